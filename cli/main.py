@@ -1,0 +1,76 @@
+"""`motion` console entry point.
+
+Commands live one module per concern in this package; each module exposes `commands`,
+a list of click commands. Modules import their heavy dependencies (mitsuba, av,
+matplotlib) inside the command body so `motion --help` stays fast.
+
+`main()` is the one place that turns a `MotionError` into one line per problem on stderr
+and its exit code (2 for bad input, 3 for an incomplete job), never a traceback.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+import click
+
+from motion.pipeline.errors import MotionError
+
+# Order is the order of `motion --help`.
+COMMAND_MODULES = [
+    "render",
+    "validate",
+    "bake",
+    "plot",
+    "telecine",
+    "cache",
+    "info",
+]
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+@click.version_option(package_name="motion-farm", prog_name="motion")
+def cli() -> None:
+    """motion: batch render-farm pipeline for animation (Mitsuba 3, OpenEXR, telecine)."""
+
+
+def _register() -> None:
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(f"motion.cli.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"motion.cli.{name}":
+                continue  # that capability is not installed in this build
+            raise
+        for command in getattr(module, "commands", []):
+            cli.add_command(command)
+
+
+_register()
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the CLI; returns the process exit code."""
+    try:
+        cli.main(args=argv, prog_name="motion", standalone_mode=False)
+    except MotionError as err:
+        for line in str(err).splitlines() or [type(err).__name__]:
+            click.echo(f"error: {line}" if not line.startswith(("/", ".")) and ":" not in line[:3] else line, err=True)
+        return err.exit_code
+    except click.exceptions.Abort:
+        click.echo("interrupted", err=True)
+        return 130
+    except KeyboardInterrupt:
+        click.echo("interrupted", err=True)
+        return 130
+    except click.ClickException as err:
+        err.show()
+        return err.exit_code
+    except click.exceptions.Exit as err:
+        return err.exit_code
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

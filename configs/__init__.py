@@ -1,0 +1,1 @@
+"""Render presets shipped with motion (ci-smoke, preview, final) and farm settings."""

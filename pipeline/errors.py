@@ -1,0 +1,81 @@
+"""One base error for everything a user can cause; subclasses are named for the situation.
+
+`motion.cli.main` catches `MotionError`, prints `str(err)` (one line per problem) and
+exits with `err.exit_code`; no traceback reaches a user for these.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+
+class MotionError(Exception):
+    """Base of every error caused by input, environment or configuration."""
+
+    exit_code: int = 2
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One problem in one input file: where it is and what was expected."""
+
+    file: str
+    line: int | None
+    column: int | None
+    yaml_path: str
+    message: str
+
+    def __str__(self) -> str:
+        where = self.file
+        if self.line is not None:
+            where += f":{self.line}"
+            if self.column is not None:
+                where += f":{self.column}"
+        path = self.yaml_path or "<document>"
+        return f"{where}: {path}: {self.message}"
+
+
+class SceneError(MotionError):
+    """A scene (or preset, or baked-motion) file failed validation: every problem at once."""
+
+    def __init__(self, problems: list[Problem]) -> None:
+        self.problems = list(problems)
+        super().__init__("\n".join(str(p) for p in self.problems))
+
+    @classmethod
+    def single(
+        cls,
+        file: str | Path,
+        yaml_path: str,
+        message: str,
+        line: int | None = None,
+        column: int | None = None,
+    ) -> "SceneError":
+        return cls([Problem(str(file), line, column, yaml_path, message)])
+
+
+class UsageError(MotionError):
+    """A command-line option is malformed (frame range, shard spec, preset name ...)."""
+
+
+class AssetError(MotionError):
+    """An asset file (mesh, texture, environment map) is missing or unreadable."""
+
+
+class RendererError(MotionError):
+    """The renderer could not be set up (no usable variant, Mitsuba failure)."""
+
+
+class SimulationError(MotionError):
+    """A dynamics simulation blew up or cannot proceed (names object, time, step)."""
+
+
+class FrameIOError(MotionError):
+    """An EXR frame is missing, truncated, unreadable or inconsistent with its sequence."""
+
+
+class IncompleteJobError(MotionError):
+    """Some frames failed everywhere; the others finished. Exit code 3."""
+
+    exit_code = 3

@@ -1,0 +1,200 @@
+"""OpenEXR frames: one write contract, atomic on disk, honest metadata; and reading back.
+
+`write_frame(path, pixels, meta)` writes RGBA (+ optional AOV layers) to a temporary file
+in the destination folder and renames it into place, so a frame on disk is either complete
+or absent; never half-written, whatever kills the process.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass, field
+from fractions import Fraction
+from pathlib import Path
+from typing import Any, Literal, Mapping
+
+import numpy as np
+import OpenEXR
+
+from .errors import FrameIOError
+
+PixelType = Literal["half", "float"]
+Compression = Literal["zip", "zips", "piz", "zstd", "none"]
+
+_COMPRESSION = {
+    "zip": OpenEXR.ZIP_COMPRESSION,
+    "zips": OpenEXR.ZIPS_COMPRESSION,
+    "piz": OpenEXR.PIZ_COMPRESSION,
+    "zstd": OpenEXR.ZSTD_COMPRESSION,
+    "none": OpenEXR.NO_COMPRESSION,
+}
+
+# Header attributes written by `write_frame` under our own prefix, so they never collide
+# with standard attribute names.
+META_PREFIX = "motion:"
+
+
+@dataclass
+class Frame:
+    """A frame read back: RGBA pixels as float32 [H, W, 4], AOVs by name, the header."""
+
+    rgba: np.ndarray
+    aovs: dict[str, np.ndarray] = field(default_factory=dict)
+    header: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def meta(self) -> dict[str, Any]:
+        """Our own attributes, without the prefix."""
+        n = len(META_PREFIX)
+        return {k[n:]: v for k, v in self.header.items() if k.startswith(META_PREFIX)}
+
+
+def _timecode_attr(tc: str) -> Any:
+    """'HH:MM:SS:FF' (or ';FF' for drop-frame) -> OpenEXR.TimeCode."""
+    drop = ";" in tc
+    hh, mm, ss, ff = (int(x) for x in tc.replace(";", ":").split(":"))
+    code = OpenEXR.TimeCode()
+    code.hours, code.minutes, code.seconds, code.frame = hh, mm, ss, ff
+    code.dropFrame = drop
+    return code
+
+
+def timecode_str(code: Any) -> str:
+    """OpenEXR.TimeCode (as read back) -> 'HH:MM:SS:FF' ('HH:MM:SS;FF' for drop-frame)."""
+    sep = ";" if code.dropFrame else ":"
+    return f"{code.hours:02d}:{code.minutes:02d}:{code.seconds:02d}{sep}{code.frame:02d}"
+
+
+def _header_value(value: Any) -> Any:
+    if isinstance(value, (bool, np.bool_)):
+        return int(value)
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, (np.floating,)):
+        return float(value)
+    if isinstance(value, (list, tuple)) and all(isinstance(v, (int, float)) for v in value):
+        return np.asarray(value, dtype=np.float32 if any(isinstance(v, float) for v in value) else np.int32)
+    return value
+
+
+def write_frame(
+    path: str | Path,
+    rgba: np.ndarray,
+    meta: Mapping[str, Any] | None = None,
+    *,
+    fps: Fraction | None = None,
+    timecode: str | None = None,
+    aovs: Mapping[str, np.ndarray] | None = None,
+    pixel_type: PixelType = "half",
+    compression: Compression = "zip",
+    standard: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write one frame atomically and return its path.
+
+    rgba: [H, W, 4] (or [H, W, 3], alpha 1 is added) linear radiance.
+    meta: our attributes (frame, time, shutter, spp, seed, hashes ...), stored as
+          `motion:<key>`; str, int, float, Fraction and short numeric lists are allowed.
+    aovs: extra layers, each [H, W] (one channel, named as given) or [H, W, C]
+          (channels `<name>.X/Y/Z` or `<name>.R/G/B`... by C).
+    standard: standard attributes (owner, comments, capDate ...) written as given.
+    """
+    path = Path(path)
+    rgba = np.asarray(rgba)
+    if rgba.ndim != 3 or rgba.shape[2] not in (3, 4):
+        raise FrameIOError(f"{path}: expected pixels [H, W, 3|4], got shape {rgba.shape}")
+    if rgba.shape[2] == 3:
+        rgba = np.concatenate([rgba, np.ones(rgba.shape[:2] + (1,), rgba.dtype)], axis=2)
+    dtype = np.float16 if pixel_type == "half" else np.float32
+    channels: dict[str, np.ndarray] = {"RGBA": np.ascontiguousarray(rgba, dtype=dtype)}
+    for name, layer in (aovs or {}).items():
+        layer = np.asarray(layer)
+        if layer.shape[:2] != rgba.shape[:2]:
+            raise FrameIOError(f"{path}: AOV {name!r} has shape {layer.shape}, frame is {rgba.shape[:2]}")
+        if layer.ndim == 2:
+            channels[name] = np.ascontiguousarray(layer, dtype=np.float32)
+        else:
+            suffixes = "XYZW" if layer.shape[2] <= 4 else [str(i) for i in range(layer.shape[2])]
+            for i in range(layer.shape[2]):
+                channels[f"{name}.{suffixes[i]}"] = np.ascontiguousarray(layer[..., i], dtype=np.float32)
+
+    header: dict[str, Any] = {
+        "compression": _COMPRESSION[compression],
+        "type": OpenEXR.scanlineimage,
+    }
+    if fps is not None:
+        header["framesPerSecond"] = Fraction(fps)
+    if timecode is not None:
+        header["timeCode"] = _timecode_attr(timecode)
+    for key, value in (standard or {}).items():
+        header[key] = _header_value(value)
+    for key, value in (meta or {}).items():
+        header[META_PREFIX + key] = _header_value(value)
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        OpenEXR.File(header, channels).write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_header(path: str | Path) -> dict[str, Any]:
+    """The header of an EXR, or FrameIOError if it is missing or not a readable EXR."""
+    path = Path(path)
+    if not path.is_file():
+        raise FrameIOError(f"{path}: no such frame")
+    try:
+        with OpenEXR.File(str(path), header_only=True) as f:
+            return dict(f.header())
+    except Exception as exc:  # the bindings raise RuntimeError for any bad file
+        raise FrameIOError(f"{path}: not a readable OpenEXR file ({exc})") from None
+
+
+def read_frame(path: str | Path) -> Frame:
+    """Read a frame written by `write_frame` (or any RGB/RGBA EXR) back as float32."""
+    path = Path(path)
+    if not path.is_file():
+        raise FrameIOError(f"{path}: no such frame")
+    try:
+        with OpenEXR.File(str(path)) as f:
+            header = dict(f.header())
+            chans = {name: np.array(ch.pixels) for name, ch in f.channels().items()}
+    except Exception as exc:
+        raise FrameIOError(f"{path}: not a readable OpenEXR file ({exc})") from None
+    if "RGBA" in chans:
+        rgba = chans.pop("RGBA").astype(np.float32)
+    elif "RGB" in chans:
+        rgb = chans.pop("RGB").astype(np.float32)
+        rgba = np.concatenate([rgb, np.ones(rgb.shape[:2] + (1,), np.float32)], axis=2)
+    else:
+        raise FrameIOError(f"{path}: no RGB or RGBA channels (has {sorted(chans)})")
+    aovs: dict[str, np.ndarray] = {}
+    grouped: dict[str, dict[str, np.ndarray]] = {}
+    for name, px in chans.items():
+        if "." in name:
+            layer, comp = name.rsplit(".", 1)
+            grouped.setdefault(layer, {})[comp] = px.astype(np.float32)
+        else:
+            aovs[name] = px.astype(np.float32)
+    for layer, comps in grouped.items():
+        aovs[layer] = np.stack([comps[k] for k in sorted(comps, key="XYZWRGBA0123456789".find)], axis=2)
+    return Frame(rgba=rgba, aovs=aovs, header=header)
+
+
+def is_complete(path: str | Path, expect: Mapping[str, Any] | None = None) -> bool:
+    """True when the EXR reads back whole and its `motion:` attributes match `expect`.
+
+    Used by --resume: a truncated or foreign file, or one made from other settings,
+    is not complete.
+    """
+    try:
+        frame = read_frame(path)
+    except FrameIOError:
+        return False
+    meta = frame.meta
+    return all(meta.get(k) == v for k, v in (expect or {}).items())

@@ -1,0 +1,199 @@
+"""Scene format v1: the `motion` block of an object, camera or light.
+
+    motion: {type: static}                       # default
+    motion: {type: keyframes, channels: {...}}   # key poses per channel
+    motion: {type: procedural, generators: [...], channels: {...}}
+    motion: {type: dynamics, ...}                # simulated (dynamics_schema.py)
+
+Parent frames are not a motion type: any object, camera or light may name a `parent`,
+and its world transform is parent(t) * local(t) (docs/scene-format.md).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal, Union
+
+from pydantic import Field, field_validator, model_validator
+
+from .dynamics_schema import DynamicsMotion
+from .types import FiniteFloat, Model, Positive, Vec3
+
+Interpolation = Literal["hold", "nearest", "linear", "catmull-rom", "bezier"]
+Extrapolation = Literal["hold", "linear", "cycle"]
+Ease = Literal["in", "out", "in-out", "none"]
+
+# A keyed value: a scalar (fov, intensity, uniform scale), a 3-vector (translate, scale),
+# or a rotation given as Euler angles, axis-angle or quaternion (rotate channel).
+ScalarOrVec = Union[FiniteFloat, tuple[FiniteFloat, FiniteFloat, FiniteFloat]]
+
+
+class Key(Model):
+    """One key of a channel. `time` is in frames or seconds (the block's `time_unit`).
+
+    `interpolation` overrides the channel's for the segment that starts at this key.
+    Bezier keys may give `tangent_in` / `tangent_out` (value units per second) or `ease`.
+    Rotation keys give exactly one of `value` (Euler xyz degrees), `euler` (+ `order`),
+    `axis` + `angle`, or `quaternion` (w, x, y, z); `turns` adds whole extra turns about
+    the segment's rotation axis (a deliberate 720-degree spin is `turns: 1` on 360 ...).
+    """
+
+    time: FiniteFloat
+    value: ScalarOrVec | None = None
+    euler: tuple[FiniteFloat, FiniteFloat, FiniteFloat] | None = None
+    order: Annotated[str, Field(pattern=r"^([xyz]{3}|[XYZ]{3})$")] = "xyz"
+    axis: Vec3 | None = None
+    angle: FiniteFloat | None = None
+    quaternion: tuple[FiniteFloat, FiniteFloat, FiniteFloat, FiniteFloat] | None = None
+    turns: int = 0
+    interpolation: Interpolation | None = None
+    ease: Ease | None = None
+    tangent_in: ScalarOrVec | None = None
+    tangent_out: ScalarOrVec | None = None
+
+    @model_validator(mode="after")
+    def _one_value(self) -> "Key":
+        given = [
+            n
+            for n, v in (("value", self.value), ("euler", self.euler), ("quaternion", self.quaternion))
+            if v is not None
+        ]
+        if self.axis is not None or self.angle is not None:
+            if self.axis is None or self.angle is None:
+                raise ValueError("axis and angle go together")
+            given.append("axis/angle")
+        if len(given) != 1:
+            raise ValueError(
+                "a key needs exactly one of value, euler, axis/angle, quaternion"
+                + (f" (got {', '.join(given)})" if given else "")
+            )
+        return self
+
+
+class Channel(Model):
+    keys: Annotated[list[Key], Field(min_length=1)]
+    interpolation: Interpolation | None = None
+    extrapolation: Extrapolation | None = None
+
+    @field_validator("keys")
+    @classmethod
+    def _sorted(cls, keys: list[Key]) -> list[Key]:
+        times = [k.time for k in keys]
+        for i in range(1, len(times)):
+            if times[i] <= times[i - 1]:
+                raise ValueError(
+                    f"key times must increase strictly: keys[{i}].time {times[i]} <= keys[{i - 1}].time {times[i - 1]}"
+                )
+        return keys
+
+
+# Channels every transformable thing has; owners add their animatable scalars
+# (camera: fov; lights: intensity, radiance, irradiance, scale).
+TRANSFORM_CHANNELS = ("translate", "rotate", "scale")
+
+
+class StaticMotion(Model):
+    type: Literal["static"] = "static"
+
+
+class KeyframeMotion(Model):
+    type: Literal["keyframes"]
+    time_unit: Literal["frames", "seconds"] = "frames"
+    interpolation: Interpolation = "linear"
+    extrapolation: Extrapolation = "hold"
+    channels: dict[str, Channel]
+
+    @field_validator("channels")
+    @classmethod
+    def _nonempty(cls, channels: dict[str, Channel]) -> dict[str, Channel]:
+        if not channels:
+            raise ValueError("a keyframes block needs at least one channel")
+        return channels
+
+
+# --- procedural generators ----------------------------------------------------------------
+
+
+class Ballistic(Model):
+    """x(t) = x0 + v0 (t - t0) + a (t - t0)^2 / 2 (seconds, metres)."""
+
+    type: Literal["ballistic"]
+    x0: Vec3 = (0.0, 0.0, 0.0)
+    v0: Vec3
+    a: Vec3 = (0.0, -9.81, 0.0)
+    t0: FiniteFloat = 0.0
+
+
+class Orbit(Model):
+    """Circular motion about `center` in the plane normal to `axis`."""
+
+    type: Literal["orbit"]
+    center: Vec3 = (0.0, 0.0, 0.0)
+    axis: Vec3 = (0.0, 1.0, 0.0)
+    radius: Positive = 1.0
+    period: Positive = 1.0  # seconds per revolution
+    phase: FiniteFloat = 0.0  # degrees
+    face_center: bool = False
+
+
+class Oscillate(Model):
+    """x(t) += amplitude * sin(2 pi frequency t + phase) along `direction` (or rotation)."""
+
+    type: Literal["oscillate"]
+    channel: Literal["translate", "rotate", "scale"] = "translate"
+    direction: Vec3 = (0.0, 1.0, 0.0)  # for rotate: the axis
+    amplitude: FiniteFloat = 1.0  # metres, degrees or scale factor
+    frequency: Positive = 1.0  # Hz
+    phase: FiniteFloat = 0.0  # degrees
+
+
+class Turntable(Model):
+    """Constant spin about `axis` through the object's origin."""
+
+    type: Literal["turntable"]
+    axis: Vec3 = (0.0, 1.0, 0.0)
+    rate: FiniteFloat = 360.0  # degrees per second
+    phase: FiniteFloat = 0.0  # degrees
+
+
+class Noise(Model):
+    """Smooth seeded noise (hand-held camera shake) on translation and rotation."""
+
+    type: Literal["noise"]
+    seed: int = 0
+    frequency: Positive = 2.0  # Hz
+    translate_amplitude: Vec3 = (0.01, 0.01, 0.0)  # metres
+    rotate_amplitude: Vec3 = (0.5, 0.5, 0.2)  # degrees
+
+
+class ExpressionChannels(Model):
+    """Channel components as expressions in `t` (seconds); see docs/expressions.md."""
+
+    translate: tuple[str, str, str] | None = None
+    rotate: tuple[str, str, str] | None = None  # Euler xyz degrees
+    scale: Union[str, tuple[str, str, str], None] = None
+    order: Annotated[str, Field(pattern=r"^([xyz]{3}|[XYZ]{3})$")] = "xyz"
+
+
+Generator = Annotated[Union[Ballistic, Orbit, Oscillate, Turntable, Noise], Field(discriminator="type")]
+
+
+class ProceduralMotion(Model):
+    """Generators compose in order (translations add, rotations multiply), then the
+    expression channels apply on top. Scalars (fov, intensity) go in `scalars`."""
+
+    type: Literal["procedural"]
+    generators: list[Generator] = []
+    channels: ExpressionChannels | None = None
+    scalars: dict[str, str] = {}
+
+    @model_validator(mode="after")
+    def _something(self) -> "ProceduralMotion":
+        if not self.generators and self.channels is None and not self.scalars:
+            raise ValueError("a procedural block needs generators, channels or scalars")
+        return self
+
+
+MotionBlock = Annotated[
+    Union[StaticMotion, KeyframeMotion, ProceduralMotion, DynamicsMotion],
+    Field(discriminator="type"),
+]

@@ -1,0 +1,392 @@
+"""Scene format v1: typed, immutable records parsed from YAML (docs/scene-format.md).
+
+Parse first, build later: these records describe the shot; the render stage turns them
+into Mitsuba dictionaries through a registry keyed by `type`, and the motion stage
+evaluates their `motion` blocks.
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+from typing import Annotated, Literal, Union
+
+from pydantic import Field, field_validator, model_validator
+
+from ..timeline import Timeline, parse_fps
+from .dynamics_schema import DynamicsSettings, ParticleEmitter
+from .motion_schema import MotionBlock, StaticMotion
+from .types import (
+    Color,
+    FiniteFloat,
+    Model,
+    NonNegative,
+    Positive,
+    Texture,
+    Transform,
+    Vec3,
+)
+
+Name = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_.\-]*$", max_length=128)]
+
+
+# --- timeline -----------------------------------------------------------------------------
+
+
+class TimelineSpec(Model):
+    fps: Union[int, float, str] = 24
+    first: int = 0
+    last: int = 0
+
+    @field_validator("fps")
+    @classmethod
+    def _fps(cls, value: int | float | str) -> str:
+        return str(parse_fps(value))
+
+    @model_validator(mode="after")
+    def _range(self) -> "TimelineSpec":
+        if self.last < self.first:
+            raise ValueError(f"frame range is reversed: first {self.first} > last {self.last}")
+        return self
+
+    @property
+    def rate(self) -> Fraction:
+        return parse_fps(self.fps)
+
+    def timeline(self) -> Timeline:
+        return Timeline(fps=self.rate, first=self.first, last=self.last)
+
+
+# --- camera -------------------------------------------------------------------------------
+
+
+class Shutter(Model):
+    """Shutter angle in degrees (0, 360]: open for angle/360 of the frame."""
+
+    angle: Annotated[float, Field(gt=0, le=360)] = 180.0
+    position: Literal["start", "center", "end"] = "center"
+
+
+class Camera(Model):
+    type: Literal["perspective", "orthographic"] = "perspective"
+    position: Vec3 | None = None
+    look_at: Vec3 | None = None
+    up: Vec3 = (0.0, 1.0, 0.0)
+    transform: Transform | None = None
+    fov: Annotated[float, Field(gt=0, lt=180)] = 40.0
+    fov_axis: Literal["x", "y", "diagonal", "smaller", "larger"] = "x"
+    ortho_width: Positive = 2.0  # metres across the image's x axis (orthographic)
+    near: Positive = 0.01
+    far: Positive = 10000.0
+    shutter: Shutter = Shutter()
+    parent: Name | None = None
+    motion: MotionBlock = StaticMotion()
+
+    @model_validator(mode="after")
+    def _placement(self) -> "Camera":
+        if self.transform is not None and (self.position is not None or self.look_at is not None):
+            raise ValueError("give either position/look_at or transform, not both")
+        if (self.position is None) != (self.look_at is None):
+            raise ValueError("position and look_at go together")
+        if self.position is not None and self.look_at is not None and self.position == self.look_at:
+            raise ValueError("look_at must differ from position")
+        if self.near >= self.far:
+            raise ValueError(f"near ({self.near}) must be less than far ({self.far})")
+        return self
+
+
+# --- lights -------------------------------------------------------------------------------
+
+
+class _Light(Model):
+    name: Name | None = None
+    parent: Name | None = None
+    motion: MotionBlock = StaticMotion()
+
+
+class ConstantLight(_Light):
+    """Uniform environment radiance (W sr^-1 m^-2 per channel)."""
+
+    type: Literal["constant"]
+    radiance: Color = 1.0
+
+
+class EnvmapLight(_Light):
+    """Latitude-longitude environment map (EXR/HDR/PNG), path relative to the scene."""
+
+    type: Literal["envmap"]
+    file: str
+    scale: NonNegative = 1.0
+    transform: Transform | None = None
+
+
+class PointLight(_Light):
+    """Isotropic point light; intensity in W sr^-1 per channel."""
+
+    type: Literal["point"]
+    position: Vec3
+    intensity: Color = 10.0
+
+
+class SpotLight(_Light):
+    type: Literal["spot"]
+    position: Vec3
+    look_at: Vec3
+    intensity: Color = 10.0
+    cutoff_angle: Annotated[float, Field(gt=0, le=90)] = 20.0  # degrees
+    beam_width: Annotated[float, Field(gt=0, le=90)] | None = None  # degrees, <= cutoff
+
+
+class DirectionalLight(_Light):
+    """Distant light (the sun); irradiance in W m^-2 per channel."""
+
+    type: Literal["directional"]
+    direction: Vec3
+    irradiance: Color = 1.0
+
+
+Light = Annotated[
+    Union[ConstantLight, EnvmapLight, PointLight, SpotLight, DirectionalLight],
+    Field(discriminator="type"),
+]
+
+
+# --- materials ----------------------------------------------------------------------------
+
+ColorOrTexture = Union[Color, Texture]
+
+
+class _Material(Model):
+    name: Name
+    two_sided: bool = False
+
+
+class Diffuse(_Material):
+    type: Literal["diffuse"]
+    color: ColorOrTexture = 0.5
+
+
+class Plastic(_Material):
+    type: Literal["plastic"]
+    color: ColorOrTexture = 0.5
+    roughness: Annotated[float, Field(ge=0, le=1)] = 0.0  # 0: smooth coating
+    ior: Annotated[float, Field(gt=1, le=4)] = 1.49
+
+
+class Conductor(_Material):
+    """Metal: `preset` is a Mitsuba material name (Au, Ag, Cu, Al, Cr ...) or `none`
+    (a perfect mirror); roughness 0 is smooth, > 0 uses a GGX microfacet model."""
+
+    type: Literal["conductor"]
+    preset: str = "Al"
+    roughness: Annotated[float, Field(ge=0, le=1)] = 0.0
+    tint: Color = 1.0
+
+
+class Dielectric(_Material):
+    type: Literal["dielectric"]
+    ior: Annotated[float, Field(gt=1, le=4)] = 1.5
+    roughness: Annotated[float, Field(ge=0, le=1)] = 0.0
+    tint: Color = 1.0
+
+
+class Principled(_Material):
+    type: Literal["principled"]
+    color: ColorOrTexture = 0.5
+    metallic: Annotated[float, Field(ge=0, le=1)] = 0.0
+    roughness: Annotated[float, Field(ge=0, le=1)] = 0.5
+    specular: Annotated[float, Field(ge=0, le=1)] = 0.5
+    clearcoat: Annotated[float, Field(ge=0, le=1)] = 0.0
+
+
+Material = Annotated[
+    Union[Diffuse, Plastic, Conductor, Dielectric, Principled],
+    Field(discriminator="type"),
+]
+
+
+# --- objects ------------------------------------------------------------------------------
+
+
+class Emission(Model):
+    """Makes the shape an area light; radiance in W sr^-1 m^-2 per channel."""
+
+    radiance: Color = 1.0
+
+
+class Collider(Model):
+    """Marks a static or keyed object as a collision surface for the simulation."""
+
+    restitution: Annotated[float, Field(ge=0, le=1)] = 0.5
+    friction: NonNegative = 0.3  # kinetic coefficient
+    static_friction: NonNegative | None = None  # defaults to the kinetic one
+
+
+class _Object(Model):
+    name: Name
+    transform: Transform = Transform()
+    material: Name | None = None
+    emission: Emission | None = None
+    parent: Name | None = None
+    motion: MotionBlock = StaticMotion()
+    collider: Collider | None = None
+    visible: bool = True
+
+
+class Sphere(_Object):
+    shape: Literal["sphere"]
+    radius: Positive = 1.0
+
+
+class Cube(_Object):
+    """An axis-aligned box of side `size` (metres), centred at the origin before transform."""
+
+    shape: Literal["cube"]
+    size: Union[Positive, tuple[Positive, Positive, Positive]] = 1.0
+
+
+class Rectangle(_Object):
+    """A `width` x `height` rectangle in the object's XY plane, normal +Z."""
+
+    shape: Literal["rectangle"]
+    width: Positive = 1.0
+    height: Positive = 1.0
+
+
+class Disk(_Object):
+    """A disk in the object's XY plane, normal +Z."""
+
+    shape: Literal["disk"]
+    radius: Positive = 1.0
+
+
+class Cylinder(_Object):
+    """A capped cylinder along the object's +Y axis, centred at the origin."""
+
+    shape: Literal["cylinder"]
+    radius: Positive = 1.0
+    height: Positive = 1.0
+
+
+class Mesh(_Object):
+    """A triangle mesh from an .obj or .ply file, path relative to the scene file."""
+
+    shape: Literal["mesh"]
+    file: str
+    face_normals: bool = False
+
+    @field_validator("file")
+    @classmethod
+    def _ext(cls, value: str) -> str:
+        if not value.lower().endswith((".obj", ".ply")):
+            raise ValueError(f"mesh file must be .obj or .ply, got {value!r}")
+        return value
+
+
+class Empty(_Object):
+    """A transform with no geometry (a locator or rig joint): a parent for other things."""
+
+    shape: Literal["empty"]
+
+
+class Particles(_Object):
+    """A particle system: particles spawned by `emitter`, simulated by the dynamics stage,
+    rendered as spheres of `radius`."""
+
+    shape: Literal["particles"]
+    radius: Positive = 0.02
+    emitter: ParticleEmitter
+
+
+SceneObject = Annotated[
+    Union[Sphere, Cube, Rectangle, Disk, Cylinder, Mesh, Empty, Particles],
+    Field(discriminator="shape"),
+]
+
+
+# --- render and output --------------------------------------------------------------------
+
+
+class RenderSettings(Model):
+    resolution: tuple[Annotated[int, Field(ge=1, le=16384)], Annotated[int, Field(ge=1, le=16384)]] = (640, 360)
+    spp: Annotated[int, Field(ge=1, le=1 << 20)] = 64
+    integrator: Literal["path", "direct"] = "path"
+    max_depth: Annotated[int, Field(ge=1, le=64)] = 8
+    rr_depth: Annotated[int, Field(ge=1, le=64)] = 5
+    motion_blur: Literal["stochastic", "subframes", "off"] = "stochastic"
+    subframes: Annotated[int, Field(ge=1, le=256)] = 8  # K for motion_blur: subframes
+    shutter_samples: Annotated[int, Field(ge=2, le=256)] = 9  # baked samples across the shutter
+    seed: Annotated[int, Field(ge=0, lt=2**31)] = 0
+    seed_policy: Literal["per-frame", "fixed"] = "per-frame"
+    variant: Literal["auto", "llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb"] = "auto"
+    filter: Literal["box", "gaussian", "tent"] = "gaussian"
+
+
+class OutputSettings(Model):
+    directory: str | None = None  # default: out/<scene name>; `-o DIR` overrides
+    filename: Annotated[str, Field(pattern=r"#+")] = "{name}.####.exr"
+    pixel_type: Literal["half", "float"] = "half"
+    compression: Literal["zip", "zips", "piz", "zstd", "none"] = "zip"
+    aovs: list[Literal["depth", "normal", "motion"]] = []
+    owner: str | None = None
+    comments: str | None = None
+
+    def frame_name(self, scene_name: str, frame: int) -> str:
+        """`{name}.####.exr` -> `cannonball.0012.exr` (the run of # sets the padding)."""
+        import re
+
+        pattern = self.filename.replace("{name}", scene_name)
+        run = re.search(r"#+", pattern)
+        assert run is not None  # guaranteed by the field pattern
+        digits = f"{frame:0{len(run.group(0))}d}" if frame >= 0 else f"-{-frame:0{len(run.group(0))}d}"
+        return pattern[: run.start()] + digits + pattern[run.end() :]
+
+
+class Scene(Model):
+    """A whole shot. `version` is the scene format's version."""
+
+    version: Literal[1] = 1
+    name: Name | None = None
+    timeline: TimelineSpec = TimelineSpec()
+    camera: Camera
+    lights: list[Light] = []
+    materials: list[Material] = []
+    objects: list[SceneObject] = []
+    dynamics: DynamicsSettings = DynamicsSettings()
+    render: RenderSettings = RenderSettings()
+    output: OutputSettings = OutputSettings()
+
+
+__all__ = [
+    "Camera",
+    "Collider",
+    "ConstantLight",
+    "Cube",
+    "Cylinder",
+    "Dielectric",
+    "Diffuse",
+    "DirectionalLight",
+    "Disk",
+    "Emission",
+    "Empty",
+    "EnvmapLight",
+    "FiniteFloat",
+    "Light",
+    "Material",
+    "Mesh",
+    "NonNegative",
+    "OutputSettings",
+    "Particles",
+    "PointLight",
+    "Principled",
+    "Plastic",
+    "Rectangle",
+    "RenderSettings",
+    "Scene",
+    "SceneObject",
+    "Shutter",
+    "Sphere",
+    "SpotLight",
+    "Conductor",
+    "TimelineSpec",
+    "Vec3",
+]

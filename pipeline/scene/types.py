@@ -1,0 +1,103 @@
+"""Small shared value types of the scene format: vectors, colours, rotations, transforms.
+
+Every model is frozen and rejects unknown keys (`extra="forbid"`); the loader turns
+pydantic's errors into `FILE:LINE:COL: yaml.path: message` lines.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, model_validator
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+Vec3 = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+# A colour is RGB in linear units, or one grey value.
+Color = Union[tuple[NonNegative, NonNegative, NonNegative], NonNegative]
+
+
+class Model(BaseModel):
+    """Base of every scene record: immutable, unknown keys rejected."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+
+
+class EulerRotation(Model):
+    """Euler angles in degrees, applied in `order` about fixed (extrinsic, lowercase) or
+    moving (intrinsic, uppercase) axes, as scipy's `Rotation.from_euler` reads them."""
+
+    euler: Vec3
+    order: Annotated[str, Field(pattern=r"^([xyz]{3}|[XYZ]{3})$")] = "xyz"
+
+
+class AxisAngleRotation(Model):
+    """A rotation of `angle` degrees about `axis` (need not be unit length)."""
+
+    axis: Vec3
+    angle: FiniteFloat
+
+    @model_validator(mode="after")
+    def _axis_nonzero(self) -> "AxisAngleRotation":
+        if math.hypot(*self.axis) < 1e-12:
+            raise ValueError("axis must not be the zero vector")
+        return self
+
+
+class QuaternionRotation(Model):
+    """A rotation as a quaternion (w, x, y, z); normalised on load, must not be zero."""
+
+    quaternion: tuple[FiniteFloat, FiniteFloat, FiniteFloat, FiniteFloat]
+
+    @model_validator(mode="after")
+    def _nonzero(self) -> "QuaternionRotation":
+        if math.sqrt(sum(c * c for c in self.quaternion)) < 1e-12:
+            raise ValueError("quaternion must not be zero")
+        return self
+
+
+def _rotation_kind(value: Any) -> str | None:
+    """Pick the rotation form by the key it uses, so errors speak of that form only."""
+    if isinstance(value, dict):
+        for key, kind in (("euler", "euler"), ("axis", "axis-angle"), ("angle", "axis-angle"), ("quaternion", "quaternion")):
+            if key in value:
+                return kind
+        return None
+    if isinstance(value, BaseModel):
+        return {EulerRotation: "euler", AxisAngleRotation: "axis-angle", QuaternionRotation: "quaternion"}.get(type(value))
+    return None
+
+
+Rotation = Annotated[
+    Union[
+        Annotated[EulerRotation, Tag("euler")],
+        Annotated[AxisAngleRotation, Tag("axis-angle")],
+        Annotated[QuaternionRotation, Tag("quaternion")],
+    ],
+    Discriminator(
+        _rotation_kind,
+        custom_error_type="rotation_form",
+        custom_error_message="a rotation needs one of: euler (+ order), axis + angle, quaternion",
+    ),
+]
+
+
+class Transform(Model):
+    """world_from_object = T(translate) * R(rotate) * S(scale)."""
+
+    translate: Vec3 = (0.0, 0.0, 0.0)
+    rotate: Rotation | None = None
+    scale: Union[Positive, tuple[Positive, Positive, Positive]] = 1.0
+
+
+class Texture(Model):
+    """A bitmap texture (PNG, JPEG, EXR, HDR ...), path relative to the scene file."""
+
+    file: str
+    filter: Literal["bilinear", "nearest"] = "bilinear"
+    wrap: Literal["repeat", "mirror", "clamp"] = "repeat"
+    raw: bool = False  # true: data (roughness, normal), not colour: no sRGB decoding
+    tile: Union[Positive, tuple[Positive, Positive]] = 1.0  # repeats across the surface (u, v)
+

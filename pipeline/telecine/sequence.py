@@ -1,0 +1,177 @@
+"""EXR sequences on disk: discover `prefix.NNNN.exr` files, validate them before any work.
+
+Telecine writes nothing until the whole input is known to be usable: every frame number
+between the first and the last is present, every header reads, every frame has the same
+size, and the height is even (a field pair needs as many bottom rows as top rows).
+Each problem is a `FrameIOError` naming the offending frame.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from fractions import Fraction
+from pathlib import Path
+from typing import Any, Iterator, Literal
+
+import numpy as np
+
+from ..errors import FrameIOError
+from ..frame_output import Frame, read_frame, read_header
+
+PixelType = Literal["half", "float"]
+
+_NAME = re.compile(r"^(?P<prefix>.+)\.(?P<number>\d+)\.exr$", re.IGNORECASE)
+
+
+@dataclass(frozen=True)
+class Sequence:
+    """A validated EXR sequence: frame numbers in order, their paths, size and timing."""
+
+    directory: Path
+    prefix: str
+    numbers: tuple[int, ...]
+    paths: tuple[Path, ...]
+    width: int
+    height: int
+    pixel_type: PixelType
+    fps: Fraction | None = None
+    first_meta: dict[str, Any] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.paths)
+
+    @property
+    def first(self) -> int:
+        return self.numbers[0]
+
+    @property
+    def padding(self) -> int:
+        """Digits of the frame number in the file names (at least 4)."""
+        return max(4, len(_NAME.match(self.paths[0].name)["number"]))  # type: ignore[index]
+
+    def read(self, index: int) -> Frame:
+        """Frame `index` (0-based position in the sequence), pixels as float32."""
+        return read_frame(self.paths[index])
+
+    def frames(self) -> Iterator[Frame]:
+        for path in self.paths:
+            yield read_frame(path)
+
+
+def _size(path: Path, header: dict[str, Any]) -> tuple[int, int]:
+    try:
+        lo, hi = header["dataWindow"]
+        return int(hi[0]) - int(lo[0]) + 1, int(hi[1]) - int(lo[1]) + 1
+    except (KeyError, TypeError, ValueError, IndexError):
+        raise FrameIOError(f"{path}: header has no usable dataWindow") from None
+
+
+def _pixel_type(path: Path) -> PixelType:
+    """'half' when the colour channels are stored as 16-bit floats, else 'float'."""
+    import OpenEXR
+
+    try:
+        with OpenEXR.File(str(path)) as f:
+            dtypes = {np.asarray(ch.pixels).dtype for ch in f.channels().values()}
+    except Exception as exc:
+        raise FrameIOError(f"{path}: not a readable OpenEXR file ({exc})") from None
+    return "half" if np.dtype(np.float16) in dtypes else "float"
+
+
+def find_sequences(directory: str | Path) -> dict[str, list[tuple[int, Path]]]:
+    """All `prefix.NNNN.exr` files of a folder, grouped by prefix and sorted by number."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise FrameIOError(f"{directory}: no such folder")
+    groups: dict[str, list[tuple[int, Path]]] = {}
+    for path in directory.iterdir():
+        m = _NAME.match(path.name)
+        if m and not path.name.startswith("."):
+            groups.setdefault(m["prefix"], []).append((int(m["number"]), path))
+    for items in groups.values():
+        items.sort()
+    return groups
+
+
+def discover(
+    directory: str | Path,
+    prefix: str | None = None,
+    *,
+    require_even_height: bool = True,
+    min_frames: int = 1,
+) -> Sequence:
+    """Find and validate the EXR sequence in `directory` (the only one, or `prefix`).
+
+    Reads every header (not the pixels) so a missing, foreign or truncated-header frame is
+    reported before anything is written. Raises FrameIOError naming the frame.
+    """
+    directory = Path(directory)
+    groups = find_sequences(directory)
+    if prefix is not None:
+        if prefix not in groups:
+            raise FrameIOError(f"{directory}: no frames named {prefix}.NNNN.exr")
+        items = groups[prefix]
+    elif not groups:
+        raise FrameIOError(f"{directory}: no EXR sequence (expected files named prefix.NNNN.exr)")
+    elif len(groups) > 1:
+        found = ", ".join(f"{p} ({len(v)} frames)" for p, v in sorted(groups.items()))
+        raise FrameIOError(f"{directory}: several EXR sequences ({found}); choose one with --prefix")
+    else:
+        prefix, items = next(iter(groups.items()))
+
+    numbers = [n for n, _ in items]
+    if len(set(numbers)) != len(numbers):
+        dup = next(n for n in numbers if numbers.count(n) > 1)
+        names = [p.name for n, p in items if n == dup]
+        raise FrameIOError(f"{directory}: frame {dup} appears twice ({', '.join(names)})")
+    pad = len(_NAME.match(items[0][1].name)["number"])  # type: ignore[index]
+    missing = sorted(set(range(numbers[0], numbers[-1] + 1)) - set(numbers))
+    if missing:
+        shown = ", ".join(str(directory / f"{prefix}.{n:0{pad}d}.exr") for n in missing[:3])
+        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+        raise FrameIOError(f"missing frame {shown}{more} in sequence {prefix} ({numbers[0]}-{numbers[-1]})")
+    if len(items) < min_frames:
+        raise FrameIOError(f"{directory}: sequence {prefix} has {len(items)} frames, need at least {min_frames}")
+
+    size: tuple[int, int] | None = None
+    fps: Fraction | None = None
+    first_meta: dict[str, Any] = {}
+    for number, path in items:
+        header = read_header(path)
+        this = _size(path, header)
+        if size is None:
+            size = this
+            rate = header.get("framesPerSecond")
+            fps = Fraction(rate) if rate is not None else None
+            first_meta = {k[len("motion:"):]: v for k, v in header.items() if k.startswith("motion:")}
+            if require_even_height and this[1] % 2:
+                raise FrameIOError(
+                    f"{path}: odd height {this[1]}; interlaced fields need an even number of rows"
+                )
+        elif this != size:
+            raise FrameIOError(
+                f"{path}: resolution {this[0]}x{this[1]} differs from the sequence's "
+                f"{size[0]}x{size[1]} (first frame {items[0][1].name})"
+            )
+    assert size is not None
+    return Sequence(
+        directory=directory,
+        prefix=prefix,
+        numbers=tuple(numbers),
+        paths=tuple(p for _, p in items),
+        width=size[0],
+        height=size[1],
+        pixel_type=_pixel_type(items[0][1]),
+        fps=fps,
+        first_meta=first_meta,
+    )
+
+
+def read_checked(seq: Sequence, index: int) -> Frame:
+    """Read frame `index` and check it still matches the sequence (size), naming the file."""
+    frame = seq.read(index)
+    h, w = frame.rgba.shape[:2]
+    if (w, h) != (seq.width, seq.height):
+        raise FrameIOError(f"{seq.paths[index]}: resolution {w}x{h} differs from the sequence's {seq.width}x{seq.height}")
+    return frame

@@ -1,0 +1,129 @@
+"""Exact time: frame <-> seconds <-> shutter interval, with rational frame rates.
+
+Frame rates are `fractions.Fraction` (24, 25, 30000/1001 ...); frame times are exact
+rationals, converted to float only at the boundary to numeric code.
+
+>>> tl = Timeline(fps=Fraction(24), first=0, last=47)
+>>> tl.seconds(24)
+Fraction(1, 1)
+>>> tl.frames
+range(0, 48)
+>>> tl.shutter(12, angle=180, position="center")
+(Fraction(47, 96), Fraction(49, 96))
+>>> tl.shutter(12, angle=180, position="start")
+(Fraction(1, 2), Fraction(25, 48))
+>>> parse_fps("30000/1001")
+Fraction(30000, 1001)
+>>> Timeline(fps=parse_fps("30000/1001"), first=0, last=0).seconds(30)
+Fraction(1001, 1000)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from fractions import Fraction
+from typing import Literal
+
+ShutterPosition = Literal["start", "center", "end"]
+
+
+def parse_fps(value: int | float | str | Fraction) -> Fraction:
+    """Parse a frame rate: an integer, a decimal, or a rational string such as "30000/1001".
+
+    Raises ValueError (with the reason) for anything else, or a rate that is not > 0.
+
+    >>> parse_fps(25), parse_fps("24000/1001"), parse_fps("23.976")
+    (Fraction(25, 1), Fraction(24000, 1001), Fraction(2997, 125))
+    """
+    if isinstance(value, bool):
+        raise ValueError("expected a frame rate (integer or 'num/den' string), got a boolean")
+    try:
+        if isinstance(value, float):
+            rate = Fraction(value).limit_denominator(1001000)
+        elif isinstance(value, str) and "/" in value:
+            num, den = value.split("/", 1)
+            rate = Fraction(int(num.strip()), int(den.strip()))
+        else:
+            rate = Fraction(value)
+    except (ValueError, ZeroDivisionError, TypeError):
+        raise ValueError(
+            f"expected a frame rate as an integer or 'num/den' string, got {value!r}"
+        ) from None
+    if rate <= 0:
+        raise ValueError(f"frame rate must be > 0, got {value!r}")
+    return rate
+
+
+@dataclass(frozen=True)
+class Timeline:
+    """A shot's frame range on an exact time base. Frame f starts at time f / fps."""
+
+    fps: Fraction
+    first: int
+    last: int
+
+    @property
+    def frames(self) -> range:
+        return range(self.first, self.last + 1)
+
+    @property
+    def frame_duration(self) -> Fraction:
+        return 1 / self.fps
+
+    def seconds(self, frame: int | Fraction) -> Fraction:
+        """Time in seconds of a (possibly fractional) frame number."""
+        return Fraction(frame) / self.fps
+
+    def frame_at(self, seconds: Fraction | float) -> Fraction:
+        """Fractional frame number at a time in seconds."""
+        return Fraction(seconds) * self.fps
+
+    def shutter(
+        self, frame: int, angle: float | Fraction, position: ShutterPosition = "center"
+    ) -> tuple[Fraction, Fraction]:
+        """Shutter interval [open, close] in seconds for a frame.
+
+        The shutter is open for angle/360 of a frame's duration. `start` opens at the
+        frame's time, `end` closes at it, `center` straddles it symmetrically.
+        """
+        open_for = Fraction(angle) / 360 * self.frame_duration
+        t = self.seconds(frame)
+        if position == "start":
+            return t, t + open_for
+        if position == "end":
+            return t - open_for, t
+        if position == "center":
+            return t - open_for / 2, t + open_for / 2
+        raise ValueError(f"shutter position must be start, center or end, got {position!r}")
+
+
+def timecode(frame: int, fps: Fraction, drop_frame: bool = False) -> str:
+    """SMPTE timecode HH:MM:SS:FF (or HH:MM:SS;FF drop-frame) of a 0-based frame count.
+
+    Drop-frame skips frame numbers 0 and 1 (2 per minute at 29.97; 4 at 59.94) in every
+    minute not divisible by ten, so the label stays within 1 frame per hour of wall time.
+
+    >>> timecode(0, Fraction(24))
+    '00:00:00:00'
+    >>> timecode(1800, Fraction(30000, 1001), drop_frame=True)
+    '00:01:00;02'
+    >>> timecode(17982, Fraction(30000, 1001), drop_frame=True)
+    '00:10:00;00'
+    """
+    nominal = round(fps)
+    if drop_frame:
+        if nominal not in (30, 60) or fps.denominator != 1001:
+            raise ValueError("drop-frame timecode applies to 30000/1001 and 60000/1001 only")
+        drop = 2 * nominal // 30
+        per_10min = nominal * 600 - drop * 9
+        per_min = nominal * 60 - drop
+        tens, rest = divmod(frame, per_10min)
+        # The first minute of each ten keeps all its numbers; later ones drop `drop` each.
+        extra = 0 if rest < drop else drop * ((rest - drop) // per_min)
+        frame = frame + drop * 9 * tens + extra
+    ff = frame % nominal
+    ss = frame // nominal % 60
+    mm = frame // (nominal * 60) % 60
+    hh = frame // (nominal * 3600) % 24
+    sep = ";" if drop_frame else ":"
+    return f"{hh:02d}:{mm:02d}:{ss:02d}{sep}{ff:02d}"

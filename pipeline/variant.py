@@ -1,0 +1,276 @@
+"""Choose the Mitsuba variant: CUDA on a GPU, LLVM where a working libLLVM exists, else scalar.
+
+drjit's LLVM backend reads `DRJIT_LIBLLVM_PATH` once, when drjit is first imported, and
+some LLVM builds (Debian's 14 and 15 with drjit 1.5) abort the whole process while
+compiling a render kernel. So each candidate library is tried in a *subprocess* that
+renders a tiny scene; the parent only imports drjit after the choice, with the variable
+set. Results are remembered in the cache folder, keyed by the library file's identity
+and the drjit version, so later commands pay nothing.
+
+`python -m motion.pipeline.variant --check-llvm` exits 0 when a working LLVM is found
+(the setup script uses it to decide whether to install libllvm19).
+"""
+
+from __future__ import annotations
+
+import glob
+import importlib.metadata
+import json
+import os
+import subprocess
+import sys
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Literal
+
+from .errors import RendererError
+
+VariantName = Literal["auto", "llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb"]
+
+ENV_LLVM = "DRJIT_LIBLLVM_PATH"
+_PROBE_TIMEOUT_S = 180.0
+
+# A tiny but real render: the crash with LLVM 14/15 happens while compiling the path
+# tracer's kernels (an unsupported `fminimum` instruction), not on simple arithmetic.
+_PROBE_CODE = r"""
+import sys
+import mitsuba as mi
+mi.set_variant(sys.argv[1])
+import drjit as dr
+scene = mi.load_dict(mi.cornell_box())
+img = mi.render(scene, spp=1)
+import numpy as np
+v = float(np.asarray(img).mean())
+assert np.isfinite(v) and v > 0, v
+print("ok")
+"""
+
+
+def cache_root() -> Path:
+    """Root of motion's on-disk caches: $MOTION_CACHE_DIR, else $XDG_CACHE_HOME/motion."""
+    env = os.environ.get("MOTION_CACHE_DIR")
+    if env:
+        return Path(env).expanduser()
+    xdg = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(xdg) / "motion"
+
+
+@dataclass(frozen=True)
+class VariantChoice:
+    variant: str
+    llvm_path: str | None
+    reason: str
+    fallback: bool = False
+
+
+def _version(pkg: str) -> str:
+    try:
+        return importlib.metadata.version(pkg)
+    except importlib.metadata.PackageNotFoundError:
+        return "missing"
+
+
+def llvm_candidates() -> list[str | None]:
+    """Libraries to try, best first. An explicit DRJIT_LIBLLVM_PATH is the only candidate.
+
+    None means "let drjit search on its own" (its default lookup), tried last.
+    """
+    explicit = os.environ.get(ENV_LLVM)
+    if explicit:
+        return [explicit]
+    found: list[str] = []
+    for major in range(30, 15, -1):
+        patterns = [
+            f"/usr/lib/llvm-{major}/lib/libLLVM.so.*",
+            f"/usr/lib/llvm-{major}/lib/libLLVM-{major}.so",
+            f"/usr/lib/*-linux-gnu/libLLVM.so.{major}*",
+            f"/usr/lib/*-linux-gnu/libLLVM-{major}.so*",
+            f"/usr/lib64/libLLVM.so.{major}*",
+            f"/usr/lib64/libLLVM-{major}.so",
+        ]
+        for pattern in patterns:
+            for path in sorted(glob.glob(pattern)):
+                real = os.path.realpath(path)
+                if real not in found:
+                    found.append(real)
+    return [*found, None]
+
+
+def _probe_key(variant: str, lib: str | None) -> str:
+    ident = "default"
+    if lib:
+        try:
+            st = os.stat(lib)
+            ident = f"{os.path.realpath(lib)}:{st.st_size}:{int(st.st_mtime)}"
+        except OSError:
+            ident = f"{lib}:missing"
+    return f"{variant}|{ident}|drjit {_version('drjit')}|mitsuba {_version('mitsuba')}"
+
+
+def _probe_cache_file() -> Path:
+    return cache_root() / "variant-probe.json"
+
+
+def _load_probe_cache() -> dict[str, bool]:
+    try:
+        return dict(json.loads(_probe_cache_file().read_text()))
+    except (OSError, ValueError):
+        return {}
+
+
+def _store_probe(key: str, ok: bool) -> None:
+    cache = _load_probe_cache()
+    cache[key] = ok
+    path = _probe_cache_file()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(cache, indent=1, sort_keys=True))
+        os.replace(tmp, path)
+    except OSError:
+        pass  # a read-only cache only costs a re-probe next time
+
+
+def probe(variant: str, lib: str | None = None, use_cache: bool = True) -> bool:
+    """Does `variant` render a tiny scene in a fresh process with this libLLVM?"""
+    if lib is not None and not os.path.exists(lib):
+        return False
+    key = _probe_key(variant, lib)
+    if use_cache:
+        cached = _load_probe_cache().get(key)
+        if cached is not None:
+            return cached
+    env = dict(os.environ)
+    env.pop(ENV_LLVM, None)
+    if lib:
+        env[ENV_LLVM] = lib
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-c", _PROBE_CODE, variant],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=_PROBE_TIMEOUT_S,
+        )
+        ok = proc.returncode == 0 and "ok" in proc.stdout
+    except (subprocess.TimeoutExpired, OSError):
+        ok = False
+    _store_probe(key, ok)
+    return ok
+
+
+def _gpu_present() -> bool:
+    return any(os.path.exists(p) for p in ("/dev/nvidia0", "/dev/nvidiactl")) or bool(
+        glob.glob("/usr/lib/*-linux-gnu/libcuda.so*")
+    )
+
+
+def find_llvm(use_cache: bool = True) -> str | None | Literal[False]:
+    """The first libLLVM that renders; None = drjit's own lookup works; False = none works."""
+    for lib in llvm_candidates():
+        if probe("llvm_ad_rgb", lib, use_cache=use_cache):
+            return lib
+    return False
+
+
+def choose(requested: str = "auto", use_cache: bool = True) -> VariantChoice:
+    """Pick the variant for `requested` without importing drjit in this process."""
+    if requested == "scalar_rgb":
+        return VariantChoice("scalar_rgb", None, "requested")
+    if requested == "cuda_ad_rgb":
+        if probe("cuda_ad_rgb", None, use_cache=use_cache):
+            return VariantChoice("cuda_ad_rgb", None, "requested")
+        raise RendererError("variant cuda_ad_rgb was requested but no working CUDA device was found")
+    if requested == "auto" and _gpu_present() and probe("cuda_ad_rgb", None, use_cache=use_cache):
+        return VariantChoice("cuda_ad_rgb", None, "GPU found")
+    lib = find_llvm(use_cache=use_cache)
+    if lib is not False:
+        return VariantChoice("llvm_ad_rgb", lib, "LLVM library renders" if lib else "drjit's default LLVM renders")
+    tried = ", ".join(c or "drjit default" for c in llvm_candidates())
+    if requested == "llvm_ad_rgb":
+        raise RendererError(
+            f"variant llvm_ad_rgb was requested but no libLLVM renders (tried: {tried}); "
+            "install Debian's libllvm19 (tools/setup.sh does) or set DRJIT_LIBLLVM_PATH"
+        )
+    return VariantChoice(
+        "scalar_rgb",
+        None,
+        f"no working LLVM library (tried: {tried})",
+        fallback=True,
+    )
+
+
+_active: VariantChoice | None = None
+
+
+def activate(requested: str = "auto", threads: int | None = None, quiet: bool = False) -> VariantChoice:
+    """Choose, export DRJIT_LIBLLVM_PATH, then import Mitsuba and set the variant once.
+
+    Safe to call repeatedly in one process; the first choice stays (drjit cannot switch
+    LLVM libraries after import). Warns once on stderr when falling back to scalar.
+    """
+    global _active
+    if _active is not None:
+        if requested not in ("auto", _active.variant):
+            raise RendererError(
+                f"this process already renders with {_active.variant}; cannot switch to {requested}"
+            )
+        return _active
+    choice = choose(requested)
+    if choice.llvm_path:
+        os.environ[ENV_LLVM] = choice.llvm_path
+    if choice.fallback and not quiet:
+        print(
+            f"warning: {choice.reason}; rendering with scalar_rgb (slow). "
+            "Install Debian's libllvm19 (tools/setup.sh does) for the LLVM CPU renderer.",
+            file=sys.stderr,
+        )
+    os.environ.setdefault("DRJIT_CACHE_DIR", str(cache_root() / "kernels"))
+    import drjit as dr
+    import mitsuba as mi
+
+    if threads is not None and choice.variant != "scalar_rgb":
+        dr.set_thread_count(max(1, int(threads)))
+    mi.set_variant(choice.variant)
+    _active = choice
+    return choice
+
+
+def info() -> dict[str, object]:
+    """What `motion info` prints: variant choice, LLVM, threads, caches, versions."""
+    choice = choose("auto")
+    llvm_version = None
+    if choice.llvm_path:
+        name = os.path.basename(choice.llvm_path)
+        digits = "".join(ch if ch.isdigit() or ch == "." else " " for ch in name).split()
+        llvm_version = digits[0].strip(".") if digits else None
+    return {
+        "variant": choice.variant,
+        "reason": choice.reason,
+        "fallback": choice.fallback,
+        "llvm_library": choice.llvm_path,
+        "llvm_version": llvm_version,
+        "threads": os.cpu_count(),
+        "cache_root": str(cache_root()),
+        "kernel_cache": os.environ.get("DRJIT_CACHE_DIR", str(cache_root() / "kernels")),
+        "asset_cache": str(cache_root() / "assets"),
+        "python": sys.version.split()[0],
+        "packages": {p: _version(p) for p in ("motion-farm", "mitsuba", "drjit", "OpenEXR", "numpy", "scipy", "av", "dask", "distributed", "pydantic")},
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = sys.argv[1:] if argv is None else argv
+    if args == ["--check-llvm"]:
+        lib = find_llvm(use_cache=False)
+        if lib is False:
+            print("no working libLLVM for drjit's LLVM backend")
+            return 1
+        print(f"working libLLVM: {lib or 'drjit default lookup'}")
+        return 0
+    print(json.dumps(info(), indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

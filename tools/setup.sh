@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Idempotent setup: a virtual environment in .venv with motion and its dependencies, and
+# Debian's libllvm19 only when drjit's LLVM backend cannot render with what is installed.
+# Prints what it does; safe to run again (it then installs nothing new).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+say() { printf '[setup] %s\n' "$*"; }
+
+PY=${PYTHON:-python3}
+if ! "$PY" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null; then
+  say "need Python >= 3.11 (found: $("$PY" --version 2>&1))"; exit 1
+fi
+
+if [ ! -x .venv/bin/python ]; then
+  say "creating virtual environment .venv ($("$PY" --version))"
+  "$PY" -m venv .venv
+fi
+
+stamp=.venv/.motion-install-stamp
+want=$(cat pyproject.toml | sha256sum | cut -c1-16)
+if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+  say "installing motion and its dependencies into .venv (pip)"
+  .venv/bin/python -m pip install --quiet --upgrade pip >/dev/null 2>&1 || true
+  .venv/bin/python -m pip install --quiet -e '.[dev]'
+  echo "$want" > "$stamp"
+else
+  say "python packages up to date"
+fi
+
+if .venv/bin/python -m motion.pipeline.variant --check-llvm >/tmp/motion-llvm-check.$$ 2>&1; then
+  say "$(cat /tmp/motion-llvm-check.$$)"
+else
+  say "drjit's LLVM backend cannot render with the installed libLLVM; installing Debian's libllvm19"
+  if [ "$(id -u)" = 0 ]; then SUDO=; else SUDO=sudo; fi
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq libllvm19 >/dev/null
+  if .venv/bin/python -m motion.pipeline.variant --check-llvm >/tmp/motion-llvm-check.$$ 2>&1; then
+    say "$(cat /tmp/motion-llvm-check.$$)"
+  else
+    say "warning: still no working libLLVM; motion will fall back to the slow scalar renderer"
+  fi
+fi
+rm -f /tmp/motion-llvm-check.$$
+say "ready: .venv/bin/motion (or 'source .venv/bin/activate' and then 'motion')"
