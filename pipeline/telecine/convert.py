@@ -1,0 +1,310 @@
+"""EXR sequence -> EXR sequence: pulldown (telecine) and its inverse, with honest metadata.
+
+Output frames are written into a hidden staging folder inside the destination and moved
+into place only once every frame has been written, so an error (a frame that fails to
+read half-way) leaves the destination as it was.
+
+Metadata on every telecined frame (besides the source frame's own `motion:` attributes):
+`framesPerSecond` (rational video rate), `timeCode` (drop-frame on request), and
+`motion:fieldOrder`, `motion:cadence`, `motion:cadenceCounts`, `motion:filmSpeed`,
+`motion:topFieldSource`, `motion:bottomFieldSource`, `motion:firstFieldSource`,
+`motion:secondFieldSource` (input frame numbers), `motion:videoFrame`.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from ..errors import FrameIOError, UsageError
+from ..frame_output import Frame, read_header, write_frame
+from ..timeline import timecode
+from .cadence import Cadence, Tail, VideoFrame, film_rate, output_rate, parse_cadence, plan
+from .fields import FieldOrder, check_field_order, weave_frames
+from .inverse import (
+    CANDIDATES, Detection, cadence_sources, detect, field_differences, recovery_map, stream_differences,
+)
+from .sequence import Sequence, discover, find_sequences, read_checked
+
+Progress = Callable[[int, int], None]
+
+# Our attributes: stripped from the source frame's metadata before ours are added.
+TELECINE_KEYS = (
+    "fieldOrder", "cadence", "cadenceCounts", "filmSpeed", "topFieldSource", "bottomFieldSource",
+    "firstFieldSource", "secondFieldSource", "videoFrame", "blendSources", "tail",
+    "inverseTelecine", "cadencePhase", "topFieldFrom", "bottomFieldFrom",
+)
+
+
+@dataclass(frozen=True)
+class Result:
+    """What a conversion wrote: the frames (in order), their rate, and how they were made."""
+
+    out_dir: Path
+    paths: tuple[Path, ...]
+    rate: Fraction
+    film_rate: Fraction
+    cadence: Cadence
+    field_order: FieldOrder | None
+    detection: Detection | None = None
+
+
+class _FrameCache:
+    """The last few frames read; pulldown reads each source at most twice in a row."""
+
+    def __init__(self, seq: Sequence, size: int = 3) -> None:
+        self.seq, self.size = seq, size
+        self.frames: dict[int, Frame] = {}
+
+    def __call__(self, index: int) -> Frame:
+        if index not in self.frames:
+            if len(self.frames) >= self.size:
+                self.frames.pop(min(self.frames))
+            self.frames[index] = read_checked(self.seq, index)
+        return self.frames[index]
+
+
+def _strip(meta: dict[str, Any]) -> dict[str, Any]:
+    return {k: v for k, v in meta.items() if k not in TELECINE_KEYS}
+
+
+def _weave_layers(top: Frame, bottom: Frame) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    rgba = weave_frames(top.rgba, bottom.rgba)
+    aovs = {name: weave_frames(layer, bottom.aovs[name]) for name, layer in top.aovs.items() if name in bottom.aovs}
+    return rgba, aovs
+
+
+def _blend_layers(a: Frame, b: Frame) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    if a is b:
+        return a.rgba, dict(a.aovs)
+    mix = lambda x, y: ((x.astype(np.float32) + y.astype(np.float32)) * np.float32(0.5))  # noqa: E731
+    return mix(a.rgba, b.rgba), {n: mix(v, b.aovs[n]) for n, v in a.aovs.items() if n in b.aovs}
+
+
+class _Staging:
+    """A hidden folder inside `out_dir`; `publish` moves its files into `out_dir`."""
+
+    def __init__(self, out_dir: Path, prefix: str, overwrite: bool) -> None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        existing = find_sequences(out_dir).get(prefix, [])
+        if existing and not overwrite:
+            raise UsageError(
+                f"{out_dir} already holds {len(existing)} frames named {prefix}.NNNN.exr; "
+                "use --overwrite to replace them"
+            )
+        self.out_dir, self.prefix = out_dir, prefix
+        self.old = [p for _, p in existing]
+        self.dir = Path(tempfile.mkdtemp(prefix=".telecine-", dir=out_dir))
+
+    def __enter__(self) -> "_Staging":
+        return self
+
+    def publish(self, names: list[str]) -> tuple[Path, ...]:
+        keep = set(names)
+        for path in self.old:
+            if path.name not in keep:
+                path.unlink(missing_ok=True)
+        out = []
+        for name in names:
+            os.replace(self.dir / name, self.out_dir / name)
+            out.append(self.out_dir / name)
+        return tuple(out)
+
+    def __exit__(self, *exc: object) -> None:
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+
+def _check_dirs(in_dir: Path, out_dir: Path, in_prefix: str, out_prefix: str) -> None:
+    if in_dir.resolve() == out_dir.resolve() and in_prefix == out_prefix:
+        raise UsageError(f"output folder {out_dir} is the input folder; choose another -o or --out-prefix")
+
+
+def _timecode(i: int, rate: Fraction, drop_frame: bool) -> str:
+    try:
+        return timecode(i, rate, drop_frame)
+    except ValueError as exc:
+        raise UsageError(f"--drop-frame: {exc} (video rate is {rate})") from None
+
+
+def telecine_sequence(
+    in_dir: str | Path,
+    out_dir: str | Path,
+    *,
+    pattern: str | Cadence = "3:2",
+    field_order: str = "tff",
+    film_speed: str | Fraction | int = "23.976",
+    tail: Tail = "pad",
+    drop_frame: bool = False,
+    prefix: str | None = None,
+    out_prefix: str | None = None,
+    pixel_type: str | None = None,
+    compression: str = "zip",
+    overwrite: bool = False,
+    progress: Progress | None = None,
+    sequence: Sequence | None = None,
+) -> Result:
+    """Pull a progressive EXR sequence down to interlaced (or, for `blend`, blended) frames.
+
+    Video frame i is numbered `first + i`, where `first` is the input's first frame
+    number, and gets timecode `timecode(i, rate)`, i.e. 00:00:00:00 at the first frame.
+    """
+    cadence = parse_cadence(pattern) if isinstance(pattern, str) else pattern
+    order = check_field_order(field_order)
+    film = film_rate(film_speed)
+    rate = output_rate(film, cadence)
+    in_dir, out_dir = Path(in_dir), Path(out_dir)
+    seq = sequence or discover(in_dir, prefix, require_even_height=not cadence.blend)
+    name = out_prefix or seq.prefix
+    _check_dirs(seq.directory, out_dir, seq.prefix, name)
+    frames = plan(len(seq), cadence, order, tail)
+    if drop_frame:
+        _timecode(0, rate, True)
+    ptype = pixel_type or seq.pixel_type
+    load = _FrameCache(seq)
+    names: list[str] = []
+    with _Staging(out_dir, name, overwrite) as staging:
+        for i, vf in enumerate(frames):
+            top, bottom = load(vf.top), load(vf.bottom)
+            meta = _strip(load(vf.first).meta)
+            if cadence.blend:
+                rgba, aovs = _blend_layers(load(vf.first), load(vf.second))
+                meta["blendSources"] = f"{seq.numbers[vf.first]},{seq.numbers[vf.second]}"
+                meta["fieldOrder"] = "progressive"
+            else:
+                rgba, aovs = _weave_layers(top, bottom)
+                meta.update(
+                    fieldOrder=order,
+                    topFieldSource=seq.numbers[vf.top],
+                    bottomFieldSource=seq.numbers[vf.bottom],
+                    firstFieldSource=seq.numbers[vf.first],
+                    secondFieldSource=seq.numbers[vf.second],
+                )
+            meta.update(
+                cadence=cadence.name,
+                cadenceCounts=":".join(str(c) for c in cadence.counts),
+                filmSpeed=film,
+                videoFrame=i,
+                tail=tail,
+            )
+            fname = f"{name}.{seq.first + i:0{seq.padding}d}.exr"
+            write_frame(
+                staging.dir / fname, rgba, meta, fps=rate, timecode=_timecode(i, rate, drop_frame),
+                aovs=aovs or None, pixel_type=ptype, compression=compression,  # type: ignore[arg-type]
+            )
+            names.append(fname)
+            if progress:
+                progress(i + 1, len(frames))
+        paths = staging.publish(names)
+    return Result(out_dir, paths, rate, film, cadence, None if cadence.blend else order)
+
+
+def read_header_meta(seq: Sequence, index: int) -> dict[str, Any]:
+    """Our `motion:` attributes of frame `index` of a sequence."""
+    header = read_header(seq.paths[index])
+    return {k[len("motion:"):]: v for k, v in header.items() if k.startswith("motion:")}
+
+
+def _sources_from_metadata(seq: Sequence, order: FieldOrder) -> list[int] | None:
+    """Film frame numbers of every field, from our own metadata; None if any frame lacks it."""
+    sources: list[int] = []
+    for i in range(len(seq)):
+        meta = read_header_meta(seq, i)
+        if "topFieldSource" not in meta or "bottomFieldSource" not in meta:
+            return None
+        top, bottom = int(meta["topFieldSource"]), int(meta["bottomFieldSource"])
+        sources += [top, bottom] if order == "tff" else [bottom, top]
+    return sources
+
+
+def inverse_sequence(
+    in_dir: str | Path,
+    out_dir: str | Path,
+    *,
+    pattern: str | Cadence | None = None,
+    field_order: str | None = None,
+    film_speed: str | Fraction | int | None = None,
+    tolerance: float = 0.0,
+    use_metadata: bool = True,
+    prefix: str | None = None,
+    out_prefix: str | None = None,
+    pixel_type: str | None = None,
+    compression: str = "zip",
+    overwrite: bool = False,
+    progress: Progress | None = None,
+) -> Result:
+    """Recover the progressive film frames from an interlaced EXR sequence.
+
+    Which film frame fed each field comes from our metadata (`motion:topFieldSource` ...)
+    when every frame has it and no pattern is forced; otherwise from detection over
+    `pattern` (or 3:2, 2:3:3:2, 2:2). With metadata the frames keep their original numbers;
+    with detection they are numbered from the input's first frame number.
+    """
+    in_dir, out_dir = Path(in_dir), Path(out_dir)
+    seq = discover(in_dir, prefix)
+    name = out_prefix or seq.prefix
+    _check_dirs(seq.directory, out_dir, seq.prefix, name)
+    order = check_field_order(field_order or str(seq.first_meta.get("fieldOrder", "tff")))
+    if order not in ("tff", "bff"):
+        raise UsageError(f"{seq.paths[0]}: field order {order!r} is not interlaced")
+
+    detection: Detection | None = None
+    sources = _sources_from_metadata(seq, order) if (use_metadata and pattern is None) else None
+    numbered_by_source = sources is not None
+    if sources is None:
+        frames = (read_checked(seq, i).rgba for i in range(len(seq)))
+        d = stream_differences(*field_differences(frames), order)
+        candidates = CANDIDATES if pattern is None else (pattern,)
+        detection = detect(d, candidates, tolerance)
+        if detection.violations:
+            raise FrameIOError(
+                f"{seq.directory}: sequence {seq.prefix} does not follow {detection.cadence.name} "
+                f"pulldown ({detection.violations} fields that should repeat differ); "
+                "give --pattern, or --tolerance for a lossy source"
+            )
+        sources = [int(s) for s in cadence_sources(2 * len(seq), detection.cadence, detection.phase)]
+    recovered = recovery_map(sources, order)
+    if not recovered:
+        raise FrameIOError(f"{seq.directory}: no complete film frame in sequence {seq.prefix}")
+
+    cadence = detection.cadence if detection else parse_cadence(str(seq.first_meta.get("cadence", "3:2")))
+    if film_speed is not None:
+        film = film_rate(film_speed)
+    elif isinstance(seq.first_meta.get("filmSpeed"), Fraction):
+        film = seq.first_meta["filmSpeed"]
+    elif seq.fps is not None:
+        film = seq.fps / cadence.rate_ratio
+    else:
+        film = film_rate("23.976")
+    ptype = pixel_type or seq.pixel_type
+    load = _FrameCache(seq)
+    names: list[str] = []
+    with _Staging(out_dir, name, overwrite) as staging:
+        for i, r in enumerate(recovered):
+            top, bottom = load(r.top_from), load(r.bottom_from)
+            rgba, aovs = _weave_layers(top, bottom)
+            meta = _strip(top.meta)
+            meta.update(
+                inverseTelecine=cadence.name,
+                topFieldFrom=seq.numbers[r.top_from],
+                bottomFieldFrom=seq.numbers[r.bottom_from],
+            )
+            if detection is not None:
+                meta["cadencePhase"] = detection.phase
+            number = r.source if numbered_by_source else seq.first + r.source
+            fname = f"{name}.{number:0{seq.padding}d}.exr"
+            write_frame(
+                staging.dir / fname, rgba, meta, fps=film, timecode=timecode(i, film),
+                aovs=aovs or None, pixel_type=ptype, compression=compression,  # type: ignore[arg-type]
+            )
+            names.append(fname)
+            if progress:
+                progress(i + 1, len(recovered))
+        paths = staging.publish(names)
+    return Result(out_dir, paths, film, film, cadence, order, detection)
