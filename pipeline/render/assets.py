@@ -1,0 +1,111 @@
+"""Converted-asset cache on disk: content-addressed, shared by every worker on a machine.
+
+A mesh is converted once to Mitsuba's fast binary PLY, keyed by a hash of the source bytes
+and the conversion settings; written to a temporary name and renamed, so concurrent
+workers either see a whole file or none (the loser of a race just renames over an
+identical file). The cache has a size cap; the oldest entries (by access time) go first.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..variant import cache_root
+
+CONVERSION_VERSION = "ply-v1"
+DEFAULT_CAP_BYTES = 2 * 1024**3
+
+_stats_lock = threading.Lock()
+STATS = {"hits": 0, "misses": 0}
+
+
+def assets_dir() -> Path:
+    return cache_root() / "assets"
+
+
+def _digest(path: Path, settings: str) -> str:
+    h = hashlib.sha256()
+    h.update(settings.encode())
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()[:32]
+
+
+def mesh_file(source: Path) -> Path:
+    """The cached PLY for a mesh source (.obj or .ply), converting it on first use."""
+    source = Path(source)
+    key = _digest(source, f"{CONVERSION_VERSION}|{source.suffix.lower()}")
+    target = assets_dir() / f"{source.stem}-{key}.ply"
+    if target.is_file():
+        with _stats_lock:
+            STATS["hits"] += 1
+        os.utime(target)  # recently used: the cap evicts least recently used first
+        return target
+    with _stats_lock:
+        STATS["misses"] += 1
+    import mitsuba as mi
+
+    target.parent.mkdir(parents=True, exist_ok=True)
+    kind = "ply" if source.suffix.lower() == ".ply" else "obj"
+    mesh = mi.load_dict({"type": kind, "filename": str(source)})
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp.ply", dir=target.parent)
+    os.close(fd)
+    try:
+        mesh.write_ply(tmp)
+        os.replace(tmp, target)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+    enforce_cap()
+    return target
+
+
+@dataclass(frozen=True)
+class CacheInfo:
+    folder: Path
+    files: int
+    bytes: int
+
+
+def info(folder: Path | None = None) -> CacheInfo:
+    folder = folder or assets_dir()
+    files = [p for p in folder.rglob("*") if p.is_file()] if folder.is_dir() else []
+    return CacheInfo(folder, len(files), sum(p.stat().st_size for p in files))
+
+
+def enforce_cap(cap_bytes: int | None = None) -> int:
+    """Delete least recently used assets until the folder is under the cap; returns bytes freed."""
+    cap = cap_bytes if cap_bytes is not None else int(os.environ.get("MOTION_ASSET_CACHE_CAP", DEFAULT_CAP_BYTES))
+    folder = assets_dir()
+    if not folder.is_dir():
+        return 0
+    entries = sorted((p.stat().st_atime, p.stat().st_size, p) for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
+    total = sum(size for _, size, _ in entries)
+    freed = 0
+    for _, size, path in entries:
+        if total - freed <= cap:
+            break
+        path.unlink(missing_ok=True)
+        freed += size
+    return freed
+
+
+def clear(folder: Path) -> int:
+    """Remove every file under `folder`; returns the number removed."""
+    n = 0
+    if folder.is_dir():
+        for p in sorted(folder.rglob("*"), reverse=True):
+            if p.is_file():
+                p.unlink(missing_ok=True)
+                n += 1
+            elif p.is_dir():
+                try:
+                    p.rmdir()
+                except OSError:
+                    pass
+    return n

@@ -1,0 +1,373 @@
+"""Scene records -> Mitsuba scene dictionaries, through one registry per concept keyed by
+`type` (materials, lights) or `shape` (objects), as pbrt's factories do.
+
+Poses come from the motion stage (`Pose`: translation, wxyz quaternion, scale); this module
+only turns records and poses into dictionaries; it loads nothing itself.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, Iterable
+
+import numpy as np
+
+from ..errors import RendererError
+from ..scene.loader import LoadedScene
+from ..scene.schema import (
+    Camera,
+    Conductor,
+    ConstantLight,
+    Cube,
+    Cylinder,
+    Dielectric,
+    Diffuse,
+    DirectionalLight,
+    Disk,
+    Empty,
+    EnvmapLight,
+    Mesh,
+    Particles,
+    Plastic,
+    PointLight,
+    Principled,
+    Rectangle,
+    Sphere,
+    SpotLight,
+)
+from ..scene.types import Texture
+
+Dict = dict[str, Any]
+
+
+# --- small math ---------------------------------------------------------------------------
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) -> 3x3 rotation matrix."""
+    w, x, y, z = (float(c) for c in q / np.linalg.norm(q))
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def trs_matrix(translation: Iterable[float], rotation: Iterable[float], scale: Iterable[float] = (1, 1, 1)) -> np.ndarray:
+    """world_from_object = T * R * S as a 4x4 matrix."""
+    m = np.eye(4)
+    m[:3, :3] = quat_to_matrix(np.asarray(rotation, float)) * np.asarray(scale, float)[None, :]
+    m[:3, 3] = np.asarray(translation, float)
+    return m
+
+
+def _mi() -> Any:
+    import mitsuba as mi
+
+    return mi
+
+
+def _xf(matrix: np.ndarray) -> Any:
+    return _mi().ScalarTransform4f(np.asarray(matrix, dtype=np.float64).tolist())
+
+
+# --- colours and textures -----------------------------------------------------------------
+
+
+def color(value: Any, loaded: LoadedScene) -> Any:
+    """A colour field: grey float, RGB triple, or a bitmap texture."""
+    if isinstance(value, Texture):
+        tile = value.tile if isinstance(value.tile, tuple) else (value.tile, value.tile)
+        return {
+            "type": "bitmap",
+            "filename": str(loaded.asset(value.file)),
+            "filter_type": value.filter,
+            "wrap_mode": value.wrap,
+            "raw": value.raw,
+            "to_uv": _mi().ScalarTransform4f().scale([tile[0], tile[1], 1.0]),
+        }
+    if isinstance(value, (tuple, list)):
+        return {"type": "rgb", "value": [float(v) for v in value]}
+    return float(value)
+
+
+def spectrum(value: Any) -> Any:
+    if isinstance(value, (tuple, list)):
+        return {"type": "rgb", "value": [float(v) for v in value]}
+    return float(value)
+
+
+# --- materials ----------------------------------------------------------------------------
+
+MaterialBuilder = Callable[[Any, LoadedScene], Dict]
+MATERIALS: dict[str, MaterialBuilder] = {}
+
+
+def _material(kind: str) -> Callable[[MaterialBuilder], MaterialBuilder]:
+    def register(fn: MaterialBuilder) -> MaterialBuilder:
+        MATERIALS[kind] = fn
+        return fn
+
+    return register
+
+
+# Roughness in our files is perceptual; GGX alpha = roughness^2 (as in Disney/principled).
+def _alpha(roughness: float) -> float:
+    return max(float(roughness) ** 2, 1e-4)
+
+
+@_material("diffuse")
+def _diffuse(m: Diffuse, loaded: LoadedScene) -> Dict:
+    return {"type": "diffuse", "reflectance": color(m.color, loaded)}
+
+
+@_material("plastic")
+def _plastic(m: Plastic, loaded: LoadedScene) -> Dict:
+    d: Dict = {"type": "plastic" if m.roughness == 0 else "roughplastic", "diffuse_reflectance": color(m.color, loaded), "int_ior": m.ior}
+    if m.roughness > 0:
+        d["alpha"] = _alpha(m.roughness)
+        d["distribution"] = "ggx"
+    return d
+
+
+@_material("conductor")
+def _conductor(m: Conductor, loaded: LoadedScene) -> Dict:
+    d: Dict = {"type": "conductor" if m.roughness == 0 else "roughconductor", "material": m.preset, "specular_reflectance": spectrum(m.tint)}
+    if m.roughness > 0:
+        d["alpha"] = _alpha(m.roughness)
+        d["distribution"] = "ggx"
+    return d
+
+
+@_material("dielectric")
+def _dielectric(m: Dielectric, loaded: LoadedScene) -> Dict:
+    d: Dict = {"type": "dielectric" if m.roughness == 0 else "roughdielectric", "int_ior": m.ior, "specular_transmittance": spectrum(m.tint)}
+    if m.roughness > 0:
+        d["alpha"] = _alpha(m.roughness)
+        d["distribution"] = "ggx"
+    return d
+
+
+@_material("principled")
+def _principled(m: Principled, loaded: LoadedScene) -> Dict:
+    return {
+        "type": "principled",
+        "base_color": color(m.color, loaded),
+        "metallic": m.metallic,
+        "roughness": m.roughness,
+        "specular": m.specular,
+        "clearcoat": m.clearcoat,
+    }
+
+
+def material_dict(m: Any, loaded: LoadedScene) -> Dict:
+    d = MATERIALS[m.type](m, loaded)
+    if m.two_sided:
+        d = {"type": "twosided", "material": d}
+    return d
+
+
+DEFAULT_MATERIAL: Dict = {"type": "diffuse", "reflectance": 0.5}
+
+
+# --- shapes -------------------------------------------------------------------------------
+
+# Each builder returns the Mitsuba shapes of one object, in OBJECT space (to_world = the
+# object's geometry-from-unit-primitive transform); the caller pre-multiplies the pose.
+ShapeBuilder = Callable[[Any, LoadedScene], list[tuple[Dict, np.ndarray]]]
+SHAPES: dict[str, ShapeBuilder] = {}
+
+
+def _shape(kind: str) -> Callable[[ShapeBuilder], ShapeBuilder]:
+    def register(fn: ShapeBuilder) -> ShapeBuilder:
+        SHAPES[kind] = fn
+        return fn
+
+    return register
+
+
+def _scale(sx: float, sy: float, sz: float) -> np.ndarray:
+    return np.diag([sx, sy, sz, 1.0])
+
+
+@_shape("sphere")
+def _sphere(o: Sphere, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
+    return [({"type": "sphere"}, _scale(o.radius, o.radius, o.radius))]
+
+
+@_shape("cube")
+def _cube(o: Cube, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
+    # Mitsuba's cube spans [-1, 1]^3
+    s = o.size if isinstance(o.size, tuple) else (o.size,) * 3
+    return [({"type": "cube"}, _scale(s[0] / 2, s[1] / 2, s[2] / 2))]
+
+
+@_shape("rectangle")
+def _rectangle(o: Rectangle, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
+    # Mitsuba's rectangle spans [-1, 1]^2 in XY, normal +Z
+    return [({"type": "rectangle"}, _scale(o.width / 2, o.height / 2, 1.0))]
+
+
+@_shape("disk")
+def _disk(o: Disk, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
+    return [({"type": "disk"}, _scale(o.radius, o.radius, 1.0))]
+
+
+@_shape("cylinder")
+def _cylinder(o: Cylinder, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
+    # Mitsuba's cylinder is open, along +Z from z=0 to z=1: rotate +Z onto +Y, centre it,
+    # and close it with two disks (top facing +Y, bottom facing -Y).
+    r, h = o.radius, o.height
+    z_to_y = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], float)  # rot -90 about x
+    body = np.eye(4)
+    body[1, 3] = -h / 2
+    body = body @ z_to_y @ _scale(r, r, h)
+    top = np.eye(4)
+    top[1, 3] = h / 2
+    top = top @ z_to_y @ _scale(r, r, 1.0)
+    y_down = np.array([[1, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]], float)  # rot +90 about x
+    bottom = np.eye(4)
+    bottom[1, 3] = -h / 2
+    bottom = bottom @ y_down @ _scale(r, r, 1.0)
+    return [({"type": "cylinder"}, body), ({"type": "disk"}, top), ({"type": "disk"}, bottom)]
+
+
+@_shape("mesh")
+def _mesh(o: Mesh, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
+    from .assets import mesh_file
+
+    path = mesh_file(loaded.asset(o.file))
+    kind = "ply" if path.suffix.lower() == ".ply" else "obj"
+    return [({"type": kind, "filename": str(path), "face_normals": o.face_normals}, np.eye(4))]
+
+
+@_shape("empty")
+def _empty(o: Empty, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
+    return []
+
+
+@_shape("particles")
+def _particles(o: Particles, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
+    return []  # particles are geometry built per frame by the renderer (render/particles.py)
+
+
+def object_shapes(obj: Any, loaded: LoadedScene, world_from_object: np.ndarray, materials: dict[str, Dict]) -> list[Dict]:
+    """The Mitsuba shape dictionaries of one object at one pose."""
+    out = []
+    for d, object_from_prim in SHAPES[obj.shape](obj, loaded):
+        d = dict(d)
+        d["to_world"] = _xf(world_from_object @ object_from_prim)
+        d["bsdf"] = materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
+        if obj.emission is not None:
+            d["emitter"] = {"type": "area", "radiance": spectrum(obj.emission.radiance)}
+        out.append(d)
+    return out
+
+
+# --- lights -------------------------------------------------------------------------------
+
+
+def light_dict(light: Any, loaded: LoadedScene, world_from_light: np.ndarray | None, scalars: dict[str, float]) -> Dict:
+    """One light at one time. `world_from_light` is the light's animated/parented frame
+    (None or identity for a still light); positions and directions are given in it."""
+    m = np.eye(4) if world_from_light is None else world_from_light
+    intensity_scale = float(scalars.get("intensity", 1.0))
+    if isinstance(light, ConstantLight):
+        return {"type": "constant", "radiance": _scaled(scalars.get("radiance", light.radiance), intensity_scale)}
+    if isinstance(light, EnvmapLight):
+        d: Dict = {"type": "envmap", "filename": str(loaded.asset(light.file)), "scale": float(scalars.get("scale", light.scale)) * intensity_scale}
+        d["to_world"] = _xf(m)  # the motion stage folds the envmap's `transform` into its pose
+        return d
+    if isinstance(light, PointLight):
+        pos = (m @ np.array([*light.position, 1.0]))[:3]
+        return {"type": "point", "position": pos.tolist(), "intensity": _scaled(scalars.get("intensity_rgb", light.intensity), intensity_scale)}
+    if isinstance(light, SpotLight):
+        pos = (m @ np.array([*light.position, 1.0]))[:3]
+        target = (m @ np.array([*light.look_at, 1.0]))[:3]
+        up = _any_up(target - pos)
+        d = {
+            "type": "spot",
+            "to_world": _mi().ScalarTransform4f().look_at(origin=pos.tolist(), target=target.tolist(), up=up),
+            "intensity": _scaled(light.intensity, intensity_scale),
+            "cutoff_angle": light.cutoff_angle,
+        }
+        if light.beam_width is not None:
+            d["beam_width"] = min(light.beam_width, light.cutoff_angle)
+        return d
+    if isinstance(light, DirectionalLight):
+        direction = m[:3, :3] @ np.asarray(light.direction, float)
+        return {"type": "directional", "direction": direction.tolist(), "irradiance": _scaled(scalars.get("irradiance", light.irradiance), intensity_scale)}
+    raise RendererError(f"no builder for light type {light.type!r}")
+
+
+def _scaled(value: Any, k: float) -> Any:
+    if isinstance(value, (tuple, list, np.ndarray)):
+        return {"type": "rgb", "value": [float(v) * k for v in value]}
+    return float(value) * k
+
+
+def _any_up(direction: np.ndarray) -> list[float]:
+    d = direction / (np.linalg.norm(direction) or 1.0)
+    return [0.0, 0.0, 1.0] if abs(d[1]) > 0.99 else [0.0, 1.0, 0.0]
+
+
+# --- camera -------------------------------------------------------------------------------
+
+
+def sensor_dict(
+    camera: Camera,
+    world_from_camera: np.ndarray,
+    fov: float,
+    resolution: tuple[int, int],
+    spp: int,
+    rfilter: str,
+    shutter: tuple[float, float] = (0.0, 0.0),
+    ortho_width: float | None = None,
+    sampler: str = "independent",
+    aovs: bool = False,
+) -> Dict:
+    """A sensor at one pose. Mitsuba's camera looks along local +Z with +Y up."""
+    film: Dict = {
+        "type": "hdrfilm",
+        "width": int(resolution[0]),
+        "height": int(resolution[1]),
+        "rfilter": {"type": rfilter},
+        "pixel_format": "rgba",
+        "sample_border": False,
+    }
+    d: Dict = {
+        "type": camera.type,
+        "near_clip": camera.near,
+        "far_clip": camera.far,
+        "film": film,
+        "sampler": {"type": sampler, "sample_count": int(spp)},
+        "shutter_open": float(shutter[0]),
+        "shutter_close": float(shutter[1]),
+    }
+    if camera.type == "perspective":
+        d["fov"] = float(fov)
+        d["fov_axis"] = camera.fov_axis
+        d["to_world"] = _xf(world_from_camera)
+    else:
+        # Mitsuba's orthographic camera sees camera-space x in [-1, 1]: scale by width / 2.
+        half = float(ortho_width if ortho_width is not None else camera.ortho_width) / 2
+        d["to_world"] = _xf(world_from_camera @ _scale(half, half, 1.0))
+    return d
+
+
+def look_at_matrix(position: Iterable[float], target: Iterable[float], up: Iterable[float]) -> np.ndarray:
+    """Mitsuba's look_at: columns (left, up', dir, origin)."""
+    o = np.asarray(position, float)
+    d = np.asarray(target, float) - o
+    d /= np.linalg.norm(d)
+    left = np.cross(np.asarray(up, float), d)
+    n = np.linalg.norm(left)
+    if n < 1e-9:  # up parallel to the view direction: pick another up
+        left = np.cross([0.0, 0.0, 1.0] if abs(d[1]) > 0.9 else [0.0, 1.0, 0.0], d)
+        n = np.linalg.norm(left)
+    left /= n
+    new_up = np.cross(d, left)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = left, new_up, d, o
+    return m

@@ -1,0 +1,259 @@
+"""`motion_path`: a unidirectional path tracer (BSDF + emitter sampling with MIS, Russian
+roulette) in which every camera sample carries its own time inside the shutter.
+
+Mitsuba 3 has no animated shapes, so motion is ours (docs/motion-blur.md):
+
+* The static set lives in one `mi.Scene` whose BVH is built once per worker and never
+  touched again. Each rigid mover lives in its own tiny scene, in its rest frame.
+* The sensor's shutter is fixed to [0, 1]: `ray.time` is the sample's shutter fraction u,
+  drawn by the sampler (stratified across a pixel's samples).
+* At u, each mover's world_from_object = T(u) R(u) is interpolated from the baked samples
+  across the shutter: translation linearly, rotation by slerp (never a matrix lerp).
+  The ray is mapped into the mover's rest frame by the inverse, intersected there, and
+  the nearest hit over all scenes wins; the hit is mapped back to world space.
+* Shadow rays and every bounce of a path reuse the path's u: one path, one time.
+* The camera's motion inside the shutter moves primary rays by C(u) C(frame)^-1.
+* Per-frame data (poses) are opaque drjit arrays of a fixed size, so a new frame replays
+  the compiled kernels instead of compiling new ones.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+
+def _mis(a: Any, b: Any) -> Any:
+    """Power heuristic (beta = 2)."""
+    a2 = dr.square(a)
+    return dr.detach(dr.select(a > 0, a2 / (a2 + dr.square(b)), 0))
+
+
+def _qrot(q: Any, v: Any) -> Any:
+    """Rotate vector v by unit quaternion q = (w, x, y, z) stored as mi.Vector4f."""
+    u = mi.Vector3f(q.y, q.z, q.w)
+    w = q.x
+    t = 2 * dr.cross(u, v)
+    return v + w * t + dr.cross(u, t)
+
+
+def _qconj(q: Any) -> Any:
+    return mi.Vector4f(q.x, -q.y, -q.z, -q.w)
+
+
+def _slerp(q0: Any, q1: Any, f: Any) -> Any:
+    """Shortest-arc spherical interpolation of unit quaternions (w, x, y, z)."""
+    d = dr.dot(q0, q1)
+    q1 = dr.select(d < 0, -q1, q1)
+    d = dr.abs(d)
+    theta = dr.acos(dr.minimum(d, 1.0))
+    s = dr.sin(theta)
+    small = s < 1e-4
+    w0 = dr.select(small, 1 - f, dr.sin((1 - f) * theta) / s)
+    w1 = dr.select(small, f, dr.sin(f * theta) / s)
+    return dr.normalize(w0 * q0 + w1 * q1)
+
+
+class MotionPathIntegrator(mi.SamplingIntegrator):
+    """See the module docstring. Properties: max_depth (default 8), rr_depth (5)."""
+
+    def __init__(self, props: mi.Properties) -> None:
+        super().__init__(props)
+        self.max_depth = int(props.get("max_depth", 8))
+        self.rr_depth = int(props.get("rr_depth", 5))
+        self.movers: list[mi.Scene] = []
+        self.n_samples = 2
+        self._mover_t = mi.Float(0.0)
+        self._mover_q = mi.Float(0.0)
+        self._cam_t = mi.Float(0.0)
+        self._cam_q = mi.Float(0.0)
+        self._cam_origin = mi.Vector3f(0.0)
+
+    # --- per-job and per-frame state --------------------------------------------------
+
+    def set_movers(self, movers: Sequence[mi.Scene], n_samples: int) -> None:
+        """The rest-frame scenes of the rigid movers (fixed for a job) and the number of
+        baked samples across the shutter."""
+        self.movers = list(movers)
+        self.n_samples = max(2, int(n_samples))
+
+    def set_frame(
+        self,
+        mover_translation: np.ndarray,
+        mover_rotation: np.ndarray,
+        camera_translation: np.ndarray,
+        camera_rotation_rel: np.ndarray,
+        sensor_origin: np.ndarray,
+    ) -> None:
+        """Per-frame poses. mover_*: [M, N, 3|4]; camera_*: [N, 3|4], where the camera
+        rotation is relative to the sensor's (C(u) C(frame)^-1); sensor_origin: [3]."""
+        m = len(self.movers)
+        n = self.n_samples
+        assert mover_translation.shape == (m, n, 3) and mover_rotation.shape == (m, n, 4)
+        assert camera_translation.shape == (n, 3) and camera_rotation_rel.shape == (n, 4)
+        flat = lambda a: mi.Float(np.ascontiguousarray(a, dtype=np.float32).ravel())  # noqa: E731
+        self._mover_t = flat(mover_translation) if m else mi.Float(0.0)
+        self._mover_q = flat(mover_rotation) if m else mi.Float(0.0)
+        self._cam_t = flat(camera_translation)
+        self._cam_q = flat(camera_rotation_rel)
+        self._cam_origin = mi.Vector3f(*[float(x) for x in sensor_origin])
+        # opaque: new values each frame must not become new literals in the kernel
+        dr.make_opaque(self._mover_t, self._mover_q, self._cam_t, self._cam_q, self._cam_origin)
+
+    # --- pose lookups at the sample's time ---------------------------------------------
+
+    def _segment(self, u: Any) -> tuple[Any, Any]:
+        x = dr.clip(u, 0.0, 1.0) * (self.n_samples - 1)
+        i = dr.minimum(mi.UInt32(dr.floor(x)), self.n_samples - 2)
+        return i, x - mi.Float(i)
+
+    def _pose(self, table_t: Any, table_q: Any, base: Any, i: Any, f: Any, active: Any) -> tuple[Any, Any]:
+        j = base + i
+        t0 = dr.gather(mi.Vector3f, table_t, j, active)
+        t1 = dr.gather(mi.Vector3f, table_t, j + 1, active)
+        q0 = dr.gather(mi.Vector4f, table_q, j, active)
+        q1 = dr.gather(mi.Vector4f, table_q, j + 1, active)
+        return dr.lerp(t0, t1, f), _slerp(q0, q1, f)
+
+    def _mover_poses(self, u: Any, active: Any) -> list[tuple[Any, Any]]:
+        i, f = self._segment(u)
+        return [
+            self._pose(self._mover_t, self._mover_q, k * self.n_samples, i, f, active)
+            for k in range(len(self.movers))
+        ]
+
+    # --- scene queries over the static set and the movers --------------------------------
+
+    def _intersect(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[tuple[Any, Any]], active: Any) -> tuple[Any, Any]:
+        """Nearest hit over all scenes, in world space; also whether it is on a mover."""
+        si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
+        on_mover = mi.Bool(False)
+        for mover, (t, q) in zip(self.movers, poses):
+            qi = _qconj(q)
+            local = mi.Ray3f(ray)
+            local.o = _qrot(qi, ray.o - t)
+            local.d = _qrot(qi, ray.d)
+            si_m = mover.ray_intersect(local, mi.RayFlags.All, coherent=False, active=active)
+            closer = si_m.is_valid() & (si_m.t < si.t)
+            # back to world space: p, normals and the shading frame rotate; wi is local
+            si_m.p = _qrot(q, si_m.p) + t
+            si_m.n = _qrot(q, si_m.n)
+            si_m.sh_frame.s = _qrot(q, si_m.sh_frame.s)
+            si_m.sh_frame.t = _qrot(q, si_m.sh_frame.t)
+            si_m.sh_frame.n = _qrot(q, si_m.sh_frame.n)
+            si_m.dp_du = _qrot(q, si_m.dp_du)
+            si_m.dp_dv = _qrot(q, si_m.dp_dv)
+            si_m.wi = dr.select(closer, si_m.wi, si.wi)
+            si = dr.select(closer, si_m, si)
+            on_mover |= closer
+        return si, on_mover
+
+    def _occluded(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[tuple[Any, Any]], active: Any) -> Any:
+        hit = scene.ray_test(ray, active)
+        for mover, (t, q) in zip(self.movers, poses):
+            qi = _qconj(q)
+            local = mi.Ray3f(ray)
+            local.o = _qrot(qi, ray.o - t)
+            local.d = _qrot(qi, ray.d)
+            hit |= mover.ray_test(local, active & ~hit)
+        return hit
+
+    # --- the path ------------------------------------------------------------------------
+
+    @dr.syntax
+    def sample(
+        self,
+        scene: mi.Scene,
+        sampler: mi.Sampler,
+        ray: mi.RayDifferential3f,
+        medium: mi.Medium | None = None,
+        active: mi.Bool = True,
+    ) -> tuple[mi.Spectrum, mi.Bool, list[mi.Float]]:
+        u = mi.Float(ray.time)  # shutter fraction in [0, 1]
+        # camera motion inside the shutter: C(u) C(frame)^-1 applied to the primary ray
+        ci, cf = self._segment(u)
+        cam_t, cam_q = self._pose(self._cam_t, self._cam_q, mi.UInt32(0), ci, cf, active)
+        ray = mi.Ray3f(ray)
+        ray.o = _qrot(cam_q, ray.o - self._cam_origin) + cam_t
+        ray.d = _qrot(cam_q, ray.d)
+
+        poses = self._mover_poses(u, active)
+        bsdf_ctx = mi.BSDFContext()
+        L = mi.Spectrum(0.0)
+        beta = mi.Spectrum(1.0)
+        depth = mi.UInt32(0)
+        eta = mi.Float(1.0)
+        active = mi.Bool(active)
+        prev_si = dr.zeros(mi.SurfaceInteraction3f)
+        prev_bsdf_pdf = mi.Float(1.0)
+        prev_bsdf_delta = mi.Bool(True)
+        valid = mi.Bool(False)
+
+        while dr.hint(active, max_iterations=self.max_depth, label="motion_path"):
+            si, on_mover = self._intersect(scene, ray, poses, active)
+            valid |= active & si.is_valid() & (depth == 0)
+            # emission reached by BSDF sampling, MIS-weighted against emitter sampling;
+            # emitters on movers are not in the static scene's light list: pdf 0, weight 1
+            ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
+            em_pdf = dr.select(
+                ~prev_bsdf_delta & ~on_mover,
+                scene.pdf_emitter_direction(prev_si, ds, ~prev_bsdf_delta & ~on_mover),
+                0.0,
+            )
+            mis_bsdf = dr.select(depth == 0, 1.0, _mis(prev_bsdf_pdf, em_pdf))
+            L += beta * mis_bsdf * ds.emitter.eval(si, active & (prev_bsdf_pdf > 0))
+
+            active_next = active & si.is_valid() & (depth + 1 < self.max_depth)
+            bsdf = si.bsdf(ray)
+
+            # emitter sampling (static lights), shadow test across all scenes at time u
+            active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+            ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), False, active_em)
+            active_em &= ds_em.pdf != 0.0
+            shadow = si.spawn_ray_to(ds_em.p)
+            occluded = self._occluded(scene, shadow, poses, active_em)
+            active_em &= ~occluded
+            wo = si.to_local(ds_em.d)
+            bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, wo, active_em)
+            mis_em = dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, bsdf_pdf))
+            L += dr.select(active_em, beta * mis_em * bsdf_val * em_weight, 0.0)
+
+            # BSDF sampling: the next segment of the path
+            bs, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(), active_next)
+            ray = si.spawn_ray(si.to_world(bs.wo))
+            beta *= bsdf_weight
+            eta *= bs.eta
+            prev_si = dr.detach(si, True)
+            prev_bsdf_pdf = bs.pdf
+            prev_bsdf_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+
+            # Russian roulette on the throughput (with the refraction scale removed)
+            depth[si.is_valid()] += 1
+            q = dr.minimum(dr.max(beta) * dr.square(eta), 0.99)
+            rr = depth >= self.rr_depth
+            beta[rr] *= dr.rcp(q)
+            active = active_next & (~rr | (sampler.next_1d() < q)) & (dr.max(beta) != 0)
+
+        if scene.environment() is not None:
+            valid = mi.Bool(True)
+        return L, valid, []
+
+    def aov_names(self) -> list[str]:
+        return []
+
+    def to_string(self) -> str:
+        return f"MotionPathIntegrator[max_depth={self.max_depth}, movers={len(self.movers)}]"
+
+
+_registered = False
+
+
+def register() -> None:
+    """Make `{"type": "motion_path"}` available to mi.load_dict (once per process)."""
+    global _registered
+    if not _registered:
+        mi.register_integrator("motion_path", lambda props: MotionPathIntegrator(props))
+        _registered = True
