@@ -250,9 +250,10 @@ def inverse_sequence(
     seq = discover(in_dir, prefix)
     name = out_prefix or seq.prefix
     _check_dirs(seq.directory, out_dir, seq.prefix, name)
-    order = check_field_order(field_order or str(seq.first_meta.get("fieldOrder", "tff")))
-    if order not in ("tff", "bff"):
-        raise UsageError(f"{seq.paths[0]}: field order {order!r} is not interlaced")
+    stored = str(seq.first_meta.get("fieldOrder", "tff"))
+    if field_order is None and stored not in ("tff", "bff"):
+        raise UsageError(f"{seq.paths[0]}: frames are marked {stored!r}, not interlaced; give --field-order to force")
+    order = check_field_order(field_order or stored)
 
     detection: Detection | None = None
     sources = _sources_from_metadata(seq, order) if (use_metadata and pattern is None) else None
