@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import FrameIOError, UsageError
 from ..frame_output import Frame, read_header, write_frame
 from ..timeline import timecode
-from .cadence import Cadence, Tail, VideoFrame, film_rate, output_rate, parse_cadence, plan
+from .cadence import Cadence, Tail, film_rate, output_rate, parse_cadence, plan
 from .fields import FieldOrder, check_field_order, weave_frames
 from .inverse import (
     CANDIDATES, Detection, cadence_sources, detect, field_differences, recovery_map, stream_differences,
