@@ -1,0 +1,266 @@
+"""Evaluate a scene's motion at any times: every object, the camera and the lights, in
+world space (docs/architecture.md, "Contract: motion evaluation").
+
+Per thing: a local pose from its `transform:` (or camera position/look_at, light
+position/direction) and its motion block (static, keyframes, procedural; dynamics come
+from the simulation), then world_from_thing = world_from_parent * parent_from_thing in
+the tree's order. Every step is vectorised over the T times.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Mapping
+
+import numpy as np
+
+from ..errors import MotionError, SceneError
+from ..scene.motion_schema import KeyframeMotion, ProceduralMotion
+from ..scene.schema import (
+    Camera,
+    ConstantLight,
+    DirectionalLight,
+    EnvmapLight,
+    Particles,
+    PointLight,
+    SpotLight,
+)
+from .graph import evaluation_order
+from .keyframes import RotationTrack, TrackError, VectorTrack
+from .pose import Pose, compose
+from .procedural import ExpressionValueError, apply_layers, procedural_layers, procedural_scalars
+from .rotation import direction_quat, look_at_quat, transform_quat
+
+if TYPE_CHECKING:
+    from ..scene.loader import LoadedScene, Loc
+
+
+class SimulationRequiredError(MotionError):
+    """The scene has dynamics bodies or particles but no simulation was given."""
+
+
+@dataclass(frozen=True)
+class SceneMotion:
+    """Everything that moves, at `times` (seconds, [T]). Plain arrays: small and picklable."""
+
+    times: np.ndarray
+    objects: dict[str, Pose]  # world_from_object for every object, static ones included
+    camera: Pose  # world_from_camera (Mitsuba camera space: +Z forward, +Y up, +X left)
+    camera_scalars: dict[str, np.ndarray]  # "fov" [T] always; keyed "ortho_width" [T]
+    lights: dict[str, Pose]  # by name, unnamed lights are light<i>
+    light_scalars: dict[str, dict[str, np.ndarray]]  # intensity/radiance/irradiance [T, 3], scale [T]
+    vertices: dict[str, np.ndarray] = field(default_factory=dict)  # deforming meshes, object space [T, V, 3]
+    particles: dict[str, Any] = field(default_factory=dict)  # ParticleSamples by object name
+
+    def take(self, index: slice | np.ndarray) -> "SceneMotion":
+        """The same motion at a subset of the times."""
+        return SceneMotion(
+            times=self.times[index],
+            objects={k: p.take(index) for k, p in self.objects.items()},
+            camera=self.camera.take(index),
+            camera_scalars={k: v[index] for k, v in self.camera_scalars.items()},
+            lights={k: p.take(index) for k, p in self.lights.items()},
+            light_scalars={k: {n: v[index] for n, v in d.items()} for k, d in self.light_scalars.items()},
+            vertices={k: v[index] for k, v in self.vertices.items()},
+            particles={k: _take_particles(v, index) for k, v in self.particles.items()},
+        )
+
+
+def _take_particles(samples: Any, index: slice | np.ndarray) -> Any:
+    """Slice a ParticleSamples-like value along time if it knows how, else keep it."""
+    take = getattr(samples, "take", None)
+    return take(index) if callable(take) else samples
+
+
+def light_name(light: Any, index: int) -> str:
+    return light.name if light.name is not None else f"light{index}"
+
+
+def has_dynamics(loaded: "LoadedScene") -> bool:
+    """True when evaluation needs a simulation (dynamics bodies or particle systems)."""
+    return any(o.motion.type == "dynamics" or isinstance(o, Particles) for o in loaded.scene.objects)
+
+
+# --- local poses --------------------------------------------------------------------------
+
+
+def _broadcast(value: np.ndarray, count: int) -> np.ndarray:
+    return np.broadcast_to(value, (count, value.shape[-1])).copy()
+
+
+def _scale3(scale: float | tuple[float, float, float]) -> np.ndarray:
+    return np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,)).copy()
+
+
+@dataclass
+class _Local:
+    translation: np.ndarray
+    rotation: np.ndarray
+    scale: np.ndarray
+    scalars: dict[str, np.ndarray]
+
+
+def _local(
+    loaded: "LoadedScene",
+    loc: "Loc",
+    motion: Any,
+    base: tuple[np.ndarray, np.ndarray, np.ndarray],
+    t: np.ndarray,
+    scalar_dims: Mapping[str, int],
+) -> _Local:
+    """parent_from_thing at times t from its base transform and motion block."""
+    count = len(t)
+    translation, rotation, scale = (_broadcast(b, count) for b in base)
+    scalars: dict[str, np.ndarray] = {}
+    mloc = (*loc, "motion")
+    try:
+        if isinstance(motion, KeyframeMotion):
+            seconds = 1.0 if motion.time_unit == "seconds" else float(1 / loaded.scene.timeline.rate)
+            for name, channel in motion.channels.items():
+                cloc = (*mloc, "channels", name)
+                try:
+                    if name == "rotate":
+                        rotation = RotationTrack.compile(channel, motion.interpolation, motion.extrapolation, seconds)(t)
+                    elif name == "translate":
+                        translation = VectorTrack.compile(channel, motion.interpolation, motion.extrapolation, seconds, 3)(t)
+                    elif name == "scale" and "scale" not in scalar_dims:
+                        scale = _vector_or_uniform(channel, motion, seconds, t)
+                    else:
+                        dim = scalar_dims.get(name, 1)
+                        if dim == 3:
+                            scalars[name] = _vector_or_uniform(channel, motion, seconds, t)
+                        else:
+                            scalars[name] = VectorTrack.compile(channel, motion.interpolation, motion.extrapolation, seconds, 1)(t)[:, 0]
+                except TrackError as exc:
+                    raise SceneError([loaded.source.problem((*cloc, *exc.loc), str(exc))]) from None
+        elif isinstance(motion, ProceduralMotion):
+            translation, rotation, scale = apply_layers(translation, rotation, scale, procedural_layers(motion, t))
+            for name, values in procedural_scalars(motion, t).items():
+                scalars[name] = values[:, None].repeat(3, axis=1) if scalar_dims.get(name, 1) == 3 else values
+    except ExpressionValueError as exc:
+        raise SceneError([loaded.source.problem((*mloc, *exc.loc), str(exc))]) from None
+    return _Local(translation, rotation, scale, scalars)
+
+
+def _vector_or_uniform(channel: Any, motion: KeyframeMotion, seconds: float, t: np.ndarray) -> np.ndarray:
+    """A channel keyed with either one number (uniform) or three per key -> [T, 3]."""
+    uniform = all(not isinstance(k.value, tuple) for k in channel.keys)
+    dim = 1 if uniform else 3
+    values = VectorTrack.compile(channel, motion.interpolation, motion.extrapolation, seconds, dim)(t)
+    return np.repeat(values, 3, axis=1) if uniform else values
+
+
+def _object_base(obj: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    tr = obj.transform
+    return np.asarray(tr.translate, dtype=np.float64), transform_quat(tr.rotate), _scale3(tr.scale)
+
+
+def _camera_base(cam: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    if cam.transform is not None:
+        return _object_base(cam)
+    if cam.position is not None and cam.look_at is not None:
+        return np.asarray(cam.position, dtype=np.float64), look_at_quat(cam.position, cam.look_at, cam.up), np.ones(3)
+    return np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.ones(3)
+
+
+def _light_base(light: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    identity = np.array([1.0, 0.0, 0.0, 0.0])
+    if isinstance(light, SpotLight):
+        up = (0.0, 1.0, 0.0)
+        d = np.subtract(light.look_at, light.position)
+        if np.linalg.norm(np.cross(d, up)) < 1e-9 * max(np.linalg.norm(d), 1e-300):
+            up = (0.0, 0.0, 1.0)
+        return np.asarray(light.position, dtype=np.float64), look_at_quat(light.position, light.look_at, up), np.ones(3)
+    if isinstance(light, PointLight):
+        return np.asarray(light.position, dtype=np.float64), identity, np.ones(3)
+    if isinstance(light, DirectionalLight):
+        return np.zeros(3), direction_quat(light.direction), np.ones(3)
+    if isinstance(light, EnvmapLight) and light.transform is not None:
+        return _object_base(light)
+    return np.zeros(3), identity, np.ones(3)
+
+
+def _light_scalar_bases(light: Any) -> dict[str, np.ndarray]:
+    """The light's own (unkeyed) scalars: colours as [3], the envmap's scale as [1]."""
+    if isinstance(light, (PointLight, SpotLight)):
+        return {"intensity": _scale3(light.intensity)}
+    if isinstance(light, ConstantLight):
+        return {"radiance": _scale3(light.radiance)}
+    if isinstance(light, DirectionalLight):
+        return {"irradiance": _scale3(light.irradiance)}
+    if isinstance(light, EnvmapLight):
+        return {"scale": np.array([light.scale])}
+    return {}
+
+
+# --- the whole scene ----------------------------------------------------------------------
+
+
+def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = None) -> SceneMotion:
+    """World-space motion of every object, the camera and every light at `times` (seconds,
+    any order and count). `simulation` (from dynamics.simulate) is required when the scene
+    has dynamics bodies or particle systems; raises SimulationRequiredError otherwise."""
+    scene = loaded.scene
+    t = np.atleast_1d(np.asarray(times, dtype=np.float64))
+    if t.ndim != 1:
+        raise MotionError(f"times must be a 1-D array of seconds, got shape {t.shape}")
+    if not np.isfinite(t).all():
+        raise MotionError("times must be finite")
+    count = len(t)
+    if has_dynamics(loaded) and simulation is None:
+        bodies = [o.name for o in scene.objects if o.motion.type == "dynamics" or isinstance(o, Particles)]
+        raise SimulationRequiredError(
+            f"{loaded.path}: scene has dynamics ({', '.join(bodies)}); run motion.pipeline.dynamics.simulate "
+            "first and pass its result as simulation="
+        )
+    sampled = simulation.sample(t) if simulation is not None and any(o.motion.type == "dynamics" for o in scene.objects) else {}
+
+    index = {o.name: i for i, o in enumerate(scene.objects)}
+    world: dict[str, Pose] = {}
+    for name in evaluation_order({o.name: o.parent for o in scene.objects}):
+        i = index[name]
+        obj = scene.objects[i]
+        if obj.motion.type == "dynamics":
+            if name not in sampled:
+                raise MotionError(f"the simulation has no samples for dynamics body '{name}'")
+            pose = sampled[name]
+            world[name] = Pose(*(np.asarray(a, dtype=np.float64) for a in pose))
+            continue
+        local = _local(loaded, ("objects", i), obj.motion, _object_base(obj), t, {})
+        pose = Pose(local.translation, local.rotation, local.scale)
+        world[name] = compose(world[obj.parent], pose) if obj.parent is not None else pose
+
+    cam = scene.camera
+    local = _local(loaded, ("camera",), cam.motion, _camera_base(cam), t, {"fov": 1, "ortho_width": 1})
+    camera = Pose(local.translation, local.rotation, local.scale)
+    if cam.parent is not None:
+        camera = compose(world[cam.parent], camera)
+    camera_scalars = {"fov": np.full(count, float(cam.fov))}
+    if cam.type == "orthographic":
+        camera_scalars["ortho_width"] = np.full(count, float(cam.ortho_width))
+    camera_scalars.update(local.scalars)
+
+    lights: dict[str, Pose] = {}
+    light_scalars: dict[str, dict[str, np.ndarray]] = {}
+    for i, light in enumerate(scene.lights):
+        bases = _light_scalar_bases(light)
+        dims = {name: (1 if name == "scale" else 3) for name in ("intensity", "radiance", "irradiance")}
+        if isinstance(light, EnvmapLight):
+            dims["scale"] = 1
+        local = _local(loaded, ("lights", i), light.motion, _light_base(light), t, dims)
+        pose = Pose(local.translation, local.rotation, local.scale)
+        name = light_name(light, i)
+        lights[name] = compose(world[light.parent], pose) if light.parent is not None else pose
+        scalars = {k: (np.full(count, v[0]) if v.shape == (1,) else _broadcast(v, count)) for k, v in bases.items()}
+        scalars.update(local.scalars)
+        light_scalars[name] = scalars
+
+    particles: dict[str, Any] = {}
+    for obj in scene.objects:
+        if isinstance(obj, Particles):
+            particles[obj.name] = simulation.particles(obj.name, t)  # type: ignore[union-attr]
+
+    from .deform import deformed_vertices
+
+    vertices = deformed_vertices(loaded, t, world)
+    return SceneMotion(t, world, camera, camera_scalars, lights, light_scalars, vertices, particles)

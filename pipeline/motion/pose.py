@@ -1,0 +1,142 @@
+"""Poses over time and the quaternion arithmetic under them (numpy, vectorised over T).
+
+A `Pose` holds world_from_object = T(translation) * R(rotation) * S(scale) at T times.
+Quaternions are (w, x, y, z) arrays of shape [..., 4]; scipy's `Rotation` is scalar-last,
+so conversions pass `scalar_first=True` at the boundary (rotation.py).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+class Pose(NamedTuple):
+    """world_from_object at T times: translation [T, 3], rotation [T, 4] (w, x, y, z), scale [T, 3]."""
+
+    translation: np.ndarray
+    rotation: np.ndarray
+    scale: np.ndarray
+
+    @property
+    def count(self) -> int:
+        """Number of time samples."""
+        return int(self.translation.shape[0])
+
+    def matrices(self) -> np.ndarray:
+        """[T, 4, 4] homogeneous matrices T * R * S."""
+        rs = quat_to_matrix(self.rotation) * self.scale[:, None, :]
+        out = np.zeros((self.count, 4, 4))
+        out[:, :3, :3] = rs
+        out[:, :3, 3] = self.translation
+        out[:, 3, 3] = 1.0
+        return out
+
+    def take(self, index: np.ndarray | slice | int) -> "Pose":
+        """The pose at a subset of the time samples (keeps the leading axis for ints)."""
+        if isinstance(index, (int, np.integer)):
+            index = slice(int(index), int(index) + 1)
+        return Pose(self.translation[index], self.rotation[index], self.scale[index])
+
+    def transform_points(self, points: np.ndarray) -> np.ndarray:
+        """Map object-space points [V, 3] to world space at every time: [T, V, 3]."""
+        scaled = points[None, :, :] * self.scale[:, None, :]
+        return quat_rotate(self.rotation[:, None, :], scaled) + self.translation[:, None, :]
+
+
+def constant_pose(count: int, translation=(0.0, 0.0, 0.0), rotation=(1.0, 0.0, 0.0, 0.0), scale=(1.0, 1.0, 1.0)) -> Pose:  # type: ignore[no-untyped-def]
+    """A pose that does not change over `count` samples."""
+    return Pose(
+        np.broadcast_to(np.asarray(translation, dtype=np.float64), (count, 3)).copy(),
+        np.broadcast_to(np.asarray(rotation, dtype=np.float64), (count, 4)).copy(),
+        np.broadcast_to(np.asarray(scale, dtype=np.float64), (count, 3)).copy(),
+    )
+
+
+def compose(world_from_parent: Pose, parent_from_child: Pose) -> Pose:
+    """world_from_child = world_from_parent * parent_from_child.
+
+    Translation and rotation compose exactly; scale composes component-wise, which is
+    exact for a uniform parent scale and otherwise drops the shear a non-uniform parent
+    scale would put on a rotated child (docs/motion.md, "Parent frames")."""
+    p, c = world_from_parent, parent_from_child
+    # T_p R_p S_p (T_c x) = t_p + R_p (s_p * t_c): the child's origin in world space.
+    translation = p.translation + quat_rotate(p.rotation, p.scale * c.translation)
+    rotation = quat_normalize(quat_mul(p.rotation, c.rotation))
+    return Pose(translation, rotation, p.scale * c.scale)
+
+
+# --- quaternions (w, x, y, z) -------------------------------------------------------------
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product a * b (broadcasting over leading axes)."""
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack(
+        (
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ),
+        axis=-1,
+    )
+
+
+def quat_conj(q: np.ndarray) -> np.ndarray:
+    """Conjugate = inverse for unit quaternions."""
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def quat_normalize(q: np.ndarray) -> np.ndarray:
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors v [..., 3] by unit quaternions q [..., 4]."""
+    w = q[..., :1]
+    u = q[..., 1:]
+    # q v q* = v + 2 w (u x v) + 2 u x (u x v)  (expanded sandwich product)
+    uv = np.cross(u, v)
+    return v + 2.0 * (w * uv + np.cross(u, uv))
+
+
+def quat_exp(rotvec: np.ndarray) -> np.ndarray:
+    """Unit quaternion of a rotation vector (axis * angle, radians); any angle."""
+    theta = np.linalg.norm(rotvec, axis=-1, keepdims=True)
+    # sin(theta/2)/theta = 0.5 * sinc(theta / 2pi) with numpy's normalised sinc: no 0/0.
+    k = 0.5 * np.sinc(theta / (2.0 * np.pi))
+    return np.concatenate((np.cos(theta / 2.0), k * rotvec), axis=-1)
+
+
+def quat_log(q: np.ndarray) -> np.ndarray:
+    """Rotation vector of the shortest arc (angle in [0, pi]) of a unit quaternion."""
+    q = np.where(q[..., :1] < 0.0, -q, q)
+    w = np.clip(q[..., :1], -1.0, 1.0)
+    v = q[..., 1:]
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    theta = 2.0 * np.arctan2(n, w)
+    # theta / n -> 2 / w as n -> 0 (theta ~ 2 n / w).
+    scale = np.where(n > 1e-12, theta / np.where(n > 1e-12, n, 1.0), 2.0 / np.maximum(w, 1e-12))
+    return v * scale
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """[..., 4] unit quaternions -> [..., 3, 3] rotation matrices."""
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    return np.stack(
+        (
+            np.stack((1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)), axis=-1),
+            np.stack((2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)), axis=-1),
+            np.stack((2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)), axis=-1),
+        ),
+        axis=-2,
+    )
+
+
+def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Angle (radians, [0, pi]) of the rotation taking a to b."""
+    d = np.abs(np.sum(a * b, axis=-1))
+    return 2.0 * np.arccos(np.clip(d, 0.0, 1.0))

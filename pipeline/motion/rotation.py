@@ -1,0 +1,132 @@
+"""Rotations from the scene file's forms to unit quaternions, and rotation segments.
+
+scipy's `Rotation` serves for the conversions (Euler in any order, axis-angle, matrices);
+segment interpolation is written with `quat_exp`/`quat_log` (pose.py) because scipy's
+`Slerp` cannot represent multi-turn segments (`turns:`) nor the cumulative spherical
+Bezier we use for catmull-rom and bezier keys (docs/motion.md, "Rotations").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation as R
+
+from ..scene.motion_schema import Key
+from ..scene.types import AxisAngleRotation, EulerRotation, QuaternionRotation
+from .pose import quat_log, quat_mul, quat_conj, quat_normalize
+
+IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
+
+
+def euler_quat(angles_deg, order: str = "xyz") -> np.ndarray:  # type: ignore[no-untyped-def]
+    """Euler angles in degrees -> (w, x, y, z); lowercase order = extrinsic, uppercase = intrinsic."""
+    return R.from_euler(order, np.asarray(angles_deg, dtype=np.float64), degrees=True).as_quat(scalar_first=True)
+
+
+def axis_angle_quat(axis, angle_deg: float) -> np.ndarray:  # type: ignore[no-untyped-def]
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    half = np.radians(angle_deg) / 2.0
+    return np.concatenate(([np.cos(half)], np.sin(half) * a))
+
+
+def transform_quat(rotation: EulerRotation | AxisAngleRotation | QuaternionRotation | None) -> np.ndarray:
+    """The quaternion of a `transform.rotate` block (identity when absent)."""
+    if rotation is None:
+        return IDENTITY.copy()
+    if isinstance(rotation, EulerRotation):
+        return euler_quat(rotation.euler, rotation.order)
+    if isinstance(rotation, AxisAngleRotation):
+        return axis_angle_quat(rotation.axis, rotation.angle)
+    return quat_normalize(np.asarray(rotation.quaternion, dtype=np.float64))
+
+
+def key_quat(key: Key) -> np.ndarray:
+    """The quaternion of a rotate key: `value` (Euler xyz degrees), `euler` + `order`,
+    `axis` + `angle`, or `quaternion` (w, x, y, z)."""
+    if key.quaternion is not None:
+        q = np.asarray(key.quaternion, dtype=np.float64)
+        norm = np.linalg.norm(q)
+        if norm < 1e-12:
+            raise ValueError("quaternion must not be zero")
+        return q / norm
+    if key.axis is not None and key.angle is not None:
+        if np.linalg.norm(key.axis) < 1e-12:
+            raise ValueError("axis must not be the zero vector")
+        return axis_angle_quat(key.axis, key.angle)
+    if key.euler is not None:
+        return euler_quat(key.euler, key.order)
+    if isinstance(key.value, tuple):
+        return euler_quat(key.value, "xyz")
+    raise ValueError("a rotation key's value is Euler angles [x, y, z] in degrees")
+
+
+def key_axis(key: Key) -> np.ndarray | None:
+    """The spin axis a key names, for `turns` on a segment whose shortest arc is zero:
+    its `axis`, or the one axis of an Euler key with a single non-zero angle."""
+    if key.axis is not None:
+        a = np.asarray(key.axis, dtype=np.float64)
+        return a / np.linalg.norm(a)
+    angles = key.euler if key.euler is not None else key.value if isinstance(key.value, tuple) else None
+    if angles is None:
+        return None
+    order = key.order if key.euler is not None else "xyz"
+    nonzero = [i for i, a in enumerate(angles) if abs(a) > 1e-12]
+    if len(nonzero) != 1:
+        return None
+    axis = np.zeros(3)
+    axis["xyz".index(order[nonzero[0]].lower())] = np.sign(angles[nonzero[0]])
+    return axis
+
+
+def segment_rotvecs(quats: np.ndarray, turns: np.ndarray, axes: list[np.ndarray | None]) -> np.ndarray:
+    """Body-frame rotation vectors w_i of the segments, q_{i+1} = q_i exp(w_i).
+
+    Each is the shortest arc (|w_i| <= pi) plus `turns[i+1]` whole turns about its axis;
+    a zero-length arc takes the axis from key i+1 (`axes[i+1]`). Raises ValueError
+    (with the key index) when turns are asked on a segment with no axis."""
+    rel = quat_mul(quat_conj(quats[:-1]), quats[1:])
+    w = quat_log(rel)
+    for i in np.flatnonzero(turns[1:]):
+        angle = np.linalg.norm(w[i])
+        if angle > 1e-9:
+            axis = w[i] / angle
+        elif axes[i + 1] is not None:
+            # the key's axis is in the parent frame; at a zero arc q_i = q_{i+1}, so map it into the body frame
+            axis = R.from_quat(quats[i], scalar_first=True).inv().apply(axes[i + 1])
+        else:
+            raise ValueError(f"keys[{i + 1}]: turns on a segment with no rotation needs an axis: give the key as axis + angle")
+        w[i] = w[i] + 2.0 * np.pi * turns[i + 1] * axis
+    return w
+
+
+def unwrap_near(rotvec: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Among the rotation vectors of the same rotation (axis * (angle + 2 pi k)), the one
+    nearest `target` (row-wise): keeps multi-turn segments whole through spline controls."""
+    angle = np.linalg.norm(rotvec, axis=-1, keepdims=True)
+    tnorm = np.linalg.norm(target, axis=-1, keepdims=True)
+    axis = np.where(angle > 1e-9, rotvec / np.maximum(angle, 1e-300), target / np.maximum(tnorm, 1e-300))
+    along = np.sum(target * axis, axis=-1, keepdims=True)
+    k = np.round((along - angle) / (2.0 * np.pi))
+    return axis * (angle + 2.0 * np.pi * k)
+
+
+def look_at_quat(origin, target, up) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """world_from_camera rotation of Mitsuba's look_at: local +Z forward, +Y up, +X left."""
+    o, t, u = (np.asarray(v, dtype=np.float64) for v in (origin, target, up))
+    forward = t - o
+    forward /= np.linalg.norm(forward)
+    left = np.cross(u, forward)
+    if np.linalg.norm(left) < 1e-9:  # up parallel to the view: pick any perpendicular up
+        left = np.cross(np.array([1.0, 0.0, 0.0]) if abs(forward[0]) < 0.9 else np.array([0.0, 0.0, 1.0]), forward)
+    left /= np.linalg.norm(left)
+    new_up = np.cross(forward, left)
+    return R.from_matrix(np.column_stack((left, new_up, forward))).as_quat(scalar_first=True)
+
+
+def direction_quat(direction) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """The rotation taking local +Z to `direction` (directional lights)."""
+    d = np.asarray(direction, dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    up = np.array([0.0, 1.0, 0.0]) if abs(d[1]) < 0.99 else np.array([1.0, 0.0, 0.0])
+    return look_at_quat(np.zeros(3), d, up)
