@@ -136,6 +136,10 @@ def write_frame(
     os.close(fd)
     try:
         OpenEXR.File(header, channels).write(tmp)
+        # mkstemp makes 0600 files; frames are shared across a farm: use the umask
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

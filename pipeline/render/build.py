@@ -272,7 +272,8 @@ def light_dict(light: Any, loaded: LoadedScene, world_from_light: np.ndarray | N
     """One light at one time. `world_from_light` is the light's animated/parented frame
     (None or identity for a still light); positions and directions are given in it."""
     m = np.eye(4) if world_from_light is None else world_from_light
-    intensity_scale = float(scalars.get("intensity", 1.0))
+    intensity = scalars.get("intensity", 1.0)
+    intensity_scale = float(intensity) if not isinstance(intensity, tuple) else 1.0
     if isinstance(light, ConstantLight):
         return {"type": "constant", "radiance": _scaled(scalars.get("radiance", light.radiance), intensity_scale)}
     if isinstance(light, EnvmapLight):

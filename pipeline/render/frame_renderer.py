@@ -152,7 +152,7 @@ class FrameRenderer:
             key = light.name or f"light{i}"
             pose = fi.lights.get(key)
             m = trs_matrix(pose[0][0], pose[1][0], pose[2][0]) if pose is not None else None
-            scalars = {k: float(v[0]) for k, v in fi.light_scalars.get(key, {}).items()}
+            scalars = {k: _first(v) for k, v in fi.light_scalars.get(key, {}).items()}
             d[key.replace(".", "_")] = light_dict(light, self.loaded, m, scalars)
         self._scene = mi.load_dict(d)
         self._params = mi.traverse(self._scene)
@@ -169,6 +169,9 @@ class FrameRenderer:
             self._mover_scale[name] = np.array(s[0])
         self._movers = movers
         self._scene.integrator().set_movers(movers, len(fi.fov) - 1)
+        # route the sensor pose through the same parameter update warm frames use, so the
+        # first warm frame replays the cold frame's kernels instead of compiling new ones
+        self._update(fi)
 
     # --- per frame (warm) ---------------------------------------------------------------
 
@@ -223,7 +226,11 @@ class FrameRenderer:
         t0 = time.perf_counter()
         cold = self._scene is None
         if cold:
-            self._build(fi)
+            try:
+                self._build(fi)
+            except BaseException:
+                self._scene = None  # never keep a half-built scene
+                raise
         else:
             self._update(fi)
         seed = frame_seed(self.settings.seed, fi.frame, self.settings.seed_policy)
@@ -262,6 +269,12 @@ class FrameRenderer:
             asset_cache_hits=assets.STATS["hits"] - hits0,
             scene_reused=not cold,
         )
+
+
+def _first(values: np.ndarray) -> Any:
+    """The frame-time value of an animated scalar or colour channel."""
+    v = np.asarray(values)[0]
+    return float(v) if np.ndim(v) == 0 else tuple(float(x) for x in np.ravel(v))
 
 
 def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -172,12 +172,16 @@ class Plastic(_Material):
     ior: Annotated[float, Field(gt=1, le=4)] = 1.49
 
 
+# Measured metals Mitsuba ships (data/ior); `none` is a perfect mirror.
+ConductorPreset = Literal["Ag", "Al", "AlAs", "AlAs_palik", "AlSb", "AlSb_palik", "Au", "Be", "Be_palik", "Cr", "CsI", "CsI_palik", "Cu", "Cu2O", "Cu2O_palik", "CuO", "CuO_palik", "Cu_palik", "Hg", "HgTe", "HgTe_palik", "Hg_palik", "Ir", "Ir_palik", "K", "K_palik", "Li", "Li_palik", "MgO", "MgO_palik", "Mo", "Mo_palik", "Na_palik", "Nb", "Nb_palik", "Ni_palik", "Rh", "Rh_palik", "Se", "Se-e", "Se-e_palik", "Se_palik", "SiC", "SiC_palik", "SnTe", "SnTe_palik", "Ta", "Ta_palik", "Te", "Te-e", "Te-e_palik", "Te_palik", "ThF4", "ThF4_palik", "TiC", "TiC_palik", "TiN", "TiN_palik", "TiO2", "TiO2-e", "TiO2-e_palik", "TiO2_palik", "VC", "VC_palik", "VN", "VN_palik", "V_palik", "W", "a-C", "d-C", "d-C_palik", "none"]
+
+
 class Conductor(_Material):
     """Metal: `preset` is a Mitsuba material name (Au, Ag, Cu, Al, Cr ...) or `none`
     (a perfect mirror); roughness 0 is smooth, > 0 uses a GGX microfacet model."""
 
     type: Literal["conductor"]
-    preset: str = "Al"
+    preset: ConductorPreset = "Al"
     roughness: Annotated[float, Field(ge=0, le=1)] = 0.0
     tint: Color = 1.0
 

@@ -1,0 +1,88 @@
+"""Render presets (configs/*.yaml, shipped as `motion.configs`) and the precedence rule:
+
+    CLI flag  >  preset  >  scene file  >  built-in default
+
+A preset may set `render:` and `output:` fields and `frame_count` (that many frames spread
+evenly over the selected range, first and last included). A path to a YAML file works as a
+preset name too.
+"""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from pydantic import Field, ValidationError
+
+from .errors import Problem, SceneError, UsageError
+from .scene.loader import parse_yaml, problems_from_validation
+from .scene.types import Model
+
+
+class Preset(Model):
+    description: str = ""
+    frame_count: int | None = Field(default=None, ge=1)
+    render: dict[str, Any] = {}
+    output: dict[str, Any] = {}
+
+
+def preset_names() -> list[str]:
+    folder = resources.files("motion.configs")
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml") and p.name != "farm.yaml")
+
+
+def load_preset(name: str) -> tuple[Preset, str]:
+    """A preset by name (configs/NAME.yaml) or path; returns it and its file name."""
+    path = Path(name)
+    if path.suffix in (".yaml", ".yml") and path.is_file():
+        text, file = path.read_text(), str(path)
+    else:
+        entry = resources.files("motion.configs") / f"{name}.yaml"
+        if name == "farm" or not entry.is_file():
+            raise UsageError(f"unknown preset '{name}'; available: {', '.join(preset_names())} (or a path to a .yaml file)")
+        text, file = entry.read_text(), f"configs/{name}.yaml"
+    data, source = parse_yaml(text, file)
+    try:
+        preset = Preset.model_validate(data or {})
+    except ValidationError as exc:
+        raise SceneError(problems_from_validation(exc, data, source, Preset)) from None
+    # check the fields against the scene format now, so a bad preset fails on its own file
+    from .scene.schema import OutputSettings, RenderSettings
+
+    problems: list[Problem] = []
+    for key, model in (("render", RenderSettings), ("output", OutputSettings)):
+        section = getattr(preset, key)
+        if section:
+            try:
+                model.model_validate(section)
+            except ValidationError as exc:
+                for p in problems_from_validation(exc, section, source, model):
+                    problems.append(Problem(p.file, *source.locate((key, *p.yaml_path.split(".")[:1])), f"{key}.{p.yaml_path}", p.message))
+    if problems:
+        raise SceneError(problems)
+    return preset, file
+
+
+def overrides_from(preset: Preset | None, cli: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Nested overrides to merge over the scene document: the preset, then CLI flags."""
+    out: dict[str, Any] = {}
+    if preset is not None:
+        for key in ("render", "output"):
+            if getattr(preset, key):
+                out[key] = dict(getattr(preset, key))
+    for key, values in cli.items():
+        section = {k: v for k, v in values.items() if v is not None}
+        if section:
+            out.setdefault(key, {}).update(section)
+    return out
+
+
+def spread(frames: list[int], count: int | None) -> list[int]:
+    """`count` frames spread evenly over `frames` (first and last included)."""
+    if count is None or count >= len(frames):
+        return frames
+    if count == 1:
+        return [frames[0]]
+    idx = [round(i * (len(frames) - 1) / (count - 1)) for i in range(count)]
+    return [frames[i] for i in sorted(set(idx))]

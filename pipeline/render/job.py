@@ -1,0 +1,192 @@
+"""A render job as workers see it, and the one task code path every executor runs.
+
+`RenderJob` is small and picklable: the scene file, the merged overrides (preset + CLI),
+the output folder and the hashes `--resume` compares. A task is `render_frames(job,
+inputs)`: the worker keeps one `FrameRenderer` per job in a process-global cache (its
+"first frame" layer) across all the tasks it is given, renders each frame and writes it
+atomically. Only small `FrameResult`s travel back.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import getpass
+import hashlib
+import json
+import os
+import socket
+import time
+from dataclasses import asdict, dataclass, field
+from fractions import Fraction
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..frame_output import is_complete, write_frame
+from ..scene.loader import LoadedScene, load_scene
+from ..timeline import timecode
+from .frame_renderer import FrameInput, FrameRenderer, frame_seed
+from .inputs import fingerprint
+
+RENDERER_VERSION = "motion-render-1"
+
+
+@dataclass(frozen=True)
+class RenderJob:
+    scene_path: str
+    overrides: dict[str, Any]
+    output_dir: str
+    scene_hash: str
+    settings_hash: str
+    cache: bool = True
+    threads: int | None = None
+    variant: str = "auto"
+
+    @property
+    def key(self) -> str:
+        return f"{self.settings_hash}:{self.threads}:{self.variant}"
+
+
+@dataclass
+class FrameResult:
+    frame: int
+    path: str
+    ok: bool
+    worker: str
+    cold: bool = False
+    setup_s: float = 0.0
+    render_s: float = 0.0
+    write_s: float = 0.0
+    kernels_compiled: int = 0
+    asset_cache_hits: int = 0
+    error: str | None = None
+    skipped: bool = False
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def scene_hashes(loaded: LoadedScene) -> tuple[str, str]:
+    """(scene, settings) hashes: the scene file's bytes; the validated scene with every
+    override applied, plus the renderer's version."""
+    scene_hash = hashlib.sha256(loaded.path.read_bytes()).hexdigest()[:16]
+    canon = json.dumps(loaded.scene.model_dump(mode="json"), sort_keys=True)
+    settings_hash = hashlib.sha256(f"{RENDERER_VERSION}|{canon}".encode()).hexdigest()[:16]
+    return scene_hash, settings_hash
+
+
+def frame_path(job: RenderJob, loaded: LoadedScene, frame: int) -> Path:
+    return Path(job.output_dir) / loaded.scene.output.frame_name(loaded.name, frame)
+
+
+def expected_meta(job: RenderJob, fi: FrameInput) -> dict[str, Any]:
+    """The attributes a complete frame of this job carries (what --resume compares): the
+    frame, the settings hash and the hash of this frame's own baked motion."""
+    return {"frame": fi.frame, "settings_hash": job.settings_hash, "motion_hash": fingerprint([fi])[:16]}
+
+
+def frame_done(job: RenderJob, loaded: LoadedScene, fi: FrameInput) -> bool:
+    return is_complete(frame_path(job, loaded, fi.frame), expected_meta(job, fi))
+
+
+# --- the worker side ----------------------------------------------------------------------
+
+_WORKER: dict[str, Any] = {}
+
+
+def worker_id() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def _renderer(job: RenderJob) -> tuple[FrameRenderer, LoadedScene, str]:
+    """The worker's cached renderer for this job (built on first use, reused after)."""
+    from .. import variant as variant_mod
+
+    if _WORKER.get("key") == job.key and job.cache:
+        return _WORKER["renderer"], _WORKER["loaded"], _WORKER["variant"]
+    # a different job (or no cache): drop the old scene first, so kernels do not bake in
+    # stale object ids, then build anew
+    _WORKER.clear()
+    import gc
+
+    gc.collect()
+    choice = variant_mod.activate(job.variant, threads=job.threads, quiet=True)
+    import mitsuba as mi
+
+    mi.set_log_level(mi.LogLevel.Error)
+    loaded = load_scene(job.scene_path, job.overrides)
+    renderer = FrameRenderer(loaded)
+    _WORKER.update(key=job.key, renderer=renderer, loaded=loaded, variant=choice.variant)
+    return renderer, loaded, choice.variant
+
+
+def render_frames(job: RenderJob, inputs: Sequence[FrameInput]) -> list[FrameResult]:
+    """Render and write each frame; a frame's failure is reported, not raised, so the
+    others of the task still finish."""
+    results = []
+    for fi in inputs:
+        results.append(_render_one(job, fi))
+    return results
+
+
+def _render_one(job: RenderJob, fi: FrameInput) -> FrameResult:
+    t_setup = time.perf_counter()
+    try:
+        renderer, loaded, variant = _renderer(job)
+        if not job.cache:
+            renderer = FrameRenderer(loaded)
+        extra_setup = time.perf_counter() - t_setup
+        rgba, stats = renderer.render(fi)
+        if not job.cache:
+            del renderer
+        out = frame_path(job, loaded, fi.frame)
+        t_write = time.perf_counter()
+        scene = loaded.scene
+        fps = scene.timeline.rate
+        meta = {
+            **expected_meta(job, fi),
+            "time": float(fi.time),
+            "shutter_open": float(fi.shutter[0]),
+            "shutter_close": float(fi.shutter[1]),
+            "spp": int(scene.render.spp),
+            "seed": frame_seed(scene.render.seed, fi.frame, scene.render.seed_policy),
+            "seed_policy": scene.render.seed_policy,
+            "motion_blur": scene.render.motion_blur,
+            "variant": variant,
+            "scene_hash": job.scene_hash,
+            "scene": str(loaded.path),
+            "render_seconds": float(stats.render_s),
+            "renderer": RENDERER_VERSION,
+        }
+        standard = {
+            "capDate": _dt.datetime.now().strftime("%Y:%m:%d %H:%M:%S"),
+            "owner": scene.output.owner or getpass.getuser(),
+            "comments": scene.output.comments or f"motion render of {loaded.name}",
+        }
+        drop = fps.denominator == 1001 and round(fps) in (30, 60)
+        write_frame(
+            out,
+            rgba,
+            meta,
+            fps=Fraction(fps),
+            timecode=timecode(fi.frame - scene.timeline.first, fps, drop_frame=drop) if fi.frame >= scene.timeline.first else None,
+            pixel_type=scene.output.pixel_type,
+            compression=scene.output.compression,
+            standard=standard,
+        )
+        return FrameResult(
+            frame=fi.frame,
+            path=str(out),
+            ok=True,
+            worker=worker_id(),
+            cold=stats.cold or not job.cache,
+            setup_s=stats.setup_s + extra_setup,
+            render_s=stats.render_s,
+            write_s=time.perf_counter() - t_write,
+            kernels_compiled=stats.kernels_compiled,
+            asset_cache_hits=stats.asset_cache_hits,
+        )
+    except Exception as exc:  # reported per frame; the farm decides on retries
+        _WORKER.clear()  # rebuild from scratch for the next frame rather than trust this state
+        return FrameResult(frame=fi.frame, path="", ok=False, worker=worker_id(), error=f"{type(exc).__name__}: {exc}")
