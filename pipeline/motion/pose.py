@@ -138,5 +138,6 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
 
 def quat_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Angle (radians, [0, pi]) of the rotation taking a to b."""
-    d = np.abs(np.sum(a * b, axis=-1))
-    return 2.0 * np.arccos(np.clip(d, 0.0, 1.0))
+    rel = quat_mul(quat_conj(a), b)
+    # 2 atan2(|v|, |w|) keeps full precision near 0, where 2 acos(|w|) loses half the digits
+    return 2.0 * np.arctan2(np.linalg.norm(rel[..., 1:], axis=-1), np.abs(rel[..., 0]))
