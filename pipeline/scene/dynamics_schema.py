@@ -94,6 +94,7 @@ class ParticleEmitter(Model):
     spread: Annotated[float, Field(ge=0, le=180)] = 15.0
     mass: Positive = 0.001
     restitution: Annotated[float, Field(ge=0, le=1)] = 0.3
+    friction: NonNegative = 0.3  # kinetic and static coefficient against colliders
     drag: Drag | None = None
     seed: int = 0
     max_count: Annotated[int, Field(ge=1, le=10_000_000)] = 100_000

@@ -1,0 +1,384 @@
+"""Collisions: swept detection over each step and impulse resolution outside the integrator.
+
+Scheme (one step, after the integrator moved every body from (x0, v0) to (x1, v1)):
+
+1. Sweep. Each body's centre moves along the segment x0 -> x1; a static collider is
+   inflated by the body's radius, so the segment against the inflated shape gives the
+   time of impact s in [0, 1] (plane: linear; sphere: quadratic; box: slab test; mesh:
+   per triangle plane + barycentric test). A body that crosses a surface within one step
+   is caught wherever it ends: nothing tunnels, whatever the speed.
+2. Resolve (static collider): at the contact, v_c = v0 + s (v1 - v0) is the velocity and
+   n the unit normal towards the body. Restitution eps = min(eps_body, eps_collider);
+   below a resting speed v_rest = 2 |g| h the contact is treated as resting (eps = 0).
+   Normal impulse, from (v + j n / m) . n = -eps v . n:  j = -(1 + eps) m v_c . n.
+   The rest of the step continues from the contact with the post-impact velocity plus
+   the step's own velocity change (1 - s)(v1 - v0). A body ending below the contact
+   surface is projected back onto it and its normal velocity clamped to >= 0 (the
+   support impulse of resting contact: what gravity added during the step, removed
+   again; no energy is added, so a ball at rest stays exactly at rest).
+   Friction acts at the contact point r = -radius n on the slip velocity
+   u = v + w x r: the impulse along -u_t is Coulomb (forces.coulomb_friction) with the
+   total normal impulse, mu = sqrt(mu_body mu_collider), and effective inverse mass
+   k_t = 1/m + t . ((I^-1 (r x t)) x r); it never reverses the slip.
+3. Sphere-sphere between bodies: the relative segment against radius r_i + r_j; with
+   n from j to i and v_rel = v_i - v_j (end-of-step velocities),
+   J = -(1 + eps) v_rel . n / (1/m_i + 1/m_j), applied +J n to i and -J n to j, so
+   momentum is conserved exactly; the overlap left is removed by moving the two apart
+   in the ratio of their inverse masses (which keeps the centre of mass).
+   Pinned bodies have 1/m = 0 and 1/I = 0: they take no impulse and never move.
+4. Simultaneous contacts: Gauss-Seidel over the colliders in scene order (each collider
+   acts on all bodies at once, vectorised), then the body pairs (Jacobi: all pairs'
+   impulses summed at once); repeated up to `contact_iterations` times until a pass
+   finds no penetration. The earlier contacts of a pass see the later ones' effects
+   on the next pass.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .forces import coulomb_friction
+
+TOL = 1e-9  # m: penetrations smaller than this are contact, not collision
+_MESH_CHUNK = 2_000_000  # bodies x triangles tested at once
+
+
+@dataclass
+class Hits:
+    hit: np.ndarray  # [n] bool
+    s: np.ndarray  # [n] time of impact in [0, 1] (fraction of the step)
+    normal: np.ndarray  # [n, 3] unit, from the surface towards the body
+    depth0: np.ndarray  # [n] penetration at the start of the step (m), usually 0
+
+
+def _no_hits(n: int) -> Hits:
+    return Hits(np.zeros(n, dtype=bool), np.zeros(n), np.zeros((n, 3)), np.zeros(n))
+
+
+@dataclass
+class Collider:
+    """A static collision surface with its material (restitution, kinetic and static friction)."""
+
+    name: str
+    restitution: float
+    friction: float
+    static_friction: float
+
+    def sweep(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
+        raise NotImplementedError
+
+
+@dataclass
+class PlaneCollider(Collider):
+    """A two-sided rectangle (half sizes half_u, half_v along axes u, v) or disk
+    (disk_radius) through `point` with unit `normal`; half sizes inf for an infinite plane."""
+
+    point: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    normal: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
+    u: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0]))
+    v: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, 1.0]))
+    half_u: float = np.inf
+    half_v: float = np.inf
+    disk_radius: float | None = None
+
+    def sweep(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
+        sd0 = (x0 - self.point) @ self.normal
+        sd1 = (x1 - self.point) @ self.normal
+        side = np.where(sd0 >= 0, 1.0, -1.0)
+        d0 = side * sd0 - r  # surface distance: > 0 apart, < 0 penetrating
+        d1 = side * sd1 - r
+        # d(s) is linear along the segment: d0 + s (d1 - d0) = 0
+        s = np.where(d0 > 0, d0 / np.where(d0 - d1 != 0, d0 - d1, 1.0), 0.0)
+        point = x0 + s[:, None] * (x1 - x0) - self.point
+        pu, pv = point @ self.u, point @ self.v
+        if self.disk_radius is not None:
+            inside = pu * pu + pv * pv <= self.disk_radius**2
+        else:
+            inside = (np.abs(pu) <= self.half_u) & (np.abs(pv) <= self.half_v)
+        hit = (d1 < -TOL) & inside
+        return Hits(hit, np.clip(s, 0.0, 1.0), side[:, None] * self.normal[None, :], np.maximum(-d0, 0.0))
+
+
+@dataclass
+class SphereCollider(Collider):
+    center: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    radius: float = 1.0
+
+    def sweep(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
+        return _sweep_spheres(x0 - self.center, x1 - self.center, self.radius + r)
+
+
+def _sweep_spheres(p0: np.ndarray, p1: np.ndarray, reach: np.ndarray) -> Hits:
+    """Segment p0 -> p1 (relative positions) against a sphere of radius `reach` at 0:
+    |p0 + s d|^2 = R^2  <=>  a s^2 + b s + c = 0 with a = d.d, b = 2 p0.d, c = p0.p0 - R^2."""
+    d = p1 - p0
+    a = np.einsum("ij,ij->i", d, d)
+    b = 2.0 * np.einsum("ij,ij->i", p0, d)
+    c = np.einsum("ij,ij->i", p0, p0) - reach * reach
+    dist0 = np.sqrt(np.maximum(np.einsum("ij,ij->i", p0, p0), 0.0))
+    inside = c < 0
+    disc = b * b - 4.0 * a * c
+    root = np.sqrt(np.maximum(disc, 0.0))
+    a_safe = np.where(a > 0, a, 1.0)
+    s_in = (-b - root) / (2.0 * a_safe)
+    s_out = (-b + root) / (2.0 * a_safe)
+    entering = (~inside) & (a > 0) & (disc > 0) & (b < 0) & (s_in >= 0) & (s_in < 1) & ((np.minimum(s_out, 1.0) - s_in) * np.sqrt(a) > TOL)
+    s = np.where(inside, 0.0, np.clip(s_in, 0.0, 1.0))
+    at = p0 + s[:, None] * d
+    norm = np.linalg.norm(at, axis=1)
+    fallback = np.zeros_like(at)
+    fallback[:, 1] = 1.0  # coincident centres: separate along +Y
+    normal = np.where(norm[:, None] > 0, at / np.where(norm > 0, norm, 1.0)[:, None], fallback)
+    return Hits(inside | entering, s, normal, np.where(inside, reach - dist0, 0.0))
+
+
+@dataclass
+class BoxCollider(Collider):
+    """An oriented box: centre, rotation (world_from_local, 3x3) and half extents (m)."""
+
+    center: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    half: np.ndarray = field(default_factory=lambda: np.full(3, 0.5))
+
+    def sweep(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
+        # slab test in the box frame against the box grown by r (corners square, not rounded)
+        p0 = (x0 - self.center) @ self.rotation
+        p1 = (x1 - self.center) @ self.rotation
+        d = p1 - p0
+        e = self.half[None, :] + r[:, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ta = (-e - p0) / d
+            tb = (e - p0) / d
+        still = d == 0
+        t_near = np.where(still, np.where(np.abs(p0) <= e, -np.inf, np.inf), np.minimum(ta, tb))
+        t_far = np.where(still, np.where(np.abs(p0) <= e, np.inf, -np.inf), np.maximum(ta, tb))
+        axis = np.argmax(t_near, axis=1)
+        rows = np.arange(len(p0))
+        t_enter = t_near[rows, axis]
+        t_exit = np.min(t_far, axis=1)
+        inside = np.all(np.abs(p0) < e, axis=1)
+        seg = np.linalg.norm(d, axis=1)
+        entering = (~inside) & (t_enter <= t_exit) & (t_enter >= 0) & (t_enter < 1) & ((np.minimum(t_exit, 1.0) - t_enter) * seg > TOL)
+        # inside at the start: leave through the face of least penetration
+        pen = e - np.abs(p0)
+        in_axis = np.argmin(pen, axis=1)
+        use_axis = np.where(inside, in_axis, axis)
+        sign = np.where(inside, np.sign(p0[rows, in_axis]), -np.sign(d[rows, axis]))
+        sign = np.where(sign == 0, 1.0, sign)
+        n_local = np.zeros_like(p0)
+        n_local[rows, use_axis] = sign
+        s = np.where(inside, 0.0, np.clip(np.nan_to_num(t_enter, neginf=0.0, posinf=1.0), 0.0, 1.0))
+        return Hits(inside | entering, s, n_local @ self.rotation.T, np.where(inside, pen[rows, in_axis], 0.0))
+
+
+@dataclass
+class MeshCollider(Collider):
+    """A triangle mesh in world space ([m, 3, 3]); two-sided. Contacts are found against
+    each triangle's face (centre over the triangle); edges and vertices are not rounded."""
+
+    triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+
+    def __post_init__(self) -> None:
+        a, b, c = self.triangles[:, 0], self.triangles[:, 1], self.triangles[:, 2]
+        n = np.cross(b - a, c - a)
+        length = np.linalg.norm(n, axis=1)
+        keep = length > 1e-15
+        self.triangles = self.triangles[keep]
+        self._n = n[keep] / length[keep, None]
+        self._a = self.triangles[:, 0]
+        self._e1 = self.triangles[:, 1] - self._a
+        self._e2 = self.triangles[:, 2] - self._a
+        d00 = np.einsum("ij,ij->i", self._e1, self._e1)
+        d01 = np.einsum("ij,ij->i", self._e1, self._e2)
+        d11 = np.einsum("ij,ij->i", self._e2, self._e2)
+        self._dots = (d00, d01, d11, d00 * d11 - d01 * d01)
+
+    def sweep(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
+        out = _no_hits(len(x0))
+        m = len(self.triangles)
+        if m == 0 or len(x0) == 0:
+            return out
+        chunk = max(1, _MESH_CHUNK // m)
+        for lo in range(0, len(x0), chunk):
+            sl = slice(lo, lo + chunk)
+            h = self._sweep_chunk(x0[sl], x1[sl], r[sl])
+            out.hit[sl], out.s[sl], out.normal[sl], out.depth0[sl] = h.hit, h.s, h.normal, h.depth0
+        return out
+
+    def _sweep_chunk(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
+        n_t, a = self._n, self._a
+        sd0 = np.einsum("bk,tk->bt", x0, n_t) - np.einsum("tk,tk->t", a, n_t)[None, :]
+        sd1 = np.einsum("bk,tk->bt", x1, n_t) - np.einsum("tk,tk->t", a, n_t)[None, :]
+        side = np.where(sd0 >= 0, 1.0, -1.0)
+        d0 = side * sd0 - r[:, None]
+        d1 = side * sd1 - r[:, None]
+        s = np.where(d0 > 0, d0 / np.where(d0 - d1 != 0, d0 - d1, 1.0), 0.0)
+        s = np.clip(s, 0.0, 1.0)
+        # centre at impact, projected onto the triangle's plane, in barycentric coordinates
+        centre = x0[:, None, :] + s[..., None] * (x1 - x0)[:, None, :]
+        sd = np.einsum("btk,tk->bt", centre - a[None], n_t)
+        rel = centre - a[None] - sd[..., None] * n_t[None]
+        d00, d01, d11, den = self._dots
+        d20 = np.einsum("btk,tk->bt", rel, self._e1)
+        d21 = np.einsum("btk,tk->bt", rel, self._e2)
+        den = np.where(den != 0, den, 1.0)
+        bv = (d11 * d20 - d01 * d21) / den
+        bw = (d00 * d21 - d01 * d20) / den
+        over = (bv >= -1e-9) & (bw >= -1e-9) & (bv + bw <= 1 + 1e-9)
+        near = side * sd0 > -r[:, None]  # not already past the plane's far side by a radius
+        valid = (d1 < -TOL) & over & near
+        key = np.where(valid, s, np.inf)
+        best = np.argmin(key, axis=1)
+        rows = np.arange(len(x0))
+        hit = np.isfinite(key[rows, best])
+        normal = side[rows, best][:, None] * n_t[best]
+        return Hits(hit, s[rows, best], normal, np.maximum(-d0[rows, best], 0.0))
+
+
+@dataclass
+class ContactBodies:
+    """The step's body arrays, changed in place by the resolution (views are fine)."""
+
+    x0: np.ndarray
+    v0: np.ndarray
+    x1: np.ndarray
+    v1: np.ndarray
+    w1: np.ndarray | None  # angular velocity at the end of the step (rigid groups)
+    inv_inertia_world: np.ndarray | None  # [n, 3, 3]
+    radius: np.ndarray
+    inv_mass: np.ndarray  # 0: pinned or not moving this step
+    restitution: np.ndarray
+    friction: np.ndarray
+    static_friction: np.ndarray
+
+
+@dataclass
+class Impacts:
+    """Impacts found in one step: body index, fraction of the step, approach speed (m/s),
+    what was hit (collider name or the other body's index as a string)."""
+
+    body: list[np.ndarray] = field(default_factory=list)
+    s: list[np.ndarray] = field(default_factory=list)
+    speed: list[np.ndarray] = field(default_factory=list)
+    other: list[np.ndarray] = field(default_factory=list)
+
+
+def _apply_friction(b: ContactBodies, idx: np.ndarray, n: np.ndarray, normal_impulse: np.ndarray, mu: np.ndarray, mu_s: np.ndarray) -> None:
+    """Coulomb friction impulse at the contact point r = -radius n of bodies idx against a
+    static surface (see module docstring)."""
+    inv_m = b.inv_mass[idx]
+    r_c = -b.radius[idx, None] * n
+    u = b.v1[idx]
+    if b.w1 is not None:
+        u = u + np.cross(b.w1[idx], r_c)
+    u_t = u - np.einsum("ij,ij->i", u, n)[:, None] * n
+    slip = np.linalg.norm(u_t, axis=1)
+    t_hat = u_t / np.where(slip > 0, slip, 1.0)[:, None]
+    k_t = inv_m.copy()
+    if b.inv_inertia_world is not None:
+        rxt = np.cross(r_c, t_hat)
+        k_t += np.einsum("ij,ij->i", np.cross(np.einsum("nij,nj->ni", b.inv_inertia_world[idx], rxt), r_c), t_hat)
+    jt = coulomb_friction(slip, normal_impulse, k_t, mu, mu_s)
+    b.v1[idx] -= (jt * inv_m)[:, None] * t_hat
+    if b.w1 is not None and b.inv_inertia_world is not None:
+        b.w1[idx] -= np.einsum("nij,nj->ni", b.inv_inertia_world[idx], np.cross(r_c, jt[:, None] * t_hat))
+
+
+def resolve_static(b: ContactBodies, hits: Hits, col: Collider, h: float, v_rest: float) -> np.ndarray:
+    """Impulse response of the bodies that hit `col` this step (in place). Returns the
+    indices of bodies whose contact was an impact (approach faster than v_rest) and
+    their approach speeds, as a pair of arrays stacked [2, k]."""
+    idx = np.flatnonzero(hits.hit & (b.inv_mass > 0))
+    if idx.size == 0:
+        return np.zeros((2, 0))
+    s = hits.s[idx][:, None]
+    n = hits.normal[idx]
+    x0, x1, v0, v1 = b.x0[idx], b.x1[idx], b.v0[idx], b.v1[idx]
+    xc = x0 + s * (x1 - x0)
+    v_c = v0 + s * (v1 - v0)
+    dv = v1 - v0
+    vn = np.einsum("ij,ij->i", v_c, n)
+    approaching = vn < 0
+    impact = -vn > v_rest
+    eps = np.where(impact, np.minimum(b.restitution[idx], col.restitution), 0.0)
+    # j = -(1 + eps) m v.n  ->  velocity change -(1 + eps) v.n along n
+    dvn = np.where(approaching, -(1.0 + eps) * vn, 0.0)
+    v_post = v_c + dvn[:, None] * n
+    v_end = v_post + (1.0 - s) * dv
+    x_end = xc + (1.0 - s) * h * 0.5 * (v_post + v_end)
+    # resting contact: back onto the contact surface, normal velocity clamped to >= 0
+    lift = np.einsum("ij,ij->i", xc - x_end, n) + hits.depth0[idx]
+    supported = lift >= 0
+    x_end += np.maximum(lift, 0.0)[:, None] * n
+    vn_end = np.einsum("ij,ij->i", v_end, n)
+    support = np.where(supported & (vn_end < 0), -vn_end, 0.0)
+    v_end += support[:, None] * n
+    b.x1[idx] = x_end
+    b.v1[idx] = v_end
+    normal_impulse = (dvn + support) / b.inv_mass[idx]
+    mu = np.sqrt(b.friction[idx] * col.friction)
+    mu_s = np.sqrt(b.static_friction[idx] * col.static_friction)
+    _apply_friction(b, idx, n, normal_impulse, mu, mu_s)
+    return np.stack((idx[impact].astype(np.float64), -vn[impact], hits.s[idx][impact]))
+
+
+def resolve_pairs(b: ContactBodies, pairs: tuple[np.ndarray, np.ndarray], h: float, v_rest: float) -> np.ndarray:
+    """Sphere-sphere impulses between body pairs (i, j), all pairs at once (Jacobi).
+    Returns [3, k]: body i, body j, approach speed of the impacts."""
+    i, j = pairs
+    if i.size == 0:
+        return np.zeros((3, 0))
+    reach = b.radius[i] + b.radius[j]
+    hits = _sweep_spheres(b.x0[i] - b.x0[j], b.x1[i] - b.x1[j], reach)
+    k = np.flatnonzero(hits.hit & ((b.inv_mass[i] + b.inv_mass[j]) > 0))
+    if k.size == 0:
+        return np.zeros((3, 0))
+    i, j, n, s = i[k], j[k], hits.normal[k], hits.s[k]
+    inv_i, inv_j = b.inv_mass[i], b.inv_mass[j]
+    v_rel = b.v1[i] - b.v1[j]
+    vn = np.einsum("ij,ij->i", v_rel, n)
+    approaching = vn < 0
+    impact = -vn > v_rest
+    eps = np.where(impact, np.minimum(b.restitution[i], b.restitution[j]), 0.0)
+    # (v_rel + J (1/m_i + 1/m_j) n) . n = -eps v_rel . n
+    J = np.where(approaching, -(1.0 + eps) * vn / (inv_i + inv_j), 0.0)
+    dv_i = (J * inv_i)[:, None] * n
+    dv_j = -(J * inv_j)[:, None] * n
+    # friction on the relative slip at the contact point (r_i = -R_i n, r_j = R_j n)
+    r_i, r_j = -b.radius[i, None] * n, b.radius[j, None] * n
+    u = (b.v1[i] + dv_i) - (b.v1[j] + dv_j)
+    if b.w1 is not None:
+        u = u + np.cross(b.w1[i], r_i) - np.cross(b.w1[j], r_j)
+    u_t = u - np.einsum("ij,ij->i", u, n)[:, None] * n
+    slip = np.linalg.norm(u_t, axis=1)
+    t_hat = u_t / np.where(slip > 0, slip, 1.0)[:, None]
+    k_t = inv_i + inv_j
+    if b.inv_inertia_world is not None:
+        for idx, r in ((i, r_i), (j, r_j)):
+            rxt = np.cross(r, t_hat)
+            k_t = k_t + np.einsum("ij,ij->i", np.cross(np.einsum("nij,nj->ni", b.inv_inertia_world[idx], rxt), r), t_hat)
+    mu = np.sqrt(b.friction[i] * b.friction[j])
+    mu_s = np.sqrt(b.static_friction[i] * b.static_friction[j])
+    jt = coulomb_friction(slip, J, k_t, mu, mu_s)
+    dv_i -= (jt * inv_i)[:, None] * t_hat
+    dv_j += (jt * inv_j)[:, None] * t_hat
+    np.add.at(b.v1, i, dv_i)
+    np.add.at(b.v1, j, dv_j)
+    # the rest of the step moves with the changed velocities
+    np.add.at(b.x1, i, (1.0 - s)[:, None] * h * dv_i)
+    np.add.at(b.x1, j, (1.0 - s)[:, None] * h * dv_j)
+    if b.w1 is not None and b.inv_inertia_world is not None:
+        imp = -jt[:, None] * t_hat
+        np.add.at(b.w1, i, np.einsum("nij,nj->ni", b.inv_inertia_world[i], np.cross(r_i, imp)))
+        np.add.at(b.w1, j, np.einsum("nij,nj->ni", b.inv_inertia_world[j], np.cross(r_j, -imp)))
+    # remove the overlap left, in the ratio of inverse masses (centre of mass unchanged)
+    d = b.x1[i] - b.x1[j]
+    dist = np.linalg.norm(d, axis=1)
+    overlap = np.maximum(reach[k] - dist, 0.0)
+    n_end = np.where(dist[:, None] > 0, d / np.where(dist > 0, dist, 1.0)[:, None], n)
+    share = overlap / (inv_i + inv_j)
+    np.add.at(b.x1, i, (share * inv_i)[:, None] * n_end)
+    np.add.at(b.x1, j, -(share * inv_j)[:, None] * n_end)
+    return np.stack((i[impact].astype(np.float64), j[impact].astype(np.float64), -vn[impact]))

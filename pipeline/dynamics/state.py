@@ -1,0 +1,193 @@
+"""System state and its derivative D(t, X), vectorised over bodies.
+
+X is one flat float64 vector: positions x [n, 3], then (rigid groups) orientations
+q [n, 4], then velocities v [n, 3], then (rigid groups) angular velocities w [n, 3]
+(world frame, rad/s). Everything before `split` is "position-like" (its rate depends on
+the velocities), everything after is "velocity-like" (its rate depends on the forces):
+semi-implicit Euler uses that split.
+
+D(t, X) = (v, 1/2 (0, w) q, F(t, x, v) / m, I^-1 (tau - w x I w)), computed in one pass
+over arrays; pinned bodies (inverse mass 0) and bodies not yet started have D = 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import forces
+from .rigid import angular_acceleration, quat_normalize, quat_rate
+
+
+@dataclass
+class BodyProps:
+    """Cold per-body data (constant during a run), one entry per body, SI units."""
+
+    names: list[str]
+    mass: np.ndarray  # kg
+    inv_mass: np.ndarray  # 1/kg, 0 for pinned bodies
+    radius: np.ndarray  # m, collision radius (bounding sphere)
+    radius_eq: np.ndarray  # m, radius of the sphere of the body's volume (buoyancy)
+    area: np.ndarray  # m^2, drag reference area
+    cd: np.ndarray  # Rayleigh drag coefficient in air (0: none)
+    linear: np.ndarray  # N s/m, linear drag
+    restitution: np.ndarray
+    friction: np.ndarray  # kinetic coefficient
+    static_friction: np.ndarray
+    start: np.ndarray  # s, held still before this time
+    inertia: np.ndarray  # [n, 3] principal moments (kg m^2), body axes
+    inv_inertia: np.ndarray  # [n, 3], 0 for pinned and point bodies
+
+    @property
+    def count(self) -> int:
+        return int(self.mass.size)
+
+    def take(self, index: np.ndarray) -> "BodyProps":
+        """The props of a subset of bodies (particle groups grow by activating slices)."""
+        return BodyProps(
+            names=[self.names[i] for i in np.asarray(index)] if self.names else [],
+            **{k: getattr(self, k)[index] for k in _ARRAY_FIELDS},
+        )
+
+
+_ARRAY_FIELDS = ("mass", "inv_mass", "radius", "radius_eq", "area", "cd", "linear", "restitution", "friction", "static_friction", "start", "inertia", "inv_inertia")
+
+
+@dataclass
+class Environment:
+    """Scene-wide forces: gravity (m/s^2), air density (kg/m^3), wind and force field
+    (parsed expressions or None), fluids, springs, Newtonian gravity (G, softening) or None."""
+
+    gravity: np.ndarray
+    air_density: float = 1.225
+    wind: tuple[object, object, object] | None = None
+    force_field: tuple[object, object, object] | None = None
+    fluids: list[forces.HalfSpaceFluid] = field(default_factory=list)
+    springs: forces.SpringSet | None = None
+    newtonian: tuple[float, float] | None = None
+
+
+@dataclass
+class State:
+    """Views into a flat state vector (no copies)."""
+
+    x: np.ndarray
+    v: np.ndarray
+    q: np.ndarray | None
+    w: np.ndarray | None
+
+
+class System:
+    """A group of bodies under one Environment: the D(t, X) an integrator advances.
+
+    `h` is the step context's dt (drag and friction use it so they never reverse a
+    velocity); `active` marks bodies that move this step (started, alive, not pinned)."""
+
+    def __init__(self, props: BodyProps, env: Environment, rotating: bool) -> None:
+        self.props = props
+        self.env = env
+        self.rotating = rotating
+        self.n = props.count
+        self.split = self.n * (7 if rotating else 3)
+        self.size = self.n * (13 if rotating else 6)
+        self.h = 0.0
+        self.active = np.ones(self.n, dtype=bool)
+        self.x_ref = np.zeros((self.n, 3))  # where gravity's potential is zero
+        if env.newtonian is not None and self.n > forces.NBODY_LIMIT:
+            from ..errors import SimulationError
+
+            raise SimulationError(f"newtonian_gravity is O(n^2) and limited to {forces.NBODY_LIMIT} bodies; this scene has {self.n}")
+
+    # --- layout ---------------------------------------------------------------------------
+
+    def unpack(self, X: np.ndarray) -> State:
+        n = self.n
+        if self.rotating:
+            return State(X[: 3 * n].reshape(n, 3), X[7 * n : 10 * n].reshape(n, 3), X[3 * n : 7 * n].reshape(n, 4), X[10 * n :].reshape(n, 3))
+        return State(X[: 3 * n].reshape(n, 3), X[3 * n :].reshape(n, 3), None, None)
+
+    def pack(self, x: np.ndarray, v: np.ndarray, q: np.ndarray | None = None, w: np.ndarray | None = None) -> np.ndarray:
+        parts = [x, q, v, w] if self.rotating else [x, v]
+        return np.concatenate([np.asarray(p, dtype=np.float64).ravel() for p in parts])
+
+    def normalize(self, X: np.ndarray) -> np.ndarray:
+        """Project back onto the state manifold: unit quaternions."""
+        if self.rotating and self.n:
+            s = self.unpack(X)
+            s.q[:] = quat_normalize(s.q)
+        return X
+
+    # --- forces and D ---------------------------------------------------------------------
+
+    def forces(self, t: float, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Total force on each body (N): gravity, field, drag (air with wind, water),
+        buoyancy, springs, Newtonian gravity."""
+        p, env = self.props, self.env
+        total = forces.gravity(p.mass, env.gravity)
+        if env.force_field is not None:
+            total += forces.field_force(p.mass, env.force_field, t, x)
+        submerged = np.zeros(self.n)
+        for fluid in env.fluids:
+            f_b, frac = forces.buoyancy(x, p.radius_eq, fluid, env.gravity)
+            total += f_b
+            submerged = np.maximum(submerged, frac)
+            # water drag on the wetted part of the reference area (the fluid is at rest)
+            total += forces.drag(v, p.mass, fluid.density, np.full(self.n, fluid.cd), p.area * frac, np.zeros(self.n), self.h)
+        if np.any(p.cd > 0) or np.any(p.linear > 0):
+            v_rel = v - forces.wind_velocity(env.wind, t, x) if env.wind is not None else v
+            total += forces.drag(v_rel, p.mass, env.air_density, p.cd, p.area * (1.0 - submerged), p.linear, self.h)
+        if env.springs is not None and env.springs.count:
+            total += forces.springs(x, v, env.springs)
+        if env.newtonian is not None and self.n > 1:
+            total += forces.newtonian_gravity(x, p.mass, *env.newtonian)
+        return total
+
+    def moving(self) -> np.ndarray:
+        return self.active & (self.props.inv_mass > 0)
+
+    def derivative(self, t: float, X: np.ndarray) -> np.ndarray:
+        """D(t, X): the whole system's rate of change, one vectorised pass."""
+        s = self.unpack(X)
+        move = self.moving()[:, None]
+        acc = self.forces(t, s.x, s.v) * self.props.inv_mass[:, None]
+        if not self.rotating:
+            return np.concatenate((np.where(move, s.v, 0.0).ravel(), np.where(move, acc, 0.0).ravel()))
+        dq = quat_rate(s.q, s.w)
+        alpha = angular_acceleration(s.q, s.w, self.props.inertia, self.props.inv_inertia, np.zeros_like(s.w))
+        return np.concatenate(
+            (np.where(move, s.v, 0.0).ravel(), np.where(move, dq, 0.0).ravel(), np.where(move, acc, 0.0).ravel(), np.where(move, alpha, 0.0).ravel())
+        )
+
+    def position_rate(self, t: float, X: np.ndarray) -> np.ndarray:
+        """The position-like part of D (velocities and quaternion rates): no forces needed."""
+        s = self.unpack(X)
+        move = self.moving()[:, None]
+        if not self.rotating:
+            return np.where(move, s.v, 0.0).ravel()
+        return np.concatenate((np.where(move, s.v, 0.0).ravel(), np.where(move, quat_rate(s.q, s.w), 0.0).ravel()))
+
+    # --- energy ---------------------------------------------------------------------------
+
+    def energy(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """(kinetic [n], potential [n], shared potential) in J for moving bodies: kinetic
+        1/2 m v^2 + 1/2 w.I w; potential of gravity and buoyancy per body; springs and
+        Newtonian gravity are shared between bodies."""
+        s = self.unpack(X)
+        p, env = self.props, self.env
+        move = self.active & (p.inv_mass > 0)
+        kinetic = 0.5 * p.mass * np.einsum("ij,ij->i", s.v, s.v)
+        if self.rotating:
+            from .rigid import quat_to_matrix
+
+            w_body = np.einsum("nji,nj->ni", quat_to_matrix(s.q), s.w)
+            kinetic = kinetic + 0.5 * np.einsum("ij,ij->i", p.inertia * w_body, w_body)
+        potential = forces.gravity_energy(p.mass, env.gravity, s.x, self.x_ref)
+        for fluid in env.fluids:
+            potential = potential + forces.buoyancy_energy(s.x, p.radius_eq, fluid, env.gravity)
+        shared = 0.0
+        if env.springs is not None and env.springs.count:
+            shared += float(forces.spring_energy(s.x, env.springs).sum())
+        if env.newtonian is not None and self.n > 1:
+            shared += forces.newtonian_energy(s.x[move], p.mass[move], *env.newtonian)
+        return np.where(move, kinetic, 0.0), np.where(move, potential, 0.0), shared
