@@ -67,9 +67,11 @@ class SceneMotion:
 
 
 def _take_particles(samples: Any, index: slice | np.ndarray) -> Any:
-    """Slice a ParticleSamples-like value along time if it knows how, else keep it."""
+    """Slice ParticleSamples (ids [n], positions [T, n, 3], alive [T, n]) along time."""
     take = getattr(samples, "take", None)
-    return take(index) if callable(take) else samples
+    if callable(take):
+        return take(index)
+    return samples._replace(positions=samples.positions[index], alive=samples.alive[index])
 
 
 def light_name(light: Any, index: int) -> str:
