@@ -15,7 +15,7 @@ import sys
 
 import click
 
-from motion.pipeline.errors import MotionError
+from motion.pipeline.errors import MotionError, SceneError
 
 # Order is the order of `motion --help`.
 COMMAND_MODULES = [
@@ -51,12 +51,23 @@ _register()
 
 
 def main(argv: list[str] | None = None) -> int:
+    code = _run(argv)
+    if argv is None:
+        sys.exit(code)
+    return code
+
+
+def _run(argv: list[str] | None) -> int:
     """Run the CLI; returns the process exit code."""
     try:
         cli.main(args=argv, prog_name="motion", standalone_mode=False)
+    except SceneError as err:
+        for problem in err.problems:  # already FILE:LINE:COL: path: message
+            click.echo(str(problem), err=True)
+        return err.exit_code
     except MotionError as err:
         for line in str(err).splitlines() or [type(err).__name__]:
-            click.echo(f"error: {line}" if not line.startswith(("/", ".")) and ":" not in line[:3] else line, err=True)
+            click.echo(f"error: {line}", err=True)
         return err.exit_code
     except click.exceptions.Abort:
         click.echo("interrupted", err=True)
@@ -73,4 +84,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    main()

@@ -219,12 +219,10 @@ def activate(requested: str = "auto", threads: int | None = None, quiet: bool = 
     choice = choose(requested)
     if choice.llvm_path:
         os.environ[ENV_LLVM] = choice.llvm_path
+    elif choice.variant == "scalar_rgb":
+        os.environ.pop(ENV_LLVM, None)  # a broken library would only make drjit complain
     if choice.fallback and not quiet:
-        print(
-            f"warning: {choice.reason}; rendering with scalar_rgb (slow). "
-            "Install Debian's libllvm19 (tools/setup.sh does) for the LLVM CPU renderer.",
-            file=sys.stderr,
-        )
+        warn_fallback(choice)
     os.environ.setdefault("DRJIT_CACHE_DIR", str(cache_root() / "kernels"))
     import drjit as dr
     import mitsuba as mi
@@ -236,14 +234,24 @@ def activate(requested: str = "auto", threads: int | None = None, quiet: bool = 
     return choice
 
 
+def warn_fallback(choice: VariantChoice) -> None:
+    """The one-line warning for the scalar fallback (printed once, by the main process)."""
+    print(
+        f"warning: {choice.reason}; rendering with scalar_rgb (slow; stochastic motion blur "
+        "becomes sub-frame accumulation). Install Debian's libllvm19 (tools/setup.sh does).",
+        file=sys.stderr,
+    )
+
+
 def info() -> dict[str, object]:
     """What `motion info` prints: variant choice, LLVM, threads, caches, versions."""
     choice = choose("auto")
     llvm_version = None
     if choice.llvm_path:
-        name = os.path.basename(choice.llvm_path)
-        digits = "".join(ch if ch.isdigit() or ch == "." else " " for ch in name).split()
-        llvm_version = digits[0].strip(".") if digits else None
+        import re
+
+        found = re.search(r"(\d+(?:\.\d+)*)", os.path.basename(choice.llvm_path))
+        llvm_version = found.group(1) if found else None
     return {
         "variant": choice.variant,
         "reason": choice.reason,

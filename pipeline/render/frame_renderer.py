@@ -114,6 +114,9 @@ class FrameRenderer:
         self._scene: Any = None
         self._params: Any = None
         self._frames_done = 0
+        # The motion_path integrator is vectorised drjit code: LLVM or CUDA variants only.
+        # The scalar fallback renders with Mitsuba's own `path`, movers placed per sub-frame.
+        self.vectorized = not mi.variant().startswith("scalar")
         self.static_names = [o.name for o in loaded.scene.objects if is_static(loaded, o.name)]
         self.mover_names = [
             o.name
@@ -216,12 +219,62 @@ class FrameRenderer:
         rel = np.array([_qmul(q, q_frame_inv) for q in cam_q])
         self._scene.integrator().set_frame(mt, mq, cam_t, rel, ct[0])
 
+    def _full_scene(self, fi: FrameInput, u: float | None) -> Any:
+        """The whole scene at one instant (u = shutter fraction, None = the frame time),
+        with Mitsuba's `path` integrator: the scalar fallback and its sub-frames."""
+        mi = self._mi
+        scene = self.loaded.scene
+        materials = {m.name: material_dict(m, self.loaded) for m in scene.materials}
+        d: dict[str, Any] = {"type": "scene", "integrator": {"type": "path", "max_depth": self.settings.max_depth, "rr_depth": self.settings.rr_depth}}
+
+        def pose(t: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return (t[0], q[0]) if u is None else resample(t[1:], q[1:], u)
+
+        ct, cq = pose(*fi.camera)
+        d["sensor"] = sensor_dict(scene.camera, trs_matrix(ct, cq), float(fi.fov[0]), self.settings.resolution, self.spp, self.settings.filter)
+        for obj in scene.objects:
+            if not obj.visible:
+                continue
+            t, q, s = fi.objects[obj.name]
+            ot, oq = pose(t, q)
+            for k, shape in enumerate(object_shapes(obj, self.loaded, trs_matrix(ot, oq, s[0]), materials)):
+                d[f"{obj.name}__{k}"] = shape
+        for i, light in enumerate(scene.lights):
+            key = light.name or f"light{i}"
+            lp = fi.lights.get(key)
+            m = trs_matrix(lp[0][0], lp[1][0], lp[2][0]) if lp is not None else None
+            scalars = {k: _first(v) for k, v in fi.light_scalars.get(key, {}).items()}
+            d[key.replace(".", "_")] = light_dict(light, self.loaded, m, scalars)
+        return mi.load_dict(d)
+
+    def _render_scalar(self, fi: FrameInput, mode: str, seed: int) -> Any:
+        mi = self._mi
+        if mode == "off":
+            return mi.render(self._full_scene(fi, None), seed=seed, spp=self.spp)
+        k = self.settings.subframes
+        spp = max(1, self.spp // k)
+        acc = None
+        for j in range(k):
+            img = mi.render(self._full_scene(fi, (j + 0.5) / k), seed=(seed * 7919 + j) & 0x7FFFFFFF, spp=spp)
+            acc = img if acc is None else acc + img
+        return acc / k
+
     def render(self, fi: FrameInput, mode: str | None = None) -> tuple[np.ndarray, FrameStats]:
         """Render one frame; returns RGBA float32 [H, W, 4] and its stats."""
         from . import assets
 
         dr, mi = self._dr, self._mi
         mode = mode or self.settings.motion_blur
+        if not self.vectorized:
+            t0 = time.perf_counter()
+            seed = frame_seed(self.settings.seed, fi.frame, self.settings.seed_policy)
+            img = self._render_scalar(fi, mode, seed)
+            rgba = np.array(img, dtype=np.float32)
+            if rgba.shape[2] == 3:
+                rgba = np.concatenate([rgba, np.ones(rgba.shape[:2] + (1,), np.float32)], axis=2)
+            cold = self._frames_done == 0
+            self._frames_done += 1
+            return rgba, FrameStats(fi.frame, cold, 0.0, time.perf_counter() - t0, 0, 0, 0, False)
         hits0 = assets.STATS["hits"]
         t0 = time.perf_counter()
         cold = self._scene is None

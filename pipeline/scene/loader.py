@@ -204,7 +204,8 @@ def _message(err: Mapping[str, Any], data: Any, loc: Loc, root: type[BaseModel])
     kind = err["type"]
     if kind == "extra_forbidden":
         key = loc[-1] if loc else "?"
-        model = _model_at(root, loc[:-1])
+        # pydantic's own location keeps the union tags ('sphere'), which name the model
+        model = _model_at(root, tuple(err["loc"])[:-1])
         hint = ""
         if model is not None:
             names = list(model.model_fields)
@@ -235,11 +236,21 @@ def _message(err: Mapping[str, Any], data: Any, loc: Loc, root: type[BaseModel])
     return msg, False
 
 
+def _is_type_error(err: Mapping[str, Any]) -> bool:
+    kind = str(err["type"])
+    return kind.endswith("_type") or kind.endswith("_parsing") or kind in ("model_attributes_type", "union_tag_not_found")
+
+
 def problems_from_validation(exc: ValidationError, data: Any, source: SourceMap, root: type[BaseModel]) -> list[Problem]:
     """One problem per YAML path; the alternatives of a union at one path join in one line."""
     grouped: dict[str, tuple[Loc, bool, list[str]]] = {}
-    for err in exc.errors(include_url=False):
-        loc = _strip_tags(tuple(err["loc"]), data)
+    errors = [(err, _strip_tags(tuple(err["loc"]), data)) for err in exc.errors(include_url=False)]
+    specific = [loc for err, loc in errors if not _is_type_error(err)]
+    for err, loc in errors:
+        # a union branch that merely had the wrong type ('expected a number') is noise when
+        # another branch got further and found a real problem at or below this path
+        if _is_type_error(err) and any(len(s) > len(loc) and s[: len(loc)] == loc for s in specific):
+            continue
         message, at_key = _message(err, data, loc, root)
         path = yaml_path(loc)
         entry = grouped.setdefault(path, (loc, at_key, []))

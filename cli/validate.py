@@ -1,0 +1,36 @@
+"""`motion validate`: schema and semantic checks only; every problem at once."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command("validate")
+@click.argument("scenes", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--preset", help="Also check the scene with this preset applied.")
+def validate(scenes: tuple[Path, ...], preset: str | None) -> None:
+    """Check SCENES (YAML) without rendering: one line per problem, exit 2 if any."""
+    from motion.pipeline.errors import Problem, SceneError
+    from motion.pipeline.presets import load_preset, overrides_from
+    from motion.pipeline.scene import load_scene
+
+    overrides = overrides_from(load_preset(preset)[0], {}) if preset else None
+    problems: list[Problem] = []
+    for path in scenes:
+        try:
+            loaded = load_scene(path, overrides)
+        except SceneError as err:
+            problems.extend(err.problems)
+            continue
+        s = loaded.scene
+        click.echo(
+            f"{path}: ok ({loaded.name}: frames {s.timeline.first}-{s.timeline.last} at {s.timeline.fps} fps, "
+            f"{len(s.objects)} objects, {len(s.lights)} lights, {len(s.materials)} materials)"
+        )
+    if problems:
+        raise SceneError(problems)
+
+
+commands = [validate]

@@ -1,0 +1,225 @@
+"""Validation: every malformed scene gives `FILE:LINE:COL: yaml.path: message`, exit 2,
+never a traceback; all problems at once; examples validate."""
+
+from __future__ import annotations
+
+import copy
+import random
+import textwrap
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from motion.cli.main import main
+from motion.pipeline.errors import SceneError
+from motion.pipeline.scene import load_scene
+
+from _support import SCENES
+
+BASE = """\
+timeline: {fps: 24, first: 0, last: 10}
+camera:
+  position: [0, 1, 5]
+  look_at: [0, 0, 0]
+materials:
+  - {name: red, type: diffuse, color: [0.8, 0.1, 0.1]}
+objects:
+  - name: ball
+    shape: sphere
+    radius: 0.5
+    material: red
+"""
+
+# (id, scene text, expected yaml path, expected line, a fragment of the message)
+CASES: list[tuple[str, str, str, int, str]] = [
+    ("fps-zero", BASE.replace("fps: 24", "fps: 0"), "timeline.fps", 1, "must be > 0"),
+    ("fps-negative", BASE.replace("fps: 24", "fps: -30"), "timeline.fps", 1, "must be > 0"),
+    ("fps-garbage", BASE.replace("fps: 24", "fps: fast"), "timeline.fps", 1, "frame rate"),
+    ("fps-zero-den", BASE.replace("fps: 24", "fps: '24/0'"), "timeline.fps", 1, "frame rate"),
+    ("range-reversed", BASE.replace("first: 0, last: 10", "first: 10, last: 2"), "timeline", 1, "reversed"),
+    ("unknown-top-key", BASE + "renderr: {spp: 4}\n", "renderr", 12, "did you mean 'render'"),
+    ("unknown-camera-key", BASE.replace("  look_at", "  lookat: [0, 0, 0]\n  look_at"), "camera.lookat", 4, "did you mean 'look_at'"),
+    ("camera-missing", "objects: []\n", "camera", 1, "required"),
+    ("position-without-look-at", BASE.replace("  look_at: [0, 0, 0]\n", ""), "camera", 3, "go together"),
+    ("position-and-transform", BASE.replace("  look_at: [0, 0, 0]\n", "  look_at: [0, 0, 0]\n  transform: {translate: [0, 0, 1]}\n"), "camera", 3, "not both"),
+    ("shutter-zero", BASE.replace("  look_at: [0, 0, 0]\n", "  look_at: [0, 0, 0]\n  shutter: {angle: 0}\n"), "camera.shutter.angle", 5, "greater than 0"),
+    ("shutter-over-360", BASE.replace("  look_at: [0, 0, 0]\n", "  look_at: [0, 0, 0]\n  shutter: {angle: 361}\n"), "camera.shutter.angle", 5, "less than or equal to 360"),
+    ("shutter-position", BASE.replace("  look_at: [0, 0, 0]\n", "  look_at: [0, 0, 0]\n  shutter: {position: middle}\n"), "camera.shutter.position", 5, "start"),
+    ("fov-180", BASE.replace("  look_at: [0, 0, 0]\n", "  look_at: [0, 0, 0]\n  fov: 180\n"), "camera.fov", 5, "less than 180"),
+    ("vector-too-short", BASE.replace("position: [0, 1, 5]", "position: [0, 1]"), "camera.position[2]", 3, "too few"),
+    ("vector-not-number", BASE.replace("position: [0, 1, 5]", "position: [0, one, 5]"), "camera.position[1]", 3, "number"),
+    ("radius-negative", BASE.replace("radius: 0.5", "radius: -1"), "objects[0].radius", 10, "greater than 0"),
+    ("unknown-shape", BASE.replace("shape: sphere", "shape: sphre"), "objects[0]", 8, "did you mean 'sphere'"),
+    ("unknown-object-key", BASE.replace("    radius: 0.5\n", "    raduis: 0.5\n"), "objects[0].raduis", 10, "did you mean 'radius'"),
+    ("unknown-material-ref", BASE.replace("material: red", "material: blue"), "objects[0].material", 11, "unknown material 'blue'"),
+    ("unknown-material-type", BASE.replace("type: diffuse", "type: difuse"), "materials[0]", 6, "did you mean 'diffuse'"),
+    ("color-negative", BASE.replace("color: [0.8, 0.1, 0.1]", "color: [-1, 0, 0]"), "materials[0].color[0]", 6, "greater than or equal to 0"),
+    ("duplicate-object", BASE + "  - {name: ball, shape: cube}\n", "objects[1].name", 12, "duplicate name 'ball'"),
+    ("duplicate-material", BASE.replace("materials:\n", "materials:\n  - {name: red, type: diffuse}\n"), "materials[1].name", 7, "duplicate material"),
+    ("unknown-parent", BASE + "    parent: nobody\n", "objects[0].parent", 12, "unknown parent 'nobody'"),
+    ("self-parent", BASE + "    parent: ball\n", "objects[0].parent", 12, "own parent"),
+    (
+        "parent-cycle",
+        BASE + "    parent: cube\n  - {name: cube, shape: cube, parent: ball}\n",
+        "objects[0].parent",
+        12,
+        "parent cycle",
+    ),
+    ("mesh-missing-file", BASE + "  - {name: m, shape: mesh, file: nowhere.obj}\n", "objects[1].file", 12, "file not found"),
+    ("mesh-bad-ext", BASE + "  - {name: m, shape: mesh, file: model.fbx}\n", "objects[1].file", 12, ".obj or .ply"),
+    ("envmap-missing", BASE + "lights:\n  - {type: envmap, file: sky.exr}\n", "lights[0].file", 13, "file not found"),
+    ("light-unknown-type", BASE + "lights:\n  - {type: laser}\n", "lights[0]", 13, "unknown type 'laser'"),
+    ("spp-zero", BASE + "render: {spp: 0}\n", "render.spp", 12, "greater than or equal to 1"),
+    ("resolution-zero", BASE + "render: {resolution: [0, 10]}\n", "render.resolution[0]", 12, "greater than or equal to 1"),
+    ("blur-mode", BASE + "render: {motion_blur: smear}\n", "render.motion_blur", 12, "stochastic"),
+    ("output-no-hashes", BASE + "output: {filename: frame.exr}\n", "output.filename", 12, "pattern"),
+    ("negative-mass", BASE + "    motion: {type: dynamics, mass: -11}\n", "objects[0].motion.mass", 12, "greater than 0"),
+    ("motion-unknown-type", BASE + "    motion: {type: wobble}\n", "objects[0].motion", 12, "unknown type 'wobble'"),
+    (
+        "keys-not-increasing",
+        BASE + "    motion:\n      type: keyframes\n      channels:\n        translate: {keys: [{time: 5, value: [0, 0, 0]}, {time: 2, value: [1, 0, 0]}]}\n",
+        "objects[0].motion.channels.translate.keys",
+        15,
+        "increase strictly",
+    ),
+    (
+        "unknown-channel",
+        BASE + "    motion:\n      type: keyframes\n      channels:\n        wiggle: {keys: [{time: 0, value: 1}]}\n",
+        "objects[0].motion.channels.wiggle",
+        15,
+        "unknown channel 'wiggle'",
+    ),
+    ("rotation-form", BASE + "    transform: {rotate: {spin: 3}}\n", "objects[0].transform.rotate", 12, "a rotation needs one of"),
+    ("quaternion-zero", BASE + "    transform: {rotate: {quaternion: [0, 0, 0, 0]}}\n", "objects[0].transform.rotate.quaternion", 12, "must not be zero"),
+    ("spring-unknown-body", BASE + "dynamics: {springs: [{a: ball, b: ghost, stiffness: 10}]}\n", "dynamics.springs[0].a", 12, "not a dynamics body"),
+    ("integrator-unknown", BASE + "dynamics: {integrator: verlet}\n", "dynamics.integrator", 12, "rk4"),
+    ("nan-value", BASE.replace("radius: 0.5", "radius: .nan"), "objects[0].radius", 10, ""),
+    ("yaml-syntax", BASE.replace("look_at: [0, 0, 0]", "look_at: [0, 0, 0"), "", 5, "invalid YAML"),
+    ("yaml-python-tag", BASE + "evil: !!python/object/apply:os.system ['echo hacked']\n", "", 12, "tag not allowed"),
+    ("yaml-duplicate-key", BASE.replace("    radius: 0.5\n", "    radius: 0.5\n    radius: 0.7\n"), "", 11, "duplicate key"),
+    ("top-level-list", "- 1\n- 2\n", "<document>", 1, "expected a mapping"),
+    ("empty-file", "", "<document>", 1, "empty"),
+]
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "scene.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_table_is_large_enough() -> None:
+    assert len(CASES) >= 30
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
+def test_malformed_scene(tmp_path: Path, case: tuple[str, str, str, int, str]) -> None:
+    _, text, path, line, fragment = case
+    scene = _write(tmp_path, text)
+    with pytest.raises(SceneError) as info:
+        load_scene(scene)
+    problems = info.value.problems
+    match = [p for p in problems if (p.yaml_path or "<document>") == (path or p.yaml_path or "<document>") and fragment in p.message]
+    assert match, f"no problem at {path!r} containing {fragment!r}; got: {[str(p) for p in problems]}"
+    assert match[0].line == line, str(match[0])
+    assert match[0].file == str(scene)
+    assert str(match[0]).startswith(f"{scene}:{line}:")
+
+
+@pytest.mark.parametrize("case", CASES[::6], ids=[c[0] for c in CASES[::6]])
+def test_cli_exit_code_and_no_traceback(tmp_path: Path, case: tuple[str, str, str, int, str], capsys: pytest.CaptureFixture[str]) -> None:
+    scene = _write(tmp_path, case[1])
+    assert main(["validate", str(scene)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert all(line.startswith(str(scene)) for line in err.strip().splitlines()), err
+
+
+def test_all_problems_at_once(tmp_path: Path) -> None:
+    text = BASE.replace("fps: 24", "fps: 0").replace("radius: 0.5", "radius: -1") + "render: {spp: 0}\n"
+    with pytest.raises(SceneError) as info:
+        load_scene(_write(tmp_path, text))
+    paths = {p.yaml_path for p in info.value.problems}
+    assert {"timeline.fps", "objects[0].radius", "render.spp"} <= paths
+
+
+def test_python_tag_is_never_executed(tmp_path: Path) -> None:
+    marker = tmp_path / "pwned"
+    text = BASE + f"evil: !!python/object/apply:os.system ['touch {marker}']\n"
+    with pytest.raises(SceneError):
+        load_scene(_write(tmp_path, text))
+    assert not marker.exists()
+
+
+@pytest.mark.parametrize("scene", sorted(SCENES.glob("*.yaml")), ids=lambda p: p.name)
+def test_examples_validate(scene: Path) -> None:
+    loaded = load_scene(scene)
+    assert loaded.scene.objects
+
+
+# --- fuzz: no input may produce a traceback -----------------------------------------------
+
+yaml_scalars = st.one_of(
+    st.none(), st.booleans(), st.integers(-10**6, 10**6), st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=12)
+)
+yaml_docs = st.recursive(
+    yaml_scalars,
+    lambda children: st.one_of(st.lists(children, max_size=4), st.dictionaries(st.text(max_size=10), children, max_size=4)),
+    max_leaves=20,
+)
+
+
+def _check_no_traceback(tmp_path: Path, text: str) -> None:
+    scene = tmp_path / "fuzz.yaml"
+    scene.write_text(text)
+    try:
+        load_scene(scene)
+    except SceneError as err:
+        assert err.problems and all(p.file == str(scene) for p in err.problems)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(doc=yaml_docs)
+def test_fuzz_random_documents(tmp_path: Path, doc: Any) -> None:
+    _check_no_traceback(tmp_path, yaml.safe_dump(doc))
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.data(), which=st.sampled_from(sorted(p.name for p in SCENES.glob("*.yaml"))))
+def test_fuzz_mutated_examples(tmp_path: Path, data: st.DataObject, which: str) -> None:
+    doc = yaml.safe_load((SCENES / which).read_text())
+    doc = copy.deepcopy(doc)
+    rng = random.Random(data.draw(st.integers(0, 2**32 - 1)))
+    for _ in range(data.draw(st.integers(1, 4))):
+        _mutate(doc, rng, data.draw(yaml_scalars))
+    # keep asset paths resolvable from the copy's folder
+    (tmp_path / "assets").mkdir(exist_ok=True)
+    sea = SCENES / "assets" / "sea.png"
+    if not (tmp_path / "assets" / "sea.png").exists():
+        (tmp_path / "assets" / "sea.png").write_bytes(sea.read_bytes())
+    _check_no_traceback(tmp_path, yaml.safe_dump(doc))
+
+
+def _mutate(node: Any, rng: random.Random, value: Any) -> None:
+    """Replace, delete or add one entry somewhere in the document tree."""
+    path = []
+    while isinstance(node, (dict, list)) and node and rng.random() < 0.75:
+        key = rng.choice(list(node.keys())) if isinstance(node, dict) else rng.randrange(len(node))
+        path.append((node, key))
+        node = node[key]
+    if not path:
+        return
+    parent, key = path[-1]
+    action = rng.random()
+    if action < 0.5:
+        parent[key] = value
+    elif action < 0.75:
+        del parent[key]
+    elif isinstance(parent, dict):
+        parent[f"{key}_x"] = value
+    else:
+        parent.append(value)
