@@ -66,7 +66,12 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         cache=req.cache,
         variant=scene.render.variant,
     )
+    from .. import variant as variant_mod
     from .inputs import evaluate_frames
+
+    choice = variant_mod.choose(scene.render.variant)  # probes in subprocesses; no drjit here
+    if choice.fallback:
+        variant_mod.warn_fallback(choice)
 
     t0 = time.perf_counter()
     inputs = evaluate_frames(loaded, frames)
