@@ -16,7 +16,7 @@ from typing import Annotated, Literal, Union
 from pydantic import Field, field_validator, model_validator
 
 from .dynamics_schema import DynamicsMotion
-from .types import FiniteFloat, Model, Positive, Vec3
+from .types import FiniteFloat, Model, NonNegative as NonNegativeFloat, Positive, Transform, Vec3
 
 Interpolation = Literal["hold", "nearest", "linear", "catmull-rom", "bezier"]
 Extrapolation = Literal["hold", "linear", "cycle"]
@@ -33,8 +33,10 @@ class Key(Model):
     `interpolation` overrides the channel's for the segment that starts at this key.
     Bezier keys may give `tangent_in` / `tangent_out` (value units per second) or `ease`.
     Rotation keys give exactly one of `value` (Euler xyz degrees), `euler` (+ `order`),
-    `axis` + `angle`, or `quaternion` (w, x, y, z); `turns` adds whole extra turns about
-    the segment's rotation axis (a deliberate 720-degree spin is `turns: 1` on 360 ...).
+    `axis` + `angle`, or `quaternion` (w, x, y, z). The segment arriving at a key takes the
+    shortest arc; `turns` adds whole extra turns about that arc's axis (a deliberate
+    720-degree spin from 0 back to 0 is `turns: 2` with an axis-angle key; negative turns
+    spin the other way). See docs/motion.md.
     """
 
     time: FiniteFloat
@@ -197,3 +199,71 @@ MotionBlock = Annotated[
     Union[StaticMotion, KeyframeMotion, ProceduralMotion, DynamicsMotion],
     Field(discriminator="type"),
 ]
+
+
+# --- deformation (pipeline/motion/deform.py; docs/motion.md, "Deformation") ---------------
+
+
+class MeshKey(Model):
+    """One key mesh of a blend-shape animation: a file (.obj, same topology) or inline
+    vertices (object space, metres). Counts are checked against the first key."""
+
+    time: FiniteFloat
+    file: str | None = None
+    vertices: list[Vec3] | None = None
+
+    @model_validator(mode="after")
+    def _one_source(self) -> "MeshKey":
+        if (self.file is None) == (self.vertices is None):
+            raise ValueError("a mesh key needs exactly one of file, vertices")
+        return self
+
+
+class BlendShapes(Model):
+    """Vertex animation between key meshes of identical topology, per vertex."""
+
+    type: Literal["blend-shapes"]
+    time_unit: Literal["frames", "seconds"] = "frames"
+    interpolation: Literal["hold", "linear", "catmull-rom"] = "linear"
+    extrapolation: Extrapolation = "hold"
+    keys: Annotated[list[MeshKey], Field(min_length=1)]
+
+    @field_validator("keys")
+    @classmethod
+    def _sorted(cls, keys: list[MeshKey]) -> list[MeshKey]:
+        for i in range(1, len(keys)):
+            if keys[i].time <= keys[i - 1].time:
+                raise ValueError(f"key times must increase strictly: keys[{i}].time {keys[i].time} <= keys[{i - 1}].time {keys[i - 1].time}")
+        return keys
+
+
+class Bone(Model):
+    """A bone frame in the mesh's object space: bind pose `transform` (relative to its
+    parent bone), `length` along its local +Y (for auto weights), animated by `motion`."""
+
+    name: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_.\-]*$")]
+    parent: str | None = None
+    transform: Transform = Transform()
+    length: Positive = 1.0
+    motion: Annotated[Union[StaticMotion, KeyframeMotion, ProceduralMotion], Field(discriminator="type")] = StaticMotion()
+
+
+class Skinning(Model):
+    """Linear blend skinning: vertex = sum_b w_b (pose_b(t) bind_b^-1) vertex_bind, at most
+    4 influences per vertex, weights normalised to sum 1. `weights` (one mapping bone ->
+    weight per vertex of the bind mesh) or `auto: true` (by distance to each bone)."""
+
+    type: Literal["skinning"]
+    bones: Annotated[list[Bone], Field(min_length=1)]
+    weights: list[dict[str, NonNegativeFloat]] | None = None
+    auto: bool = False
+    detail: Annotated[int, Field(ge=1, le=256)] = 16  # tessellation of primitive bind meshes
+
+    @model_validator(mode="after")
+    def _weights(self) -> "Skinning":
+        if (self.weights is None) == (not self.auto):
+            raise ValueError("skinning needs exactly one of weights, auto: true")
+        return self
+
+
+Deformation = Annotated[Union[BlendShapes, Skinning], Field(discriminator="type")]

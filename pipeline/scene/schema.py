@@ -14,7 +14,7 @@ from pydantic import Field, field_validator, model_validator
 
 from ..timeline import Timeline, parse_fps
 from .dynamics_schema import DynamicsSettings, ParticleEmitter
-from .motion_schema import MotionBlock, StaticMotion
+from .motion_schema import Deformation, MotionBlock, StaticMotion
 from .types import (
     Color,
     FiniteFloat,
@@ -234,6 +234,7 @@ class _Object(Model):
     motion: MotionBlock = StaticMotion()
     collider: Collider | None = None
     visible: bool = True
+    deform: Deformation | None = None
 
 
 class Sphere(_Object):
