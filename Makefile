@@ -5,10 +5,10 @@ setup:
 	@bash tools/setup.sh
 
 render: setup
-	.venv/bin/motion render scenes/cannonball.yaml -o out/cannonball
+	.venv/bin/motion render scenes/cannonball.yaml -o out/cannonball $(ARGS)
 
 test: setup
-	.venv/bin/python -m pytest -q
+	.venv/bin/python -m pytest -q $(ARGS)
 
 bench: setup
-	.venv/bin/python -m bench
+	for b in bench/bench_*.py; do echo "== $$b"; .venv/bin/python $$b || exit 1; done
