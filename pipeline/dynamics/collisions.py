@@ -160,7 +160,8 @@ class BoxCollider(Collider):
         t_exit = np.min(t_far, axis=1)
         inside = np.all(np.abs(p0) < e, axis=1)
         seg = np.linalg.norm(d, axis=1)
-        entering = (~inside) & (t_enter <= t_exit) & (t_enter >= 0) & (t_enter < 1) & ((np.minimum(t_exit, 1.0) - t_enter) * seg > TOL)
+        with np.errstate(invalid="ignore"):
+                entering = (~inside) & (t_enter <= t_exit) & (t_enter >= 0) & (t_enter < 1) & ((np.minimum(t_exit, 1.0) - t_enter) * seg > TOL)
         # inside at the start: leave through the face of least penetration
         pen = e - np.abs(p0)
         in_axis = np.argmin(pen, axis=1)
@@ -265,9 +266,11 @@ class Impacts:
     other: list[np.ndarray] = field(default_factory=list)
 
 
-def _apply_friction(b: ContactBodies, idx: np.ndarray, n: np.ndarray, normal_impulse: np.ndarray, mu: np.ndarray, mu_s: np.ndarray) -> None:
+def _apply_friction(b: ContactBodies, idx: np.ndarray, n: np.ndarray, normal_impulse: np.ndarray, mu: np.ndarray, mu_s: np.ndarray, lever: np.ndarray) -> None:
     """Coulomb friction impulse at the contact point r = -radius n of bodies idx against a
-    static surface (see module docstring)."""
+    static surface (see module docstring). The position moves by lever * dv: friction acts
+    over the contact part of the step, (1 - s) h, as a constant deceleration (trapezoid:
+    lever = (1 - s) h / 2), so a sticking contact does not creep."""
     inv_m = b.inv_mass[idx]
     r_c = -b.radius[idx, None] * n
     u = b.v1[idx]
@@ -281,15 +284,17 @@ def _apply_friction(b: ContactBodies, idx: np.ndarray, n: np.ndarray, normal_imp
         rxt = np.cross(r_c, t_hat)
         k_t += np.einsum("ij,ij->i", np.cross(np.einsum("nij,nj->ni", b.inv_inertia_world[idx], rxt), r_c), t_hat)
     jt = coulomb_friction(slip, normal_impulse, k_t, mu, mu_s)
-    b.v1[idx] -= (jt * inv_m)[:, None] * t_hat
+    dv = -(jt * inv_m)[:, None] * t_hat
+    b.v1[idx] += dv
+    b.x1[idx] += lever[:, None] * dv
     if b.w1 is not None and b.inv_inertia_world is not None:
         b.w1[idx] -= np.einsum("nij,nj->ni", b.inv_inertia_world[idx], np.cross(r_c, jt[:, None] * t_hat))
 
 
 def resolve_static(b: ContactBodies, hits: Hits, col: Collider, h: float, v_rest: float) -> np.ndarray:
-    """Impulse response of the bodies that hit `col` this step (in place). Returns the
-    indices of bodies whose contact was an impact (approach faster than v_rest) and
-    their approach speeds, as a pair of arrays stacked [2, k]."""
+    """Impulse response of the bodies that hit `col` this step (in place). Returns [3, k]:
+    the bodies whose contact was an impact (approach faster than v_rest), their approach
+    speeds (m/s) and times of impact (fraction of the step)."""
     idx = np.flatnonzero(hits.hit & (b.inv_mass > 0))
     if idx.size == 0:
         return np.zeros((2, 0))
@@ -320,7 +325,7 @@ def resolve_static(b: ContactBodies, hits: Hits, col: Collider, h: float, v_rest
     normal_impulse = (dvn + support) / b.inv_mass[idx]
     mu = np.sqrt(b.friction[idx] * col.friction)
     mu_s = np.sqrt(b.static_friction[idx] * col.static_friction)
-    _apply_friction(b, idx, n, normal_impulse, mu, mu_s)
+    _apply_friction(b, idx, n, normal_impulse, mu, mu_s, 0.5 * (1.0 - s[:, 0]) * h)
     return np.stack((idx[impact].astype(np.float64), -vn[impact], hits.s[idx][impact]))
 
 

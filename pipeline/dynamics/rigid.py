@@ -122,13 +122,16 @@ def principal_inertia(shape: str, mass: float, dims: dict[str, float]) -> np.nda
 
 def inverse_inertia_world(q: np.ndarray, inv_inertia_body: np.ndarray) -> np.ndarray:
     """I_world^-1 = R diag(I_body^-1) R^T, [n, 3, 3]."""
-    rot = quat_to_matrix(q)
+    rot = quat_to_matrix(quat_normalize(q))
     return np.einsum("nij,nj,nkj->nik", rot, inv_inertia_body, rot)
 
 
 def angular_acceleration(q: np.ndarray, omega: np.ndarray, inertia_body: np.ndarray, inv_inertia_body: np.ndarray, torque: np.ndarray) -> np.ndarray:
-    """Euler's equations in world frame: dw/dt = I^-1 (tau - w x (I w)), I = R diag(I_b) R^T."""
-    rot = quat_to_matrix(q)
+    """Euler's equations in world frame: dw/dt = I^-1 (tau - w x (I w)), I = R diag(I_b) R^T.
+
+    q is normalised first: Runge-Kutta stages see unnormalised quaternions, whose matrix
+    would not be a rotation (and would make an isotropic body look anisotropic)."""
+    rot = quat_to_matrix(quat_normalize(q))
     w_body = np.einsum("nji,nj->ni", rot, omega)  # R^T w
     tau_body = np.einsum("nji,nj->ni", rot, torque)
     alpha_body = inv_inertia_body * (tau_body - np.cross(w_body, inertia_body * w_body))
