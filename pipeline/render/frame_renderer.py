@@ -43,6 +43,8 @@ class FrameInput:
     fov: np.ndarray  # [1+N]
     lights: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
     light_scalars: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+    vertices: dict[str, np.ndarray] = field(default_factory=dict)  # deforming meshes [1+N, V, 3], object space
+    particles: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)  # (positions [1+N, n, 3], alive [1+N, n])
 
 
 @dataclass

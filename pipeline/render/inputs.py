@@ -11,51 +11,56 @@ from ..scene.loader import LoadedScene
 from .frame_renderer import FrameInput
 
 
-def frame_times(loaded: LoadedScene, frame: int) -> tuple[float, tuple[float, float], np.ndarray]:
-    """(frame time, shutter interval, [frame time, N sample times across the shutter])."""
-    scene = loaded.scene
-    tl = scene.timeline.timeline()
-    shutter = tl.shutter(frame, scene.camera.shutter.angle, scene.camera.shutter.position)
-    n = scene.render.shutter_samples
-    t = float(tl.seconds(frame))
-    samples = np.linspace(float(shutter[0]), float(shutter[1]), n)
-    return t, (float(shutter[0]), float(shutter[1])), np.concatenate([[t], samples])
-
-
-def inputs_from_motion(loaded: LoadedScene, frames: Sequence[int], motion: Any) -> list[FrameInput]:
-    """Slice a `SceneMotion` evaluated at the concatenated times of `frames` (each frame's
-    [frame time, N samples], in order) into one `FrameInput` per frame."""
-    n1 = loaded.scene.render.shutter_samples + 1
+def inputs_from_baked(baked: Any) -> list[FrameInput]:
+    """One `FrameInput` per baked frame: index 0 is the frame time, 1..N the shutter samples."""
     out = []
-    light_keys = [light.name or f"light{i}" for i, light in enumerate(loaded.scene.lights)]
-    for k, frame in enumerate(frames):
-        sl = slice(k * n1, (k + 1) * n1)
-        t, shutter, _ = frame_times(loaded, frame)
-        objects = {name: (p.translation[sl], p.rotation[sl], p.scale[sl]) for name, p in motion.objects.items()}
-        lights = {name: (p.translation[sl], p.rotation[sl], p.scale[sl]) for name, p in motion.lights.items() if name in light_keys}
-        light_scalars = {name: {c: v[sl] for c, v in chans.items()} for name, chans in motion.light_scalars.items()}
+    for bf in baked.frames:
+        motion = _concat(bf.at_frame, bf.motion)
         out.append(
             FrameInput(
-                frame=frame,
-                time=t,
-                shutter=shutter,
-                objects=objects,
-                camera=(motion.camera.translation[sl], motion.camera.rotation[sl]),
-                fov=np.asarray(motion.camera_scalars["fov"][sl], dtype=float),
-                lights=lights,
-                light_scalars=light_scalars,
+                frame=bf.frame,
+                time=float(bf.time),
+                shutter=(float(bf.shutter[0]), float(bf.shutter[1])),
+                objects={n: (p.translation, p.rotation, p.scale) for n, p in motion.objects.items()},
+                camera=(motion.camera.translation, motion.camera.rotation),
+                fov=np.asarray(motion.camera_scalars["fov"], dtype=float),
+                lights={n: (p.translation, p.rotation, p.scale) for n, p in motion.lights.items()},
+                light_scalars=motion.light_scalars,
+                vertices=motion.vertices,
+                particles={n: (np.asarray(v.positions), np.asarray(v.alive)) for n, v in motion.particles.items()},
             )
         )
     return out
 
 
-def evaluate_frames(loaded: LoadedScene, frames: Sequence[int], simulation: Any = None) -> list[FrameInput]:
-    """Evaluate the motion of `frames` (one vectorised call) and slice it per frame."""
-    from ..motion import evaluate
+def _concat(a: Any, b: Any) -> Any:
+    """SceneMotion at [a's times, b's times] (a: the frame time, b: the shutter samples)."""
+    from ..motion import Pose, SceneMotion
 
-    times = np.concatenate([frame_times(loaded, f)[2] for f in frames]) if frames else np.zeros(0)
-    motion = evaluate(loaded, times, simulation)
-    return inputs_from_motion(loaded, frames, motion)
+    def pose(p: Any, q: Any) -> Any:
+        return Pose(np.concatenate([p.translation, q.translation]), np.concatenate([p.rotation, q.rotation]), np.concatenate([p.scale, q.scale]))
+
+    particles = {}
+    for name, pa in a.particles.items():
+        pb = b.particles[name]
+        particles[name] = pa._replace(positions=np.concatenate([pa.positions, pb.positions]), alive=np.concatenate([pa.alive, pb.alive]))
+    return SceneMotion(
+        times=np.concatenate([a.times, b.times]),
+        objects={k: pose(v, b.objects[k]) for k, v in a.objects.items()},
+        camera=pose(a.camera, b.camera),
+        camera_scalars={k: np.concatenate([v, b.camera_scalars[k]]) for k, v in a.camera_scalars.items()},
+        lights={k: pose(v, b.lights[k]) for k, v in a.lights.items()},
+        light_scalars={k: {n: np.concatenate([v, b.light_scalars[k][n]]) for n, v in d.items()} for k, d in a.light_scalars.items()},
+        vertices={k: np.concatenate([v, b.vertices[k]]) for k, v in a.vertices.items()},
+        particles=particles,
+    )
+
+
+def evaluate_frames(loaded: LoadedScene, frames: Sequence[int], simulation: Any = None) -> list[FrameInput]:
+    """Bake `frames` (simulating once here if the scene has dynamics) into FrameInputs."""
+    from ..bake import bake
+
+    return inputs_from_baked(bake(loaded, frames, simulation))
 
 
 def fingerprint(inputs: Sequence[FrameInput]) -> str:
@@ -71,4 +76,9 @@ def fingerprint(inputs: Sequence[FrameInput]) -> str:
         for a in fi.camera:
             h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
         h.update(np.ascontiguousarray(fi.fov, dtype=np.float64).tobytes())
+        for name in sorted(fi.vertices):
+            h.update(np.ascontiguousarray(fi.vertices[name], dtype=np.float64).tobytes())
+        for name in sorted(fi.particles):
+            for a in fi.particles[name]:
+                h.update(np.ascontiguousarray(a).tobytes())
     return h.hexdigest()
