@@ -325,6 +325,12 @@ class RenderSettings(Model):
     variant: Literal["auto", "llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb"] = "auto"
     filter: Literal["box", "gaussian", "tent"] = "gaussian"
 
+    @field_validator("motion_blur", mode="before")
+    @classmethod
+    def _yaml_off(cls, value: object) -> object:
+        # YAML 1.1 reads a bare `off` as false: take it as the user meant it
+        return "off" if value is False else value
+
 
 class OutputSettings(Model):
     directory: str | None = None  # default: out/<scene name>; `-o DIR` overrides
