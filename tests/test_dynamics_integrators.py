@@ -60,7 +60,7 @@ def test_cannonball_hits_the_sea_at_range_and_flight_time(cannon, name):
     impacts = cannon[name].bodies.impacts
     assert len(impacts), "the ball never hit the sea"
     t_hit = impacts[0, 0]
-    x_hit = cannon[name].sample(np.array([t_hit]))["ball"].translation[0]
+    x_hit = impacts[0, 4:7]
     exact = name not in ("euler", "semi-implicit-euler")
     tol_t = 1e-3 if exact else 2 * STEP
     assert abs(t_hit - FLIGHT) < tol_t

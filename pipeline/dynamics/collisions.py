@@ -292,12 +292,12 @@ def _apply_friction(b: ContactBodies, idx: np.ndarray, n: np.ndarray, normal_imp
 
 
 def resolve_static(b: ContactBodies, hits: Hits, col: Collider, h: float, v_rest: float) -> np.ndarray:
-    """Impulse response of the bodies that hit `col` this step (in place). Returns [3, k]:
+    """Impulse response of the bodies that hit `col` this step (in place). Returns [6, k]:
     the bodies whose contact was an impact (approach faster than v_rest), their approach
-    speeds (m/s) and times of impact (fraction of the step)."""
+    speeds (m/s), times of impact (fraction of the step) and centres at impact (x, y, z)."""
     idx = np.flatnonzero(hits.hit & (b.inv_mass > 0))
     if idx.size == 0:
-        return np.zeros((2, 0))
+        return np.zeros((6, 0))
     s = hits.s[idx][:, None]
     n = hits.normal[idx]
     x0, x1, v0, v1 = b.x0[idx], b.x1[idx], b.v0[idx], b.v1[idx]
@@ -326,22 +326,23 @@ def resolve_static(b: ContactBodies, hits: Hits, col: Collider, h: float, v_rest
     mu = np.sqrt(b.friction[idx] * col.friction)
     mu_s = np.sqrt(b.static_friction[idx] * col.static_friction)
     _apply_friction(b, idx, n, normal_impulse, mu, mu_s, 0.5 * (1.0 - s[:, 0]) * h)
-    return np.stack((idx[impact].astype(np.float64), -vn[impact], hits.s[idx][impact]))
+    return np.concatenate((np.stack((idx[impact].astype(np.float64), -vn[impact], hits.s[idx][impact])), xc[impact].T))
 
 
 def resolve_pairs(b: ContactBodies, pairs: tuple[np.ndarray, np.ndarray], h: float, v_rest: float) -> np.ndarray:
     """Sphere-sphere impulses between body pairs (i, j), all pairs at once (Jacobi).
-    Returns [3, k]: body i, body j, approach speed of the impacts."""
+    Returns [6, k]: body i, body j, approach speed, centre of i at the impact (x, y, z)."""
     i, j = pairs
     if i.size == 0:
-        return np.zeros((3, 0))
+        return np.zeros((6, 0))
     reach = b.radius[i] + b.radius[j]
     hits = _sweep_spheres(b.x0[i] - b.x0[j], b.x1[i] - b.x1[j], reach)
     k = np.flatnonzero(hits.hit & ((b.inv_mass[i] + b.inv_mass[j]) > 0))
     if k.size == 0:
-        return np.zeros((3, 0))
+        return np.zeros((6, 0))
     i, j, n, s = i[k], j[k], hits.normal[k], hits.s[k]
     inv_i, inv_j = b.inv_mass[i], b.inv_mass[j]
+    x_hit = b.x0[i] + s[:, None] * (b.x1[i] - b.x0[i])
     v_rel = b.v1[i] - b.v1[j]
     vn = np.einsum("ij,ij->i", v_rel, n)
     approaching = vn < 0
@@ -386,4 +387,4 @@ def resolve_pairs(b: ContactBodies, pairs: tuple[np.ndarray, np.ndarray], h: flo
     share = overlap / (inv_i + inv_j)
     np.add.at(b.x1, i, (share * inv_i)[:, None] * n_end)
     np.add.at(b.x1, j, -(share * inv_j)[:, None] * n_end)
-    return np.stack((i[impact].astype(np.float64), j[impact].astype(np.float64), -vn[impact]))
+    return np.concatenate((np.stack((i[impact].astype(np.float64), j[impact].astype(np.float64), -vn[impact])), x_hit[impact].T))

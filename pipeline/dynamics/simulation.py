@@ -54,7 +54,7 @@ class Track:
     contact: np.ndarray
     kinetic: np.ndarray
     potential: np.ndarray
-    impacts: np.ndarray  # [k, 4]: time, body, speed (m/s), other (collider index or -1 - body)
+    impacts: np.ndarray  # [k, 7]: time, body, speed (m/s), other (collider index or -1 - body), centre x, y, z
 
     def interpolate(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """Positions (and orientations) at `times` ([T] or [T, n], clamped to the record).
@@ -134,14 +134,14 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
             contact |= hits.hit
             out = resolve_static(bodies, hits, col, ctx.dt, v_rest)
             if out.shape[1]:
-                impacts.append(np.stack((ctx.t + out[2] * ctx.dt, out[0], out[1], np.full(out.shape[1], float(ci))), axis=1))
+                impacts.append(np.stack((ctx.t + out[2] * ctx.dt, out[0], out[1], np.full(out.shape[1], float(ci)), *out[3:6]), axis=1))
         if group.pairs[0].size:
             out = resolve_pairs(bodies, group.pairs, ctx.dt, v_rest)
             if out.shape[1]:
                 found = True
                 contact[out[0].astype(int)] = True
                 contact[out[1].astype(int)] = True
-                impacts.append(np.stack((np.full(out.shape[1], ctx.t + ctx.dt), out[0], out[2], -1.0 - out[1]), axis=1))
+                impacts.append(np.stack((np.full(out.shape[1], ctx.t + ctx.dt), out[0], out[2], -1.0 - out[1], *out[3:6]), axis=1))
         if not found:
             break
     return contact, impacts
@@ -233,7 +233,7 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
         contact=np.stack(rec_c),
         kinetic=np.asarray(rec_ke),
         potential=np.asarray(rec_pe),
-        impacts=np.concatenate(impacts) if impacts else np.zeros((0, 4)),
+        impacts=np.concatenate(impacts) if impacts else np.zeros((0, 7)),
     )
 
 
