@@ -1,4 +1,5 @@
-"""`motion render`: scene -> baked motion -> frames on disk (-> deliverables)."""
+"""`motion render`: scene -> baked motion -> frames on disk (-> deliverables), on local
+worker processes or a Dask cluster (docs/farm.md)."""
 
 from __future__ import annotations
 
@@ -24,28 +25,52 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.command("render")
 @click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("-o", "--output", "output_dir", type=click.Path(file_okay=False, path_type=Path), help="Output folder (default: the scene's output.directory, else out/<name>).")
-@click.option("--frames", "frames_spec", help="Frames to render: 0-119, 0-119x2, 1,5,9 or mixes (default: the scene's timeline).")
+@click.option("--frames", "frames_spec", help="Frames: 0-119, 0-119x2 (every 2nd), 1,5,9 or mixes (default: the scene's timeline).")
+@click.option("--shard", help="I/N: render only the I-th (1-based) of N balanced parts of the frames (CI matrix, farm nodes).")
 @click.option("--preset", help="Render preset: ci-smoke, preview, final, or a path to a preset .yaml.")
 @click.option("--spp", type=click.IntRange(min=1), help="Samples per pixel (overrides preset and scene).")
 @click.option("--resolution", help="WIDTHxHEIGHT (overrides preset and scene).")
 @click.option("--motion-blur", type=click.Choice(["stochastic", "subframes", "off"]), help="Motion-blur mode.")
 @click.option("--variant", type=click.Choice(["auto", "llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb"]), help="Mitsuba variant (default: auto).")
+@click.option("--motion", "motion_file", type=click.Path(dir_okay=False, path_type=Path), help="Baked motion from `motion bake` (.json/.npz) instead of baking here.")
+@click.option("--workers", type=click.IntRange(min=1), help="Local worker processes (default 1); drjit threads are divided among them.")
+@click.option("--scheduler", help="Dask cluster: tcp://HOST:PORT or a scheduler file (instead of local workers).")
+@click.option("--threads", type=click.IntRange(min=1), help="drjit threads per worker (default: cores // workers locally, all cores on a Dask worker).")
+@click.option("--chunk-size", type=click.IntRange(min=1), help="Frames per task (default: from frame and worker count; configs/farm.yaml).")
+@click.option("--retries", type=click.IntRange(min=0), help="Extra attempts for a failed chunk (default: configs/farm.yaml).")
+@click.option("--task-timeout", "task_timeout_s", type=click.FloatRange(min=0, min_open=True), help="Seconds before a chunk is cancelled and retried.")
+@click.option("--resume/--no-resume", default=True, show_default=True, help="Skip frames already complete with this scene, motion and settings.")
+@click.option("--overwrite", is_flag=True, help="Re-render every selected frame, replacing complete ones.")
+@click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path), help="Where to write the JSON report (default: OUTPUT/render-report.json).")
+@click.option("--progress/--no-progress", "progress", default=None, help="Live progress bar (default: only on a terminal).")
 @click.option("--no-cache", is_flag=True, help="Naive path for comparison: a fresh Mitsuba scene for every frame.")
 @click.option("--deliver", "deliver_spec", help="After the last frame, assemble deliverables: 24p,60i,50i,review,contact.")
 def render(
     scene: Path,
     output_dir: Path | None,
     frames_spec: str | None,
+    shard: str | None,
     preset: str | None,
     spp: int | None,
     resolution: str | None,
     motion_blur: str | None,
     variant: str | None,
+    motion_file: Path | None,
+    workers: int | None,
+    scheduler: str | None,
+    threads: int | None,
+    chunk_size: int | None,
+    retries: int | None,
+    task_timeout_s: float | None,
+    resume: bool,
+    overwrite: bool,
+    report_path: Path | None,
+    progress: bool | None,
     no_cache: bool,
     deliver_spec: str | None,
 ) -> None:
     """Render SCENE's frames to OpenEXR files."""
-    from motion.pipeline.render.run import RenderRequest, run_render
+    from motion.pipeline.farm.run import RenderRequest, run_render
 
     request = RenderRequest(
         scene=scene,
@@ -55,6 +80,18 @@ def render(
         render_overrides={"spp": spp, "resolution": _resolution(resolution), "motion_blur": motion_blur, "variant": variant},
         cache=not no_cache,
         deliver=deliver_spec,
+        resume=resume,
+        overwrite=overwrite,
+        shard=shard,
+        workers=workers,
+        scheduler=scheduler,
+        threads=threads,
+        chunk_size=chunk_size,
+        retries=retries,
+        task_timeout_s=task_timeout_s,
+        motion_file=motion_file,
+        report=report_path,
+        progress=progress,
     )
     run_render(request)
 

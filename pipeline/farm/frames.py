@@ -1,0 +1,125 @@
+"""Frame selection: the `--frames` grammar, `--shard I/N` partitions and chunks.
+
+Grammar (Blender-like, comma-separated parts, each one of):
+
+    N          one frame                     7
+    A-B        inclusive range               0-119
+    A-BxS      every S-th frame from A       0-119x2  (0, 2, ... 118)
+
+Parts may mix (`1,5,10-20x5`); the result is sorted and each frame appears once.
+Negative frames are allowed (`-5--1`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Sequence
+
+from ..errors import UsageError
+
+_PART = re.compile(r"^(-?\d+)(?:-(-?\d+)(?:x(\d+))?)?$")
+
+
+def parse_frames(spec: str, first: int | None = None, last: int | None = None) -> list[int]:
+    """Parse a `--frames` spec into sorted unique frame numbers.
+
+    When `first`/`last` are given, frames outside the scene's timeline are an error.
+
+    >>> parse_frames("0-9x3,4,1")
+    [0, 1, 3, 4, 6, 9]
+    """
+    if not spec or not spec.strip():
+        raise UsageError("--frames: empty frame spec; expected e.g. 0-119, 0-119x2 or 1,5,9")
+    frames: set[int] = set()
+    for raw in spec.split(","):
+        part = raw.strip().replace(" ", "")
+        m = _PART.match(part)
+        if not m:
+            raise UsageError(f"--frames: cannot read {raw.strip()!r} in {spec!r}; expected N, A-B or A-BxSTEP (e.g. 0-119x2)")
+        a, b, step = m.group(1), m.group(2), m.group(3)
+        lo = int(a)
+        hi = int(b) if b is not None else lo
+        s = int(step) if step is not None else 1
+        if hi < lo:
+            raise UsageError(f"--frames: range {part!r} is reversed (write {hi}-{lo})")
+        if s < 1:
+            raise UsageError(f"--frames: step in {part!r} must be at least 1")
+        frames.update(range(lo, hi + 1, s))
+    out = sorted(frames)
+    if first is not None and last is not None:
+        outside = [f for f in out if f < first or f > last]
+        if outside:
+            raise UsageError(f"--frames: {format_frames(outside)} outside the scene's timeline {first}-{last}")
+    return out
+
+
+def format_frames(frames: Sequence[int]) -> str:
+    """Compact text in the `--frames` grammar: [1,2,3,7] -> '1-3,7'; [0,2,4,6] -> '0-6x2'.
+
+    >>> format_frames([0, 2, 4, 6, 9, 10])
+    '0-6x2,9,10'
+    """
+    fs = sorted(set(frames))
+    parts: list[str] = []
+    i = 0
+    while i < len(fs):
+        j = i
+        if i + 1 < len(fs):
+            step = fs[i + 1] - fs[i]
+            while j + 1 < len(fs) and fs[j + 1] - fs[j] == step:
+                j += 1
+        if j - i >= 2:
+            parts.append(f"{fs[i]}-{fs[j]}" + (f"x{step}" if step != 1 else ""))
+            i = j + 1
+        else:
+            parts.append(str(fs[i]))
+            i += 1
+    return ",".join(parts)
+
+
+def parse_shard(spec: str) -> tuple[int, int]:
+    """'I/N' (1-based) -> (I, N)."""
+    m = re.fullmatch(r"\s*(\d+)\s*/\s*(\d+)\s*", spec or "")
+    if not m:
+        raise UsageError(f"--shard: expected I/N such as 2/4, got {spec!r}")
+    i, n = int(m.group(1)), int(m.group(2))
+    if n < 1 or not 1 <= i <= n:
+        raise UsageError(f"--shard: {spec!r} needs 1 <= I <= N")
+    return i, n
+
+
+def shard(frames: Sequence[int], index: int, count: int) -> list[int]:
+    """The `index`-th (1-based) of `count` balanced contiguous parts of `frames`.
+
+    Part sizes differ by at most one (the first `len % count` parts get the extra frame);
+    contiguous parts keep each shard's frames together (warm caches, simple checks).
+    """
+    if count < 1 or not 1 <= index <= count:
+        raise UsageError(f"--shard: {index}/{count} needs 1 <= I <= N")
+    n = len(frames)
+    base, extra = divmod(n, count)
+    k = index - 1
+    start = k * base + min(k, extra)
+    size = base + (1 if k < extra else 0)
+    return list(frames[start : start + size])
+
+
+def default_chunk_size(n_frames: int, n_workers: int) -> int:
+    """About four chunks per worker (load balance, small retry unit), at most 8 frames."""
+    if n_frames <= 0:
+        return 1
+    return max(1, min(8, math.ceil(n_frames / (max(1, n_workers) * 4))))
+
+
+def chunks(frames: Sequence[int], size: int) -> list[list[int]]:
+    """Split the (sorted) selection into runs of up to `size` consecutive selected frames."""
+    if size < 1:
+        raise UsageError(f"--chunk-size must be at least 1, got {size}")
+    out: list[list[int]] = []
+    for f in frames:
+        if out and len(out[-1]) < size:
+            out[-1].append(f)
+        else:
+            out.append([f])
+    return out

@@ -1,0 +1,149 @@
+"""Where the farm's per-frame motion comes from: baked here (`bake()`, once, in the main
+process, before any worker starts) or read from a file written by `motion bake`
+(`--motion FILE`). Either way the result is a list of small `FrameInput`s.
+
+A frame's input is its pose at the frame time (index 0) followed by the N shutter samples
+(indices 1..N), which is `BakedFrame.at_frame` followed by `BakedFrame.motion`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..errors import UsageError
+from ..render.frame_renderer import FrameInput
+from ..scene.loader import LoadedScene
+
+
+def _light_keys(loaded: LoadedScene) -> list[str]:
+    return [light.name or f"light{i}" for i, light in enumerate(loaded.scene.lights)]
+
+
+def simulation_for(loaded: LoadedScene, frames: Sequence[int]) -> Any:
+    """Simulate once over the whole selection (before sharding), if the scene has dynamics;
+    every shard computes the same simulation, so every shard bakes the same motion."""
+    from ..bake import frame_sample_times
+    from ..motion import has_dynamics
+
+    if not frames or not has_dynamics(loaded):
+        return None
+    from ..dynamics import simulate
+
+    ends = [frame_sample_times(loaded, f) for f in (min(frames), max(frames))]
+    t_lo = float(min(ends[0][1][0], ends[0][0]))
+    t_hi = float(max(ends[1][1][1], ends[1][0]))
+    return simulate(loaded, t_end=t_hi, t_start=min(0.0, t_lo))
+
+
+def baked_inputs(loaded: LoadedScene, frames: Sequence[int], simulation: Any = None) -> list[FrameInput]:
+    """Bake `frames` here and turn them into FrameInputs."""
+    from ..bake import bake
+
+    if not frames:
+        return []
+    baked = bake(loaded, frames, simulation)
+    keys = set(_light_keys(loaded))
+    out = []
+    for bf in baked.frames:
+        a, m = bf.at_frame, bf.motion
+
+        def cat(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+            return np.concatenate([np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)], axis=0)
+
+        out.append(
+            FrameInput(
+                frame=bf.frame,
+                time=bf.time,
+                shutter=(float(bf.shutter[0]), float(bf.shutter[1])),
+                objects={n: (cat(a.objects[n].translation, p.translation), cat(a.objects[n].rotation, p.rotation), cat(a.objects[n].scale, p.scale)) for n, p in m.objects.items()},
+                camera=(cat(a.camera.translation, m.camera.translation), cat(a.camera.rotation, m.camera.rotation)),
+                fov=cat(a.camera_scalars["fov"], m.camera_scalars["fov"]),
+                lights={n: (cat(a.lights[n].translation, p.translation), cat(a.lights[n].rotation, p.rotation), cat(a.lights[n].scale, p.scale)) for n, p in m.lights.items() if n in keys},
+                light_scalars={n: {c: cat(a.light_scalars[n][c], v) for c, v in chans.items()} for n, chans in m.light_scalars.items()},
+            )
+        )
+    return out
+
+
+def _check_meta(doc: dict[str, Any], loaded: LoadedScene, path: Path) -> None:
+    scene = loaded.scene
+    problems = []
+    if doc.get("scene") != loaded.name:
+        problems.append(f"baked from scene {doc.get('scene')!r}, rendering {loaded.name!r}")
+    if str(doc.get("fps")) != str(scene.timeline.rate):
+        problems.append(f"fps {doc.get('fps')} differs from the scene's {scene.timeline.rate}")
+    if int(doc.get("samples_per_frame", -1)) != scene.render.shutter_samples:
+        problems.append(f"{doc.get('samples_per_frame')} shutter samples per frame, the render needs {scene.render.shutter_samples} (render.shutter_samples)")
+    sh = doc.get("shutter", {})
+    if float(sh.get("angle", -1)) != float(scene.camera.shutter.angle) or sh.get("position") != scene.camera.shutter.position:
+        problems.append(f"shutter {sh} differs from the scene's camera shutter")
+    if problems:
+        raise UsageError(f"--motion {path}: " + "; ".join(problems))
+
+
+def file_inputs(loaded: LoadedScene, path: str | Path, frames: Sequence[int]) -> list[FrameInput]:
+    """FrameInputs for `frames` from a `motion bake` file (.json or .npz)."""
+    from ..bake import read_baked
+
+    path = Path(path)
+    doc = read_baked(path)
+    _check_meta(doc, loaded, path)
+    keys = set(_light_keys(loaded))
+    if "arrays" in doc:
+        by_frame = _npz_frames(doc["arrays"])
+    else:
+        by_frame = {int(f["frame"]): f for f in doc["frames"]}
+    missing = [f for f in frames if f not in by_frame]
+    if missing:
+        from .frames import format_frames
+
+        raise UsageError(f"--motion {path}: frames {format_frames(missing)} are not in the baked file (it has {format_frames(sorted(by_frame))})")
+    out = []
+    for f in frames:
+        rec = by_frame[f]
+        at, sm = rec["at_frame"], rec["samples"]
+
+        def cat(one: Any, many: Any) -> np.ndarray:
+            one = np.asarray(one, dtype=np.float64)
+            return np.concatenate([one[None, ...], np.asarray(many, dtype=np.float64)], axis=0)
+
+        def pose(a: dict[str, Any], s: dict[str, Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            return (cat(a["translation"], s["translation"]), cat(a["rotation"], s["rotation"]), cat(a["scale"], s["scale"]))
+
+        out.append(
+            FrameInput(
+                frame=f,
+                time=float(rec["time"]),
+                shutter=(float(rec["shutter"][0]), float(rec["shutter"][1])),
+                objects={n: pose(at["objects"][n], s) for n, s in sm.get("objects", {}).items()},
+                camera=pose(at["camera"], sm["camera"])[:2],
+                fov=cat(at["camera_scalars"]["fov"], sm["camera_scalars"]["fov"]),
+                lights={n: pose(at["lights"][n], s) for n, s in sm.get("lights", {}).items() if n in keys},
+                light_scalars={n: {c: cat(at["light_scalars"][n][c], v) for c, v in ch.items()} for n, ch in sm.get("light_scalars", {}).items()},
+            )
+        )
+    return out
+
+
+def _npz_frames(arrays: dict[str, np.ndarray]) -> dict[int, dict[str, Any]]:
+    """The NPZ layout (stacked over frames) as the JSON layout, per frame."""
+    frames = [int(f) for f in arrays["frames"]]
+    out: dict[int, dict[str, Any]] = {}
+    for k, f in enumerate(frames):
+        rec: dict[str, Any] = {"frame": f, "time": float(arrays["times"][k]), "shutter": arrays["shutter"][k], "at_frame": {}, "samples": {}}
+        for key, arr in arrays.items():
+            head, _, rest = key.partition("/")
+            if head not in ("at_frame", "samples") or not rest:
+                continue
+            parts = rest.split("/")
+            if parts[0] in ("vertices", "particles"):
+                continue
+            node = rec[head]
+            for p in parts[:-1]:
+                node = node.setdefault(p, {})
+            node[parts[-1]] = arr[k]
+        out[f] = rec
+    return out

@@ -1,0 +1,108 @@
+"""`render-report.json`: per frame (worker, cold/warm, setup/render/write seconds,
+attempts, errors), per worker (first-frame cost, frames, failures, exclusion), totals."""
+
+from __future__ import annotations
+
+import json
+import os
+import statistics
+from pathlib import Path
+from typing import Any
+
+from ..render.job import RenderJob
+from ..scene.loader import LoadedScene
+from .config import FarmConfig
+from .frames import format_frames
+from .scheduler import Scheduler
+
+
+def build_report(
+    *,
+    loaded: LoadedScene,
+    job: RenderJob,
+    out_dir: Path,
+    frames: list[int],
+    selected: list[int],
+    shard_spec: tuple[int, int] | None,
+    skipped: list[int],
+    sched: Scheduler | None,
+    cfg: FarmConfig,
+    executor_info: dict[str, Any],
+    timings: dict[str, float],
+    run_id: str,
+    interrupted: bool,
+    motion_file: str | None,
+) -> dict[str, Any]:
+    rows: list[dict[str, Any]] = []
+    for f in skipped:
+        rows.append({"frame": f, "status": "skipped", "reason": "complete on disk (resume)"})
+    records = sched.frames if sched else {}
+    for f, rec in sorted(records.items()):
+        row: dict[str, Any] = {"frame": f, "status": rec.status, "attempts": rec.attempts, "retries": max(0, rec.attempts - 1)}
+        r = rec.result
+        if r is not None and r.ok:
+            row.update(worker=r.worker, cold=r.cold, setup_s=r.setup_s, render_s=r.render_s, write_s=r.write_s, kernels_compiled=r.kernels_compiled, path=r.path)
+        if rec.errors:
+            row["errors"] = rec.errors
+        rows.append(row)
+    rows.sort(key=lambda r: r["frame"])
+    count = lambda s: sum(1 for r in rows if r["status"] == s)  # noqa: E731
+    rendered = [r for r in rows if r["status"] == "rendered"]
+    failed = [{"frame": r["frame"], "error": (r.get("errors") or ["not rendered"])[-1], "attempts": r.get("attempts", 0)} for r in rows if r["status"] in ("failed", "pending")]
+    workers = []
+    for w in (sched.workers.values() if sched else []):
+        workers.append(
+            {
+                "worker": w.name,
+                "frames": w.frames,
+                "chunks": w.chunks,
+                "first_frame_s": w.first_frame_s,
+                "warm_render_mean_s": statistics.fmean(w.warm_render_s) if w.warm_render_s else None,
+                "failures": w.failures,
+                "excluded": w.excluded,
+                "lost": w.lost,
+            }
+        )
+    farm_s = timings.get("farm_s", 0.0)
+    totals = {
+        "frames": len(frames),
+        "rendered": len(rendered),
+        "skipped": count("skipped"),
+        "done_elsewhere": count("done_elsewhere"),
+        "failed": len(failed),
+        "retries": sum(r.get("retries", 0) for r in rows),
+        "cold_frames": sum(1 for r in rendered if r.get("cold")),
+        "render_s_sum": sum(r.get("render_s", 0.0) for r in rendered),
+        "setup_s_sum": sum(r.get("setup_s", 0.0) for r in rendered),
+        "frames_per_minute": 60.0 * len(rendered) / farm_s if farm_s > 0 else 0.0,
+        **timings,
+    }
+    return {
+        "scene": str(loaded.path),
+        "scene_name": loaded.name,
+        "output_dir": str(out_dir),
+        "run_id": run_id,
+        "settings_hash": job.settings_hash,
+        "scene_hash": job.scene_hash,
+        "selection": format_frames(selected),
+        "shard": f"{shard_spec[0]}/{shard_spec[1]}" if shard_spec else None,
+        "frames_this_job": format_frames(frames),
+        "motion_file": motion_file,
+        "executor": executor_info,
+        "config": {"retries": cfg.retries, "task_timeout_s": cfg.task_timeout_s, "max_worker_failures": cfg.max_worker_failures, "claim_stale_s": cfg.stale_after_s},
+        "interrupted": interrupted,
+        "totals": totals,
+        "failed": failed,
+        "workers": workers,
+        "frames": rows,
+    }
+
+
+def write_report(report: dict[str, Any], path: str | Path) -> Path:
+    """Write atomically (a reader never sees half a report)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(report, indent=2) + "\n")
+    os.replace(tmp, path)
+    return path

@@ -1,0 +1,210 @@
+"""One `motion render`: load the scene with its preset and flags, select frames (and the
+shard), bake their motion once here, skip complete frames, run the chunks on the local or
+Dask executor, show progress, write `render-report.json`, and assemble deliverables.
+
+drjit is never imported in this process: workers are spawned (or are Dask workers) and
+import it themselves.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..errors import IncompleteJobError, UsageError
+from ..frame_output import is_complete
+from ..presets import load_preset, overrides_from, spread
+from ..render.job import RenderJob, expected_meta, frame_path, scene_hashes
+from ..scene.loader import load_scene
+from .claims import new_run_id
+from .config import FarmConfig, load_farm_config
+from .frames import chunks as make_chunks
+from .frames import default_chunk_size, format_frames, parse_frames, parse_shard, shard
+from .progress import Progress
+from .report import build_report, write_report
+from .scheduler import Scheduler
+from .task import TaskContext
+
+
+@dataclass
+class RenderRequest:
+    """Everything `motion render` was asked to do (flags left None use the defaults)."""
+
+    scene: Path
+    output_dir: Path | None = None
+    frames_spec: str | None = None
+    preset: str | None = None
+    render_overrides: dict[str, Any] = field(default_factory=dict)
+    cache: bool = True
+    deliver: str | None = None
+    resume: bool = True
+    overwrite: bool = False
+    shard: str | None = None
+    workers: int | None = None
+    scheduler: str | None = None
+    threads: int | None = None
+    chunk_size: int | None = None
+    retries: int | None = None
+    task_timeout_s: float | None = None
+    motion_file: Path | None = None
+    report: Path | None = None
+    progress: bool | None = None  # None: a live bar only on a terminal
+
+
+def _scheduler_target(spec: str) -> dict[str, str]:
+    """`tcp://host:port` (or `host:port`) -> address; an existing file -> scheduler file."""
+    if "://" in spec:
+        return {"address": spec}
+    if Path(spec).is_file():
+        return {"scheduler_file": spec}
+    if ":" in spec and not spec.endswith(".json"):
+        return {"address": f"tcp://{spec}"}
+    raise UsageError(f"--scheduler: {spec!r} is neither tcp://HOST:PORT nor an existing scheduler file")
+
+
+def run_render(req: RenderRequest) -> dict[str, Any]:
+    """Render the request; returns the report. Raises IncompleteJobError (exit 3) if any
+    frame failed everywhere, KeyboardInterrupt after a clean stop on Ctrl-C."""
+    t_start = time.perf_counter()
+    cfg = load_farm_config().with_overrides(retries=req.retries, task_timeout_s=req.task_timeout_s, chunk_size=req.chunk_size)
+    if req.workers is not None and req.workers < 1:
+        raise UsageError(f"--workers must be at least 1, got {req.workers}")
+    if req.workers is not None and req.scheduler:
+        raise UsageError("--workers is for the local executor; a Dask cluster (--scheduler) sizes itself")
+    if req.deliver and req.shard:
+        raise UsageError("--deliver needs every frame: assemble after all shards (docs/ci-sharding.md)")
+    preset, _ = load_preset(req.preset) if req.preset else (None, None)
+    overrides = overrides_from(preset, {"render": req.render_overrides})
+    loaded = load_scene(req.scene, overrides)
+    scene = loaded.scene
+
+    # frames: the selection, then this shard of it
+    timeline_frames = list(scene.timeline.timeline().frames)
+    if req.frames_spec:
+        selected = parse_frames(req.frames_spec, scene.timeline.first, scene.timeline.last)
+    else:
+        selected = spread(timeline_frames, preset.frame_count if preset else None)
+    shard_spec = parse_shard(req.shard) if req.shard else None
+    frames = shard(selected, *shard_spec) if shard_spec else selected
+
+    out_dir = Path(req.output_dir or scene.output.directory or Path("out") / loaded.name).resolve()
+    scene_hash, settings_hash = scene_hashes(loaded)
+    workers = 1 if req.scheduler else (req.workers or 1)
+    if req.scheduler:
+        threads = req.threads  # None: each Dask worker uses its machine's cores
+    else:
+        from .local import threads_per_worker
+
+        threads = req.threads or threads_per_worker(workers)
+    job = RenderJob(
+        scene_path=str(loaded.path),
+        overrides=overrides,
+        output_dir=str(out_dir),
+        scene_hash=scene_hash,
+        settings_hash=settings_hash,
+        cache=req.cache,
+        threads=threads,
+        variant=scene.render.variant,
+    )
+
+    # motion: simulated over the whole selection, baked for this shard (or read from file)
+    t0 = time.perf_counter()
+    from .motion_source import baked_inputs, file_inputs, simulation_for
+
+    if req.motion_file:
+        inputs = file_inputs(loaded, req.motion_file, frames)
+    else:
+        inputs = baked_inputs(loaded, frames, simulation_for(loaded, selected))
+    bake_s = time.perf_counter() - t0
+    by_frame = {fi.frame: fi for fi in inputs}
+    paths = {f: str(frame_path(job, loaded, f)) for f in frames}
+
+    # resume: complete frames made from this scene, motion and settings are skipped
+    resume = req.resume and not req.overwrite
+    existing = [f for f in frames if os.path.exists(paths[f])]
+    if not req.resume and not req.overwrite and existing:
+        raise UsageError(f"{out_dir}: frames {format_frames(existing)} exist; pass --resume to keep complete ones or --overwrite to re-render them")
+    skipped = [f for f in frames if resume and f in existing and is_complete(paths[f], expected_meta(job, by_frame[f]))]
+    todo = [f for f in frames if f not in set(skipped)]
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    chunk_size = cfg.chunk_size or default_chunk_size(len(todo), workers if not req.scheduler else 2)
+    chunk_list = make_chunks(todo, chunk_size)
+    run_id = new_run_id()
+    ctx = TaskContext(run_id=run_id, paths=paths, resume=resume, stale_after_s=cfg.stale_after_s)
+    label = f"{loaded.name}" + (f" shard {shard_spec[0]}/{shard_spec[1]}" if shard_spec else "")
+    progress = Progress(total=len(frames), already=len(skipped), label=label, live=req.progress)
+    progress.log(
+        f"motion: {label}: {len(frames)} frames ({format_frames(frames) or 'none'}) -> {out_dir}; "
+        f"{len(skipped)} already complete, {len(todo)} to render in {len(chunk_list)} chunks of <= {chunk_size}"
+    )
+
+    executor: Any = None
+    interrupted = False
+    sched: Scheduler | None = None
+    t_farm = time.perf_counter()
+    try:
+        if chunk_list:
+            if req.scheduler:
+                from .cluster import DaskExecutor
+
+                executor = DaskExecutor(**_scheduler_target(req.scheduler))
+                progress.log(f"  executor: dask at {executor.address}, {len(executor.live_workers())} workers")
+            else:
+                from .local import LocalExecutor
+
+                executor = LocalExecutor(min(workers, len(chunk_list)))
+                progress.log(f"  executor: local, {executor.n} worker processes x {threads} threads")
+            sched = Scheduler(executor, job, by_frame, ctx, cfg, notify=progress.event, no_worker_grace_s=120.0 if req.scheduler else 0.0)
+            with progress:
+                sched.run(chunk_list)
+    except KeyboardInterrupt:
+        interrupted = True
+        if executor is not None:
+            executor.close(interrupted=True)
+            executor = None
+        if sched is not None:
+            sched.abandon()
+    finally:
+        if executor is not None:
+            executor.close()
+    farm_s = time.perf_counter() - t_farm
+
+    report = build_report(
+        loaded=loaded,
+        job=job,
+        out_dir=out_dir,
+        frames=frames,
+        selected=selected,
+        shard_spec=shard_spec,
+        skipped=skipped,
+        sched=sched,
+        cfg=cfg,
+        executor_info={"kind": "dask" if req.scheduler else "local", "workers": workers if not req.scheduler else None, "threads": threads, "scheduler": req.scheduler, "chunk_size": chunk_size, "chunks": len(chunk_list)},
+        timings={"bake_s": bake_s, "farm_s": farm_s, "wall_s": time.perf_counter() - t_start},
+        run_id=run_id,
+        interrupted=interrupted,
+        motion_file=str(req.motion_file) if req.motion_file else None,
+    )
+    default_name = f"render-report.shard-{shard_spec[0]}-of-{shard_spec[1]}.json" if shard_spec else "render-report.json"
+    report_path = write_report(report, req.report or out_dir / default_name)
+    totals = report["totals"]
+    progress.log(
+        f"motion: {label}: {totals['rendered']} rendered, {totals['skipped']} skipped, {totals['done_elsewhere']} by another job, "
+        f"{totals['failed']} failed in {totals['wall_s']:.1f}s ({totals['frames_per_minute']:.1f} frames/min); report {report_path}"
+    )
+    if interrupted:
+        raise KeyboardInterrupt
+    failed = report["failed"]
+    if failed:
+        listing = "\n".join(f"frame {f['frame']}: {f['error']} (attempts {f['attempts']})" for f in failed)
+        raise IncompleteJobError(f"{len(failed)} of {len(frames)} frames failed everywhere; the others finished:\n{listing}")
+    if req.deliver:
+        from ..telecine.deliver import deliver, parse_formats
+
+        deliver(out_dir, out_dir / "deliver", parse_formats(req.deliver))
+    return report

@@ -1,0 +1,61 @@
+"""The one task both executors run: claim each frame of a chunk, skip it if it is already
+complete, render the rest through `render_frames` (the worker's first-frame cache stays in
+its process), release the claims. Only small `ChunkResult`s travel back."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+from ..frame_output import is_complete
+from ..render.frame_renderer import FrameInput
+from ..render.job import FrameResult, RenderJob, expected_meta, render_frames, worker_id
+from .claims import Claimant, release, remove_partials, try_claim
+
+
+@dataclass(frozen=True)
+class TaskContext:
+    """What a task needs besides the job: the run's id (claims), frame paths by frame,
+    whether complete frames are skipped, and the claim staleness limit."""
+
+    run_id: str
+    paths: dict[int, str]
+    resume: bool = True
+    stale_after_s: float = 1800.0
+
+
+@dataclass
+class ChunkResult:
+    """Per-frame results, frames another render holds, frames found already complete."""
+
+    chunk_id: int
+    worker: str
+    results: list[FrameResult] = field(default_factory=list)
+    held_elsewhere: dict[int, str] = field(default_factory=dict)
+    already_done: list[int] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[FrameInput], ctx: TaskContext) -> ChunkResult:
+    """Render one chunk in this worker process (local or Dask)."""
+    t0 = time.perf_counter()
+    me = Claimant.here(ctx.run_id)
+    out = ChunkResult(chunk_id=chunk_id, worker=worker_id())
+    for fi in inputs:
+        path = ctx.paths[fi.frame]
+        ok, holder = try_claim(path, me, ctx.stale_after_s)
+        if not ok:
+            owner = holder or {}
+            out.held_elsewhere[fi.frame] = f"{owner.get('host', '?')}:{owner.get('pid', '?')} (run {owner.get('run_id', '?')})"
+            continue
+        try:
+            remove_partials(path)
+            if ctx.resume and is_complete(path, expected_meta(job, fi)):
+                out.already_done.append(fi.frame)
+                continue
+            out.results.extend(render_frames(job, [fi]))
+        finally:
+            release(path, ctx.run_id)
+    out.seconds = time.perf_counter() - t0
+    return out
