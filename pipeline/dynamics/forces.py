@@ -32,7 +32,8 @@ def newtonian_gravity(x: np.ndarray, mass: np.ndarray, G: float, softening: floa
     O(n^2) in time and memory; limited to NBODY_LIMIT bodies. s (m) is the softening length."""
     d = x[None, :, :] - x[:, None, :]  # d[i, j] = x_j - x_i
     r2 = np.einsum("ijk,ijk->ij", d, d) + softening * softening
-    inv_r3 = np.where(r2 > 0, r2 ** -1.5, 0.0)
+    inv_r3 = np.zeros_like(r2)
+    np.power(r2, -1.5, out=inv_r3, where=r2 > 0)
     np.fill_diagonal(inv_r3, 0.0)
     return G * mass[:, None] * np.einsum("ij,ijk->ik", mass[None, :] * inv_r3, d)
 

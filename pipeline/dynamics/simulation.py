@@ -173,8 +173,9 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
         rec_ke.append(float(energy[0].sum()))
         rec_pe.append(float(energy[1].sum() + energy[2]))
 
-    ctx = StepContext(t0, step, 1.0 / step, 0)
+    ctx = StepContext(t0, 0.0, math.inf, 0)
     group.activate(group, ctx)
+    group.on_spawn_energy.clear()  # counted in the initial energy
     X = group.X
     energy = system.energy(X)
     guard.e_in = float(energy[0].sum() + energy[1].sum() + energy[2])
@@ -185,12 +186,10 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
         h = min(h_next, step, t1 - t)
         ctx = StepContext(t, h, 1.0 / h, index)
         # stage: activate
-        before = float(guard.e_in)
         group.activate(group, ctx)
         if group.on_spawn_energy:
             guard.add_energy(sum(group.on_spawn_energy))
             group.on_spawn_energy.clear()
-        del before
         X = group.X
         system.h = h
         # stage: integrate
@@ -460,20 +459,21 @@ def particle_group(system: System, spawns: Spawns, colliders: list[Collider], t_
     X = system.pack(x, v)
 
     def activate(group: Group, ctx: StepContext) -> None:
+        # newly born: onto their path at t; still unborn: at t + dt, where the record of
+        # this step will see them (they do not move during the step)
         s = system.unpack(group.X)
         unborn = np.flatnonzero(~born)
         if unborn.size:
-            xs, vs = ballistic(spawns, unborn, ctx.t, g)
-            s.x[unborn], s.v[unborn] = xs, vs
             newly = unborn[spawns.birth[unborn] <= ctx.t + 1e-12]
+            waiting = unborn[spawns.birth[unborn] > ctx.t + 1e-12]
+            if waiting.size:
+                s.x[waiting], s.v[waiting] = ballistic(spawns, waiting, ctx.t + ctx.dt, g)
             if newly.size:
+                s.x[newly], s.v[newly] = ballistic(spawns, newly, ctx.t, g)
                 born[newly] = True
-                before = system.active.copy()
-                system.active = born & (spawns.death > ctx.t)
                 ke = 0.5 * system.props.mass[newly] * np.einsum("ij,ij->i", s.v[newly], s.v[newly])
                 pe = forces.gravity_energy(system.props.mass[newly], g, s.x[newly], system.x_ref[newly])
                 group.on_spawn_energy.append(float((ke + pe).sum()))
-                del before
         system.active = born & (spawns.death > ctx.t)
 
     # keep records within the memory budget: x, v (float32) and a contact flag per record
