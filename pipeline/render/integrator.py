@@ -27,9 +27,11 @@ import numpy as np
 
 
 def _mis(a: Any, b: Any) -> Any:
-    """Power heuristic (beta = 2)."""
+    """Power heuristic (beta = 2); 0 where it is not finite (an infinite pdf, e.g. a light
+    sampled from a point on its own plane, contributes nothing)."""
     a2 = dr.square(a)
-    return dr.detach(dr.select(a > 0, a2 / (a2 + dr.square(b)), 0))
+    w = a2 / (a2 + dr.square(b))
+    return dr.detach(dr.select(dr.isfinite(w), w, 0.0))
 
 
 def _qrot(q: Any, v: Any) -> Any:

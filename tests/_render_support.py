@@ -1,0 +1,45 @@
+"""Render helpers for tests: a scene from YAML text, rendered in this process through the
+real pipeline (bake -> FrameInput -> FrameRenderer)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def activate() -> str:
+    from motion.pipeline import variant
+
+    return variant.activate("auto", quiet=True).variant
+
+
+def load(tmp_path: Path, text: str, name: str = "scene.yaml") -> Any:
+    from motion.pipeline.scene import load_scene
+
+    path = tmp_path / name
+    path.write_text(text)
+    return load_scene(path)
+
+
+def render(loaded: Any, frames: list[int], mode: str | None = None, renderer: Any = None) -> tuple[list[np.ndarray], list[Any], Any]:
+    """Render `frames` with one (first-frame cached) renderer; returns images, stats, renderer."""
+    activate()
+    from motion.pipeline.render.frame_renderer import FrameRenderer
+    from motion.pipeline.render.inputs import evaluate_frames
+
+    renderer = renderer or FrameRenderer(loaded)
+    images, stats = [], []
+    for fi in evaluate_frames(loaded, frames):
+        img, st = renderer.render(fi, mode)
+        images.append(img)
+        stats.append(st)
+    return images, stats, renderer
+
+
+def column_x(width: int, ortho_width: float) -> np.ndarray:
+    """World x of each pixel column's centre for the tests' orthographic camera (at -z
+    looking +z, up +y): camera +X is image left, so x falls from left to right."""
+    pitch = ortho_width / width
+    return ortho_width / 2 - (np.arange(width) + 0.5) * pitch
