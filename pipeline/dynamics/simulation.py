@@ -100,7 +100,6 @@ class Group:
     activate: Callable[["Group", StepContext], None]
     record_stride: int = 1
     record_dtype: type = np.float64
-    on_spawn_energy: list[float] = field(default_factory=list)
 
 
 def _bodies_activate(group: Group, ctx: StepContext) -> None:
@@ -175,7 +174,6 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
 
     ctx = StepContext(t0, 0.0, math.inf, 0)
     group.activate(group, ctx)
-    group.on_spawn_energy.clear()  # counted in the initial energy
     X = group.X
     energy = system.energy(X)
     guard.e_in = float(energy[0].sum() + energy[1].sum() + energy[2])
@@ -186,10 +184,12 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
         h = min(h_next, step, t1 - t)
         ctx = StepContext(t, h, 1.0 / h, index)
         # stage: activate
+        before = system.moving()
         group.activate(group, ctx)
-        if group.on_spawn_energy:
-            guard.add_energy(sum(group.on_spawn_energy))
-            group.on_spawn_energy.clear()
+        joined = system.moving() & ~before
+        if joined.any():  # bodies that start now, particles born now: their energy comes in
+            kin, pot, _ = system.energy(group.X)
+            guard.add_energy(float((kin + pot)[joined].sum()))
         X = group.X
         system.h = h
         # stage: integrate
@@ -471,9 +471,6 @@ def particle_group(system: System, spawns: Spawns, colliders: list[Collider], t_
             if newly.size:
                 s.x[newly], s.v[newly] = ballistic(spawns, newly, ctx.t, g)
                 born[newly] = True
-                ke = 0.5 * system.props.mass[newly] * np.einsum("ij,ij->i", s.v[newly], s.v[newly])
-                pe = forces.gravity_energy(system.props.mass[newly], g, s.x[newly], system.x_ref[newly])
-                group.on_spawn_energy.append(float((ke + pe).sum()))
         system.active = born & (spawns.death > ctx.t)
 
     # keep records within the memory budget: x, v (float32) and a contact flag per record
