@@ -43,6 +43,7 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--overwrite", is_flag=True, help="Re-render every selected frame, replacing complete ones.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path), help="Where to write the JSON report (default: OUTPUT/render-report.json).")
 @click.option("--progress/--no-progress", "progress", default=None, help="Live progress bar (default: only on a terminal).")
+@click.option("--check", is_flag=True, help="Render nothing: verify every selected frame is complete (exit 3 if not).")
 @click.option("--no-cache", is_flag=True, help="Naive path for comparison: a fresh Mitsuba scene for every frame.")
 @click.option("--deliver", "deliver_spec", help="After the last frame, assemble deliverables: 24p,60i,50i,review,contact.")
 def render(
@@ -66,6 +67,7 @@ def render(
     overwrite: bool,
     report_path: Path | None,
     progress: bool | None,
+    check: bool,
     no_cache: bool,
     deliver_spec: str | None,
 ) -> None:
@@ -92,6 +94,7 @@ def render(
         motion_file=motion_file,
         report=report_path,
         progress=progress,
+        check=check,
     )
     run_render(request)
 

@@ -53,6 +53,7 @@ class RenderRequest:
     motion_file: Path | None = None
     report: Path | None = None
     progress: bool | None = None  # None: a live bar only on a terminal
+    check: bool = False  # only verify every selected frame is complete; render nothing
 
 
 def _scheduler_target(spec: str) -> dict[str, str]:
@@ -64,6 +65,22 @@ def _scheduler_target(spec: str) -> dict[str, str]:
     if ":" in spec and not spec.endswith(".json"):
         return {"address": f"tcp://{spec}"}
     raise UsageError(f"--scheduler: {spec!r} is neither tcp://HOST:PORT nor an existing scheduler file")
+
+
+def _check_only(name: str, out_dir: Path, frames: list[int], todo: list[int], paths: dict[int, str]) -> dict[str, Any]:
+    """`--check`: every selected frame must be complete and match (what a CI gather job
+    runs before assembling deliverables)."""
+    if todo:
+        absent = [f for f in todo if not os.path.exists(paths[f])]
+        stale = [f for f in todo if f not in set(absent)]
+        why = []
+        if absent:
+            why.append(f"missing {format_frames(absent)}")
+        if stale:
+            why.append(f"incomplete or made with other settings {format_frames(stale)}")
+        raise IncompleteJobError(f"{out_dir}: {len(todo)} of {len(frames)} frames of {name} not complete: " + "; ".join(why))
+    print(f"motion: {name}: all {len(frames)} frames ({format_frames(frames)}) complete in {out_dir}", file=sys.stderr)
+    return {"frames": len(frames), "complete": len(frames), "output_dir": str(out_dir)}
 
 
 def run_render(req: RenderRequest) -> dict[str, Any]:
@@ -130,6 +147,8 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         raise UsageError(f"{out_dir}: frames {format_frames(existing)} exist; pass --resume to keep complete ones or --overwrite to re-render them")
     skipped = [f for f in frames if resume and f in existing and is_complete(paths[f], expected_meta(job, by_frame[f]))]
     todo = [f for f in frames if f not in set(skipped)]
+    if req.check:
+        return _check_only(loaded.name, out_dir, frames, todo, paths)
     out_dir.mkdir(parents=True, exist_ok=True)
 
     chunk_size = cfg.chunk_size or default_chunk_size(len(todo), workers if not req.scheduler else 2)

@@ -1,0 +1,75 @@
+"""Helpers for the farm tests: run `motion` as a real process, find its workers, read
+frames and reports."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+import psutil
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENE = ROOT / "tests" / "data" / "farm-tiny.yaml"
+BIN = Path(sys.executable).parent
+MOTION = str(BIN / "motion")
+DASK = str(BIN / "dask")
+TINY = ["--resolution", "16x12", "--spp", "1", "--no-progress"]
+# slow enough (~0.2-0.3 s a frame) to kill or interrupt a job half way
+SLOW = ["--resolution", "96x72", "--spp", "128", "--no-progress"]
+
+
+def motion(*args: str, cwd: Path | None = None, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run([MOTION, *map(str, args)], cwd=cwd, capture_output=True, text=True, timeout=timeout)
+
+
+def start_motion(*args: str, cwd: Path | None = None) -> subprocess.Popen:
+    return subprocess.Popen([MOTION, *map(str, args)], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def wait_for(pred: Callable[[], bool], timeout: float = 60, what: str = "condition") -> None:
+    t0 = time.monotonic()
+    while not pred():
+        if time.monotonic() - t0 > timeout:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.05)
+
+
+def worker_pids(pid: int) -> list[int]:
+    """The farm worker processes (spawned children) of a `motion render` process."""
+    out = []
+    for child in psutil.Process(pid).children(recursive=True):
+        try:
+            cmd = " ".join(child.cmdline())
+        except psutil.Error:
+            continue
+        if "spawn_main" in cmd and "resource_tracker" not in cmd:
+            out.append(child.pid)
+    return out
+
+
+def frames_in(folder: Path) -> list[Path]:
+    return sorted(folder.glob("*.exr"))
+
+
+def report(folder: Path, name: str = "render-report.json") -> dict:
+    return json.loads((folder / name).read_text())
+
+
+def leftovers(folder: Path) -> list[Path]:
+    """Temporary frame files and claims that should never outlive a render."""
+    tmps = list(folder.glob(".*.tmp"))
+    claims = list((folder / ".motion-claims").glob("*")) if (folder / ".motion-claims").exists() else []
+    return tmps + claims
+
+
+def kill(pid: int, sig: int = signal.SIGKILL) -> None:
+    try:
+        os.kill(pid, sig)
+    except ProcessLookupError:
+        pass
