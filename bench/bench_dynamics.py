@@ -1,0 +1,106 @@
+"""Dynamics benchmark: particle-steps per second for 100,000 particles under gravity +
+Rayleigh drag + a ground plane (RK4 and semi-implicit Euler), against
+scipy.integrate.solve_ivp on the same gravity + drag system; the n-body force cost vs n;
+peak memory of the 100k run.  Run: python bench/bench_dynamics.py [--particles N]"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import resource
+import time
+import tracemalloc
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from motion.pipeline.dynamics import forces
+from motion.pipeline.dynamics.collisions import PlaneCollider
+from motion.pipeline.dynamics.guard import Guard
+from motion.pipeline.dynamics.integrators import make_integrator
+from motion.pipeline.dynamics.particles import Spawns
+from motion.pipeline.dynamics.simulation import particle_group, run_group
+from motion.pipeline.dynamics.state import BodyProps, Environment, System
+
+G = np.array([0.0, -9.81, 0.0])
+RADIUS, MASS, CD = 0.01, 0.001, 0.47
+
+
+def particle_system(n: int) -> tuple[System, Spawns]:
+    rng = np.random.default_rng(0)
+    area = math.pi * RADIUS**2
+    props = BodyProps(
+        names=[], mass=np.full(n, MASS), inv_mass=np.full(n, 1 / MASS), radius=np.full(n, RADIUS), radius_eq=np.full(n, RADIUS),
+        area=np.full(n, area), cd=np.full(n, CD), linear=np.zeros(n), restitution=np.full(n, 0.5), friction=np.full(n, 0.3),
+        static_friction=np.full(n, 0.3), start=np.zeros(n), inertia=np.zeros((n, 3)), inv_inertia=np.zeros((n, 3)),
+    )
+    system = System(props, Environment(gravity=G), rotating=False)
+    pos = rng.uniform([-5, 1, -5], [5, 5, 5], (n, 3))
+    vel = rng.normal(0, 3, (n, 3))
+    return system, Spawns(np.zeros(n), np.full(n, 1e9), pos, vel)
+
+
+def run_ours(n: int, integrator: str, steps: int, h: float, plane: bool) -> tuple[float, float]:
+    system, spawns = particle_system(n)
+    colliders = [PlaneCollider(name="ground", restitution=0.5, friction=0.3, static_friction=0.3)] if plane else []
+    group = particle_group(system, spawns, colliders, 0.0, steps * h, h)
+    guard = Guard(["p"], integrator, 10.0, 0.0, 1.0)
+    start = time.perf_counter()
+    track = run_group(group, make_integrator(integrator), 0.0, steps * h, h, 4, guard)
+    elapsed = time.perf_counter() - start
+    assert np.isfinite(track.x).all()
+    return n * steps / elapsed, elapsed
+
+
+def run_scipy(n: int, steps: int, h: float, method: str) -> tuple[float, float, int]:
+    system, spawns = particle_system(n)
+    system.h = h
+    system.active = np.ones(n, dtype=bool)
+    X0 = system.pack(spawns.position, spawns.velocity)
+    start = time.perf_counter()
+    sol = solve_ivp(system.derivative, (0.0, steps * h), X0, method=method, t_eval=np.arange(1, steps + 1) * h, rtol=1e-6, atol=1e-9)
+    elapsed = time.perf_counter() - start
+    return n * steps / elapsed, elapsed, int(sol.nfev)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--particles", type=int, default=100_000)
+    ap.add_argument("--steps", type=int, default=50)
+    args = ap.parse_args()
+    n, steps, h = args.particles, args.steps, 1 / 480
+    print(f"# {n} particles, {steps} steps of {h:.5f} s, gravity + drag (+ ground plane)")
+    results = {}
+    for integ in ("semi-implicit-euler", "rk4"):
+        for plane in (True, False):
+            rate, el = run_ours(n, integ, steps, h, plane)
+            results[(integ, plane)] = rate
+            print(f"ours {integ:20s} plane={plane!s:5s}: {rate / 1e6:7.2f} M particle-steps/s ({el:.2f} s)")
+    for method in ("RK45", "RK23"):
+        rate, el, nfev = run_scipy(n, steps, h, method)
+        results[("scipy", method)] = rate
+        print(f"scipy solve_ivp {method} (no plane): {rate / 1e6:7.2f} M particle-steps/s ({el:.2f} s, {nfev} D evaluations)")
+    print(f"ratio ours rk4 (no plane) / scipy RK45: {results[('rk4', False)] / results[('scipy', 'RK45')]:.2f}")
+    print(f"ratio ours semi-implicit (no plane) / scipy RK45: {results[('semi-implicit-euler', False)] / results[('scipy', 'RK45')]:.2f}")
+    print(f"ratio semi-implicit / rk4 (with plane): {results[('semi-implicit-euler', True)] / results[('rk4', True)]:.2f}")
+    print("# n-body force (one evaluation, O(n^2))")
+    rng = np.random.default_rng(1)
+    for nb in (64, 128, 256, 512, 1024, 2048):
+        x = rng.normal(size=(nb, 3))
+        m = np.ones(nb)
+        reps = max(1, 20000 // nb)
+        start = time.perf_counter()
+        for _ in range(reps):
+            forces.newtonian_gravity(x, m, 1.0, 1e-3)
+        el = (time.perf_counter() - start) / reps
+        print(f"n = {nb:5d}: {el * 1e3:8.3f} ms per evaluation, {el / (nb * nb) * 1e9:6.2f} ns per pair")
+    print("# peak memory of the 100k run (rk4 with plane)")
+    tracemalloc.start()
+    run_ours(n, "rk4", 10, h, True)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    print(f"peak traced numpy/python allocation: {peak / 2**20:.1f} MiB; process max RSS: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.1f} MiB")
+
+
+if __name__ == "__main__":
+    main()
