@@ -57,6 +57,7 @@ class FrameStats:
     kernels_reused: int
     asset_cache_hits: int
     scene_reused: bool
+    updated_params: tuple[str, ...] = ()  # scene parameters changed for this frame
 
 
 def frame_seed(seed: int, frame: int, policy: str) -> int:
@@ -180,19 +181,24 @@ class FrameRenderer:
 
     # --- per frame (warm) ---------------------------------------------------------------
 
-    def _update(self, fi: FrameInput) -> None:
+    def _update(self, fi: FrameInput) -> tuple[str, ...]:
+        """Per-frame parameter changes: the sensor only (moving lights are per frame too).
+        Returns the keys changed; shapes of the static set never appear here, so its BVH
+        is never rebuilt."""
         params = self._params
         camera = self.loaded.scene.camera
         world_from_camera = trs_matrix(fi.camera[0][0], fi.camera[1][0])
         sensor = sensor_dict(camera, world_from_camera, float(fi.fov[0]), self.settings.resolution, self.spp, self.settings.filter)
-        changed = False
+        changed: list[str] = []
         if "sensor.to_world" in params:
             params["sensor.to_world"] = sensor["to_world"]
-            changed = True
+            changed.append("sensor.to_world")
         if camera.type == "perspective" and "sensor.x_fov" in params and float(params["sensor.x_fov"][0]) != float(fi.fov[0]):
             params["sensor.x_fov"] = float(fi.fov[0])
+            changed.append("sensor.x_fov")
         if changed:
             params.update()
+        return tuple(changed)
 
     def _integrator_frame(self, fi: FrameInput, mode: str, u_fixed: float | None = None) -> None:
         n = len(fi.fov) - 1
@@ -280,6 +286,7 @@ class FrameRenderer:
         hits0 = assets.STATS["hits"]
         t0 = time.perf_counter()
         cold = self._scene is None
+        updated: tuple[str, ...] = ()
         if cold:
             try:
                 self._build(fi)
@@ -287,7 +294,7 @@ class FrameRenderer:
                 self._scene = None  # never keep a half-built scene
                 raise
         else:
-            self._update(fi)
+            updated = self._update(fi)
         seed = frame_seed(self.settings.seed, fi.frame, self.settings.seed_policy)
         dr.kernel_history()  # clear
         setup_s = time.perf_counter() - t0
@@ -309,6 +316,7 @@ class FrameRenderer:
         rgba = np.array(img, dtype=np.float32)
         render_s = time.perf_counter() - t1
         history = dr.kernel_history()
+        self._last_history = [h for h in history if h.get("type") == dr.KernelType.JIT]
         compiled = sum(1 for h in history if h.get("type") == dr.KernelType.JIT and not h.get("cache_hit", False))
         reused = sum(1 for h in history if h.get("type") == dr.KernelType.JIT and h.get("cache_hit", False))
         if rgba.shape[2] == 3:
@@ -323,6 +331,7 @@ class FrameRenderer:
             kernels_reused=reused,
             asset_cache_hits=assets.STATS["hits"] - hits0,
             scene_reused=not cold,
+            updated_params=updated,
         )
 
 

@@ -68,11 +68,12 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         self.rr_depth = int(props.get("rr_depth", 5))
         self.movers: list[mi.Scene] = []
         self.n_samples = 2
-        self._mover_t = mi.Float(0.0)
-        self._mover_q = mi.Float(0.0)
-        self._cam_t = mi.Float(0.0)
-        self._cam_q = mi.Float(0.0)
-        self._cam_origin = mi.Vector3f(0.0)
+        # All per-frame data live in ONE opaque array (offsets below are fixed for a job):
+        # with several fresh arrays per frame, drjit recycles variable indices from two
+        # frames back, their relative order flips and the kernel's input order with it,
+        # which alternates between two kernel variants.
+        self._frame_data = mi.Float(0.0)
+        self._layout = (0, 0, 0, 0, 0)
 
     # --- per-job and per-frame state --------------------------------------------------
 
@@ -96,14 +97,14 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         n = self.n_samples
         assert mover_translation.shape == (m, n, 3) and mover_rotation.shape == (m, n, 4)
         assert camera_translation.shape == (n, 3) and camera_rotation_rel.shape == (n, 4)
-        flat = lambda a: mi.Float(np.ascontiguousarray(a, dtype=np.float32).ravel())  # noqa: E731
-        self._mover_t = flat(mover_translation) if m else mi.Float(0.0)
-        self._mover_q = flat(mover_rotation) if m else mi.Float(0.0)
-        self._cam_t = flat(camera_translation)
-        self._cam_q = flat(camera_rotation_rel)
-        self._cam_origin = mi.Vector3f(*[float(x) for x in sensor_origin])
+        parts = [mover_translation, mover_rotation, camera_translation, camera_rotation_rel, sensor_origin]
+        flat = [np.asarray(a, dtype=np.float32).ravel() for a in parts]
+        sizes = [len(a) for a in flat]
+        # element offsets of each block; the gathers below index in units of 3 or 4 floats
+        self._layout = tuple(int(x) for x in np.cumsum([0, *sizes[:-1]]))  # type: ignore[assignment]
+        self._frame_data = mi.Float(np.concatenate(flat))
         # opaque: new values each frame must not become new literals in the kernel
-        dr.make_opaque(self._mover_t, self._mover_q, self._cam_t, self._cam_q, self._cam_origin)
+        dr.make_opaque(self._frame_data)
 
     # --- pose lookups at the sample's time ---------------------------------------------
 
@@ -112,20 +113,24 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         i = dr.minimum(mi.UInt32(dr.floor(x)), self.n_samples - 2)
         return i, x - mi.Float(i)
 
-    def _pose(self, table_t: Any, table_q: Any, base: Any, i: Any, f: Any, active: Any) -> tuple[Any, Any]:
-        j = base + i
-        t0 = dr.gather(mi.Vector3f, table_t, j, active)
-        t1 = dr.gather(mi.Vector3f, table_t, j + 1, active)
-        q0 = dr.gather(mi.Vector4f, table_q, j, active)
-        q1 = dr.gather(mi.Vector4f, table_q, j + 1, active)
+    def _vec(self, offset: int, width: int, j: Any, active: Any) -> Any:
+        """Element j of the `width`-float records starting at `offset` in the frame data."""
+        base = offset + j * width
+        comps = [dr.gather(mi.Float, self._frame_data, base + c, active) for c in range(width)]
+        return mi.Vector3f(*comps) if width == 3 else mi.Vector4f(*comps)
+
+    def _pose(self, t_offset: int, q_offset: int, record: int, i: Any, f: Any, active: Any) -> tuple[Any, Any]:
+        j = record + i
+        t0 = self._vec(t_offset, 3, j, active)
+        t1 = self._vec(t_offset, 3, j + 1, active)
+        q0 = self._vec(q_offset, 4, j, active)
+        q1 = self._vec(q_offset, 4, j + 1, active)
         return dr.lerp(t0, t1, f), _slerp(q0, q1, f)
 
     def _mover_poses(self, u: Any, active: Any) -> list[tuple[Any, Any]]:
         i, f = self._segment(u)
-        return [
-            self._pose(self._mover_t, self._mover_q, k * self.n_samples, i, f, active)
-            for k in range(len(self.movers))
-        ]
+        mt, mq = self._layout[0], self._layout[1]
+        return [self._pose(mt, mq, k * self.n_samples, i, f, active) for k in range(len(self.movers))]
 
     # --- scene queries over the static set and the movers --------------------------------
 
@@ -177,9 +182,10 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         u = mi.Float(ray.time)  # shutter fraction in [0, 1]
         # camera motion inside the shutter: C(u) C(frame)^-1 applied to the primary ray
         ci, cf = self._segment(u)
-        cam_t, cam_q = self._pose(self._cam_t, self._cam_q, mi.UInt32(0), ci, cf, active)
+        cam_t, cam_q = self._pose(self._layout[2], self._layout[3], 0, ci, cf, active)
+        cam_origin = self._vec(self._layout[4], 3, mi.UInt32(0), active)
         ray = mi.Ray3f(ray)
-        ray.o = _qrot(cam_q, ray.o - self._cam_origin) + cam_t
+        ray.o = _qrot(cam_q, ray.o - cam_origin) + cam_t
         ray.d = _qrot(cam_q, ray.d)
 
         poses = self._mover_poses(u, active)
