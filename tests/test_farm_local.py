@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from farm_util import SCENE, SLOW, TINY, frames_in, kill, leftovers, motion, report, start_motion, wait_for, worker_pids
+from farm_util import MOTION, SCENE, SLOW, TINY, frames_in, kill, leftovers, motion, report, start_motion, wait_for, worker_pids
 from motion.pipeline.frame_output import is_complete, read_frame
 
 pytestmark = pytest.mark.render
@@ -132,3 +132,22 @@ def test_main_process_never_imports_drjit(tmp_path) -> None:
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stderr
+
+
+def test_motion_file_from_bake_matches_baking_here(tmp_path) -> None:
+    out = tmp_path / "out"
+    for ext in ("json", "npz"):
+        res = subprocess.run([MOTION, "bake", str(SCENE), "-o", str(tmp_path / f"m.{ext}"), "--frames", "0-5"], capture_output=True, text=True)
+        assert res.returncode == 0, res.stderr
+    res = motion("render", SCENE, "-o", out, "--frames", "0-3", "--motion", tmp_path / "m.json", *TINY)
+    assert res.returncode == 0, res.stderr
+    assert report(out)["totals"]["rendered"] == 4
+    # the same motion from the .npz and from baking here: every frame is already complete
+    for extra in (["--motion", tmp_path / "m.npz"], []):
+        res = motion("render", SCENE, "-o", out, "--frames", "0-3", *extra, *TINY)
+        assert res.returncode == 0, res.stderr
+        assert report(out)["totals"]["skipped"] == 4
+    res = motion("render", SCENE, "-o", out, "--frames", "0-9", "--motion", tmp_path / "m.json", *TINY)
+    assert res.returncode == 2 and "frames 6-9 are not in the baked file" in res.stderr
+    res = motion("render", SCENE, "-o", out, "--frames", "0-3", "--motion", tmp_path / "m.json", "--preset", "ci-smoke")
+    assert res.returncode == 2 and "shutter samples" in res.stderr
