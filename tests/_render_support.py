@@ -29,7 +29,14 @@ def render(loaded: Any, frames: list[int], mode: str | None = None, renderer: An
     from motion.pipeline.render.frame_renderer import FrameRenderer
     from motion.pipeline.render.inputs import evaluate_frames
 
-    renderer = renderer or FrameRenderer(loaded)
+    if renderer is None:
+        # like a farm worker between jobs: free earlier scenes first. drjit traces virtual
+        # calls over every LIVE instance (all BSDFs of all scenes), so scenes left alive by
+        # other tests would change the compiled code and the last bit of the pixels.
+        import gc
+
+        gc.collect()
+        renderer = FrameRenderer(loaded)
     images, stats = [], []
     for fi in evaluate_frames(loaded, frames):
         img, st = renderer.render(fi, mode)

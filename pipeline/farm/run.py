@@ -128,6 +128,15 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         variant=scene.render.variant,
     )
 
+    if not req.scheduler:
+        # the local workers will make the same choice (cached probe); warn here, once,
+        # rather than once per worker. Probing runs in subprocesses: no drjit import here.
+        from .. import variant as variant_mod
+
+        choice = variant_mod.choose(scene.render.variant)
+        if choice.fallback:
+            variant_mod.warn_fallback(choice)
+
     # motion: simulated over the whole selection, baked for this shard (or read from file)
     t0 = time.perf_counter()
     from .motion_source import baked_inputs, file_inputs, simulation_for
