@@ -1,0 +1,178 @@
+"""Benchmark: the farm on this machine.
+
+  throughput  frames per minute on the same 24-frame preview shot (spinning-top,
+              --preset preview: 320x180, 16 spp, depth 4) with 1 and 2 local workers and a
+              2-worker Dask cluster on loopback (one drjit thread per worker when 2).
+              Wall time includes worker start-up; "farm" time is from first task to last.
+  overhead    scheduling cost per task: a 1x1-pixel, 1-spp render, one frame per task,
+              minus the time the workers spent rendering and writing.
+  memory      peak RSS of the main process and of each worker over a 200-frame job
+              (tiny resolution), sampled through the job: the last quarter's peak against
+              the second quarter's (after start-up) (flat, not growing with frame count).
+
+    python bench/bench_farm.py [--frames 24] [--memory-frames 200]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import psutil
+
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+MOTION = str(BIN / "motion")
+SHOT = ROOT / "scenes" / "spinning-top.yaml"
+TINY = ROOT / "tests" / "data" / "farm-tiny.yaml"
+
+
+def render(args: list[str], out: Path, sample_memory: bool = False) -> tuple[dict, float, dict]:
+    """Run `motion render`; returns (report, wall seconds, memory samples)."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen([MOTION, "render", *args, "-o", str(out), "--no-progress", "--overwrite"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    samples: dict[str, list[tuple[float, float]]] = {}
+    if sample_memory:
+        main = psutil.Process(proc.pid)
+        while proc.poll() is None:
+            try:
+                now = time.perf_counter() - t0
+                procs = [("main", main)] + [(f"worker:{c.pid}", c) for c in main.children(recursive=True) if "spawn_main" in " ".join(c.cmdline()) and "resource_tracker" not in " ".join(c.cmdline())]
+                for name, p in procs:
+                    samples.setdefault(name, []).append((now, p.memory_info().rss / 2**20))
+            except psutil.Error:
+                pass
+            time.sleep(0.05)
+    _, err = proc.communicate()
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"render failed ({proc.returncode}):\n{err}")
+    report = json.loads((out / "render-report.json").read_text())
+    return report, wall, samples
+
+
+class Cluster:
+    """A `dask scheduler` and N single-threaded `dask worker`s on 127.0.0.1."""
+
+    def __init__(self, workers: int) -> None:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        self.address = f"tcp://127.0.0.1:{port}"
+        dask = str(BIN / "dask")
+        quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+        self.procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], **quiet)]
+        for i in range(workers):
+            self.procs.append(subprocess.Popen([dask, "worker", self.address, "--nthreads", "1", "--no-nanny", "--no-dashboard", "--host", "127.0.0.1"], **quiet))
+        from distributed import Client
+
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                with Client(self.address, timeout=5) as c:
+                    c.wait_for_workers(workers, timeout=30)
+                break
+            except Exception:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.5)
+
+    def close(self) -> None:
+        for p in reversed(self.procs):
+            p.terminate()
+        for p in self.procs:
+            p.wait(10)
+
+
+def throughput(frames: int, tmp: Path) -> dict[str, dict]:
+    common = [str(SHOT), "--preset", "preview", "--frames", f"0-{frames - 1}"]
+    out: dict[str, dict] = {}
+    for name, extra in (("local x1", ["--workers", "1"]), ("local x2", ["--workers", "2"])):
+        rep, wall, _ = render(common + extra, tmp / name.replace(" ", ""))
+        out[name] = {"wall_s": wall, "farm_s": rep["totals"]["farm_s"], "first_frame_s": [w["first_frame_s"] for w in rep["workers"]], "warm_render_s": [w["warm_render_mean_s"] for w in rep["workers"]]}
+    cluster = Cluster(2)
+    try:
+        rep, wall, _ = render(common + ["--scheduler", cluster.address, "--threads", "1"], tmp / "dask")
+        out["dask x2"] = {"wall_s": wall, "farm_s": rep["totals"]["farm_s"], "first_frame_s": [w["first_frame_s"] for w in rep["workers"]], "warm_render_s": [w["warm_render_mean_s"] for w in rep["workers"]]}
+        # a second job on the same cluster: workers are already warm
+        rep, wall, _ = render(common + ["--scheduler", cluster.address, "--threads", "1"], tmp / "dask")
+        out["dask x2 (warm cluster)"] = {"wall_s": wall, "farm_s": rep["totals"]["farm_s"], "first_frame_s": [w["first_frame_s"] for w in rep["workers"]], "warm_render_s": [w["warm_render_mean_s"] for w in rep["workers"]]}
+        out["_overhead_dask"] = overhead(["--scheduler", cluster.address, "--threads", "1"], tmp / "ovd")
+    finally:
+        cluster.close()
+    for v in out.values():
+        if "wall_s" in v:
+            v["fpm_wall"] = 60 * frames / v["wall_s"]
+            v["fpm_farm"] = 60 * frames / v["farm_s"]
+    return out
+
+
+def long_scene(tmp: Path, frames: int) -> Path:
+    """The tiny test scene with a timeline of `frames` frames."""
+    text = TINY.read_text().replace("last: 47", f"last: {frames - 1}")
+    path = tmp / "farm-long.yaml"
+    path.write_text(text.replace("name: farm-tiny", "name: farm-long"))
+    return path
+
+
+def overhead(extra: list[str], out: Path, frames: int = 120) -> dict[str, float]:
+    rep, wall, _ = render([str(long_scene(out.parent, frames)), "--frames", f"0-{frames - 1}", "--resolution", "1x1", "--spp", "1", "--chunk-size", "1", *extra], out)
+    work = sum(r.get("setup_s", 0) + r.get("render_s", 0) + r.get("write_s", 0) for r in rep["frames"])
+    tasks = rep["executor"]["chunks"]
+    workers = max(1, len(rep["workers"]))
+    # farm time x workers = busy + idle; what is not rendering/writing is scheduling
+    per_task = (rep["totals"]["farm_s"] * workers - work) / tasks
+    return {"tasks": tasks, "farm_s": rep["totals"]["farm_s"], "work_s": work, "per_task_ms": 1000 * per_task / workers, "per_task_worker_ms": 1000 * per_task}
+
+
+def memory(frames: int, tmp: Path) -> dict[str, dict]:
+    rep, wall, samples = render([str(long_scene(tmp, frames)), "--frames", f"0-{frames - 1}", "--resolution", "32x24", "--spp", "1", "--workers", "2"], tmp / "mem", sample_memory=True)
+    out = {}
+    for name, series in samples.items():
+        if len(series) < 4:
+            continue
+        t0, t_end = series[0][0], series[-1][0]
+        quarter = lambda k: [m for t, m in series if t0 + (k - 1) * (t_end - t0) / 4 < t <= t0 + k * (t_end - t0) / 4 + 1e-9]  # noqa: E731
+        q2, q4 = max(quarter(2) or [0.0]), max(quarter(4) or [0.0])
+        out[name] = {"peak_mb": max(m for _, m in series), "q2_peak_mb": q2, "q4_peak_mb": q4, "growth": q4 / q2 if q2 else float("nan"), "samples": len(series)}
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--frames", type=int, default=24)
+    ap.add_argument("--memory-frames", type=int, default=200)
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory(prefix="bench-farm-") as d:
+        tmp = Path(d)
+        print(f"cores: {len(os.sched_getaffinity(0))}")
+        tp = throughput(args.frames, tmp)
+        base = tp["local x1"]
+        print(f"\nthroughput: {SHOT.name} --preset preview, {args.frames} frames")
+        print(f"{'executor':24} {'wall s':>7} {'fr/min':>7} {'farm s':>7} {'fr/min':>7} {'vs x1':>6}  first-frame s / warm render s per worker")
+        for name, v in tp.items():
+            if name.startswith("_"):
+                continue
+            ff = ", ".join(f"{a:.2f}/{b:.3f}" for a, b in zip(v["first_frame_s"], v["warm_render_s"]) if a is not None and b is not None)
+            print(f"{name:24} {v['wall_s']:7.2f} {v['fpm_wall']:7.1f} {v['farm_s']:7.2f} {v['fpm_farm']:7.1f} {v['fpm_wall'] / base['fpm_wall']:6.2f}  {ff}")
+        ov_local = overhead(["--workers", "1"], tmp / "ovl")
+        ov_dask = tp["_overhead_dask"]
+        print("\nscheduling overhead per task (1x1 px, 1 spp, one frame per task):")
+        for name, ov in (("local x1", ov_local), ("dask x2", ov_dask)):
+            print(f"  {name:10} {ov['tasks']} tasks in {ov['farm_s']:.2f}s (worker busy {ov['work_s']:.2f}s): {ov['per_task_worker_ms']:.1f} ms per task per worker")
+        mem = memory(args.memory_frames, tmp)
+        print(f"\nmemory over a {args.memory_frames}-frame job (32x24, 2 local workers): peak RSS, MB")
+        for name, m in mem.items():
+            print(f"  {name:16} peak {m['peak_mb']:7.1f}  2nd quarter {m['q2_peak_mb']:7.1f}  last quarter {m['q4_peak_mb']:7.1f}  growth x{m['growth']:.3f}")
+
+
+if __name__ == "__main__":
+    main()
