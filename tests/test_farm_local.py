@@ -52,14 +52,18 @@ def test_sigkill_a_worker_mid_job(tmp_path) -> None:
 def test_frames_failing_everywhere_exit_3_others_finish(tmp_path) -> None:
     out = tmp_path / "out"
     (out / "farm-tiny.0002.exr").mkdir(parents=True)  # frame 2 cannot be written, anywhere
-    res = motion("render", SCENE, "-o", out, "--frames", "0-4", "--retries", "1", *TINY)
+    # 4 attempts: the worker fails 3 times (max_worker_failures), is excluded and replaced
+    res = motion("render", SCENE, "-o", out, "--frames", "0-4", "--retries", "3", *TINY)
     assert res.returncode == 3, res.stderr
     assert "1 of 5 frames failed everywhere" in res.stderr and "frame 2:" in res.stderr
     _valid(out, [0, 1, 3, 4])
     rep = report(out)
-    assert rep["failed"] == [{"frame": 2, "error": rep["failed"][0]["error"], "attempts": 2}]
+    assert rep["failed"] == [{"frame": 2, "error": rep["failed"][0]["error"], "attempts": 4}]
     assert "Error" in rep["failed"][0]["error"]
     assert rep["totals"]["rendered"] == 4
+    excluded = [w for w in rep["workers"] if w["excluded"]]
+    assert len(excluded) == 1 and excluded[0]["failures"] == 3 and "excluded for this job" in res.stderr
+    assert len(rep["workers"]) == 2  # the replacement made the 4th attempt
     assert not leftovers(out)
 
 
