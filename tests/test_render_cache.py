@@ -94,10 +94,19 @@ render: {resolution: [32, 24], spp: 2, max_depth: 3, seed: 7, seed_policy: %s}
 
 @pytest.mark.parametrize("policy", ["per-frame", "fixed"])
 def test_seed_policy(tmp_path: Path, policy: str) -> None:
+    """Through the worker's task path (render_frames), as the farm renders."""
+    from motion.pipeline.render.inputs import evaluate_frames
+    from motion.pipeline.render.job import RenderJob, render_frames, scene_hashes
+
     loaded = load(tmp_path, STILL % policy)
-    (a, b), _, renderer = render(loaded, [0, 1])
-    (a2,), _, _ = render(loaded, [0], renderer=renderer)
-    assert np.array_equal(a, a2)  # frame 0 again, after frame 1: the seed depends on the frame only
+    job = RenderJob(str(loaded.path), {}, str(tmp_path / "out"), *scene_hashes(loaded))
+    inputs = evaluate_frames(loaded, [0, 1])
+    first = render_frames(job, inputs)
+    again = render_frames(job, inputs[:1])  # frame 0 again, after frame 1
+    a, b = (read_frame(r.path).rgba for r in first)
+    a2 = read_frame(again[0].path).rgba
+    assert np.array_equal(a, a2)  # the seed depends on the scene seed and frame number only
+    assert first[0].ok and read_frame(first[0].path).meta["seed_policy"] == policy
     if policy == "fixed":
         assert np.array_equal(a, b)  # the same noise pattern every frame
     else:
