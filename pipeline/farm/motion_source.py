@@ -39,33 +39,13 @@ def simulation_for(loaded: LoadedScene, frames: Sequence[int]) -> Any:
 
 
 def baked_inputs(loaded: LoadedScene, frames: Sequence[int], simulation: Any = None) -> list[FrameInput]:
-    """Bake `frames` here and turn them into FrameInputs."""
+    """Bake `frames` here and turn them into FrameInputs (poses, vertices, particles)."""
     from ..bake import bake
+    from ..render.inputs import inputs_from_baked
 
     if not frames:
         return []
-    baked = bake(loaded, frames, simulation)
-    keys = set(_light_keys(loaded))
-    out = []
-    for bf in baked.frames:
-        a, m = bf.at_frame, bf.motion
-
-        def cat(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-            return np.concatenate([np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)], axis=0)
-
-        out.append(
-            FrameInput(
-                frame=bf.frame,
-                time=bf.time,
-                shutter=(float(bf.shutter[0]), float(bf.shutter[1])),
-                objects={n: (cat(a.objects[n].translation, p.translation), cat(a.objects[n].rotation, p.rotation), cat(a.objects[n].scale, p.scale)) for n, p in m.objects.items()},
-                camera=(cat(a.camera.translation, m.camera.translation), cat(a.camera.rotation, m.camera.rotation)),
-                fov=cat(a.camera_scalars["fov"], m.camera_scalars["fov"]),
-                lights={n: (cat(a.lights[n].translation, p.translation), cat(a.lights[n].rotation, p.rotation), cat(a.lights[n].scale, p.scale)) for n, p in m.lights.items() if n in keys},
-                light_scalars={n: {c: cat(a.light_scalars[n][c], v) for c, v in chans.items()} for n, chans in m.light_scalars.items()},
-            )
-        )
-    return out
+    return inputs_from_baked(bake(loaded, frames, simulation))
 
 
 def _check_meta(doc: dict[str, Any], loaded: LoadedScene, path: Path) -> None:
@@ -89,6 +69,10 @@ def file_inputs(loaded: LoadedScene, path: str | Path, frames: Sequence[int]) ->
     from ..bake import read_baked
 
     path = Path(path)
+    nonrigid = [o.name for o in loaded.scene.objects if o.shape == "particles" or getattr(o, "deform", None) is not None]
+    if nonrigid:
+        # the file formats carry rigid poses; particles and vertices are baked in the render
+        raise UsageError(f"--motion {path}: {loaded.name} has particle systems or deforming meshes ({', '.join(nonrigid)}); render without --motion so they are baked here")
     doc = read_baked(path)
     _check_meta(doc, loaded, path)
     keys = set(_light_keys(loaded))

@@ -120,12 +120,16 @@ class FrameRenderer:
         # The motion_path integrator is vectorised drjit code: LLVM or CUDA variants only.
         # The scalar fallback renders with Mitsuba's own `path`, movers placed per sub-frame.
         self.vectorized = not mi.variant().startswith("scalar")
-        self.static_names = [o.name for o in loaded.scene.objects if is_static(loaded, o.name)]
+        objects = loaded.scene.objects
+        # non-rigid geometry: particle systems and deforming meshes render as time slices
+        self.slice_names = [o.name for o in objects if o.visible and (isinstance(o, Particles) or getattr(o, "deform", None) is not None)]
+        self.static_names = [o.name for o in objects if is_static(loaded, o.name) and o.name not in self.slice_names]
         self.mover_names = [
             o.name
-            for o in loaded.scene.objects
-            if o.name not in self.static_names and not isinstance(o, (Empty, Particles)) and o.visible
+            for o in objects
+            if o.name not in self.static_names and o.name not in self.slice_names and not isinstance(o, (Empty, Particles)) and o.visible
         ]
+        self._groups: list[Any] = []
         dr.set_flag(dr.JitFlag.KernelHistory, True)
 
     # --- build (cold) -----------------------------------------------------------------
@@ -175,9 +179,65 @@ class FrameRenderer:
             self._mover_scale[name] = np.array(s[0])
         self._movers = movers
         self._scene.integrator().set_movers(movers, len(fi.fov) - 1)
+        self._groups = [self._build_group(name, fi, materials) for name in self.slice_names]
+        self._scene.integrator().set_slices([g.scenes for g in self._groups])
         # route the sensor pose through the same parameter update warm frames use, so the
         # first warm frame replays the cold frame's kernels instead of compiling new ones
         self._update(fi)
+
+    def _build_group(self, name: str, fi: FrameInput, materials: dict[str, Any]) -> Any:
+        from .build import DEFAULT_MATERIAL
+        from .slices import build_group
+
+        mi = self._mi
+        obj = next(o for o in self.loaded.scene.objects if o.name == name)
+        bsdf = mi.load_dict(materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL)
+        slices = len(fi.fov) - 1
+        if isinstance(obj, Particles):
+            n = fi.particles[name][0].shape[1] if name in fi.particles else 0
+            capacity = max(64, 1 << int(np.ceil(np.log2(max(n, 1) * 1.5))))
+            return build_group(mi, name, "particles", capacity, np.zeros((0, 3)), bsdf, slices, radius=obj.radius)
+        from ..motion.deform import bind_mesh
+
+        verts, faces = bind_mesh(self.loaded, obj)
+        return build_group(mi, name, "deform", len(verts), np.asarray(faces, np.uint32), bsdf, slices)
+
+    def _update_groups(self, fi: FrameInput, mode: str, u_fixed: float | None) -> None:
+        """Each slice's geometry at its sample time (all at one instant for `off` and
+        for one sub-frame of `subframes`)."""
+        from .slices import particle_mesh, quat_rotate, update_group
+
+        n = len(fi.fov) - 1
+        if mode == "off":
+            index = [0] * n
+        elif u_fixed is not None:
+            index = [1 + int(round(u_fixed * (n - 1)))] * n
+        else:
+            index = list(range(1, n + 1))
+        for g in self._groups:
+            per_slice = []
+            if g.kind == "particles":
+                positions, alive = fi.particles.get(g.name, (np.zeros((n + 1, 0, 3)), np.zeros((n + 1, 0), bool)))
+                if positions.shape[1] > g.capacity:  # more particles than room: grow (one recompile)
+                    self._grow(g, positions.shape[1], fi)
+                    return self._update_groups(fi, mode, u_fixed)
+                for i in index:
+                    per_slice.append(particle_mesh(positions[i], alive[i], g.radius, g.capacity)[0])
+            else:
+                t, q, s = fi.objects[g.name]
+                local = fi.vertices[g.name]
+                for i in index:
+                    per_slice.append(quat_rotate(q[i], local[i] * s[i]) + t[i])
+            update_group(self._mi, g, per_slice)
+
+    def _grow(self, group: Any, needed: int, fi: FrameInput) -> None:
+        from .slices import build_group
+
+        k = self._groups.index(group)
+        capacity = 1 << int(np.ceil(np.log2(needed * 1.5)))
+        bsdf = group.scenes[0].shapes()[0].bsdf()
+        self._groups[k] = build_group(self._mi, group.name, "particles", capacity, group.faces, bsdf, len(group.scenes), radius=group.radius)
+        self._scene.integrator().set_slices([g.scenes for g in self._groups])
 
     # --- per frame (warm) ---------------------------------------------------------------
 
@@ -226,6 +286,8 @@ class FrameRenderer:
             cam_t, cam_q = ct[1:], cq[1:]
         rel = np.array([_qmul(q, q_frame_inv) for q in cam_q])
         self._scene.integrator().set_frame(mt, mq, cam_t, rel, ct[0])
+        if self._groups:
+            self._update_groups(fi, mode, u_fixed)
 
     def _full_scene(self, fi: FrameInput, u: float | None) -> Any:
         """The whole scene at one instant (u = shutter fraction, None = the frame time),

@@ -67,6 +67,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         self.max_depth = int(props.get("max_depth", 8))
         self.rr_depth = int(props.get("rr_depth", 5))
         self.movers: list[mi.Scene] = []
+        self.slices: list[list[mi.Scene]] = []  # per non-rigid object: one scene per shutter sample
         self.n_samples = 2
         # All per-frame data live in ONE opaque array (offsets below are fixed for a job):
         # with several fresh arrays per frame, drjit recycles variable indices from two
@@ -82,6 +83,11 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         baked samples across the shutter."""
         self.movers = list(movers)
         self.n_samples = max(2, int(n_samples))
+
+    def set_slices(self, groups: Sequence[Sequence[mi.Scene]]) -> None:
+        """Time-sliced geometry (render/slices.py): for each deforming object or particle
+        system, one world-space scene per baked shutter sample."""
+        self.slices = [list(g) for g in groups]
 
     def set_frame(
         self,
@@ -134,10 +140,21 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
 
     # --- scene queries over the static set and the movers --------------------------------
 
-    def _intersect(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[tuple[Any, Any]], active: Any) -> tuple[Any, Any]:
+    def _slice_of(self, u: Any) -> Any:
+        """The time slice a path at shutter fraction u sees: the nearest baked sample."""
+        return mi.UInt32(dr.round(dr.clip(u, 0.0, 1.0) * (self.n_samples - 1)))
+
+    def _intersect(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[tuple[Any, Any]], active: Any, k: Any = None) -> tuple[Any, Any]:
         """Nearest hit over all scenes, in world space; also whether it is on a mover."""
         si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
         on_mover = mi.Bool(False)
+        for group in self.slices:
+            for s, slice_scene in enumerate(group):
+                mine = active & (k == s)
+                si_s = slice_scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=mine)
+                closer = mine & si_s.is_valid() & (si_s.t < si.t)
+                si = dr.select(closer, si_s, si)
+                on_mover |= closer
         for mover, (t, q) in zip(self.movers, poses):
             qi = _qconj(q)
             local = mi.Ray3f(ray)
@@ -158,8 +175,11 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             on_mover |= closer
         return si, on_mover
 
-    def _occluded(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[tuple[Any, Any]], active: Any) -> Any:
+    def _occluded(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[tuple[Any, Any]], active: Any, k: Any = None) -> Any:
         hit = scene.ray_test(ray, active)
+        for group in self.slices:
+            for s, slice_scene in enumerate(group):
+                hit |= slice_scene.ray_test(ray, active & ~hit & (k == s))
         for mover, (t, q) in zip(self.movers, poses):
             qi = _qconj(q)
             local = mi.Ray3f(ray)
@@ -189,6 +209,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         ray.d = _qrot(cam_q, ray.d)
 
         poses = self._mover_poses(u, active)
+        k_slice = self._slice_of(u)
         bsdf_ctx = mi.BSDFContext()
         L = mi.Spectrum(0.0)
         beta = mi.Spectrum(1.0)
@@ -201,7 +222,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         valid = mi.Bool(False)
 
         while dr.hint(active, max_iterations=self.max_depth, label="motion_path"):
-            si, on_mover = self._intersect(scene, ray, poses, active)
+            si, on_mover = self._intersect(scene, ray, poses, active, k_slice)
             valid |= active & si.is_valid() & (depth == 0)
             # emission reached by BSDF sampling, MIS-weighted against emitter sampling;
             # emitters on movers are not in the static scene's light list: pdf 0, weight 1
@@ -222,7 +243,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), False, active_em)
             active_em &= ds_em.pdf != 0.0
             shadow = si.spawn_ray_to(ds_em.p)
-            occluded = self._occluded(scene, shadow, poses, active_em)
+            occluded = self._occluded(scene, shadow, poses, active_em, k_slice)
             active_em &= ~occluded
             wo = si.to_local(ds_em.d)
             bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, wo, active_em)
