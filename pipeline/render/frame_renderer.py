@@ -192,7 +192,7 @@ class FrameRenderer:
         mi = self._mi
         obj = next(o for o in self.loaded.scene.objects if o.name == name)
         bsdf = mi.load_dict(materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL)
-        slices = len(fi.fov) - 1
+        slices = self._slice_count(fi)
         if isinstance(obj, Particles):
             n = fi.particles[name][0].shape[1] if name in fi.particles else 0
             capacity = max(64, 1 << int(np.ceil(np.log2(max(n, 1) * 1.5))))
@@ -202,18 +202,24 @@ class FrameRenderer:
         verts, faces = bind_mesh(self.loaded, obj)
         return build_group(mi, name, "deform", len(verts), np.asarray(faces, np.uint32), bsdf, slices)
 
+    def _slice_count(self, fi: FrameInput) -> int:
+        return max(1, min(self.settings.time_slices, len(fi.fov) - 1))
+
     def _update_groups(self, fi: FrameInput, mode: str, u_fixed: float | None) -> None:
-        """Each slice's geometry at its sample time (all at one instant for `off` and
-        for one sub-frame of `subframes`)."""
+        """Each slice's geometry at its time: slice s of S holds the baked sample nearest
+        u = s / (S - 1) (all at one instant for `off` and for one sub-frame)."""
         from .slices import particle_mesh, quat_rotate, update_group
 
         n = len(fi.fov) - 1
+        count = self._slice_count(fi)
         if mode == "off":
-            index = [0] * n
+            index = [0] * count
         elif u_fixed is not None:
-            index = [1 + int(round(u_fixed * (n - 1)))] * n
+            index = [1 + int(round(u_fixed * (n - 1)))] * count
+        elif count == 1:
+            index = [0]
         else:
-            index = list(range(1, n + 1))
+            index = [1 + int(round(s * (n - 1) / (count - 1))) for s in range(count)]
         for g in self._groups:
             per_slice = []
             if g.kind == "particles":

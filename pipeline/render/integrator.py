@@ -141,8 +141,10 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
     # --- scene queries over the static set and the movers --------------------------------
 
     def _slice_of(self, u: Any) -> Any:
-        """The time slice a path at shutter fraction u sees: the nearest baked sample."""
-        return mi.UInt32(dr.round(dr.clip(u, 0.0, 1.0) * (self.n_samples - 1)))
+        """The time slice a path at shutter fraction u sees: the nearest of S slices
+        (all groups have the same S)."""
+        count = len(self.slices[0]) if self.slices else 1
+        return mi.UInt32(dr.round(dr.clip(u, 0.0, 1.0) * (count - 1)))
 
     def _intersect(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[tuple[Any, Any]], active: Any, k: Any = None) -> tuple[Any, Any]:
         """Nearest hit over all scenes, in world space; also whether it is on a mover."""
