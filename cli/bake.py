@@ -11,18 +11,23 @@ import click
 @click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="FILE.json (rigid transforms and scalars) or FILE.npz (also vertices and particles).")
-@click.option("--frames", help="A-B, N or a comma list of those (default: the scene's timeline).")
-def bake(scene: Path, output: Path, frames: str | None) -> None:
+@click.option("--frames", help="Frames as for `motion render`: 0-119, 0-119x2, 1,5,9 or mixes (default: the scene's timeline).")
+@click.option("--preset", help="Bake with a render preset applied (its shutter_samples), to match a render that uses it.")
+def bake(scene: Path, output: Path, frames: str | None, preset: str | None) -> None:
     """Evaluate SCENE's motion at every frame and across its shutter; write it to a file."""
     import time
 
     from motion.pipeline.bake import bake as bake_motion
-    from motion.pipeline.bake import parse_frames, summary, write_baked
+    from motion.pipeline.bake import summary, write_baked
+    from motion.pipeline.farm.frames import parse_frames
+    from motion.pipeline.presets import load_preset, overrides_from
     from motion.pipeline.scene import load_scene
 
     t0 = time.perf_counter()
-    loaded = load_scene(scene)
-    baked = bake_motion(loaded, parse_frames(frames, loaded))
+    loaded = load_scene(scene, overrides_from(load_preset(preset)[0], {}) if preset else None)
+    timeline = loaded.scene.timeline
+    selected = parse_frames(frames, timeline.first, timeline.last) if frames else list(timeline.timeline().frames)
+    baked = bake_motion(loaded, selected)
     write_baked(baked, output)
     s = summary(baked)
     click.echo(

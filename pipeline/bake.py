@@ -70,27 +70,6 @@ def frame_sample_times(loaded: "LoadedScene", frame: int) -> tuple[Fraction, tup
     return timeline.seconds(frame), (t_open, t_close), samples
 
 
-def parse_frames(text: str | None, loaded: "LoadedScene") -> list[int]:
-    """`A-B`, `N` or a comma list of those; None means the scene's whole timeline."""
-    if text is None:
-        return list(loaded.scene.timeline.timeline().frames)
-    frames: list[int] = []
-    for part in text.split(","):
-        part = part.strip()
-        try:
-            if "-" in part[1:]:
-                cut = part.index("-", 1)
-                a, b = int(part[:cut]), int(part[cut + 1 :])
-                if b < a:
-                    raise UsageError(f"--frames: reversed range {part!r}")
-                frames.extend(range(a, b + 1))
-            else:
-                frames.append(int(part))
-        except ValueError:
-            raise UsageError(f"--frames: expected A-B, N or a comma list of those, got {text!r}") from None
-    return sorted(set(frames))
-
-
 def bake(loaded: "LoadedScene", frames: Sequence[int], simulation: Any | None = None) -> BakedMotion:
     """Evaluate `frames` (each at its time and at N times across its shutter).
 
@@ -264,4 +243,4 @@ def summary(baked: BakedMotion) -> dict[str, Any]:
     }
 
 
-__all__ = ["BakeFileError", "BakedFrame", "BakedMotion", "bake", "frame_sample_times", "parse_frames", "read_baked", "summary", "write_baked"]
+__all__ = ["BakeFileError", "BakedFrame", "BakedMotion", "bake", "frame_sample_times", "read_baked", "summary", "write_baked"]

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from motion.pipeline.bake import BakeFileError, bake, parse_frames, read_baked, write_baked
+from motion.pipeline.bake import BakeFileError, bake, read_baked, write_baked
 from motion.pipeline.errors import UsageError
 from motion.pipeline.motion import Pose, evaluate
 from motion.pipeline.scene import load_scene
@@ -37,14 +37,22 @@ def test_frames_shutters_and_samples() -> None:
         baked.frame(5)
 
 
-def test_parse_frames() -> None:
-    loaded = load_scene(SCENES / "walk-cycle.yaml")
-    assert parse_frames(None, loaded) == list(range(48))
-    assert parse_frames("3-5,1,4", loaded) == [1, 3, 4, 5]
-    assert parse_frames("-2--1", loaded) == [-2, -1]
-    for bad in ("a-b", "5-2", ""):
-        with pytest.raises(UsageError):
-            parse_frames(bad, loaded)
+def test_bake_cli_frames_and_preset(tmp_path: Path) -> None:
+    """`motion bake` reads frames with the render grammar and can apply a preset."""
+    import json
+    import subprocess
+    import sys
+
+    motion = str(Path(sys.executable).with_name("motion"))
+    out = tmp_path / "wc.json"
+    proc = subprocess.run([motion, "bake", str(SCENES / "walk-cycle.yaml"), "-o", str(out), "--frames", "0-10x5", "--preset", "ci-smoke"], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    doc = json.loads(out.read_text())
+    assert [f["frame"] for f in doc["frames"]] == [0, 5, 10]
+    assert doc["samples_per_frame"] == 5  # ci-smoke's shutter_samples, not the scene's 9
+    for bad in ("a-b", "5-2", "40-60"):
+        proc = subprocess.run([motion, "bake", str(SCENES / "walk-cycle.yaml"), "-o", str(out), "--frames", bad], capture_output=True, text=True)
+        assert proc.returncode == 2 and "--frames" in proc.stderr and "Traceback" not in proc.stderr
 
 
 def test_npz_and_json_layouts(tmp_path: Path) -> None:
