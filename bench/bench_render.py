@@ -232,22 +232,33 @@ def blur_error(folder: Path) -> dict[str, float]:
     return out
 
 
-def memory(folder: Path, frames: int) -> dict[str, float]:
-    """5. peak RSS of a worker over `frames` warm frames (sampled as it goes)."""
-    from motion.pipeline.render.frame_renderer import FrameRenderer
-    from motion.pipeline.render.inputs import evaluate_frames
-    from motion.pipeline.scene import load_scene
+_MEMORY_PROBE = """
+import json, sys, psutil
+from motion.pipeline import variant
+variant.activate("auto", quiet=True)
+from motion.pipeline.render.frame_renderer import FrameRenderer
+from motion.pipeline.render.inputs import evaluate_frames
+from motion.pipeline.scene import load_scene
+loaded = load_scene(sys.argv[1])
+frames = int(sys.argv[2])
+inputs = evaluate_frames(loaded, list(range(frames)))
+renderer = FrameRenderer(loaded)
+proc = psutil.Process()
+rss = []
+for fi in inputs:
+    renderer.render(fi)
+    rss.append(proc.memory_info().rss / 2**20)
+print(json.dumps(rss))
+"""
 
-    loaded = load_scene(shot(folder, movers=4, res=(64, 36), spp=4))
-    inputs = evaluate_frames(loaded, list(range(frames)))
-    renderer = FrameRenderer(loaded)
-    marks = {}
-    for k, fi in enumerate(inputs):
-        renderer.render(fi)
-        if k + 1 in (10, frames // 2, frames):
-            marks[k + 1] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    first, last = marks[10], marks[frames]
-    return {"peak_rss_mb_at": marks, "growth_10_to_last_mb": last - first}
+
+def memory(folder: Path, frames: int) -> dict[str, object]:
+    """5. a worker's resident memory over `frames` warm frames, in a fresh process."""
+    scene = shot(folder, movers=4, res=(64, 36), spp=4, last=frames)
+    proc = subprocess.run([sys.executable, "-c", _MEMORY_PROBE, str(scene), str(frames)], capture_output=True, text=True, check=True)
+    rss = json.loads(proc.stdout.strip().splitlines()[-1])
+    marks = {k: round(rss[k - 1], 1) for k in (1, 10, frames // 2, frames)}
+    return {"rss_mb_after_frame": marks, "growth_frame10_to_last_mb": round(rss[-1] - rss[9], 2)}
 
 
 def main() -> int:

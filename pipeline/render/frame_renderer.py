@@ -130,6 +130,7 @@ class FrameRenderer:
             if o.name not in self.static_names and o.name not in self.slice_names and not isinstance(o, (Empty, Particles)) and o.visible
         ]
         self._groups: list[Any] = []
+        self.last_aovs: dict[str, np.ndarray] = {}
         dr.set_flag(dr.JitFlag.KernelHistory, True)
 
     # --- build (cold) -----------------------------------------------------------------
@@ -139,7 +140,8 @@ class FrameRenderer:
         scene = self.loaded.scene
         materials = {m.name: material_dict(m, self.loaded) for m in scene.materials}
         d: dict[str, Any] = {"type": "scene"}
-        d["integrator"] = {"type": "motion_path", "max_depth": self.settings.max_depth, "rr_depth": self.settings.rr_depth}
+        aovs = list(self.loaded.scene.output.aovs)
+        d["integrator"] = {"type": "motion_path", "max_depth": self.settings.max_depth, "rr_depth": self.settings.rr_depth, "aovs": ",".join(aovs)}
         world_from_camera = trs_matrix(fi.camera[0][0], fi.camera[1][0])
         d["sensor"] = sensor_dict(
             scene.camera,
@@ -179,6 +181,12 @@ class FrameRenderer:
             self._mover_scale[name] = np.array(s[0])
         self._movers = movers
         self._scene.integrator().set_movers(movers, len(fi.fov) - 1)
+        w, h = self.settings.resolution
+        if scene.camera.type == "orthographic":
+            self._scene.integrator().set_projection("orthographic", w / scene.camera.ortho_width, w, h)
+        else:
+            x_fov = float(np.asarray(self._params["sensor.x_fov"]).ravel()[0]) if "sensor.x_fov" in self._params else float(fi.fov[0])
+            self._scene.integrator().set_projection("perspective", (w / 2) / np.tan(np.radians(x_fov) / 2), w, h)
         self._groups = [self._build_group(name, fi, materials) for name in self.slice_names]
         self._scene.integrator().set_slices([g.scenes for g in self._groups])
         # route the sensor pose through the same parameter update warm frames use, so the
@@ -201,6 +209,22 @@ class FrameRenderer:
 
         verts, faces = bind_mesh(self.loaded, obj)
         return build_group(mi, name, "deform", len(verts), np.asarray(faces, np.uint32), bsdf, slices)
+
+    def _split_aovs(self, image: np.ndarray) -> np.ndarray:
+        """RGBA from the film's output; the AOV channels go to `self.last_aovs` as layers
+        named for the EXR: Z [H, W], N [H, W, 3], motion [H, W, 2]."""
+        self.last_aovs = {}
+        names = self._scene.integrator().aov_names()
+        if not names:
+            return image
+        extra = image[..., 4:]
+        k = 0
+        for aov in self.loaded.scene.output.aovs:
+            width = {"depth": 1, "normal": 3, "motion": 2}[aov]
+            layer = extra[..., k : k + width]
+            self.last_aovs[{"depth": "Z", "normal": "N", "motion": "motion"}[aov]] = layer[..., 0] if width == 1 else layer
+            k += width
+        return image[..., :4]
 
     def _slice_count(self, fi: FrameInput) -> int:
         return max(1, min(self.settings.time_slices, len(fi.fov) - 1))
@@ -291,7 +315,7 @@ class FrameRenderer:
         else:
             cam_t, cam_q = ct[1:], cq[1:]
         rel = np.array([_qmul(q, q_frame_inv) for q in cam_q])
-        self._scene.integrator().set_frame(mt, mq, cam_t, rel, ct[0])
+        self._scene.integrator().set_frame(mt, mq, cam_t, rel, ct[0], cam_q)
         if self._groups:
             self._update_groups(fi, mode, u_fixed)
 
@@ -383,6 +407,7 @@ class FrameRenderer:
         dr.sync_thread()
         rgba = np.array(img, dtype=np.float32)
         render_s = time.perf_counter() - t1
+        rgba = self._split_aovs(rgba)
         history = dr.kernel_history()
         self._last_history = [h for h in history if h.get("type") == dr.KernelType.JIT]
         compiled = sum(1 for h in history if h.get("type") == dr.KernelType.JIT and not h.get("cache_hit", False))

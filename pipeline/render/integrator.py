@@ -66,6 +66,10 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         super().__init__(props)
         self.max_depth = int(props.get("max_depth", 8))
         self.rr_depth = int(props.get("rr_depth", 5))
+        # AOVs of the first hit: "depth" (Z), "normal" (N.X/Y/Z, world), "motion" (motion.X/Y:
+        # screen pixels moved from shutter open to close, +x right, +y down)
+        self.aovs = [a for a in str(props.get("aovs", "")).split(",") if a]
+        self._projection = ("perspective", 1.0, 0.0, 0.0)  # kind, scale (px per unit), cx, cy
         self.movers: list[mi.Scene] = []
         self.slices: list[list[mi.Scene]] = []  # per non-rigid object: one scene per shutter sample
         self.n_samples = 2
@@ -74,7 +78,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         # frames back, their relative order flips and the kernel's input order with it,
         # which alternates between two kernel variants.
         self._frame_data = mi.Float(0.0)
-        self._layout = (0, 0, 0, 0, 0)
+        self._layout = (0, 0, 0, 0, 0, 0)
 
     # --- per-job and per-frame state --------------------------------------------------
 
@@ -83,6 +87,11 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         baked samples across the shutter."""
         self.movers = list(movers)
         self.n_samples = max(2, int(n_samples))
+
+    def set_projection(self, kind: str, scale: float, width: int, height: int) -> None:
+        """Camera projection for the motion AOV: perspective scale = (W/2) / tan(xfov/2),
+        orthographic scale = W / ortho_width (pixels per metre). Fixed for a job."""
+        self._projection = (kind, float(scale), width / 2.0, height / 2.0)
 
     def set_slices(self, groups: Sequence[Sequence[mi.Scene]]) -> None:
         """Time-sliced geometry (render/slices.py): for each deforming object or particle
@@ -96,6 +105,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         camera_translation: np.ndarray,
         camera_rotation_rel: np.ndarray,
         sensor_origin: np.ndarray,
+        camera_rotation: np.ndarray | None = None,
     ) -> None:
         """Per-frame poses. mover_*: [M, N, 3|4]; camera_*: [N, 3|4], where the camera
         rotation is relative to the sensor's (C(u) C(frame)^-1); sensor_origin: [3]."""
@@ -103,7 +113,9 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         n = self.n_samples
         assert mover_translation.shape == (m, n, 3) and mover_rotation.shape == (m, n, 4)
         assert camera_translation.shape == (n, 3) and camera_rotation_rel.shape == (n, 4)
-        parts = [mover_translation, mover_rotation, camera_translation, camera_rotation_rel, sensor_origin]
+        if camera_rotation is None:
+            camera_rotation = camera_rotation_rel
+        parts = [mover_translation, mover_rotation, camera_translation, camera_rotation_rel, sensor_origin, camera_rotation]
         flat = [np.asarray(a, dtype=np.float32).ravel() for a in parts]
         sizes = [len(a) for a in flat]
         # element offsets of each block; the gathers below index in units of 3 or 4 floats
@@ -146,10 +158,12 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         count = len(self.slices[0]) if self.slices else 1
         return mi.UInt32(dr.round(dr.clip(u, 0.0, 1.0) * (count - 1)))
 
-    def _intersect(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[tuple[Any, Any]], active: Any, k: Any = None) -> tuple[Any, Any]:
-        """Nearest hit over all scenes, in world space; also whether it is on a mover."""
+    def _intersect(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[tuple[Any, Any]], active: Any, k: Any = None) -> tuple[Any, Any, Any]:
+        """Nearest hit over all scenes, in world space; whether it is on a mover or a
+        slice; and which mover (len(movers) for none)."""
         si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
         on_mover = mi.Bool(False)
+        hit_mover = mi.UInt32(len(self.movers))
         for group in self.slices:
             for s, slice_scene in enumerate(group):
                 mine = active & (k == s)
@@ -157,7 +171,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
                 closer = mine & si_s.is_valid() & (si_s.t < si.t)
                 si = dr.select(closer, si_s, si)
                 on_mover |= closer
-        for mover, (t, q) in zip(self.movers, poses):
+        for index, (mover, (t, q)) in enumerate(zip(self.movers, poses)):
             qi = _qconj(q)
             local = mi.Ray3f(ray)
             local.o = _qrot(qi, ray.o - t)
@@ -175,7 +189,8 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             si_m.wi = dr.select(closer, si_m.wi, si.wi)
             si = dr.select(closer, si_m, si)
             on_mover |= closer
-        return si, on_mover
+            hit_mover = dr.select(closer, mi.UInt32(index), hit_mover)
+        return si, on_mover, hit_mover
 
     def _occluded(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[tuple[Any, Any]], active: Any, k: Any = None) -> Any:
         hit = scene.ray_test(ray, active)
@@ -189,6 +204,38 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             local.d = _qrot(qi, ray.d)
             hit |= mover.ray_test(local, active & ~hit)
         return hit
+
+    # --- AOVs -----------------------------------------------------------------------------
+
+    def _project(self, p: Any, record: int, active: Any) -> Any:
+        """Pixel coordinates of world point p seen by the camera at shutter sample `record`."""
+        kind, scale, cx, cy = self._projection
+        o = self._vec(self._layout[2], 3, mi.UInt32(record), active)
+        q = self._vec(self._layout[5], 4, mi.UInt32(record), active)
+        local = _qrot(_qconj(q), p - o)  # camera space: +Z forward, +Y up, +X left
+        if kind == "orthographic":
+            x, y = local.x * scale, local.y * scale
+        else:
+            z = dr.maximum(local.z, 1e-6)
+            x, y = local.x / z * scale, local.y / z * scale
+        return mi.Vector2f(cx - x, cy - y)
+
+    def _motion_vector(self, si: Any, hit_mover: Any, poses: list[tuple[Any, Any]], active: Any) -> Any:
+        """Screen-space motion of the first hit across the shutter, in pixels."""
+        last = self.n_samples - 1
+        p0, p1 = mi.Vector3f(si.p), mi.Vector3f(si.p)
+        for index, (t, q) in enumerate(poses):
+            mine = hit_mover == index
+            rest = _qrot(_qconj(q), si.p - t)
+            r = index * self.n_samples
+            t0 = self._vec(self._layout[0], 3, mi.UInt32(r), active)
+            q0 = self._vec(self._layout[1], 4, mi.UInt32(r), active)
+            t1 = self._vec(self._layout[0], 3, mi.UInt32(r + last), active)
+            q1 = self._vec(self._layout[1], 4, mi.UInt32(r + last), active)
+            p0 = dr.select(mine, _qrot(q0, rest) + t0, p0)
+            p1 = dr.select(mine, _qrot(q1, rest) + t1, p1)
+        v = self._project(p1, last, active) - self._project(p0, 0, active)
+        return dr.select(si.is_valid(), v, 0.0)
 
     # --- the path ------------------------------------------------------------------------
 
@@ -222,10 +269,24 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         prev_bsdf_pdf = mi.Float(1.0)
         prev_bsdf_delta = mi.Bool(True)
         valid = mi.Bool(False)
+        aov_z = mi.Float(0.0)
+        aov_n = mi.Vector3f(0.0)
+        aov_mv = mi.Vector2f(0.0)
+        want_aovs = len(self.aovs) > 0  # a Python bool: @dr.syntax keeps it a plain `if`
 
         while dr.hint(active, max_iterations=self.max_depth, label="motion_path"):
-            si, on_mover = self._intersect(scene, ray, poses, active, k_slice)
+            si, on_mover, hit_mover = self._intersect(scene, ray, poses, active, k_slice)
             valid |= active & si.is_valid() & (depth == 0)
+            if want_aovs:
+                first = active & (depth == 0) & si.is_valid()
+                if "depth" in self.aovs:
+                    # camera-space depth along the view axis, with the camera at this time
+                    cam_p, cam_r = self._pose(self._layout[2], self._layout[5], 0, ci, cf, first)
+                    aov_z = dr.select(first, _qrot(_qconj(cam_r), si.p - cam_p).z, aov_z)
+                if "normal" in self.aovs:
+                    aov_n = dr.select(first, si.sh_frame.n, aov_n)
+                if "motion" in self.aovs:
+                    aov_mv = dr.select(first, self._motion_vector(si, hit_mover, poses, first), aov_mv)
             # emission reached by BSDF sampling, MIS-weighted against emitter sampling;
             # emitters on movers are not in the static scene's light list: pdf 0, weight 1
             ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
@@ -270,10 +331,24 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
 
         if scene.environment() is not None:
             valid = mi.Bool(True)
-        return L, valid, []
+        aovs: list[Any] = []
+        if "depth" in self.aovs:
+            aovs.append(aov_z)
+        if "normal" in self.aovs:
+            aovs += [aov_n.x, aov_n.y, aov_n.z]
+        if "motion" in self.aovs:
+            aovs += [aov_mv.x, aov_mv.y]
+        return L, valid, aovs
 
     def aov_names(self) -> list[str]:
-        return []
+        names: list[str] = []
+        if "depth" in self.aovs:
+            names.append("Z")
+        if "normal" in self.aovs:
+            names += ["N.X", "N.Y", "N.Z"]
+        if "motion" in self.aovs:
+            names += ["motion.X", "motion.Y"]
+        return names
 
     def to_string(self) -> str:
         return f"MotionPathIntegrator[max_depth={self.max_depth}, movers={len(self.movers)}]"

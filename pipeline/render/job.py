@@ -121,6 +121,16 @@ def _renderer(job: RenderJob) -> tuple[FrameRenderer, LoadedScene, str]:
     return renderer, loaded, choice.variant
 
 
+def _root_cause(exc: BaseException) -> str:
+    """The innermost cause: drjit wraps kernel errors in 'error while performing a custom
+    operation (see above)', which says nothing in a report."""
+    inner = exc
+    while inner.__cause__ is not None or (inner.__context__ is not None and not inner.__suppress_context__):
+        inner = inner.__cause__ or inner.__context__  # type: ignore[assignment]
+    message = f"{type(inner).__name__}: {inner}"
+    return message if inner is exc else f"{type(exc).__name__}: {message}"
+
+
 def render_frames(job: RenderJob, inputs: Sequence[FrameInput]) -> list[FrameResult]:
     """Render and write each frame; a frame's failure is reported, not raised, so the
     others of the task still finish."""
@@ -138,6 +148,7 @@ def _render_one(job: RenderJob, fi: FrameInput) -> FrameResult:
             renderer = FrameRenderer(loaded)
         extra_setup = time.perf_counter() - t_setup
         rgba, stats = renderer.render(fi)
+        aovs = dict(renderer.last_aovs)
         if not job.cache:
             del renderer
         out = frame_path(job, loaded, fi.frame)
@@ -174,6 +185,7 @@ def _render_one(job: RenderJob, fi: FrameInput) -> FrameResult:
             pixel_type=scene.output.pixel_type,
             compression=scene.output.compression,
             standard=standard,
+            aovs=aovs or None,
         )
         return FrameResult(
             frame=fi.frame,
@@ -189,4 +201,4 @@ def _render_one(job: RenderJob, fi: FrameInput) -> FrameResult:
         )
     except Exception as exc:  # reported per frame; the farm decides on retries
         _WORKER.clear()  # rebuild from scratch for the next frame rather than trust this state
-        return FrameResult(frame=fi.frame, path="", ok=False, worker=worker_id(), error=f"{type(exc).__name__}: {exc}")
+        return FrameResult(frame=fi.frame, path="", ok=False, worker=worker_id(), error=_root_cause(exc))
