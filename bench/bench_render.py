@@ -118,6 +118,38 @@ def cache_figures(folder: Path, frames: int) -> dict[str, float]:
     return {"cold_s": cold_total, "cold_setup_s": cold.setup_s, "warm_s": w, "pure_kernel_s": k, "warm_over_kernel": w / k, "cold_over_warm": cold_total / w}
 
 
+_COLD_PROBE = """
+import json, sys, time
+t0 = time.perf_counter()
+from motion.pipeline import variant
+variant.activate("auto", quiet=True)
+from motion.pipeline.render.frame_renderer import FrameRenderer
+from motion.pipeline.render.inputs import evaluate_frames
+from motion.pipeline.scene import load_scene
+loaded = load_scene(sys.argv[1])
+inputs = evaluate_frames(loaded, [0, 1, 2])
+t_import = time.perf_counter() - t0
+renderer = FrameRenderer(loaded)
+out = {"startup_s": t_import}
+for fi in inputs:
+    t = time.perf_counter(); _, st = renderer.render(fi)
+    out.setdefault("frames", []).append({"total_s": time.perf_counter() - t, "setup_s": st.setup_s, "compiled": st.kernels_compiled})
+print(json.dumps(out))
+"""
+
+
+def cold_empty_caches(folder: Path) -> dict[str, object]:
+    """1b. a new worker process with EMPTY kernel and asset caches: the real first frame."""
+    scene = shot(folder, movers=4)
+    env = dict(os.environ, MOTION_CACHE_DIR=str(folder / "empty-cache"))
+    env.pop("DRJIT_CACHE_DIR", None)
+    proc = subprocess.run([sys.executable, "-c", _COLD_PROBE, str(scene)], capture_output=True, text=True, check=True, env=env)
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    f = out["frames"]
+    out["cold_over_warm"] = f[0]["total_s"] / f[2]["total_s"]
+    return out
+
+
 def fpm_figures(folder: Path, preset_args: list[str], frames: int, label: str) -> dict[str, float]:
     """2. frames/min: one cached worker vs a fresh process per frame (the naive farm)."""
     scene = shot(folder, movers=4, last=frames)
@@ -278,6 +310,8 @@ def main() -> int:
         results: dict[str, object] = {"variant": choice.variant, "static_triangles": tris, "threads": os.cpu_count()}
         results["1_cache_preview"] = cache_figures(folder, n)
         print(json.dumps({"1_cache_preview": results["1_cache_preview"]}, indent=1), flush=True)
+        results["1b_cold_empty_caches"] = cold_empty_caches(folder)
+        print(json.dumps({"1b_cold_empty_caches": results["1b_cold_empty_caches"]}, indent=1), flush=True)
         results["3_blur_cost"] = blur_cost(folder, n)
         print(json.dumps({"3_blur_cost": results["3_blur_cost"]}, indent=1), flush=True)
         results["4_blur_error"] = blur_error(folder)
