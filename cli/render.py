@@ -33,7 +33,7 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--motion-blur", type=click.Choice(["stochastic", "subframes", "off"]), help="Motion-blur mode.")
 @click.option("--variant", type=click.Choice(["auto", "llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb"]), help="Mitsuba variant (default: auto).")
 @click.option("--motion", "motion_file", type=click.Path(dir_okay=False, path_type=Path), help="Baked motion from `motion bake` (.json/.npz) instead of baking here.")
-@click.option("--workers", type=click.IntRange(min=1), help="Local worker processes (default 1); drjit threads are divided among them.")
+@click.option("--workers", type=click.IntRange(min=1), help="Local worker processes (default: one per core, at most 8 and at most one per frame); drjit threads are divided among them.")
 @click.option("--scheduler", help="Dask cluster: tcp://HOST:PORT or a scheduler file (instead of local workers).")
 @click.option("--threads", type=click.IntRange(min=1), help="drjit threads per worker (default: cores // workers locally, all cores on a Dask worker).")
 @click.option("--chunk-size", type=click.IntRange(min=1), help="Frames per task (default: from frame and worker count; configs/farm.yaml).")

@@ -83,6 +83,19 @@ def _check_only(name: str, out_dir: Path, frames: list[int], todo: list[int], pa
     return {"frames": len(frames), "complete": len(frames), "output_dir": str(out_dir)}
 
 
+MAX_DEFAULT_WORKERS = 8  # each worker keeps its own scene and kernels in memory
+
+
+def default_workers(frames: int) -> int:
+    """All local cores by default: one worker per core (each gets cores // workers drjit
+    threads), no more than there are frames, at most MAX_DEFAULT_WORKERS. On 2 cores,
+    2 workers x 1 thread render 1.6x faster than 1 worker x 2 threads (bench_farm)."""
+    from .local import threads_per_worker
+
+    cores = threads_per_worker(1)
+    return max(1, min(cores, frames, MAX_DEFAULT_WORKERS))
+
+
 def run_render(req: RenderRequest) -> dict[str, Any]:
     """Render the request; returns the report. Raises IncompleteJobError (exit 3) if any
     frame failed everywhere, KeyboardInterrupt after a clean stop on Ctrl-C."""
@@ -110,7 +123,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
 
     out_dir = Path(req.output_dir or scene.output.directory or Path("out") / loaded.name).resolve()
     scene_hash, settings_hash = scene_hashes(loaded)
-    workers = 1 if req.scheduler else (req.workers or 1)
+    workers = 1 if req.scheduler else (req.workers or default_workers(len(frames)))
     if req.scheduler:
         threads = req.threads  # None: each Dask worker uses its machine's cores
     else:
