@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from motion.pipeline.bake import BakeFileError, bake, read_baked, write_baked
-from motion.pipeline.errors import UsageError
 from motion.pipeline.motion import Pose, evaluate
 from motion.pipeline.scene import load_scene
 

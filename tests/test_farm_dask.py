@@ -6,10 +6,7 @@ from __future__ import annotations
 
 import socket
 import subprocess
-import time
-from pathlib import Path
 
-import psutil
 import pytest
 
 from farm_util import DASK, SCENE, SLOW, TINY, frames_in, kill, leftovers, motion, report, start_motion, wait_for

@@ -173,7 +173,7 @@ def test_example_scenes_evaluate() -> None:
     assert np.degrees(quat_angle(m.objects["hip_l"].rotation[0], np.array([np.cos(np.radians(12.5)), 0, 0, np.sin(np.radians(12.5))]))) < 1e-9
 
     top = load_scene(SCENES / "spinning-top.yaml")
-    fps, shutter = 24, 0.5 / 24
+    shutter = 0.5 / 24  # 180 degrees at 24 fps
     m = evaluate(top, np.array([1.0 - shutter / 2, 1.0 + shutter / 2]))
     swept = np.degrees(quat_angle(m.objects["fin_a"].rotation[0], m.objects["fin_a"].rotation[1]))
     assert swept > 120  # one frame's shutter sweeps a large angle (150 degrees + precession)

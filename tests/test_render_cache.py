@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from motion.pipeline.frame_output import read_frame
-from _render_support import load, render
+from _render_support import load
 from _support import SCENES, run_motion
 
 pytestmark = pytest.mark.render

@@ -5,47 +5,17 @@ All functions are vectorised over a leading body axis; nothing loops over bodies
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
+
+from ..motion.pose import quat_mul, quat_normalize, quat_to_matrix
 
 # --- quaternions (w, x, y, z) -------------------------------------------------------------
 
 
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product a * b over the last axis ([..., 4])."""
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack(
-        (
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ),
-        axis=-1,
-    )
 
 
-def quat_normalize(q: np.ndarray) -> np.ndarray:
-    """Unit quaternions; a zero quaternion becomes the identity."""
-    norm = np.linalg.norm(q, axis=-1, keepdims=True)
-    out = np.where(norm > 0, q / np.where(norm > 0, norm, 1.0), 0.0)
-    out[..., 0] = np.where(norm[..., 0] > 0, out[..., 0], 1.0)
-    return out
 
 
-def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices [..., 3, 3] of unit quaternions [..., 4] (world_from_body)."""
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack(
-        (
-            np.stack((1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)), axis=-1),
-            np.stack((2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)), axis=-1),
-            np.stack((2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)), axis=-1),
-        ),
-        axis=-2,
-    )
 
 
 def quat_rate(q: np.ndarray, omega: np.ndarray) -> np.ndarray:
@@ -56,37 +26,8 @@ def quat_rate(q: np.ndarray, omega: np.ndarray) -> np.ndarray:
     return 0.5 * quat_mul(pure, q)
 
 
-def quat_from_rotation(rotate: object) -> np.ndarray:
-    """The unit quaternion (w, x, y, z) of a scene `rotate:` value (None is the identity)."""
-    from scipy.spatial.transform import Rotation
-
-    if rotate is None:
-        return np.array([1.0, 0.0, 0.0, 0.0])
-    if hasattr(rotate, "quaternion"):
-        q = np.asarray(rotate.quaternion, dtype=np.float64)
-        return q / np.linalg.norm(q)
-    if hasattr(rotate, "euler"):
-        r = Rotation.from_euler(rotate.order, rotate.euler, degrees=True)
-    else:
-        axis = np.asarray(rotate.axis, dtype=np.float64)
-        r = Rotation.from_rotvec(axis / np.linalg.norm(axis) * math.radians(rotate.angle))
-    x, y, z, w = r.as_quat()  # scipy is scalar-last
-    return np.array([w, x, y, z])
 
 
-def slerp(q0: np.ndarray, q1: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Spherical linear interpolation [..., 4] with the shortest-path flip; s in [0, 1]."""
-    dot = np.sum(q0 * q1, axis=-1, keepdims=True)
-    q1 = np.where(dot < 0, -q1, q1)
-    dot = np.abs(dot)
-    s = np.asarray(s)[..., None]
-    theta = np.arccos(np.clip(dot, -1.0, 1.0))
-    sin_theta = np.sin(theta)
-    small = sin_theta < 1e-6
-    safe = np.where(small, 1.0, sin_theta)
-    a = np.where(small, 1.0 - s, np.sin((1.0 - s) * theta) / safe)
-    b = np.where(small, s, np.sin(s * theta) / safe)
-    return quat_normalize(a * q0 + b * q1)
 
 
 # --- inertia ------------------------------------------------------------------------------

@@ -14,7 +14,7 @@ colliders only and do not act on bodies, so each group is run on its own.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
@@ -25,7 +25,9 @@ from .collisions import BoxCollider, Collider, ContactBodies, MeshCollider, Plan
 from .guard import Guard
 from .integrators import Integrator, make_integrator
 from .particles import ParticleSamples, Spawns, ballistic, emit
-from .rigid import inverse_inertia_world, principal_inertia, quat_from_rotation, quat_to_matrix, slerp
+from ..motion.pose import quat_to_matrix, slerp
+from ..motion.rotation import transform_quat as quat_from_rotation
+from .rigid import inverse_inertia_world, principal_inertia
 from .state import BodyProps, Environment, System
 
 if TYPE_CHECKING:

@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import forces
-from .rigid import angular_acceleration, quat_normalize, quat_rate
+from ..motion.pose import quat_normalize
+from .rigid import angular_acceleration, quat_rate
 
 
 @dataclass
@@ -178,7 +179,7 @@ class System:
         move = self.active & (p.inv_mass > 0)
         kinetic = 0.5 * p.mass * np.einsum("ij,ij->i", s.v, s.v)
         if self.rotating:
-            from .rigid import quat_to_matrix
+            from ..motion.pose import quat_to_matrix
 
             w_body = np.einsum("nji,nj->ni", quat_to_matrix(s.q), s.w)
             kinetic = kinetic + 0.5 * np.einsum("ij,ij->i", p.inertia * w_body, w_body)

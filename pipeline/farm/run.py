@@ -21,7 +21,7 @@ from ..presets import load_preset, overrides_from, spread
 from ..render.job import RenderJob, expected_meta, frame_path, scene_hashes
 from ..scene.loader import load_scene
 from .claims import new_run_id
-from .config import FarmConfig, load_farm_config
+from .config import load_farm_config
 from .frames import chunks as make_chunks
 from .frames import default_chunk_size, format_frames, parse_frames, parse_shard, shard
 from .progress import Progress

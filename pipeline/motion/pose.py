@@ -91,7 +91,27 @@ def quat_conj(q: np.ndarray) -> np.ndarray:
 
 
 def quat_normalize(q: np.ndarray) -> np.ndarray:
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+    """Unit quaternions; a zero quaternion becomes the identity."""
+    norm = np.linalg.norm(q, axis=-1, keepdims=True)
+    out = np.where(norm > 0, q / np.where(norm > 0, norm, 1.0), 0.0)
+    out[..., 0] = np.where(norm[..., 0] > 0, out[..., 0], 1.0)
+    return out
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, s: np.ndarray | float) -> np.ndarray:
+    """Spherical linear interpolation [..., 4] with the shortest-path flip; s in [0, 1]."""
+    dot = np.sum(q0 * q1, axis=-1, keepdims=True)
+    q1 = np.where(dot < 0, -q1, q1)
+    dot = np.abs(dot)
+    s = np.asarray(s)[..., None]
+    theta = np.arccos(np.clip(dot, -1.0, 1.0))
+    sin_theta = np.sin(theta)
+    small = sin_theta < 1e-6
+    safe = np.where(small, 1.0, sin_theta)
+    # (sin((1-s) theta) q0 + sin(s theta) q1) / sin(theta); lerp where theta ~ 0
+    a = np.where(small, 1.0 - s, np.sin((1.0 - s) * theta) / safe)
+    b = np.where(small, s, np.sin(s * theta) / safe)
+    return quat_normalize(a * q0 + b * q1)
 
 
 def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:

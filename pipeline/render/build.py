@@ -12,6 +12,7 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from ..errors import RendererError
+from ..motion.pose import quat_normalize, quat_to_matrix
 from ..scene.loader import LoadedScene
 from ..scene.schema import (
     Camera,
@@ -42,22 +43,12 @@ Dict = dict[str, Any]
 # --- small math ---------------------------------------------------------------------------
 
 
-def quat_to_matrix(q: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z) -> 3x3 rotation matrix."""
-    w, x, y, z = (float(c) for c in q / np.linalg.norm(q))
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
 
 
 def trs_matrix(translation: Iterable[float], rotation: Iterable[float], scale: Iterable[float] = (1, 1, 1)) -> np.ndarray:
     """world_from_object = T * R * S as a 4x4 matrix."""
     m = np.eye(4)
-    m[:3, :3] = quat_to_matrix(np.asarray(rotation, float)) * np.asarray(scale, float)[None, :]
+    m[:3, :3] = quat_to_matrix(quat_normalize(np.asarray(rotation, float))) * np.asarray(scale, float)[None, :]
     m[:3, 3] = np.asarray(translation, float)
     return m
 

@@ -18,10 +18,10 @@ from typing import Any
 
 import numpy as np
 
+from ..motion.pose import quat_mul, quat_rotate, slerp
 from ..scene.loader import LoadedScene
 from ..scene.schema import Empty, Particles
 from .build import (
-    DEFAULT_MATERIAL,
     light_dict,
     material_dict,
     object_shapes,
@@ -79,16 +79,6 @@ def is_static(loaded: LoadedScene, name: str) -> bool:
     return True
 
 
-def _slerp_np(q0: np.ndarray, q1: np.ndarray, f: float) -> np.ndarray:
-    d = float(np.dot(q0, q1))
-    if d < 0:
-        q1, d = -q1, -d
-    theta = np.arccos(min(d, 1.0))
-    if theta < 1e-6:
-        q = (1 - f) * q0 + f * q1
-    else:
-        q = (np.sin((1 - f) * theta) * q0 + np.sin(f * theta) * q1) / np.sin(theta)
-    return q / np.linalg.norm(q)
 
 
 def resample(t: np.ndarray, q: np.ndarray, u: float) -> tuple[np.ndarray, np.ndarray]:
@@ -97,7 +87,7 @@ def resample(t: np.ndarray, q: np.ndarray, u: float) -> tuple[np.ndarray, np.nda
     x = min(max(u, 0.0), 1.0) * (n - 1)
     i = min(int(np.floor(x)), n - 2)
     f = x - i
-    return (1 - f) * t[i] + f * t[i + 1], _slerp_np(q[i], q[i + 1], f)
+    return (1 - f) * t[i] + f * t[i + 1], slerp(q[i], q[i + 1], f)
 
 
 class FrameRenderer:
@@ -232,7 +222,7 @@ class FrameRenderer:
     def _update_groups(self, fi: FrameInput, mode: str, u_fixed: float | None) -> None:
         """Each slice's geometry at its time: slice s of S holds the baked sample nearest
         u = s / (S - 1) (all at one instant for `off` and for one sub-frame)."""
-        from .slices import particle_mesh, quat_rotate, update_group
+        from .slices import particle_mesh, update_group
 
         n = len(fi.fov) - 1
         count = self._slice_count(fi)
@@ -314,7 +304,7 @@ class FrameRenderer:
             cam_t, cam_q = np.repeat(tt[None], n, axis=0), np.repeat(qq[None], n, axis=0)
         else:
             cam_t, cam_q = ct[1:], cq[1:]
-        rel = np.array([_qmul(q, q_frame_inv) for q in cam_q])
+        rel = quat_mul(cam_q, q_frame_inv[None, :])
         self._scene.integrator().set_frame(mt, mq, cam_t, rel, ct[0], cam_q)
         if self._groups:
             self._update_groups(fi, mode, u_fixed)
@@ -432,17 +422,3 @@ def _first(values: np.ndarray) -> Any:
     """The frame-time value of an animated scalar or colour channel."""
     v = np.asarray(values)[0]
     return float(v) if np.ndim(v) == 0 else tuple(float(x) for x in np.ravel(v))
-
-
-def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of quaternions (w, x, y, z)."""
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return np.array(
-        [
-            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-        ]
-    )

@@ -16,12 +16,11 @@ import json
 import os
 import socket
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from fractions import Fraction
 from pathlib import Path
 from typing import Any, Sequence
 
-import numpy as np
 
 from ..frame_output import is_complete, write_frame
 from ..scene.loader import LoadedScene, load_scene

@@ -39,11 +39,6 @@ def particle_mesh(positions: np.ndarray, alive: np.ndarray, radius: float, capac
     return verts.reshape(-1, 3), faces.reshape(-1, 3)
 
 
-def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors v [V, 3] by the unit quaternion q (w, x, y, z)."""
-    w, u = q[0], q[1:]
-    t = 2 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
 
 
 @dataclass

@@ -4,7 +4,7 @@ emitters. SI units: kg, m, s; angles in degrees (angular velocity in degrees/s).
 
 from __future__ import annotations
 
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
