@@ -160,7 +160,8 @@ class FrameRenderer:
         self._params = mi.traverse(self._scene)
         # movers: one rest-frame scene each (scale kept in the rest frame)
         movers = []
-        self._mover_scale = {}
+        self._mover_scale: dict[str, np.ndarray] = {}
+        self._mover_params: dict[str, Any] = {}
         for name in self.mover_names:
             obj = next(o for o in scene.objects if o.name == name)
             t, q, s = fi.objects[name]
@@ -169,6 +170,13 @@ class FrameRenderer:
                 md[f"{name}__{k}"] = shape
             movers.append(mi.load_dict(md))
             self._mover_scale[name] = np.array(s[0])
+            self._mover_params[name] = mi.traverse(movers[-1])
+        # lights that move or change (their own motion, or a moving parent): updated per frame
+        self._animated_lights = [
+            (i, light)
+            for i, light in enumerate(scene.lights)
+            if light.motion.type != "static" or (light.parent is not None and not is_static(self.loaded, light.parent))
+        ]
         self._movers = movers
         self._scene.integrator().set_movers(movers, len(fi.fov) - 1)
         w, h = self.settings.resolution
@@ -276,9 +284,51 @@ class FrameRenderer:
         if camera.type == "perspective" and "sensor.x_fov" in params and float(params["sensor.x_fov"][0]) != float(fi.fov[0]):
             params["sensor.x_fov"] = float(fi.fov[0])
             changed.append("sensor.x_fov")
+        changed += self._update_lights(fi)
         if changed:
             params.update()
+        changed += self._update_mover_scales(fi)
         return tuple(changed)
+
+    def _update_lights(self, fi: FrameInput) -> list[str]:
+        """Animated lights at the frame's time: build the light as it is now and copy its
+        parameters into the scene (opaque, so new values replay the same kernels)."""
+        dr, mi = self._dr, self._mi
+        keys: list[str] = []
+        for i, light in self._animated_lights:
+            key = light.name or f"light{i}"
+            pose = fi.lights.get(key)
+            m = trs_matrix(pose[0][0], pose[1][0], pose[2][0]) if pose is not None else None
+            scalars = {k: _first(v) for k, v in fi.light_scalars.get(key, {}).items()}
+            fresh = mi.traverse(mi.load_dict(light_dict(light, self.loaded, m, scalars)))
+            prefix = key.replace(".", "_")
+            for k in fresh.keys():
+                target = f"{prefix}.{k}"
+                if target in self._params and not k.endswith("data"):  # never copy an envmap's pixels
+                    value = fresh[k]
+                    if hasattr(value, "index"):
+                        dr.make_opaque(value)
+                    self._params[target] = value
+                    keys.append(target)
+        return keys
+
+    def _update_mover_scales(self, fi: FrameInput) -> list[str]:
+        """A mover's scale is applied in its rest frame, per frame (not per sample): only
+        that mover's small BVH is rebuilt, and only when its scale changed."""
+        keys: list[str] = []
+        scene = self.loaded.scene
+        for name in self.mover_names:
+            s = np.asarray(fi.objects[name][2][0], dtype=float)
+            if np.allclose(s, self._mover_scale[name]):
+                continue
+            obj = next(o for o in scene.objects if o.name == name)
+            params = self._mover_params[name]
+            for k, shape in enumerate(object_shapes(obj, self.loaded, np.diag([*s, 1.0]), {})):
+                params[f"{name}__{k}.to_world"] = shape["to_world"]
+                keys.append(f"mover:{name}__{k}.to_world")
+            params.update()
+            self._mover_scale[name] = s
+        return keys
 
     def _integrator_frame(self, fi: FrameInput, mode: str, u_fixed: float | None = None) -> None:
         n = len(fi.fov) - 1
