@@ -56,3 +56,43 @@ def test_moving_light_and_keyed_scale(tmp_path: Path) -> None:
     # pixels of frame 0 (a little more: the pixel filter's soft rim scales too)
     area = [int((im > 10.0).sum()) for im in lum]
     assert 1.9 < area[1] / area[0] < 2.8 and 3.5 < area[2] / area[0] < 5.0, area
+
+
+ZOOM = """
+timeline: {fps: 24, first: 0, last: 24}
+camera:
+  type: orthographic
+  position: [0, 0, -5]
+  look_at: [0, 0, 0]
+  ortho_width: 2
+  motion: {type: keyframes, channels: {ortho_width: {keys: [{time: 0, value: 2.0}, {time: 24, value: 4.0}]}}}
+materials: [{name: black, type: diffuse, color: 0.0}]
+objects:
+  - {name: card, shape: rectangle, width: 1, height: 1, material: black, emission: {radiance: 1.0},
+     transform: {rotate: {euler: [0, 180, 0]}}}
+render: {resolution: [40, 40], spp: 4, max_depth: 2, filter: box, motion_blur: off}
+"""
+
+
+def test_keyed_orthographic_width_zooms(tmp_path: Path) -> None:
+    (near, far), stats, _ = render(load(tmp_path, ZOOM), [0, 24])
+    covered = [int((img[..., 0] > 0.5).sum()) for img in (near, far)]
+    # a 1 m card: 20 px wide at 2 m across 40 px, 10 px at 4 m: area 400 -> 100
+    assert covered == [400, 100], covered
+    assert stats[1].kernels_compiled == 0
+
+
+def test_direct_integrator_is_one_bounce(tmp_path: Path) -> None:
+    room = """
+camera: {position: [0, 1, 3], look_at: [0, 0.5, 0]}
+materials: [{name: white, type: diffuse, color: 0.8}]
+objects:
+  - {name: floor, shape: rectangle, width: 4, height: 4, material: white, transform: {rotate: {euler: [-90, 0, 0]}}}
+  - {name: wall, shape: rectangle, width: 4, height: 4, material: white, transform: {translate: [0, 2, -1]}}
+  - {name: sky, shape: rectangle, width: 0.5, height: 0.5, emission: {radiance: 20}, transform: {translate: [0, 1.9, 0], rotate: {euler: [90, 0, 0]}}}
+render: {resolution: [32, 24], spp: 16, max_depth: 6, integrator: %s, motion_blur: off}
+"""
+    (path_img,), _, _ = render(load(tmp_path, room % "path", "path.yaml"), [0])
+    (direct_img,), _, r = render(load(tmp_path, room % "direct", "direct.yaml"), [0])
+    assert r.max_depth == 2
+    assert direct_img[..., :3].mean() < 0.9 * path_img[..., :3].mean()  # no interreflection

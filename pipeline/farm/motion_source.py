@@ -105,6 +105,7 @@ def file_inputs(loaded: LoadedScene, path: str | Path, frames: Sequence[int]) ->
                 objects={n: pose(at["objects"][n], s) for n, s in sm.get("objects", {}).items()},
                 camera=pose(at["camera"], sm["camera"])[:2],
                 fov=cat(at["camera_scalars"]["fov"], sm["camera_scalars"]["fov"]),
+                ortho_width=cat(at["camera_scalars"]["ortho_width"], sm["camera_scalars"]["ortho_width"]) if "ortho_width" in sm["camera_scalars"] else None,
                 lights={n: pose(at["lights"][n], s) for n, s in sm.get("lights", {}).items() if n in keys},
                 light_scalars={n: {c: cat(at["light_scalars"][n][c], v) for c, v in ch.items()} for n, ch in sm.get("light_scalars", {}).items()},
             )

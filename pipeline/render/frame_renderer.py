@@ -44,6 +44,7 @@ class FrameInput:
     lights: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
     light_scalars: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
     vertices: dict[str, np.ndarray] = field(default_factory=dict)  # deforming meshes [1+N, V, 3], object space
+    ortho_width: np.ndarray | None = None  # [1+N], orthographic cameras
     particles: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)  # (positions [1+N, n, 3], alive [1+N, n])
 
 
@@ -103,6 +104,8 @@ class FrameRenderer:
         self.loaded = loaded
         self.settings = loaded.scene.render
         self.spp = int(spp or self.settings.spp)
+        # `integrator: direct` is direct lighting only: paths of one bounce
+        self.max_depth = 2 if self.settings.integrator == "direct" else self.settings.max_depth
         self._mi, self._dr = mi, dr
         self._scene: Any = None
         self._params: Any = None
@@ -131,7 +134,7 @@ class FrameRenderer:
         materials = {m.name: material_dict(m, self.loaded) for m in scene.materials}
         d: dict[str, Any] = {"type": "scene"}
         aovs = list(self.loaded.scene.output.aovs)
-        d["integrator"] = {"type": "motion_path", "max_depth": self.settings.max_depth, "rr_depth": self.settings.rr_depth, "aovs": ",".join(aovs)}
+        d["integrator"] = {"type": "motion_path", "max_depth": self.max_depth, "rr_depth": self.settings.rr_depth, "aovs": ",".join(aovs)}
         world_from_camera = trs_matrix(fi.camera[0][0], fi.camera[1][0])
         d["sensor"] = sensor_dict(
             scene.camera,
@@ -142,6 +145,7 @@ class FrameRenderer:
             self.settings.filter,
             shutter=(0.0, 1.0),
             sampler="multijitter",
+            ortho_width=_ortho(fi),
         )
         for name in self.static_names:
             obj = next(o for o in scene.objects if o.name == name)
@@ -276,7 +280,7 @@ class FrameRenderer:
         params = self._params
         camera = self.loaded.scene.camera
         world_from_camera = trs_matrix(fi.camera[0][0], fi.camera[1][0])
-        sensor = sensor_dict(camera, world_from_camera, float(fi.fov[0]), self.settings.resolution, self.spp, self.settings.filter)
+        sensor = sensor_dict(camera, world_from_camera, float(fi.fov[0]), self.settings.resolution, self.spp, self.settings.filter, ortho_width=_ortho(fi))
         changed: list[str] = []
         if "sensor.to_world" in params:
             params["sensor.to_world"] = sensor["to_world"]
@@ -365,13 +369,13 @@ class FrameRenderer:
         mi = self._mi
         scene = self.loaded.scene
         materials = {m.name: material_dict(m, self.loaded) for m in scene.materials}
-        d: dict[str, Any] = {"type": "scene", "integrator": {"type": "path", "max_depth": self.settings.max_depth, "rr_depth": self.settings.rr_depth}}
+        d: dict[str, Any] = {"type": "scene", "integrator": {"type": "path", "max_depth": self.max_depth, "rr_depth": self.settings.rr_depth}}
 
         def pose(t: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             return (t[0], q[0]) if u is None else resample(t[1:], q[1:], u)
 
         ct, cq = pose(*fi.camera)
-        d["sensor"] = sensor_dict(scene.camera, trs_matrix(ct, cq), float(fi.fov[0]), self.settings.resolution, self.spp, self.settings.filter)
+        d["sensor"] = sensor_dict(scene.camera, trs_matrix(ct, cq), float(fi.fov[0]), self.settings.resolution, self.spp, self.settings.filter, ortho_width=_ortho(fi))
         for obj in scene.objects:
             if not obj.visible:
                 continue
@@ -466,6 +470,11 @@ class FrameRenderer:
             scene_reused=not cold,
             updated_params=updated,
         )
+
+
+def _ortho(fi: FrameInput) -> float | None:
+    """The orthographic width at the frame's time, if the camera is orthographic."""
+    return None if fi.ortho_width is None else float(fi.ortho_width[0])
 
 
 def _first(values: np.ndarray) -> Any:

@@ -24,6 +24,7 @@ def inputs_from_baked(baked: Any) -> list[FrameInput]:
                 objects={n: (p.translation, p.rotation, p.scale) for n, p in motion.objects.items()},
                 camera=(motion.camera.translation, motion.camera.rotation),
                 fov=np.asarray(motion.camera_scalars["fov"], dtype=float),
+                ortho_width=np.asarray(motion.camera_scalars["ortho_width"], dtype=float) if "ortho_width" in motion.camera_scalars else None,
                 lights={n: (p.translation, p.rotation, p.scale) for n, p in motion.lights.items()},
                 light_scalars=motion.light_scalars,
                 vertices=motion.vertices,
