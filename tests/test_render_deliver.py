@@ -1,0 +1,43 @@
+"""`motion render ... --deliver` assembles the deliverables after the last frame."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+from pathlib import Path
+
+import pytest
+
+from motion.pipeline.frame_output import read_frame
+from _support import SCENES, run_motion
+
+pytestmark = pytest.mark.render
+
+
+def test_render_then_deliver_24p_60i_and_contact_sheet(tmp_path: Path) -> None:
+    import av
+
+    out = tmp_path / "out"
+    proc = run_motion(
+        "render", str(SCENES / "walk-cycle.yaml"), "--preset", "ci-smoke", "--frames", "0-7",
+        "--resolution", "32x24", "--deliver", "24p,60i,contact", "-o", str(out),
+    )
+    assert proc.returncode == 0, proc.stderr
+    deliver = out / "deliver"
+    with av.open(str(deliver / "walk-cycle_24p.mov")) as movie:
+        stream = movie.streams.video[0]
+        frames = list(movie.decode(stream))
+        assert len(frames) == 8
+        assert stream.average_rate == Fraction(24000, 1001)  # film speed 23.976 by default
+    # 8 film frames -> 10 interlaced video frames by 3:2 pulldown
+    fields = sorted((deliver / "60i").glob("*.exr"))
+    assert len(fields) == 10
+    assert read_frame(fields[0]).header["framesPerSecond"] == Fraction(30000, 1001)
+    with av.open(str(deliver / "walk-cycle_60i.mov")) as movie:
+        frames = list(movie.decode(movie.streams.video[0]))
+        assert len(frames) == 10 and frames[0].interlaced_frame
+    assert (deliver / "walk-cycle_contact.png").stat().st_size > 0
+
+
+def test_deliver_refuses_shards(tmp_path: Path) -> None:
+    proc = run_motion("render", str(SCENES / "walk-cycle.yaml"), "--shard", "1/2", "--deliver", "24p", "-o", str(tmp_path))
+    assert proc.returncode == 2 and "--deliver needs every frame" in proc.stderr
