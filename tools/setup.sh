@@ -21,10 +21,12 @@ want=$(cat pyproject.toml | sha256sum | cut -c1-16)
 if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
   say "installing motion and its dependencies into .venv (pip)"
   .venv/bin/python -m pip install --quiet --upgrade pip >/dev/null 2>&1 || true
-  # pip's notes about this machine's unused local index folders are noise: filter them
-  .venv/bin/python -m pip install --quiet -e '.[dev]' 2>&1 | grep -v "is ignored: it is neither a file nor a directory" || true
+  # pip's output goes to a log, shown only if the install fails
+  if ! .venv/bin/python -m pip install --quiet -e '.[dev]' > .venv/pip-install.log 2>&1; then
+    cat .venv/pip-install.log; say "installation failed (pip's output above, also in .venv/pip-install.log)"; exit 1
+  fi
   .venv/bin/python -c 'import motion.pipeline, mitsuba, drjit, OpenEXR, av, distributed' \
-    || { say "installation failed (see pip's messages above)"; exit 1; }
+    || { say "installation incomplete: a package does not import (see .venv/pip-install.log)"; exit 1; }
   echo "$want" > "$stamp"
 else
   say "python packages up to date"
