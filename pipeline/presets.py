@@ -43,24 +43,27 @@ def load_preset(name: str) -> tuple[Preset, str]:
             raise UsageError(f"unknown preset '{name}'; available: {', '.join(preset_names())} (or a path to a .yaml file)")
         text, file = entry.read_text(), f"configs/{name}.yaml"
     data, source = parse_yaml(text, file)
+    data = {} if data is None else data
+    problems: list[Problem] = []
+    preset = None
     try:
-        preset = Preset.model_validate(data or {})
+        preset = Preset.model_validate(data)
     except ValidationError as exc:
-        raise SceneError(problems_from_validation(exc, data, source, Preset)) from None
-    # check the fields against the scene format now, so a bad preset fails on its own file
+        problems += problems_from_validation(exc, data, source, Preset)
+    # check the sections against the scene format now, so a bad preset fails on its own
+    # file, with every problem at once
     from .scene.schema import OutputSettings, RenderSettings
 
-    problems: list[Problem] = []
     for key, model in (("render", RenderSettings), ("output", OutputSettings)):
-        section = getattr(preset, key)
-        if section:
+        section = data.get(key) if isinstance(data, dict) else None
+        if isinstance(section, dict) and section:
             try:
                 model.model_validate(section)
             except ValidationError as exc:
-                for p in problems_from_validation(exc, section, source, model):
-                    problems.append(Problem(p.file, *source.locate((key, *p.yaml_path.split(".")[:1])), f"{key}.{p.yaml_path}", p.message))
-    if problems:
-        raise SceneError(problems)
+                for p in problems_from_validation(exc, section, source.sub((key,)), model):
+                    problems.append(Problem(p.file, p.line, p.column, f"{key}.{p.yaml_path}", p.message))
+    if problems or preset is None:
+        raise SceneError(sorted(problems, key=lambda p: (p.line or 0, p.column or 0)))
     return preset, file
 
 

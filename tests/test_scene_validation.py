@@ -222,3 +222,16 @@ def _mutate(node: Any, rng: random.Random, value: Any) -> None:
         parent[f"{key}_x"] = value
     else:
         parent.append(value)
+
+
+def test_bad_preset_reports_every_problem_with_lines(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    preset = tmp_path / "mine.yaml"
+    preset.write_text("render:\n  spp: -3\n  resolutoin: [1, 2]\nframe_count: 0\n")
+    scene = SCENES / "walk-cycle.yaml"
+    assert main(["validate", str(scene), "--preset", str(preset)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines == [
+        f"{preset}:2:8: render.spp: Input should be greater than or equal to 1 (got -3)",
+        f"{preset}:3:3: render.resolutoin: unknown key 'resolutoin'; did you mean 'resolution'?",
+        f"{preset}:4:14: frame_count: Input should be greater than or equal to 1 (got 0)",
+    ]

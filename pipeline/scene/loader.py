@@ -79,6 +79,11 @@ class SourceMap:
                 return pos
         return (None, None)
 
+    def sub(self, prefix: Loc) -> "SourceMap":
+        """The positions of the part of the document under `prefix`, relative to it."""
+        n = len(prefix)
+        return SourceMap(self.file, {loc[n:]: pos for loc, pos in self.positions.items() if loc[:n] == prefix})
+
     def problem(self, loc: Loc, message: str, key: bool = False) -> Problem:
         line, col = self.locate(loc, key=key)
         return Problem(self.file, line, col, yaml_path(loc), message)
