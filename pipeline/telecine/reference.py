@@ -1,7 +1,11 @@
-"""FFmpeg's own `telecine` filter (through PyAV's filter graph), as a reference and a benchmark.
+"""FFmpeg's own filters (through PyAV's filter graph), as references for tests and the benchmark.
 
-Half-float RGBA goes through the graph as `rgbaf16le`, which the filter copies row by row
-without conversion, so its output can be compared with ours bit for bit.
+`ffmpeg_telecine`: the `telecine` filter. Half-float RGBA goes through the graph as
+`rgbaf16le`, which the filter copies row by row without conversion, so its output can be
+compared with ours bit for bit.
+
+`ffmpeg_inverse_telecine`: `fieldmatch` + `decimate`, FFmpeg's inverse telecine. Both take
+only planar YUV/gray integer formats, so 8-bit frames go through as the Y plane of `yuv444p`.
 """
 
 from __future__ import annotations
@@ -68,3 +72,62 @@ def ffmpeg_telecine(
     if graph is not None:
         src.push(None)  # type: ignore[union-attr]
         yield from drain()
+
+
+def ffmpeg_inverse_telecine(
+    lumas: Iterable[np.ndarray],
+    field_order: FieldOrder = "tff",
+    rate: Fraction = Fraction(30000, 1001),
+    fieldmatch: str = "",
+    decimate: str = "",
+) -> list[np.ndarray]:
+    """FFmpeg's inverse telecine, `fieldmatch=order=..` then `decimate` (cycle 5), on 8-bit frames.
+
+    `lumas` are [H, W] uint8 video frames; they go through the graph as `yuv444p` with the
+    frame as the Y plane and neutral chroma (both filters take planar YUV, so nothing is
+    converted) and the output Y planes are returned, as uint8 [H, W]. Extra filter options
+    (e.g. "combmatch=full") are appended to each filter's arguments.
+    """
+    import av
+
+    order = check_field_order(field_order)
+    rate = Fraction(rate)
+    time_base = 1 / rate
+    graph = av.filter.Graph()
+    src = sink = None
+    out: list[np.ndarray] = []
+
+    def drain() -> None:
+        while True:
+            try:
+                frame = sink.pull()  # type: ignore[union-attr]
+            except (av.BlockingIOError, av.EOFError):
+                return
+            out.append(frame.to_ndarray(format="yuv444p")[0].copy())
+
+    for i, luma in enumerate(lumas):
+        luma = np.ascontiguousarray(luma, dtype=np.uint8)
+        if src is None:
+            h, w = luma.shape
+            src = graph.add(
+                "buffer",
+                f"video_size={w}x{h}:pix_fmt=yuv444p:time_base={time_base.numerator}/{time_base.denominator}"
+                f":frame_rate={rate.numerator}/{rate.denominator}:pixel_aspect=1/1",
+            )
+            fm = graph.add("fieldmatch", f"order={order}" + (f":{fieldmatch}" if fieldmatch else ""))
+            dc = graph.add("decimate", decimate)
+            sink = graph.add("buffersink")
+            src.link_to(fm)
+            fm.link_to(dc)
+            dc.link_to(sink)
+            graph.configure()
+        neutral = np.full_like(luma, 128)
+        vf = av.VideoFrame.from_ndarray(np.stack([luma, neutral, neutral]), format="yuv444p")
+        vf.pts = i
+        vf.time_base = time_base
+        src.push(vf)
+        drain()
+    if src is not None:
+        src.push(None)
+        drain()
+    return out
