@@ -49,10 +49,13 @@ def _progress(label: str) -> Iterator[Callable[[int, int], None] | None]:
               help="Also encode the output as a movie (.mov ProRes 422 HQ, .mp4 H.264).")
 @click.option("--codec", type=click.Choice(CODEC_NAMES), default=None, help="Movie codec (default from the extension).")
 @click.option("--exposure", type=float, default=0.0, show_default=True, help="Movie exposure in stops.")
-@click.option("--ocio", "ocio_config", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="OCIO config for the movie's view transform (needs PyOpenColorIO).")
+@click.option("--ocio", "ocio_config", default=None,
+              help="OCIO config for the movie's view transform: a .ocio file or a built-in URI "
+                   "(ocio://cg-config-latest, ocio://studio-config-latest, ocio://default).")
 @click.option("--ocio-display", default=None, help="OCIO display (default: the config's).")
 @click.option("--ocio-view", default=None, help="OCIO view (default: the display's).")
+@click.option("--ocio-colorspace", default=None,
+              help="OCIO colour space of the frames (default: the config's linear Rec.709, else scene_linear).")
 @click.option("--tail", type=click.Choice(["pad", "drop"]), default="pad", show_default=True,
               help="An unpaired last field: complete the frame from the same film frame, or drop it (as FFmpeg).")
 @click.option("--drop-frame", is_flag=True, help="Drop-frame timecode (29.97 only).")
@@ -63,8 +66,8 @@ def _progress(label: str) -> Iterator[Callable[[int, int], None] | None]:
               help="Output EXR pixel type (default: as the input).")
 @click.option("--overwrite", is_flag=True, help="Replace an existing sequence of the same name in OUT.")
 def telecine(in_dir: Path, out_dir: Path, pattern: str | None, field_order: str | None, film_speed: str | None,
-             inverse: bool, movie: Path | None, codec: str | None, exposure: float, ocio_config: Path | None,
-             ocio_display: str | None, ocio_view: str | None, tail: str, drop_frame: bool, tolerance: float,
+             inverse: bool, movie: Path | None, codec: str | None, exposure: float, ocio_config: str | None,
+             ocio_display: str | None, ocio_view: str | None, ocio_colorspace: str | None, tail: str, drop_frame: bool, tolerance: float,
              prefix: str | None, pixel_type: str | None, overwrite: bool) -> None:
     """Pull a 24p EXR sequence down to 60i (3:2) fields, or back with --inverse."""
     from motion.pipeline.telecine.convert import inverse_sequence, telecine_sequence
@@ -73,8 +76,8 @@ def telecine(in_dir: Path, out_dir: Path, pattern: str | None, field_order: str 
         from motion.pipeline.telecine.movie import ViewTransform, choose_codec
 
         choose_codec(movie, codec)  # a bad extension or codec fails before any work
-        ViewTransform(exposure, ocio_config, ocio_display, ocio_view)
-    elif ocio_config is not None:
+        ViewTransform(exposure, ocio_config, ocio_display, ocio_view, ocio_colorspace)
+    elif ocio_config is not None or ocio_display or ocio_view or ocio_colorspace:
         raise UsageError("--ocio applies to the movie; give --movie FILE")
     with _progress("telecine" if not inverse else "inverse telecine") as progress:
         if inverse:
@@ -97,7 +100,7 @@ def telecine(in_dir: Path, out_dir: Path, pattern: str | None, field_order: str 
         with _progress("movie") as progress:
             path = sequence_movie(result.out_dir, movie, rate=result.rate, codec=codec, exposure=exposure,
                                   ocio_config=ocio_config, ocio_display=ocio_display, ocio_view=ocio_view,
-                                  prefix=result.paths[0].name.rsplit(".", 2)[0], progress=progress)
+                                  ocio_colorspace=ocio_colorspace, prefix=result.paths[0].name.rsplit(".", 2)[0], progress=progress)
         click.echo(f"wrote {path}")
 
 
@@ -109,17 +112,27 @@ def telecine(in_dir: Path, out_dir: Path, pattern: str | None, field_order: str 
 @click.option("--columns", type=int, default=None, help="Thumbnails per row (default: about 16:9 overall).")
 @click.option("--max-frames", type=int, default=60, show_default=True, help="Sample every k-th frame above this.")
 @click.option("--exposure", type=float, default=0.0, show_default=True, help="Exposure in stops.")
-@click.option("--ocio", "ocio_config", type=click.Path(dir_okay=False, path_type=Path), default=None,
-              help="OCIO config for the view transform (needs PyOpenColorIO).")
+@click.option("--ocio", "ocio_config", default=None,
+              help="OCIO config for the view transform: a .ocio file or ocio://cg-config-latest etc.")
+@click.option("--ocio-display", default=None, help="OCIO display (default: the config's).")
+@click.option("--ocio-view", default=None, help="OCIO view (default: the display's).")
+@click.option("--ocio-colorspace", default=None, help="OCIO colour space of the frames.")
 @click.option("--prefix", default=None, help="Which sequence of IN_DIR.")
 def contact_sheet(in_dir: Path, out_path: Path, thumb_width: int, columns: int | None, max_frames: int,
-                  exposure: float, ocio_config: Path | None, prefix: str | None) -> None:
-    """A PNG grid of tone-mapped thumbnails of an EXR sequence, with frame numbers."""
+                  exposure: float, ocio_config: str | None, ocio_display: str | None, ocio_view: str | None,
+                  ocio_colorspace: str | None, prefix: str | None) -> None:
+    """A PNG grid of tone-mapped thumbnails of an EXR sequence, with frame numbers (gaps allowed)."""
     from motion.pipeline.telecine.contact_sheet import contact_sheet as make_sheet
+    from motion.pipeline.telecine.movie import ViewTransform
+    from motion.pipeline.telecine.sequence import discover
 
-    path = make_sheet(in_dir, out_path, thumb_width=thumb_width, columns=columns, max_frames=max_frames,
-                      exposure=exposure, ocio_config=ocio_config, prefix=prefix)
-    click.echo(f"wrote {path}")
+    ViewTransform(exposure, ocio_config, ocio_display, ocio_view, ocio_colorspace)  # bad options first
+    seq = discover(in_dir, prefix, require_even_height=False, allow_gaps=True)
+    path = make_sheet(seq, out_path, thumb_width=thumb_width, columns=columns, max_frames=max_frames,
+                      exposure=exposure, ocio_config=ocio_config, ocio_display=ocio_display, ocio_view=ocio_view,
+                      ocio_colorspace=ocio_colorspace)
+    missing = f", {len(seq.missing)} missing" if seq.missing else ""
+    click.echo(f"wrote {path} ({len(seq)} frames{missing})")
 
 
 commands = [telecine, contact_sheet]

@@ -13,12 +13,13 @@ import pytest
 from click.testing import CliRunner
 
 from motion.cli.main import cli, main
-from motion.pipeline.errors import UsageError
+from motion.pipeline.errors import FrameIOError, UsageError
 from motion.pipeline.frame_output import read_frame, write_frame
 from motion.pipeline.telecine import deliver, parse_formats
-from motion.pipeline.telecine.contact_sheet import box_resize, contact_sheet
+from motion.pipeline.telecine.contact_sheet import box_resize, contact_sheet, sheet_layout
 from motion.pipeline.telecine.convert import telecine_sequence
 from motion.pipeline.telecine.movie import ViewTransform, sequence_movie, srgb_encode
+from motion.pipeline.telecine.sequence import discover
 
 H, W = 24, 32
 AV_FIELD_TT, AV_FIELD_BB, AV_FIELD_PROGRESSIVE = 2, 3, 1
@@ -149,3 +150,30 @@ def test_deliver_24p_and_60i(tmp_path: Path) -> None:
     s60, f60 = decode(done["60i"][-1])
     assert (len(f24), s24.average_rate) == (4, Fraction(24000, 1001))
     assert (len(f60), s60.average_rate, f60[0].interlaced_frame) == (5, Fraction(30000, 1001), True)
+
+
+def test_contact_sheet_accepts_gaps_telecine_refuses_them(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """After `motion render --frames 0-100x10`: frames 0, 10, ..., 100 (90 numbers missing)."""
+    src = tmp_path / "in"
+    numbers = list(range(0, 101, 10))
+    for k, n in enumerate(numbers):
+        write_frame(src / f"shot.{n:04d}.exr", np.full((24, 32, 4), 0.02 * (k + 1), np.float32), fps=Fraction(24))
+    seq = discover(src, allow_gaps=True)
+    assert seq.numbers == tuple(numbers) and len(seq.missing) == 90 and seq.missing[:3] == (1, 2, 3)
+    layout = sheet_layout(seq)
+    assert layout.numbers == tuple(numbers) and layout.missing == 90
+    assert "frames 0-100 (11 of 101 frames, 90 missing)" in layout.header
+    assert sheet_layout(seq, max_frames=4).numbers == (0, 30, 60, 90)  # sampled among existing frames
+    assert main(["contact-sheet", str(src), "-o", str(tmp_path / "c.png"), "--width", "32", "--columns", "11"]) == 0
+    assert "(11 frames, 90 missing)" in capsys.readouterr().out
+    img = matplotlib.image.imread(tmp_path / "c.png")
+    shown = [img[30 + 4 + 12, 4 + k * 36 + 16, 0] for k in range(11)]  # each thumbnail's centre, in order
+    np.testing.assert_allclose(shown, srgb_encode(0.02 * np.arange(1, 12)), atol=1 / 255)
+    # Telecine and movies stay strict: one line naming the first missing frame, nothing written.
+    assert main(["telecine", str(src), "-o", str(tmp_path / "60i")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "missing frame" in err[0] and "shot.0001.exr" in err[0] and "87 more" in err[0]
+    assert not (tmp_path / "60i").exists()
+    with pytest.raises(FrameIOError, match=r"missing frame .*shot\.0001\.exr"):
+        sequence_movie(src, tmp_path / "m.mov")
+    assert not (tmp_path / "m.mov").exists()

@@ -3,7 +3,9 @@
 Thumbnails are box-filtered (each thumbnail pixel is the mean of the source pixels it
 covers, `np.add.reduceat` over row and column bin edges), shown through the same view
 transform as the movies, and labelled with the frame number. Long shots are sampled:
-every k-th frame so that at most `max_frames` thumbnails are drawn. Matplotlib (Agg)
+every k-th frame so that at most `max_frames` thumbnails are drawn. Gaps in the numbering
+(a render of `--frames 0-100x10`) are fine: the frames that exist are shown with their own
+numbers and the header says how many are missing. Matplotlib (Agg)
 draws the labels and writes the PNG, to a temporary file renamed into place.
 """
 
@@ -12,13 +14,14 @@ from __future__ import annotations
 import math
 import os
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import UsageError
 from .movie import ViewTransform, _publish
-from .sequence import discover, read_checked
+from .sequence import Sequence, discover, read_checked
 
 LABEL_ROWS = 18
 GAP = 4
@@ -36,8 +39,30 @@ def box_resize(image: np.ndarray, height: int, width: int) -> np.ndarray:
     return (sums / counts).astype(np.float32)
 
 
+@dataclass(frozen=True)
+class SheetLayout:
+    """Which frames a contact sheet shows and what its header says."""
+
+    indices: tuple[int, ...]  # positions in the sequence, in order
+    numbers: tuple[int, ...]  # their frame numbers (the labels)
+    step: int  # every step-th existing frame
+    missing: int  # frame numbers absent between the first and the last
+    header: str  # first header line
+
+
+def sheet_layout(seq: Sequence, max_frames: int = 60) -> SheetLayout:
+    """Sample at most `max_frames` of the frames that exist; describe the shot in one line."""
+    step = math.ceil(len(seq) / max_frames)
+    picked = tuple(range(0, len(seq), step))
+    span = seq.numbers[-1] - seq.first + 1
+    count = f"{len(seq)} frames" if not seq.missing else f"{len(seq)} of {span} frames, {len(seq.missing)} missing"
+    header = (f"{seq.prefix}  frames {seq.first}-{seq.numbers[-1]} ({count})  {seq.width}x{seq.height}"
+              f"{f'  {seq.fps} fps' if seq.fps else ''}")
+    return SheetLayout(picked, tuple(seq.numbers[i] for i in picked), step, len(seq.missing), header)
+
+
 def contact_sheet(
-    in_dir: str | Path,
+    in_dir: str | Path | Sequence,
     out_path: str | Path,
     *,
     thumb_width: int = 240,
@@ -45,9 +70,16 @@ def contact_sheet(
     max_frames: int = 60,
     exposure: float = 0.0,
     ocio_config: str | Path | None = None,
+    ocio_display: str | None = None,
+    ocio_view: str | None = None,
+    ocio_colorspace: str | None = None,
     prefix: str | None = None,
 ) -> Path:
-    """Write a PNG grid of the sequence in `in_dir` to `out_path` and return its path."""
+    """Write a PNG grid of the sequence in `in_dir` to `out_path` and return its path.
+
+    Missing frame numbers are allowed (unlike telecine and movies): the sheet shows the
+    frames that exist and its header counts the missing ones.
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -56,9 +88,11 @@ def contact_sheet(
         raise UsageError(f"{out_path}: the contact sheet is written as PNG (use a .png name)")
     if thumb_width < 8 or max_frames < 1:
         raise UsageError("thumbnail width must be >= 8 and max frames >= 1")
-    seq = discover(in_dir, prefix, require_even_height=False)
-    step = math.ceil(len(seq) / max_frames)
-    picked = list(range(0, len(seq), step))
+    view = ViewTransform(exposure, ocio_config, ocio_display, ocio_view, ocio_colorspace)
+    seq = in_dir if isinstance(in_dir, Sequence) else discover(in_dir, prefix, require_even_height=False,
+                                                               allow_gaps=True)
+    layout = sheet_layout(seq, max_frames)
+    picked, step = layout.indices, layout.step
     cols = columns or max(1, min(len(picked), math.ceil(math.sqrt(len(picked) * 16 / 9 * seq.height / seq.width))))
     rows = math.ceil(len(picked) / cols)
     tw = min(thumb_width, seq.width)
@@ -67,23 +101,20 @@ def contact_sheet(
     cell_w, cell_h = tw + GAP, th + LABEL_ROWS + GAP
     width, height = cols * cell_w + GAP, rows * cell_h + GAP + header
     sheet = np.full((height, width, 3), 0.12, np.float32)
-    view = ViewTransform(exposure, ocio_config)
     places = []
-    for n, index in enumerate(picked):
+    for n, (index, number) in enumerate(zip(picked, layout.numbers)):
         r, c = divmod(n, cols)
         y, x = header + GAP + r * cell_h, GAP + c * cell_w
         thumb = box_resize(read_checked(seq, index).rgba, th, tw)
         sheet[y: y + th, x: x + tw] = view(thumb).astype(np.float32) / 65535.0
-        places.append((x, y + th, seq.numbers[index]))
+        places.append((x, y + th, number))
 
     dpi = 100
     fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi)
     # figimage puts array row 0 at the bottom of the figure: flip so row 0 is the top.
     fig.figimage(sheet[::-1], 0, 0, origin="lower", resize=False)
     fig.text(GAP / width, 1 - 4 / height, (
-        f"{seq.prefix}  frames {seq.first}-{seq.numbers[-1]}  {seq.width}x{seq.height}"
-        f"{f'  {seq.fps} fps' if seq.fps else ''}\n{view.description}"
-        f"{f'  (every {step}th frame)' if step > 1 else ''}"
+        f"{layout.header}\n{view.description}{f'  (every {step}th frame)' if step > 1 else ''}"
     ), color="white", fontsize=8, va="top", ha="left", family="monospace")
     for x, y, number in places:
         fig.text(x / width, 1 - (y + 2) / height, f"{number:04d}", color="white", fontsize=9,

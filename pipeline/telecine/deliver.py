@@ -19,7 +19,7 @@ from ..errors import UsageError
 from .cadence import film_rate
 from .contact_sheet import contact_sheet
 from .convert import telecine_sequence
-from .movie import sequence_movie
+from .movie import ViewTransform, sequence_movie
 from .sequence import discover
 
 FORMATS = ("24p", "60i", "50i", "review", "contact")
@@ -49,6 +49,8 @@ def deliver(
     codec: str | None = None,
     exposure: float = 0.0,
     ocio_config: str | Path | None = None,
+    ocio_display: str | None = None,
+    ocio_view: str | None = None,
     prefix: str | None = None,
     overwrite: bool = False,
     report: Report | None = None,
@@ -62,7 +64,8 @@ def deliver(
     seq = discover(in_dir, prefix, require_even_height=any(f in ("60i", "50i") for f in wanted))
     out_dir = Path(out_dir)
     film = film_rate(film_speed)
-    view = dict(exposure=exposure, ocio_config=ocio_config)
+    view = dict(exposure=exposure, ocio_config=ocio_config, ocio_display=ocio_display, ocio_view=ocio_view)
+    ViewTransform(**view)  # a bad OCIO config or view fails before anything is written
     say = report or (lambda fmt, step: None)
     done: dict[str, list[Path]] = {}
     for fmt in wanted:

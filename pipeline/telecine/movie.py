@@ -3,7 +3,8 @@
 View transform (no OCIO config): scene-linear RGB is scaled by 2**exposure, clipped to
 [0, 1] and encoded with the sRGB curve (IEC 61966-2-1), alpha dropped (our frames are
 premultiplied over black). With an OCIO config (needs the PyOpenColorIO package) the
-exposure-scaled pixels go through the config's display/view transform instead. The
+exposure-scaled pixels go through the config's display/view transform instead (a config
+file or a built-in one, `ocio://cg-config-latest`; see `ViewTransform`). The
 result is quantised to 16 bits and handed to FFmpeg's `scale` filter for the conversion
 to the codec's Y'CbCr (BT.709 matrix, video range); for interlaced output the filter
 subsamples chroma per field (`interl=1`), and `setfield` marks the field order on every
@@ -84,8 +85,36 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
 
 
+# Colour tags (AVColorPrimaries, AVColorTransferCharacteristic) of the displays we can name;
+# any other OCIO display is tagged "unspecified" (2, 2) rather than guessed.
+BT709, TRC_BT709, TRC_GAMMA22, TRC_SRGB, UNSPECIFIED = 1, 1, 4, 13, 2
+_DISPLAY_TAGS: tuple[tuple[str, tuple[int, int]], ...] = (
+    ("srgb", (BT709, TRC_SRGB)),
+    ("rec.1886 rec.709", (BT709, TRC_BT709)),
+    ("gamma 2.2 rec.709", (BT709, TRC_GAMMA22)),
+)
+# Our renders are linear Rec.709 (Mitsuba's RGB variants). Aliases of that colour space in the
+# ACES built-in configs (cg/studio) and in common studio configs, tried in this order.
+LINEAR_REC709_NAMES = ("lin_rec709_srgb", "lin_rec709", "Linear Rec.709 (sRGB)", "lin_srgb", "Utility - Linear - sRGB")
+
+
+def builtin_ocio_configs() -> list[str]:
+    """Names of the OCIO configs built into the installed PyOpenColorIO (use as ocio://NAME)."""
+    import PyOpenColorIO as OCIO  # type: ignore[import-not-found]
+
+    return list(OCIO.BuiltinConfigRegistry())
+
+
 class ViewTransform:
-    """Scene-linear RGBA -> display-referred RGB uint16 [H, W, 3]."""
+    """Scene-linear RGBA -> display-referred RGB uint16 [H, W, 3].
+
+    Without an OCIO config: x 2**exposure, clip to [0, 1], sRGB curve. With one (a file or
+    a built-in URI such as ``ocio://cg-config-latest``): x 2**exposure, then the config's
+    DisplayViewTransform from `ocio_colorspace` (default: the config's linear Rec.709
+    colour space if it has one, else its ``scene_linear`` role) to `ocio_display` /
+    `ocio_view` (defaults: the config's default display and that display's default view),
+    then clip to [0, 1].
+    """
 
     def __init__(
         self,
@@ -97,41 +126,75 @@ class ViewTransform:
     ) -> None:
         self.gain = np.float32(2.0 ** float(exposure))
         self._cpu = None
+        self.display = self.view = self.source = None
+        self.color_tags = (BT709, TRC_SRGB)  # (primaries, transfer) for the movie's stream
         self.description = f"linear -> sRGB, exposure {float(exposure):+g} stops"
-        if ocio_config is not None:
-            try:
-                import PyOpenColorIO as OCIO  # type: ignore[import-not-found]
-            except ImportError:
-                raise UsageError(
-                    f"an OCIO config was given ({ocio_config}) but the PyOpenColorIO package is not "
-                    "installed (pip install opencolorio), or omit --ocio for the built-in sRGB view"
-                ) from None
-            try:
-                config = OCIO.Config.CreateFromFile(str(ocio_config))
-                display = ocio_display or config.getDefaultDisplay()
-                view = ocio_view or config.getDefaultView(display)
-                source = ocio_colorspace or OCIO.ROLE_SCENE_LINEAR
-                transform = OCIO.DisplayViewTransform(src=source, display=display, view=view)
-                self._cpu = config.getProcessor(transform).getDefaultCPUProcessor()
-            except Exception as exc:  # OCIO raises its own Exception type for any bad config
-                raise UsageError(f"{ocio_config}: OCIO config unusable ({exc})") from None
-            self.description = f"OCIO {ocio_config}: {source} -> {display}/{view}, exposure {float(exposure):+g}"
+        if ocio_config is None:
+            if ocio_display or ocio_view or ocio_colorspace:
+                raise UsageError("--ocio-display/--ocio-view/--ocio-colorspace need an OCIO config (--ocio)")
+            return
+        try:
+            import PyOpenColorIO as OCIO  # type: ignore[import-not-found]
+        except ImportError:
+            raise UsageError(
+                f"an OCIO config was given ({ocio_config}) but the PyOpenColorIO package is not "
+                "installed (pip install opencolorio), or omit --ocio for the built-in sRGB view"
+            ) from None
+        # str, not Path: pathlib would turn ocio://name into ocio:/name.
+        name = str(ocio_config)
+        try:
+            config = OCIO.Config.CreateFromFile(name)
+        except Exception as exc:  # OCIO raises its own Exception type for any bad config
+            hint = ""
+            if name.startswith("ocio://"):
+                hint = f"; built-in configs: ocio://default, ocio://cg-config-latest, ocio://studio-config-latest, " \
+                       f"or ocio://NAME with NAME one of {', '.join(builtin_ocio_configs())}"
+            raise UsageError(f"{name}: OCIO config unusable ({exc}){hint}") from None
+        displays = list(config.getDisplays())
+        display = ocio_display or config.getDefaultDisplay()
+        if display not in displays:
+            raise UsageError(f"{name}: no OCIO display {display!r}; the config has {', '.join(displays)}")
+        views = list(config.getViews(display))
+        view = ocio_view or config.getDefaultView(display)
+        if view not in views:
+            raise UsageError(f"{name}: display {display!r} has no view {view!r}; it has {', '.join(views)}")
+        if ocio_colorspace is not None:
+            cs = config.getColorSpace(ocio_colorspace)
+            if cs is None:
+                raise UsageError(f"{name}: no OCIO colour space {ocio_colorspace!r}")
+            source = cs.getName()
+        else:
+            found = next((config.getColorSpace(n) for n in LINEAR_REC709_NAMES if config.getColorSpace(n)), None)
+            source = found.getName() if found is not None else config.getColorSpace(OCIO.ROLE_SCENE_LINEAR).getName()
+        try:
+            transform = OCIO.DisplayViewTransform(src=source, display=display, view=view)
+            self._cpu = config.getProcessor(transform).getDefaultCPUProcessor()
+        except Exception as exc:
+            raise UsageError(f"{name}: OCIO cannot build {source} -> {display}/{view} ({exc})") from None
+        self.display, self.view, self.source = display, view, source
+        self.color_tags = next((tags for key, tags in _DISPLAY_TAGS if key in display.lower()),
+                               (UNSPECIFIED, UNSPECIFIED))
+        self.description = f"OCIO {name}: {source} -> {display} / {view}, exposure {float(exposure):+g}"
+
+    def encode(self, rgba: np.ndarray) -> np.ndarray:
+        """Display-referred float RGB in [0, 1], [..., 3] (before quantisation)."""
+        rgb = np.ascontiguousarray(rgba[..., :3], dtype=np.float32) * self.gain
+        if self._cpu is None:
+            return srgb_encode(rgb)
+        flat = np.ascontiguousarray(rgb.reshape(-1, 3))
+        self._cpu.applyRGB(flat)
+        return np.clip(flat.reshape(rgb.shape), 0.0, 1.0)
 
     def __call__(self, rgba: np.ndarray) -> np.ndarray:
-        rgb = np.ascontiguousarray(rgba[..., :3], dtype=np.float32) * self.gain
-        if self._cpu is not None:
-            self._cpu.applyRGB(rgb)
-            out = np.clip(rgb, 0.0, 1.0)
-        else:
-            out = srgb_encode(rgb)
-        return np.round(out * 65535.0).astype(np.uint16)
+        return np.round(self.encode(rgba) * 65535.0).astype(np.uint16)
 
 
 class _Encoder:
     """One video stream: RGB48 frames -> scale/format/setfield filter graph -> encoder -> muxer."""
 
     def __init__(self, path: Path, container: str, codec: Codec, width: int, height: int, rate: Fraction,
-                 field_order: FieldOrder | None, timecode: str | None) -> None:
+                 field_order: FieldOrder | None, timecode: str | None,
+                 color_tags: tuple[int, int] = (BT709, TRC_SRGB)) -> None:
         import av
 
         self.av = av
@@ -154,8 +217,9 @@ class _Encoder:
             cc.field_order = AV_FIELD_TT if field_order == "tff" else AV_FIELD_BB
         else:
             cc.field_order = AV_FIELD_PROGRESSIVE
-        # BT.709 primaries and matrix; the transfer is the sRGB curve we applied.
-        cc.color_primaries, cc.colorspace, cc.color_trc, cc.color_range = 1, 1, 13, 1
+        # BT.709 matrix, video range; primaries and transfer from the view transform (sRGB by default).
+        cc.color_primaries, cc.color_trc = color_tags
+        cc.colorspace, cc.color_range = 1, 1
         self.time_base = 1 / rate
         self.graph = av.filter.Graph()
         self.src = self.graph.add(
@@ -228,7 +292,8 @@ def write_movie(
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix + ".part", dir=path.parent)
     os.close(fd)
     try:
-        encoder = _Encoder(Path(tmp), container, chosen, width, height, Fraction(rate), order, timecode)
+        encoder = _Encoder(Path(tmp), container, chosen, width, height, Fraction(rate), order, timecode,
+                           view.color_tags)
         for i, rgba in enumerate(frames):
             encoder.add(view(rgba))
             if progress:
@@ -252,6 +317,7 @@ def sequence_movie(
     ocio_config: str | Path | None = None,
     ocio_display: str | None = None,
     ocio_view: str | None = None,
+    ocio_colorspace: str | None = None,
     prefix: str | None = None,
     progress: Progress | None = None,
 ) -> Path:
@@ -270,7 +336,7 @@ def sequence_movie(
         field_order = meta_order if meta_order in ("tff", "bff") else None
     if field_order and seq.height % 2:
         raise FrameIOError(f"{seq.paths[0]}: odd height {seq.height}; interlaced fields need an even number of rows")
-    view = ViewTransform(exposure, ocio_config, ocio_display, ocio_view)
+    view = ViewTransform(exposure, ocio_config, ocio_display, ocio_view, ocio_colorspace)
     frames = (read_checked(seq, i).rgba for i in range(len(seq)))
     return write_movie(
         path, frames, rate, width=seq.width, height=seq.height, codec=codec, field_order=field_order,

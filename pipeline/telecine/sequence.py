@@ -1,7 +1,8 @@
 """EXR sequences on disk: discover `prefix.NNNN.exr` files, validate them before any work.
 
 Telecine writes nothing until the whole input is known to be usable: every frame number
-between the first and the last is present, every header reads, every frame has the same
+between the first and the last is present (only the contact sheet, a glance tool, accepts
+gaps: `allow_gaps=True`, the absent numbers in `Sequence.missing`), every header reads, every frame has the same
 size, and the height is even (a field pair needs as many bottom rows as top rows).
 Each problem is a `FrameIOError` naming the offending frame.
 """
@@ -37,6 +38,7 @@ class Sequence:
     pixel_type: PixelType
     fps: Fraction | None = None
     first_meta: dict[str, Any] = field(default_factory=dict)
+    missing: tuple[int, ...] = ()  # absent frame numbers between first and last (allow_gaps only)
 
     def __len__(self) -> int:
         return len(self.paths)
@@ -100,11 +102,13 @@ def discover(
     *,
     require_even_height: bool = True,
     min_frames: int = 1,
+    allow_gaps: bool = False,
 ) -> Sequence:
     """Find and validate the EXR sequence in `directory` (the only one, or `prefix`).
 
     Reads every header (not the pixels) so a missing, foreign or truncated-header frame is
-    reported before anything is written. Raises FrameIOError naming the frame.
+    reported before anything is written. Raises FrameIOError naming the frame. With
+    `allow_gaps` absent frame numbers are not an error; they are listed in `missing`.
     """
     directory = Path(directory)
     groups = find_sequences(directory)
@@ -127,7 +131,7 @@ def discover(
         raise FrameIOError(f"{directory}: frame {dup} appears twice ({', '.join(names)})")
     pad = len(_NAME.match(items[0][1].name)["number"])  # type: ignore[index]
     missing = sorted(set(range(numbers[0], numbers[-1] + 1)) - set(numbers))
-    if missing:
+    if missing and not allow_gaps:
         shown = ", ".join(str(directory / f"{prefix}.{n:0{pad}d}.exr") for n in missing[:3])
         more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
         raise FrameIOError(f"missing frame {shown}{more} in sequence {prefix} ({numbers[0]}-{numbers[-1]})")
@@ -165,6 +169,7 @@ def discover(
         pixel_type=_pixel_type(items[0][1]),
         fps=fps,
         first_meta=first_meta,
+        missing=tuple(missing),
     )
 
 
