@@ -340,6 +340,82 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             aovs += [aov_mv.x, aov_mv.y]
         return L, valid, aovs
 
+    # --- deterministic film -------------------------------------------------------------
+
+    def render(
+        self,
+        scene: mi.Scene,
+        sensor: Any = 0,
+        seed: Any = 0,
+        spp: int = 0,
+        develop: bool = True,
+        evaluate: bool = True,
+    ) -> Any:
+        """Render to an image whose bits do not depend on the thread count.
+
+        Mitsuba's film splats every sample into its neighbours with atomic adds, whose
+        order varies with the threads; sums of floats then differ in the last bit. Here a
+        pixel's samples are consecutive lanes, so for each reconstruction-filter offset a
+        `block_sum` adds one pixel's weighted samples in a fixed order, and the image
+        gathers those sums offset by offset, also in a fixed order: no atomics anywhere.
+        Returns [H, W, 4 + AOV channels] (RGBA, alpha = the pixel's coverage).
+        """
+        if isinstance(sensor, int):
+            sensor = scene.sensors()[sensor]
+        film = sensor.film()
+        sampler = sensor.sampler()
+        spp = int(spp) if spp else int(sampler.sample_count())
+        sampler.set_sample_count(spp)
+        spp = int(sampler.sample_count())  # the sampler may round (multijitter)
+        sampler.set_samples_per_wavefront(spp)
+        size = film.crop_size()
+        width, height = int(size[0]), int(size[1])
+        n_px = width * height
+        sampler.seed(seed, n_px * spp)
+
+        # ray generation in Mitsuba's order of sampler dimensions
+        pixel = dr.arange(mi.UInt32, n_px * spp) // spp
+        px = mi.Vector2f(mi.Float(pixel % width), mi.Float(pixel // width))
+        film_pos = px + sampler.next_2d()
+        time = sensor.shutter_open() + sampler.next_1d() * sensor.shutter_open_time()
+        aperture = sampler.next_2d() if sensor.needs_aperture_sample() else mi.Point2f(0.5)
+        ray, ray_weight = sensor.sample_ray_differential(time, 0.0, film_pos / mi.Vector2f(width, height), aperture)
+        L, valid, aovs = self.sample(scene, sampler, ray, None, True)
+        L = L * ray_weight
+        channels = [L[0], L[1], L[2], dr.select(valid, 1.0, 0.0), *aovs]
+        dr.eval(channels, film_pos)
+
+        # reconstruction: every target pixel gathers, offset by offset, the filter-weighted
+        # sums of the samples of the pixel `offset` away from it
+        rfilter = film.rfilter()
+        reach = max(0, int(np.ceil(rfilter.radius() - 0.5)))
+        target = dr.arange(mi.UInt32, n_px)
+        tx, ty = mi.Int32(target % width), mi.Int32(target // width)
+        acc = [mi.Float(dr.zeros(mi.Float, n_px)) for _ in range(len(channels) + 1)]
+        # the filter is separable: its 1-D weights per x and y offset, evaluated once
+        wx = {o: rfilter.eval(px.x + (o + 0.5) - film_pos.x) for o in range(-reach, reach + 1)}
+        wy = {o: rfilter.eval(px.y + (o + 0.5) - film_pos.y) for o in range(-reach, reach + 1)}
+        dr.eval(wx, wy)
+        for oy in range(-reach, reach + 1):
+            for ox in range(-reach, reach + 1):
+                w = wx[ox] * wy[oy]  # the sample's weight for the pixel (ox, oy) from its own
+                sums = [dr.block_sum(c * w, spp) for c in channels] + [dr.block_sum(w, spp)]
+                dr.eval(sums)
+                sx, sy = tx - ox, ty - oy  # the source pixel whose samples land here
+                ok = (sx >= 0) & (sx < width) & (sy >= 0) & (sy < height)
+                src = mi.UInt32(dr.select(ok, sy * width + sx, 0))
+                acc = [a + dr.gather(mi.Float, v, src, ok) for a, v in zip(acc, sums)]
+                dr.eval(acc)
+        weight = acc[-1]
+        inv = dr.select(weight > 0, dr.rcp(weight), 0.0)
+        planes = [a * inv for a in acc[:-1]]
+        # interleave to [H, W, C]: each element written exactly once (no conflicts)
+        n_ch = len(planes)
+        flat = dr.zeros(mi.Float, n_px * n_ch)
+        for c, plane in enumerate(planes):
+            dr.scatter(flat, plane, target * n_ch + c)
+        return mi.TensorXf(flat, shape=(height, width, n_ch))
+
     def aov_names(self) -> list[str]:
         names: list[str] = []
         if "depth" in self.aovs:
