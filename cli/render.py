@@ -46,6 +46,10 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--check", is_flag=True, help="Render nothing: verify every selected frame is complete (exit 3 if not).")
 @click.option("--no-cache", is_flag=True, help="Naive path for comparison: a fresh Mitsuba scene for every frame.")
 @click.option("--deliver", "deliver_spec", help="After the last frame, assemble deliverables: 24p,60i,50i,review,contact.")
+@click.option("--exposure", type=float, default=0.0, show_default=True, help="Deliverables' view transform: exposure in stops.")
+@click.option("--ocio", "ocio_config", help="Deliverables' view transform: an OCIO config file or built-in URI (ocio://cg-config-latest).")
+@click.option("--ocio-display", help="OCIO display (default: the config's default).")
+@click.option("--ocio-view", help="OCIO view (default: the display's default).")
 def render(
     scene: Path,
     output_dir: Path | None,
@@ -70,6 +74,10 @@ def render(
     check: bool,
     no_cache: bool,
     deliver_spec: str | None,
+    exposure: float,
+    ocio_config: str | None,
+    ocio_display: str | None,
+    ocio_view: str | None,
 ) -> None:
     """Render SCENE's frames to OpenEXR files."""
     from motion.pipeline.farm.run import RenderRequest, run_render
@@ -82,6 +90,7 @@ def render(
         render_overrides={"spp": spp, "resolution": _resolution(resolution), "motion_blur": motion_blur, "variant": variant},
         cache=not no_cache,
         deliver=deliver_spec,
+        deliver_view={"exposure": exposure, "ocio_config": ocio_config, "ocio_display": ocio_display, "ocio_view": ocio_view},
         resume=resume,
         overwrite=overwrite,
         shard=shard,

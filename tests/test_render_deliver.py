@@ -41,3 +41,22 @@ def test_render_then_deliver_24p_60i_and_contact_sheet(tmp_path: Path) -> None:
 def test_deliver_refuses_shards(tmp_path: Path) -> None:
     proc = run_motion("render", str(SCENES / "walk-cycle.yaml"), "--shard", "1/2", "--deliver", "24p", "-o", str(tmp_path))
     assert proc.returncode == 2 and "--deliver needs every frame" in proc.stderr
+
+
+def test_unknown_deliverable_fails_before_rendering(tmp_path: Path) -> None:
+    proc = run_motion("render", str(SCENES / "walk-cycle.yaml"), "--deliver", "24p,4k", "-o", str(tmp_path))
+    assert proc.returncode == 2 and "4k" in proc.stderr
+    assert not list(tmp_path.glob("*.exr"))  # nothing was rendered
+
+
+def test_deliver_through_an_ocio_view(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    proc = run_motion(
+        "render", str(SCENES / "walk-cycle.yaml"), "--preset", "ci-smoke", "--frames", "0-1", "--resolution", "32x24",
+        "--deliver", "contact", "--ocio", "ocio://cg-config-latest", "--ocio-view", "Un-tone-mapped", "-o", str(out),
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert (out / "deliver" / "walk-cycle_contact.png").is_file()
+    bad = run_motion("render", str(SCENES / "walk-cycle.yaml"), "--preset", "ci-smoke", "--frames", "0-1", "--resolution", "32x24",
+                     "--deliver", "contact", "--ocio", "ocio://cg-config-latest", "--ocio-view", "No Such View", "-o", str(tmp_path / "o2"))
+    assert bad.returncode == 2 and "No Such View" in bad.stderr and "Traceback" not in bad.stderr

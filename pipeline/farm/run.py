@@ -41,6 +41,7 @@ class RenderRequest:
     render_overrides: dict[str, Any] = field(default_factory=dict)
     cache: bool = True
     deliver: str | None = None
+    deliver_view: dict[str, Any] = field(default_factory=dict)  # exposure / OCIO for the deliverables
     resume: bool = True
     overwrite: bool = False
     shard: str | None = None
@@ -107,6 +108,10 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         raise UsageError("--workers is for the local executor; a Dask cluster (--scheduler) sizes itself")
     if req.deliver and req.shard:
         raise UsageError("--deliver needs every frame: assemble after all shards (docs/ci-sharding.md)")
+    if req.deliver:
+        from ..telecine.deliver import parse_formats
+
+        parse_formats(req.deliver)  # a wrong name fails now, not after the last frame
     preset, _ = load_preset(req.preset) if req.preset else (None, None)
     overrides = overrides_from(preset, {"render": req.render_overrides})
     loaded = load_scene(req.scene, overrides)
@@ -247,5 +252,5 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     if req.deliver:
         from ..telecine.deliver import deliver, parse_formats
 
-        deliver(out_dir, out_dir / "deliver", parse_formats(req.deliver))
+        deliver(out_dir, out_dir / "deliver", parse_formats(req.deliver), **{k: v for k, v in req.deliver_view.items() if v is not None})
     return report
