@@ -147,19 +147,9 @@ class FrameRenderer:
             sampler="multijitter",
             ortho_width=_ortho(fi),
         )
-        for name in self.static_names:
-            obj = next(o for o in scene.objects if o.name == name)
-            if not obj.visible:
-                continue
-            t, q, s = fi.objects[name]
-            for k, shape in enumerate(object_shapes(obj, self.loaded, trs_matrix(t[0], q[0], s[0]), materials)):
-                d[f"{name}__{k}"] = shape
-        for i, light in enumerate(scene.lights):
-            key = light.name or f"light{i}"
-            pose = fi.lights.get(key)
-            m = trs_matrix(pose[0][0], pose[1][0], pose[2][0]) if pose is not None else None
-            scalars = {k: _first(v) for k, v in fi.light_scalars.get(key, {}).items()}
-            d[key.replace(".", "_")] = light_dict(light, self.loaded, m, scalars)
+        static = [o for o in scene.objects if o.name in set(self.static_names)]
+        self._add_shapes(d, static, fi, materials)
+        self._add_lights(d, fi)
         self._scene = mi.load_dict(d)
         self._params = mi.traverse(self._scene)
         # movers: one rest-frame scene each (scale kept in the rest frame)
@@ -194,6 +184,25 @@ class FrameRenderer:
         # route the sensor pose through the same parameter update warm frames use, so the
         # first warm frame replays the cold frame's kernels instead of compiling new ones
         self._update(fi)
+
+    def _add_shapes(self, d: dict[str, Any], objects: Any, fi: FrameInput, materials: dict[str, Any], u: float | None = None) -> None:
+        """The visible `objects`' shapes at the frame time (u None) or at shutter fraction u."""
+        for obj in objects:
+            if not obj.visible:
+                continue
+            t, q, s = fi.objects[obj.name]
+            ot, oq = (t[0], q[0]) if u is None else resample(t[1:], q[1:], u)
+            for k, shape in enumerate(object_shapes(obj, self.loaded, trs_matrix(ot, oq, s[0]), materials)):
+                d[f"{obj.name}__{k}"] = shape
+
+    def _add_lights(self, d: dict[str, Any], fi: FrameInput) -> None:
+        """Every light at the frame's time."""
+        for i, light in enumerate(self.loaded.scene.lights):
+            key = light.name or f"light{i}"
+            pose = fi.lights.get(key)
+            m = trs_matrix(pose[0][0], pose[1][0], pose[2][0]) if pose is not None else None
+            scalars = {k: _first(v) for k, v in fi.light_scalars.get(key, {}).items()}
+            d[key.replace(".", "_")] = light_dict(light, self.loaded, m, scalars)
 
     def _build_group(self, name: str, fi: FrameInput, materials: dict[str, Any]) -> Any:
         from .build import DEFAULT_MATERIAL
@@ -376,19 +385,8 @@ class FrameRenderer:
 
         ct, cq = pose(*fi.camera)
         d["sensor"] = sensor_dict(scene.camera, trs_matrix(ct, cq), float(fi.fov[0]), self.settings.resolution, self.spp, self.settings.filter, ortho_width=_ortho(fi))
-        for obj in scene.objects:
-            if not obj.visible:
-                continue
-            t, q, s = fi.objects[obj.name]
-            ot, oq = pose(t, q)
-            for k, shape in enumerate(object_shapes(obj, self.loaded, trs_matrix(ot, oq, s[0]), materials)):
-                d[f"{obj.name}__{k}"] = shape
-        for i, light in enumerate(scene.lights):
-            key = light.name or f"light{i}"
-            lp = fi.lights.get(key)
-            m = trs_matrix(lp[0][0], lp[1][0], lp[2][0]) if lp is not None else None
-            scalars = {k: _first(v) for k, v in fi.light_scalars.get(key, {}).items()}
-            d[key.replace(".", "_")] = light_dict(light, self.loaded, m, scalars)
+        self._add_shapes(d, scene.objects, fi, materials, u)
+        self._add_lights(d, fi)
         return mi.load_dict(d)
 
     def _render_scalar(self, fi: FrameInput, mode: str, seed: int) -> Any:
