@@ -28,6 +28,7 @@ from .particles import ParticleSamples, Spawns, ballistic, emit
 from ..motion.pose import quat_to_matrix, slerp
 from ..motion.rotation import transform_quat as quat_from_rotation
 from .rigid import inverse_inertia_world, principal_inertia
+from .shapes import BOX, CYLINDER, ShapeSet, find_contacts, resolve_shaped, true_shape_collider
 from .state import BodyProps, Environment, System
 
 if TYPE_CHECKING:
@@ -102,6 +103,7 @@ class Group:
     activate: Callable[["Group", StepContext], None]
     record_stride: int = 1
     record_dtype: type = np.float64
+    shapes: ShapeSet | None = None  # true-shape boxes and cylinders (shapes.py)
 
 
 def _bodies_activate(group: Group, ctx: StepContext) -> None:
@@ -124,11 +126,25 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
         inv_I = inverse_inertia_world(s1.q, np.where(moving[:, None], p.inv_inertia, 0.0))
     bodies = ContactBodies(s0.x, s0.v, s1.x, s1.v, s1.w, inv_I, p.radius, inv_mass, p.restitution, p.friction, p.static_friction)
     v_rest = max(2.0 * g_mag * ctx.dt, 1e-6)
+    shaped = group.shapes.shaped() & moving if group.shapes is not None else np.zeros(system.n, dtype=bool)
+    shaped_idx = np.flatnonzero(shaped)
+    if group.shapes is not None:
+        group.shapes.begin_step()
     for _ in range(iterations):
         found = False
+        if shaped_idx.size and group.colliders:
+            cs = find_contacts(bodies, group.shapes, shaped_idx, s0.q, s1.q, group.colliders)
+            if cs is not None:
+                found = True
+                contact[cs.body] = True
+                out = resolve_shaped(bodies, cs, group.shapes, s1.q, ctx.dt, v_rest, 4 * iterations)
+                if out.shape[1]:
+                    impacts.append(np.stack((ctx.t + out[3] * ctx.dt, out[0], out[1], out[2], *out[4:7]), axis=1))
         for ci, col in enumerate(group.colliders):
             hits = col.sweep(s0.x, s1.x, p.radius)
             hits.hit &= moving
+            if true_shape_collider(col):
+                hits.hit &= ~shaped  # boxes and cylinders: their true shape, above
             if not hits.hit.any():
                 continue
             found = True
@@ -380,12 +396,17 @@ def build_bodies(loaded: "LoadedScene", t_start: float) -> tuple[Group, list[np.
     names = [o.name for o in objs]
     cols: dict[str, list[float] | list[np.ndarray]] = {k: [] for k in ("mass", "inv_mass", "radius", "radius_eq", "area", "cd", "linear", "restitution", "friction", "static_friction", "start", "inertia", "inv_inertia")}
     x, v, q, w, scales = [], [], [], [], []
-    for o in objs:
+    kind, half = np.zeros(n, dtype=np.int64), np.zeros((n, 3))
+    for k_obj, o in enumerate(objs):
         m = o.motion
         dims, radius, volume = _shape_numbers(loaded, o)
         r_eq = (3.0 * max(volume, 1e-12) / (4.0 * math.pi)) ** (1.0 / 3.0)
         inertia = principal_inertia(o.shape if dims else "empty", m.mass, dims)
         rigid = m.body == "rigid" and not m.pinned
+        if o.shape == "cube":
+            kind[k_obj], half[k_obj] = BOX, [dims["sx"] / 2, dims["sy"] / 2, dims["sz"] / 2]
+        elif o.shape == "cylinder":
+            kind[k_obj], half[k_obj] = CYLINDER, [dims["radius"], dims["height"] / 2, dims["radius"]]
         vals = dict(
             mass=m.mass,
             inv_mass=0.0 if m.pinned else 1.0 / m.mass,
@@ -419,7 +440,7 @@ def build_bodies(loaded: "LoadedScene", t_start: float) -> tuple[Group, list[np.
     system.x_ref = x_arr.copy()
     X = system.pack(x_arr, np.asarray(v, dtype=np.float64), np.asarray(q), np.asarray(w, dtype=np.float64))
     pairs = np.triu_indices(n, 1)
-    group = Group(system, X, build_colliders(loaded), (pairs[0], pairs[1]), _bodies_activate)
+    group = Group(system, X, build_colliders(loaded), (pairs[0], pairs[1]), _bodies_activate, shapes=ShapeSet(kind, half))
     return group, scales
 
 
