@@ -20,6 +20,8 @@ Scheme (one step, after the integrator moved every body from (x0, v0) to (x1, v1
    u = v + w x r: the impulse along -u_t is Coulomb (forces.coulomb_friction) with the
    total normal impulse, mu = sqrt(mu_body mu_collider), and effective inverse mass
    k_t = 1/m + t . ((I^-1 (r x t)) x r); it never reverses the slip.
+   Boxes and cylinders use their true shape against plane, box and sphere colliders
+   (shapes.py); this module's bounding-sphere sweep is their broad phase.
 3. Sphere-sphere between bodies: the relative segment against radius r_i + r_j; with
    n from j to i and v_rel = v_i - v_j (end-of-step velocities),
    J = -(1 + eps) v_rel . n / (1/m_i + 1/m_j), applied +J n to i and -J n to j, so
