@@ -130,10 +130,14 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
     shaped_idx = np.flatnonzero(shaped)
     if group.shapes is not None:
         group.shapes.begin_step()
+    seen = None  # shaped bodies' end positions after their last contact pass
     for _ in range(iterations):
         found = False
         if shaped_idx.size and group.colliders:
-            cs = find_contacts(bodies, group.shapes, shaped_idx, s0.q, s1.q, group.colliders)
+            # after the first pass only bodies that something else moved can have new contacts
+            check = shaped_idx if seen is None else shaped_idx[np.any(s1.x[shaped_idx] != seen, axis=1)]
+            cs = find_contacts(bodies, group.shapes, check, s0.q, s1.q, group.colliders) if check.size else None
+            seen = s1.x[shaped_idx].copy()
             if cs is not None:
                 found = True
                 contact[cs.body] = True
