@@ -315,7 +315,7 @@ def build_colliders(loaded: "LoadedScene") -> list[Collider]:
         elif obj.shape == "sphere":
             out.append(SphereCollider(**base, center=origin, radius=obj.radius * float(norms.max())))
         elif obj.shape == "mesh":
-            from .meshes import load_mesh
+            from ..meshes import load_mesh
 
             verts, tris = load_mesh(loaded.asset(obj.file))
             world = verts @ cols.T + origin
@@ -346,7 +346,7 @@ def _shape_numbers(loaded: "LoadedScene", obj: object) -> tuple[dict[str, float]
         r = obj.radius * float(s[:2].max())  # type: ignore[attr-defined]
         return {"radius": r}, r, 0.0
     if shape == "mesh":
-        from .meshes import load_mesh
+        from ..meshes import load_mesh
 
         verts, tris = load_mesh(loaded.asset(obj.file))  # type: ignore[attr-defined]
         verts = verts * s

@@ -1,7 +1,7 @@
 """Deformation: blend shapes (vertex animation between key meshes) and linear blend
 skinning (bones as a frame tree), giving object-space vertices [T, V, 3].
 
-Bind meshes: a `mesh` object's .obj vertices in file order; primitive cubes, cylinders
+Bind meshes: a `mesh` object's .obj/.ply vertices in file order (pipeline/meshes.py); primitive cubes, cylinders
 and rectangles are tessellated by `primitive_mesh` (the renderer uses the same function,
 so vertex order matches). Validation with located errors happens here, at evaluation.
 """
@@ -12,7 +12,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..errors import SceneError
+from ..errors import AssetError, SceneError
+from ..meshes import load_mesh
 from ..scene.motion_schema import BlendShapes, Skinning
 from ..scene.schema import Cube, Cylinder, Mesh, Rectangle
 from .keyframes import MODES, VectorTrack, _catmull_rom_tangents
@@ -22,33 +23,6 @@ if TYPE_CHECKING:
     from ..scene.loader import LoadedScene, Loc
 
 MAX_INFLUENCES = 4
-
-
-def read_obj_vertices(path: Any) -> np.ndarray:
-    """The `v x y z` lines of a Wavefront .obj, in file order: [V, 3]."""
-    rows = []
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        for line in fh:
-            if line.startswith("v "):
-                rows.append([float(x) for x in line.split()[1:4]])
-    return np.array(rows, dtype=np.float64).reshape(-1, 3)
-
-
-def read_obj(path: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices [V, 3] and triangles [F, 3] (polygons fanned) of a Wavefront .obj."""
-    verts, faces = [], []
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        for line in fh:
-            parts = line.split()
-            if not parts:
-                continue
-            if parts[0] == "v":
-                verts.append([float(x) for x in parts[1:4]])
-            elif parts[0] == "f":
-                idx = [int(p.split("/")[0]) for p in parts[1:]]
-                idx = [i - 1 if i > 0 else len(verts) + i for i in idx]
-                faces.extend([idx[0], idx[k], idx[k + 1]] for k in range(1, len(idx) - 1))
-    return np.array(verts, dtype=np.float64).reshape(-1, 3), np.array(faces, dtype=np.int64).reshape(-1, 3)
 
 
 def primitive_mesh(obj: Any, detail: int = 16) -> tuple[np.ndarray, np.ndarray]:
@@ -95,11 +69,9 @@ def _grid_rect(nu: int, nv: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def bind_mesh(loaded: "LoadedScene", obj: Any, detail: int = 16) -> tuple[np.ndarray, np.ndarray]:
-    """The undeformed mesh of an object: its .obj file, or its tessellated primitive."""
+    """The undeformed mesh of an object: its .obj/.ply file, or its tessellated primitive."""
     if isinstance(obj, Mesh):
-        if not obj.file.lower().endswith(".obj"):
-            raise ValueError("deforming meshes are read from .obj files in this build")
-        return read_obj(loaded.asset(obj.file))
+        return load_mesh(loaded.asset(obj.file))
     return primitive_mesh(obj, detail)
 
 
@@ -114,8 +86,8 @@ def blend_shapes(loaded: "LoadedScene", loc: "Loc", deform: BlendShapes, t: np.n
             shapes.append(np.asarray(key.vertices, dtype=np.float64))
         else:
             try:
-                shapes.append(read_obj_vertices(loaded.asset(key.file or "")))
-            except OSError as exc:
+                shapes.append(load_mesh(loaded.asset(key.file or ""))[0])
+            except (OSError, AssetError) as exc:
                 raise SceneError([loaded.source.problem((*loc, "keys", i, "file"), f"cannot read key mesh: {exc}")]) from None
     expect = base_count if base_count is not None else len(shapes[0])
     problems = [
@@ -254,7 +226,7 @@ def deformed_vertices(loaded: "LoadedScene", t: np.ndarray, world: dict[str, Pos
         loc = ("objects", i, "deform")
         try:
             if isinstance(deform, BlendShapes):
-                count = len(read_obj_vertices(loaded.asset(obj.file))) if isinstance(obj, Mesh) else None
+                count = len(load_mesh(loaded.asset(obj.file))[0]) if isinstance(obj, Mesh) else None
                 out[obj.name] = blend_shapes(loaded, loc, deform, t, count)
             else:
                 vertices, _ = bind_mesh(loaded, obj, deform.detail)

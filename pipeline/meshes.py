@@ -1,6 +1,7 @@
-"""Triangle meshes for mesh colliders and mesh bodies: a small .obj / .ply (ascii and
-binary) reader with numpy; polygons are fan-triangulated. Returns vertices [v, 3] and
-triangle indices [t, 3]."""
+"""Triangle meshes from .obj and .ply (ascii and binary) files, read with numpy: for mesh
+colliders and bodies (dynamics) and for bind and key meshes (deformation). Vertices stay
+in file order; polygons are fan-triangulated. Returns vertices [v, 3] and triangle
+indices [t, 3]. (The renderer reads meshes through Mitsuba and its asset cache.)"""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import AssetError
+from .errors import AssetError
 
 _PLY_TYPES = {"char": "i1", "uchar": "u1", "short": "i2", "ushort": "u2", "int": "i4", "uint": "u4", "float": "f4", "double": "f8",
               "int8": "i1", "uint8": "u1", "int16": "i2", "uint16": "u2", "int32": "i4", "uint32": "u4", "float32": "f4", "float64": "f8"}
