@@ -19,6 +19,7 @@ Mitsuba 3 has no animated shapes, so motion is ours (docs/motion-blur.md):
 
 from __future__ import annotations
 
+import os
 from typing import Any, Sequence
 
 import drjit as dr
@@ -342,6 +343,12 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
 
     # --- deterministic film -------------------------------------------------------------
 
+    # At most this many sample lanes in flight per pass: per-sample colour, film position
+    # and filter weights are kept for the film, about 80 bytes a lane (~0.7 GB a pass).
+    # A 1080p frame at 256 spp is 531M lanes: it runs as passes of fewer samples per pixel.
+    # ($MOTION_MAX_LANES overrides it: less memory per worker, more passes.)
+    max_lanes = int(os.environ.get("MOTION_MAX_LANES", 1 << 23))
+
     def render(
         self,
         scene: mi.Scene,
@@ -358,6 +365,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         pixel's samples are consecutive lanes, so for each reconstruction-filter offset a
         `block_sum` adds one pixel's weighted samples in a fixed order, and the image
         gathers those sums offset by offset, also in a fixed order: no atomics anywhere.
+        Large sample counts run as passes (see `max_lanes`), summed in pass order.
         Returns [H, W, 4 + AOV channels] (RGBA, alpha = the pixel's coverage).
         """
         if isinstance(sensor, int):
@@ -365,12 +373,40 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         film = sensor.film()
         sampler = sensor.sampler()
         spp = int(spp) if spp else int(sampler.sample_count())
-        sampler.set_sample_count(spp)
-        spp = int(sampler.sample_count())  # the sampler may round (multijitter)
-        sampler.set_samples_per_wavefront(spp)
         size = film.crop_size()
         width, height = int(size[0]), int(size[1])
         n_px = width * height
+        per_pass = max(1, min(spp, self.max_lanes // max(n_px, 1)))
+        total: list[Any] | None = None
+        done, index = 0, 0
+        while done < spp:
+            count = min(per_pass, spp - done)
+            # pass 0 keeps the frame's seed; later passes derive theirs from it and the pass
+            pass_seed = seed if index == 0 else mi.sample_tea_32(int(seed), index)[0]
+            acc, used = self._render_pass(scene, sensor, sampler, pass_seed, count, width, height)
+            total = acc if total is None else [t + a for t, a in zip(total, acc)]
+            dr.eval(total)
+            done += used
+            index += 1
+        assert total is not None
+        weight = total[-1]
+        inv = dr.select(weight > 0, dr.rcp(weight), 0.0)
+        planes = [a * inv for a in total[:-1]]
+        # interleave to [H, W, C]: each element written exactly once (no conflicts)
+        n_ch = len(planes)
+        target = dr.arange(mi.UInt32, n_px)
+        flat = dr.zeros(mi.Float, n_px * n_ch)
+        for c, plane in enumerate(planes):
+            dr.scatter(flat, plane, target * n_ch + c)
+        return mi.TensorXf(flat, shape=(height, width, n_ch))
+
+    def _render_pass(self, scene: mi.Scene, sensor: Any, sampler: Any, seed: Any, spp: int, width: int, height: int) -> tuple[list[Any], int]:
+        """One pass of `spp` samples per pixel: per-pixel filter-weighted sums of every
+        channel and of the weights (unnormalised), and the sample count actually used."""
+        n_px = width * height
+        sampler.set_sample_count(spp)
+        spp = int(sampler.sample_count())  # the sampler may round (multijitter)
+        sampler.set_samples_per_wavefront(spp)
         sampler.seed(seed, n_px * spp)
 
         # ray generation in Mitsuba's order of sampler dimensions
@@ -387,7 +423,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
 
         # reconstruction: every target pixel gathers, offset by offset, the filter-weighted
         # sums of the samples of the pixel `offset` away from it
-        rfilter = film.rfilter()
+        rfilter = sensor.film().rfilter()
         reach = max(0, int(np.ceil(rfilter.radius() - 0.5)))
         target = dr.arange(mi.UInt32, n_px)
         tx, ty = mi.Int32(target % width), mi.Int32(target // width)
@@ -406,15 +442,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
                 src = mi.UInt32(dr.select(ok, sy * width + sx, 0))
                 acc = [a + dr.gather(mi.Float, v, src, ok) for a, v in zip(acc, sums)]
                 dr.eval(acc)
-        weight = acc[-1]
-        inv = dr.select(weight > 0, dr.rcp(weight), 0.0)
-        planes = [a * inv for a in acc[:-1]]
-        # interleave to [H, W, C]: each element written exactly once (no conflicts)
-        n_ch = len(planes)
-        flat = dr.zeros(mi.Float, n_px * n_ch)
-        for c, plane in enumerate(planes):
-            dr.scatter(flat, plane, target * n_ch + c)
-        return mi.TensorXf(flat, shape=(height, width, n_ch))
+        return acc, spp
 
     def aov_names(self) -> list[str]:
         names: list[str] = []
