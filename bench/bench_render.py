@@ -318,7 +318,7 @@ def main() -> int:
         results["5_memory"] = memory(folder, 30 if args.quick else 100)
         print(json.dumps({"5_memory": results["5_memory"]}, indent=1), flush=True)
         fpm = {}
-        for label, preset, frames in (("ci-smoke", ["--preset", "ci-smoke"], 6 if args.quick else 12), ("preview", ["--preset", "preview"], 4 if args.quick else 10), ("final", ["--preset", "final"], 2)):
+        for label, preset, frames in (("ci-smoke", ["--preset", "ci-smoke"], 6 if args.quick else 12), ("preview", ["--preset", "preview"], 4 if args.quick else 10), ("final", ["--preset", "final"], 1)):
             if args.quick and label == "final":
                 continue
             fpm[label] = fpm_figures(folder, preset, frames, label)
