@@ -61,7 +61,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..motion.pose import quat_mul, quat_normalize, quat_to_matrix
-from .collisions import TOL, BoxCollider, Collider, ContactBodies, PlaneCollider, SphereCollider, _sweep_spheres
+from .collisions import TOL, BoxCollider, Collider, ContactBodies, PlaneCollider, SphereCollider
 
 BOX, CYLINDER = 1, 2
 RIM_SAMPLES = 8

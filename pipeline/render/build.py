@@ -113,31 +113,26 @@ def _diffuse(m: Diffuse, loaded: LoadedScene) -> Dict:
     return {"type": "diffuse", "reflectance": color(m.color, loaded)}
 
 
+def _smooth_or_rough(plugin: str, roughness: float, **params: Any) -> Dict:
+    """Mitsuba's smooth `plugin`, or its GGX `rough<plugin>` when roughness > 0."""
+    if roughness == 0:
+        return {"type": plugin, **params}
+    return {"type": f"rough{plugin}", "alpha": _alpha(roughness), "distribution": "ggx", **params}
+
+
 @_material("plastic")
 def _plastic(m: Plastic, loaded: LoadedScene) -> Dict:
-    d: Dict = {"type": "plastic" if m.roughness == 0 else "roughplastic", "diffuse_reflectance": color(m.color, loaded), "int_ior": m.ior}
-    if m.roughness > 0:
-        d["alpha"] = _alpha(m.roughness)
-        d["distribution"] = "ggx"
-    return d
+    return _smooth_or_rough("plastic", m.roughness, diffuse_reflectance=color(m.color, loaded), int_ior=m.ior)
 
 
 @_material("conductor")
 def _conductor(m: Conductor, loaded: LoadedScene) -> Dict:
-    d: Dict = {"type": "conductor" if m.roughness == 0 else "roughconductor", "material": m.preset, "specular_reflectance": spectrum(m.tint)}
-    if m.roughness > 0:
-        d["alpha"] = _alpha(m.roughness)
-        d["distribution"] = "ggx"
-    return d
+    return _smooth_or_rough("conductor", m.roughness, material=m.preset, specular_reflectance=spectrum(m.tint))
 
 
 @_material("dielectric")
 def _dielectric(m: Dielectric, loaded: LoadedScene) -> Dict:
-    d: Dict = {"type": "dielectric" if m.roughness == 0 else "roughdielectric", "int_ior": m.ior, "specular_transmittance": spectrum(m.tint)}
-    if m.roughness > 0:
-        d["alpha"] = _alpha(m.roughness)
-        d["distribution"] = "ggx"
-    return d
+    return _smooth_or_rough("dielectric", m.roughness, int_ior=m.ior, specular_transmittance=spectrum(m.tint))
 
 
 @_material("principled")
