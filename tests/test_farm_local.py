@@ -51,8 +51,8 @@ def test_sigkill_a_worker_mid_job(tmp_path) -> None:
 def test_frames_failing_everywhere_exit_3_others_finish(tmp_path) -> None:
     out = tmp_path / "out"
     (out / "farm-tiny.0002.exr").mkdir(parents=True)  # frame 2 cannot be written, anywhere
-    # 4 attempts: the worker fails 3 times (max_worker_failures), is excluded and replaced
-    res = motion("render", SCENE, "-o", out, "--frames", "0-4", "--retries", "3", *TINY)
+    # 4 attempts: the (one) worker fails 3 times (max_worker_failures), is excluded and replaced
+    res = motion("render", SCENE, "-o", out, "--frames", "0-4", "--retries", "3", "--workers", "1", *TINY)
     assert res.returncode == 3, res.stderr
     assert "1 of 5 frames failed everywhere" in res.stderr and "frame 2:" in res.stderr
     _valid(out, [0, 1, 3, 4])
