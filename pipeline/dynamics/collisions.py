@@ -85,10 +85,13 @@ class PlaneCollider(Collider):
     half_v: float = np.inf
     disk_radius: float | None = None
 
-    def sweep(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
+    def sweep(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray, side_from: np.ndarray | None = None) -> Hits:
+        """The plane is two-sided: the side of `side_from` (default x0) is the outside,
+        e.g. a body's centre when x0 are points on its surface."""
         sd0 = (x0 - self.point) @ self.normal
         sd1 = (x1 - self.point) @ self.normal
-        side = np.where(sd0 >= 0, 1.0, -1.0)
+        ref = sd0 if side_from is None else (side_from - self.point) @ self.normal
+        side = np.where(ref >= 0, 1.0, -1.0)
         d0 = side * sd0 - r  # surface distance: > 0 apart, < 0 penetrating
         d1 = side * sd1 - r
         # d(s) is linear along the segment: d0 + s (d1 - d0) = 0

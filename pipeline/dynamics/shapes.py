@@ -157,21 +157,11 @@ def point_hits(col: Collider, p0: np.ndarray, p1: np.ndarray, c0: np.ndarray):
     """Swept points p0 -> p1 ([N, 3]) against a collider, radius 0. Returns hit, s,
     normal (towards the body), depth at the end of the step (m, > 0 penetrating)."""
     zero = np.zeros(len(p0))
-    if isinstance(col, PlaneCollider):
-        side = np.where((c0 - col.point) @ col.normal >= 0, 1.0, -1.0)  # the body centre's side
-        d0 = side * ((p0 - col.point) @ col.normal)
-        d1 = side * ((p1 - col.point) @ col.normal)
-        s = np.where(d0 > 0, d0 / np.where(d0 - d1 != 0, d0 - d1, 1.0), 0.0)
-        s = np.clip(s, 0.0, 1.0)
-        at = p0 + s[:, None] * (p1 - p0) - col.point
-        pu, pv = at @ col.u, at @ col.v
-        if col.disk_radius is not None:
-            inside = pu * pu + pv * pv <= col.disk_radius**2
-        else:
-            inside = (np.abs(pu) <= col.half_u) & (np.abs(pv) <= col.half_v)
-        return (d1 < -TOL) & inside, s, side[:, None] * col.normal[None, :], -d1
-    h = col.sweep(p0, p1, zero)
+    # a point on the surface may start behind a (two-sided) plane: the body centre's side
+    # is the outside
+    h = col.sweep(p0, p1, zero, side_from=c0) if isinstance(col, PlaneCollider) else col.sweep(p0, p1, zero)
     at = p0 + h.s[:, None] * (p1 - p0)
+    # depth at the end of the step: the start depth plus the travel into the surface
     depth = h.depth0 + np.einsum("ij,ij->i", h.normal, at - p1)
     return h.hit & (depth > TOL), h.s, h.normal, depth
 
