@@ -28,9 +28,7 @@ from ..frame_output import Frame, read_header, write_frame
 from ..timeline import timecode
 from .cadence import Cadence, Tail, film_rate, output_rate, parse_cadence, plan
 from .fields import FieldOrder, check_field_order, weave_frames
-from .inverse import (
-    CANDIDATES, Detection, cadence_sources, detect, field_differences, recovery_map, stream_differences,
-)
+from .inverse import Detection, detect_pulldown, recovery_map
 from .sequence import Sequence, discover, find_sequences, read_checked
 
 Progress = Callable[[int, int], None]
@@ -260,16 +258,13 @@ def inverse_sequence(
     numbered_by_source = sources is not None
     if sources is None:
         frames = (read_checked(seq, i).rgba for i in range(len(seq)))
-        d = stream_differences(*field_differences(frames), order)
-        candidates = CANDIDATES if pattern is None else (pattern,)
-        detection = detect(d, candidates, tolerance)
+        sources, detection = detect_pulldown(frames, len(seq), order, pattern, tolerance)
         if detection.violations:
             raise FrameIOError(
                 f"{seq.directory}: sequence {seq.prefix} does not follow {detection.cadence.name} "
                 f"pulldown ({detection.violations} fields that should repeat differ); "
                 "give --pattern, or --tolerance for a lossy source"
             )
-        sources = [int(s) for s in cadence_sources(2 * len(seq), detection.cadence, detection.phase)]
     recovered = recovery_map(sources, order)
     if not recovered:
         raise FrameIOError(f"{seq.directory}: no complete film frame in sequence {seq.prefix}")

@@ -149,6 +149,20 @@ def recovery_map(field_sources: Sequence[int], order: FieldOrder) -> list[Recove
     return out
 
 
+def detect_pulldown(
+    frames: Iterable[np.ndarray],
+    count: int,
+    order: FieldOrder,
+    pattern: str | Cadence | None = None,
+    tolerance: float = 0.0,
+) -> tuple[list[int], Detection]:
+    """Detect the cadence (pattern None: among CANDIDATES) of `count` video frames and the
+    source film frame of each of their 2 * count fields. Callers check `violations`."""
+    d = stream_differences(*field_differences(frames), order)
+    found = detect(d, CANDIDATES if pattern is None else (pattern,), tolerance)
+    return [int(s) for s in cadence_sources(2 * count, found.cadence, found.phase)], found
+
+
 def inverse_frames(
     frames: Sequence[np.ndarray],
     order: FieldOrder,
@@ -156,13 +170,10 @@ def inverse_frames(
     tolerance: float = 0.0,
 ) -> tuple[list[np.ndarray], Detection]:
     """In-memory inverse telecine of video frames (each [H, W, ...]); pattern None = detect."""
-    d = stream_differences(*field_differences(frames), order)
-    candidates = CANDIDATES if pattern is None else (pattern,)
-    found = detect(d, candidates, tolerance)
+    sources, found = detect_pulldown(frames, len(frames), order, pattern, tolerance)
     if found.violations:
         raise FrameIOError(
             f"the frames do not follow {found.cadence.name} pulldown: {found.violations} "
             "fields that should repeat differ"
         )
-    sources = cadence_sources(2 * len(frames), found.cadence, found.phase)
     return [weave_frames(frames[r.top_from], frames[r.bottom_from]) for r in recovery_map(sources, order)], found
