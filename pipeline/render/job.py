@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 
-from ..frame_output import is_complete, write_frame
+from ..frame_output import write_frame
 from ..scene.loader import LoadedScene, load_scene
 from ..timeline import timecode
 from .frame_renderer import FrameInput, FrameRenderer, frame_seed
@@ -85,8 +85,6 @@ def expected_meta(job: RenderJob, fi: FrameInput) -> dict[str, Any]:
     return {"frame": fi.frame, "settings_hash": job.settings_hash, "motion_hash": fingerprint([fi])[:16]}
 
 
-def frame_done(job: RenderJob, loaded: LoadedScene, fi: FrameInput) -> bool:
-    return is_complete(frame_path(job, loaded, fi.frame), expected_meta(job, fi))
 
 
 # --- the worker side ----------------------------------------------------------------------
@@ -142,14 +140,10 @@ def render_frames(job: RenderJob, inputs: Sequence[FrameInput]) -> list[FrameRes
 def _render_one(job: RenderJob, fi: FrameInput) -> FrameResult:
     t_setup = time.perf_counter()
     try:
-        renderer, loaded, variant = _renderer(job)
-        if not job.cache:
-            renderer = FrameRenderer(loaded)
+        renderer, loaded, variant = _renderer(job)  # a fresh one every frame without the cache
         extra_setup = time.perf_counter() - t_setup
         rgba, stats = renderer.render(fi)
         aovs = dict(renderer.last_aovs)
-        if not job.cache:
-            del renderer
         out = frame_path(job, loaded, fi.frame)
         t_write = time.perf_counter()
         scene = loaded.scene
