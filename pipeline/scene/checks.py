@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import difflib
 from pathlib import Path
-from typing import TYPE_CHECKING, Iterator
+from typing import TYPE_CHECKING
 
 from ..errors import Problem
 from .motion_schema import KeyframeMotion, ProceduralMotion, TRANSFORM_CHANNELS
-from .schema import Camera, EnvmapLight, Mesh, Scene, Texture
+from .schema import EnvmapLight, Mesh, Scene, Texture
 
 if TYPE_CHECKING:
     from .loader import Loc, SourceMap
@@ -29,9 +29,6 @@ def _suggest(name: str, options: list[str]) -> str:
     return f"; defined: {', '.join(options)}" if options else "; none are defined"
 
 
-def _textures(value: object, loc: "Loc") -> Iterator[tuple["Loc", Texture]]:
-    if isinstance(value, Texture):
-        yield loc, value
 
 
 def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap") -> list[Problem]:
@@ -126,8 +123,6 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap") -> list
         check_channels(("objects", i, "motion"), obj.motion, "object", add)
     for i, light in enumerate(scene.lights):
         check_channels(("lights", i, "motion"), light.motion, "light", add)
-    if isinstance(scene.camera, Camera) and scene.camera.type == "orthographic" and scene.camera.fov != 40.0:
-        pass  # fov is ignored by orthographic cameras; documented, not an error
     problems.extend(expression_problems(scene, source))
     return problems
 

@@ -171,13 +171,6 @@ def _model_at(root: type[BaseModel], loc: Loc) -> type[BaseModel] | None:
     return models[0] if len(models) == 1 else None
 
 
-def _data_at(data: Any, loc: Loc) -> Any:
-    for part in loc:
-        try:
-            data = data[part]
-        except (KeyError, IndexError, TypeError):
-            return None
-    return data
 
 
 def _strip_tags(loc: Loc, data: Any) -> Loc:
