@@ -30,6 +30,24 @@ _COMPRESSION = {
     "none": OpenEXR.NO_COMPRESSION,
 }
 
+def _read_umask() -> int:
+    # os.umask can only be read by setting it; do it once, at import, while no other
+    # thread of ours is creating files
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+_UMASK = _read_umask()
+
+
+def publish(tmp: str | Path, path: str | Path) -> None:
+    """Move a finished temporary file into place atomically, with the permissions a plain
+    `open` would have given it (mkstemp makes 0600 files; outputs are shared on a farm)."""
+    os.chmod(tmp, 0o666 & ~_UMASK)
+    os.replace(tmp, path)
+
+
 # Header attributes written by `write_frame` under our own prefix, so they never collide
 # with standard attribute names.
 META_PREFIX = "motion:"
@@ -136,11 +154,7 @@ def write_frame(
     os.close(fd)
     try:
         OpenEXR.File(header, channels).write(tmp)
-        # mkstemp makes 0600 files; frames are shared across a farm: use the umask
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
+        publish(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

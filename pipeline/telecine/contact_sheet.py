@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UsageError
-from .movie import ViewTransform, _publish
+from ..frame_output import publish
+from .movie import ViewTransform
 from .sequence import Sequence, discover, read_checked
 
 LABEL_ROWS = 18
@@ -124,7 +125,7 @@ def contact_sheet(
     os.close(fd)
     try:
         FigureCanvasAgg(fig).print_png(tmp)
-        _publish(tmp, out_path)
+        publish(tmp, out_path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

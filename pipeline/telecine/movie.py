@@ -27,6 +27,7 @@ from typing import Callable, Iterable, Mapping
 import numpy as np
 
 from ..errors import FrameIOError, UsageError
+from ..frame_output import publish
 from .fields import FieldOrder, check_field_order
 from .sequence import Sequence, discover, read_checked
 
@@ -54,14 +55,6 @@ CONTAINER_FOR_SUFFIX = {".mov": "mov", ".mp4": "mp4", ".m4v": "mp4", ".mkv": "ma
 
 # FFmpeg's AVFieldOrder values (libavcodec/defs.h): what the container's field atom records.
 AV_FIELD_PROGRESSIVE, AV_FIELD_TT, AV_FIELD_BB = 1, 2, 3
-
-
-def _publish(tmp: str | Path, path: Path) -> None:
-    """Rename a finished temporary file into place, with the usual permissions (mkstemp makes 0600)."""
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
-    os.replace(tmp, path)
 
 
 def choose_codec(path: str | Path, codec: str | None = None) -> tuple[Codec, str]:
@@ -299,7 +292,7 @@ def write_movie(
             if progress:
                 progress(i + 1, total)
         encoder.close()
-        _publish(tmp, path)
+        publish(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
