@@ -20,6 +20,8 @@ SCALAR_CHANNELS = {
     "light": ("intensity", "radiance", "irradiance", "scale"),
     "object": (),
 }
+# Channels keyed with exactly one number (lights' channels also take colours).
+NUMBER_CHANNELS = ("fov", "ortho_width")
 
 
 def _suggest(name: str, options: list[str]) -> str:
@@ -144,7 +146,7 @@ def check_channels(loc: "Loc", motion: object, owner: str, add) -> None:  # type
                     add(kloc, f"a '{name}' key needs 'value'")
                 elif name == "translate" and isinstance(key.value, float):
                     add((*kloc, "value"), "a translate key needs [x, y, z] in metres")
-                elif name in SCALAR_CHANNELS[owner] and name not in ("radiance", "irradiance", "intensity", "scale") and not isinstance(key.value, float):
+                elif name in NUMBER_CHANNELS and not isinstance(key.value, float):
                     add((*kloc, "value"), f"'{name}' is a scalar channel; expected one number")
                 if name != "rotate" and key.turns:
                     add((*kloc, "turns"), "turns applies to rotate keys only")
