@@ -254,49 +254,60 @@ def object_shapes(obj: Any, loaded: LoadedScene, world_from_object: np.ndarray, 
 # --- lights -------------------------------------------------------------------------------
 
 
-def light_dict(light: Any, loaded: LoadedScene, world_from_light: np.ndarray | None, scalars: dict[str, float]) -> Dict:
-    """One light at one time. `world_from_light` is the light's animated/parented frame
-    (None or identity for a still light); positions and directions are given in it."""
-    m = np.eye(4) if world_from_light is None else world_from_light
-    intensity = scalars.get("intensity", 1.0)
-    intensity_scale = float(intensity) if not isinstance(intensity, tuple) else 1.0
+# Each light's animatable colour channel (`scalars` key), in the light's own units.
+LIGHT_CHANNEL = {"constant": "radiance", "envmap": "scale", "point": "intensity", "spot": "intensity", "directional": "irradiance"}
+
+
+def light_dict(light: Any, loaded: LoadedScene, world_from_light: np.ndarray | None, scalars: dict[str, Any]) -> Dict:
+    """One light at one time, placed by its frame exactly once.
+
+    `world_from_light` is the light's pose from the motion stage (None = identity): its
+    origin is the light's position and its +Z axis the direction it shines (spot axis,
+    directional travel direction), as in Mitsuba's emitters; the record's `position`,
+    `look_at` and `direction` are already folded into it (motion/evaluate.py). `scalars`
+    holds the light's colour channel at that time (LIGHT_CHANNEL), from its keys or record.
+    """
+    m = np.eye(4) if world_from_light is None else np.asarray(world_from_light, dtype=float)
+    value = scalars.get(LIGHT_CHANNEL[light.type])
     if isinstance(light, ConstantLight):
-        return {"type": "constant", "radiance": _scaled(scalars.get("radiance", light.radiance), intensity_scale)}
+        return {"type": "constant", "radiance": spectrum(light.radiance if value is None else value)}
     if isinstance(light, EnvmapLight):
-        d: Dict = {"type": "envmap", "filename": str(loaded.asset(light.file)), "scale": float(scalars.get("scale", light.scale)) * intensity_scale}
-        d["to_world"] = _xf(m)  # the motion stage folds the envmap's `transform` into its pose
-        return d
+        scale = float(light.scale if value is None else value)
+        return {"type": "envmap", "filename": str(loaded.asset(light.file)), "scale": scale, "to_world": _xf(m)}
+    rigid = _rigid(m)
     if isinstance(light, PointLight):
-        pos = (m @ np.array([*light.position, 1.0]))[:3]
-        return {"type": "point", "position": pos.tolist(), "intensity": _scaled(scalars.get("intensity_rgb", light.intensity), intensity_scale)}
+        return {"type": "point", "to_world": _xf(rigid), "intensity": spectrum(light.intensity if value is None else value)}
     if isinstance(light, SpotLight):
-        pos = (m @ np.array([*light.position, 1.0]))[:3]
-        target = (m @ np.array([*light.look_at, 1.0]))[:3]
-        up = _any_up(target - pos)
-        d = {
-            "type": "spot",
-            "to_world": _mi().ScalarTransform4f().look_at(origin=pos.tolist(), target=target.tolist(), up=up),
-            "intensity": _scaled(light.intensity, intensity_scale),
-            "cutoff_angle": light.cutoff_angle,
-        }
+        d = {"type": "spot", "to_world": _xf(rigid), "intensity": spectrum(light.intensity if value is None else value), "cutoff_angle": light.cutoff_angle}
         if light.beam_width is not None:
             d["beam_width"] = min(light.beam_width, light.cutoff_angle)
         return d
     if isinstance(light, DirectionalLight):
-        direction = m[:3, :3] @ np.asarray(light.direction, float)
-        return {"type": "directional", "direction": direction.tolist(), "irradiance": _scaled(scalars.get("irradiance", light.irradiance), intensity_scale)}
+        return {"type": "directional", "to_world": _xf(rigid), "irradiance": spectrum(light.irradiance if value is None else value)}
     raise RendererError(f"no builder for light type {light.type!r}")
 
 
-def _scaled(value: Any, k: float) -> Any:
-    if isinstance(value, (tuple, list, np.ndarray)):
-        return {"type": "rgb", "value": [float(v) * k for v in value]}
-    return float(value) * k
+def unit_light_dict(light: Any) -> Dict:
+    """A moving point, spot or directional light in its own frame (at the origin, shining
+    along +Z) with unit intensity: the integrator poses it per path and scales its colour."""
+    d: Dict = {"type": light.type, "to_world": _xf(np.eye(4))}
+    d["irradiance" if light.type == "directional" else "intensity"] = 1.0
+    if isinstance(light, SpotLight):
+        d["cutoff_angle"] = light.cutoff_angle
+        if light.beam_width is not None:
+            d["beam_width"] = min(light.beam_width, light.cutoff_angle)
+    return d
 
 
-def _any_up(direction: np.ndarray) -> list[float]:
-    d = direction / (np.linalg.norm(direction) or 1.0)
-    return [0.0, 0.0, 1.0] if abs(d[1]) > 0.99 else [0.0, 1.0, 0.0]
+def _rigid(m: np.ndarray) -> np.ndarray:
+    """The rotation and translation of a pose matrix, without its scale (a light's frame
+    is rigid: a scaled parent moves it but does not stretch its beam)."""
+    r = m[:3, :3]
+    norms = np.linalg.norm(r, axis=0)
+    out = np.eye(4)
+    out[:3, :3] = r / np.where(norms > 0, norms, 1.0)
+    out[:3, 3] = m[:3, 3]
+    return out
 
 
 # --- camera -------------------------------------------------------------------------------

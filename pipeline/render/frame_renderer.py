@@ -22,11 +22,13 @@ from ..motion.pose import quat_mul, quat_rotate, slerp
 from ..scene.loader import LoadedScene
 from ..scene.schema import Empty, Particles
 from .build import (
+    LIGHT_CHANNEL,
     light_dict,
     material_dict,
     object_shapes,
     sensor_dict,
     trs_matrix,
+    unit_light_dict,
 )
 
 
@@ -122,6 +124,16 @@ class FrameRenderer:
             for o in objects
             if o.name not in self.static_names and o.name not in self.slice_names and not isinstance(o, (Empty, Particles)) and o.visible
         ]
+        # lights whose pose can change (their own motion or a moving parent)
+        animated = [
+            (i, light)
+            for i, light in enumerate(loaded.scene.lights)
+            if light.motion.type != "static" or (light.parent is not None and not is_static(loaded, light.parent))
+        ]
+        # moving point, spot and directional lights are posed per path by the integrator
+        # (at the sample's time); animated environment lights are updated per frame
+        self.moving_lights = [(i, light) for i, light in animated if light.type in ("point", "spot", "directional")]
+        self._animated_lights = [(i, light) for i, light in animated if light.type not in ("point", "spot", "directional")]
         self._groups: list[Any] = []
         self.last_aovs: dict[str, np.ndarray] = {}
         dr.set_flag(dr.JitFlag.KernelHistory, True)
@@ -149,7 +161,7 @@ class FrameRenderer:
         )
         static = [o for o in scene.objects if o.name in set(self.static_names)]
         self._add_shapes(d, static, fi, materials)
-        self._add_lights(d, fi)
+        self._add_lights(d, fi, skip={i for i, _ in self.moving_lights})
         self._scene = mi.load_dict(d)
         self._params = mi.traverse(self._scene)
         # movers: one rest-frame scene each (scale kept in the rest frame)
@@ -165,14 +177,9 @@ class FrameRenderer:
             movers.append(mi.load_dict(md))
             self._mover_scale[name] = np.array(s[0])
             self._mover_params[name] = mi.traverse(movers[-1])
-        # lights that move or change (their own motion, or a moving parent): updated per frame
-        self._animated_lights = [
-            (i, light)
-            for i, light in enumerate(scene.lights)
-            if light.motion.type != "static" or (light.parent is not None and not is_static(self.loaded, light.parent))
-        ]
         self._movers = movers
         self._scene.integrator().set_movers(movers, len(fi.fov) - 1)
+        self._scene.integrator().set_lights([(light.type, mi.load_dict(unit_light_dict(light))) for _, light in self.moving_lights])
         w, h = self.settings.resolution
         if scene.camera.type == "orthographic":
             self._scene.integrator().set_projection("orthographic", w / scene.camera.ortho_width, w, h)
@@ -195,12 +202,18 @@ class FrameRenderer:
             for k, shape in enumerate(object_shapes(obj, self.loaded, trs_matrix(ot, oq, s[0]), materials)):
                 d[f"{obj.name}__{k}"] = shape
 
-    def _add_lights(self, d: dict[str, Any], fi: FrameInput) -> None:
-        """Every light at the frame's time."""
+    def _add_lights(self, d: dict[str, Any], fi: FrameInput, u: float | None = None, skip: set[int] = set()) -> None:
+        """Every light (but those in `skip`) at the frame's time (u None) or at shutter
+        fraction u, placed by its baked world_from_light frame."""
         for i, light in enumerate(self.loaded.scene.lights):
+            if i in skip:
+                continue
             key = light.name or f"light{i}"
             pose = fi.lights.get(key)
-            m = trs_matrix(pose[0][0], pose[1][0], pose[2][0]) if pose is not None else None
+            m = None
+            if pose is not None:
+                lt, lq = (pose[0][0], pose[1][0]) if u is None else resample(pose[0][1:], pose[1][1:], u)
+                m = trs_matrix(lt, lq, pose[2][0])
             scalars = {k: _first(v) for k, v in fi.light_scalars.get(key, {}).items()}
             d[key.replace(".", "_")] = light_dict(light, self.loaded, m, scalars)
 
@@ -368,9 +381,30 @@ class FrameRenderer:
         else:
             cam_t, cam_q = ct[1:], cq[1:]
         rel = quat_mul(cam_q, q_frame_inv[None, :])
-        self._scene.integrator().set_frame(mt, mq, cam_t, rel, ct[0], cam_q)
+        lt, lq, rgb = self._moving_light_frame(fi, mode, u_fixed)
+        self._scene.integrator().set_frame(mt, mq, cam_t, rel, ct[0], cam_q, lt, lq, rgb)
         if self._groups:
             self._update_groups(fi, mode, u_fixed)
+
+    def _moving_light_frame(self, fi: FrameInput, mode: str, u_fixed: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The moving lights' world_from_light across the shutter ([L, N, 3], [L, N, 4],
+        as the movers': all at the frame time for `off`, all at u for one sub-frame) and
+        their colours at the frame's time ([L, 3])."""
+        n = len(fi.fov) - 1
+        count = len(self.moving_lights)
+        lt, lq, rgb = np.zeros((count, n, 3)), np.zeros((count, n, 4)), np.zeros((count, 3))
+        for k, (i, light) in enumerate(self.moving_lights):
+            key = light.name or f"light{i}"
+            t, q, _ = fi.lights[key]
+            if mode == "off":
+                lt[k], lq[k] = t[0], q[0]
+            elif u_fixed is not None:
+                lt[k], lq[k] = resample(t[1:], q[1:], u_fixed)
+            else:
+                lt[k], lq[k] = t[1:], q[1:]
+            value = fi.light_scalars.get(key, {}).get(LIGHT_CHANNEL[light.type])
+            rgb[k] = np.asarray(value[0] if value is not None else getattr(light, LIGHT_CHANNEL[light.type]), dtype=float)
+        return lt, lq, rgb
 
     def _full_scene(self, fi: FrameInput, u: float | None) -> Any:
         """The whole scene at one instant (u = shutter fraction, None = the frame time),
@@ -386,7 +420,7 @@ class FrameRenderer:
         ct, cq = pose(*fi.camera)
         d["sensor"] = sensor_dict(scene.camera, trs_matrix(ct, cq), float(fi.fov[0]), self.settings.resolution, self.spp, self.settings.filter, ortho_width=_ortho(fi))
         self._add_shapes(d, scene.objects, fi, materials, u)
-        self._add_lights(d, fi)
+        self._add_lights(d, fi, u)
         return mi.load_dict(d)
 
     def _render_scalar(self, fi: FrameInput, mode: str, seed: int) -> Any:

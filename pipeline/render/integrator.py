@@ -13,6 +13,9 @@ Mitsuba 3 has no animated shapes, so motion is ours (docs/motion-blur.md):
   the nearest hit over all scenes wins; the hit is mapped back to world space.
 * Shadow rays and every bounce of a path reuse the path's u: one path, one time.
 * The camera's motion inside the shutter moves primary rays by C(u) C(frame)^-1.
+* Lights that move (point, spot, directional: `set_lights`) are Mitsuba's own emitters
+  queried in their rest frame at the path's time u, like movers; emitters on movers are
+  sampled in the mover's rest frame too, and combined with BSDF sampling by MIS.
 * Per-frame data (poses) are opaque drjit arrays of a fixed size, so a new frame replays
   the compiled kernels instead of compiling new ones.
 """
@@ -25,6 +28,11 @@ from typing import Any, Sequence
 import drjit as dr
 import mitsuba as mi
 import numpy as np
+
+from ..errors import RendererError
+
+# The blocks of the per-frame data array, in order (see `set_frame`).
+FRAME_BLOCKS = ("mover_t", "mover_q", "camera_t", "camera_rel", "sensor_origin", "camera_q", "light_t", "light_q", "light_rgb")
 
 
 def _mis(a: Any, b: Any) -> Any:
@@ -79,7 +87,9 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         # frames back, their relative order flips and the kernel's input order with it,
         # which alternates between two kernel variants.
         self._frame_data = mi.Float(0.0)
-        self._layout = (0, 0, 0, 0, 0, 0)
+        self._at: dict[str, int] = dict.fromkeys(FRAME_BLOCKS, 0)  # block name -> element offset
+        self.lights: list[tuple[str, Any]] = []  # moving lights: (kind, emitter in its rest frame)
+        self.emissive: list[int] = []  # indices of movers that carry area emitters
 
     # --- per-job and per-frame state --------------------------------------------------
 
@@ -88,6 +98,13 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         baked samples across the shutter."""
         self.movers = list(movers)
         self.n_samples = max(2, int(n_samples))
+        self.emissive = [k for k, m in enumerate(self.movers) if len(m.emitters()) > 0]
+
+    def set_lights(self, lights: Sequence[tuple[str, Any]]) -> None:
+        """The lights that move (fixed for a job): (kind, emitter) with kind `point`, `spot` or
+        `directional` and the emitter built in the light's own frame (at the origin, shining
+        along +Z) with unit intensity; poses and colours come per frame (`set_frame`)."""
+        self.lights = list(lights)
 
     def set_projection(self, kind: str, scale: float, width: int, height: int) -> None:
         """Camera projection for the motion AOV: perspective scale = (W/2) / tan(xfov/2),
@@ -107,20 +124,40 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         camera_rotation_rel: np.ndarray,
         sensor_origin: np.ndarray,
         camera_rotation: np.ndarray | None = None,
+        light_translation: np.ndarray | None = None,
+        light_rotation: np.ndarray | None = None,
+        light_color: np.ndarray | None = None,
     ) -> None:
         """Per-frame poses. mover_*: [M, N, 3|4]; camera_*: [N, 3|4], where the camera
-        rotation is relative to the sensor's (C(u) C(frame)^-1); sensor_origin: [3]."""
-        m = len(self.movers)
-        n = self.n_samples
-        assert mover_translation.shape == (m, n, 3) and mover_rotation.shape == (m, n, 4)
-        assert camera_translation.shape == (n, 3) and camera_rotation_rel.shape == (n, 4)
+        rotation is relative to the sensor's (C(u) C(frame)^-1); sensor_origin: [3];
+        light_*: [L, N, 3|4] world_from_light across the shutter and light_color [L, 3]
+        (the moving lights of `set_lights`, in order)."""
+        m, n, nl = len(self.movers), self.n_samples, len(self.lights)
         if camera_rotation is None:
             camera_rotation = camera_rotation_rel
-        parts = [mover_translation, mover_rotation, camera_translation, camera_rotation_rel, sensor_origin, camera_rotation]
-        flat = [np.asarray(a, dtype=np.float32).ravel() for a in parts]
-        sizes = [len(a) for a in flat]
+        if light_translation is None:
+            light_translation, light_rotation, light_color = np.zeros((0, n, 3)), np.zeros((0, n, 4)), np.zeros((0, 3))
+        blocks = {
+            "mover_t": (mover_translation, (m, n, 3)),
+            "mover_q": (mover_rotation, (m, n, 4)),
+            "camera_t": (camera_translation, (n, 3)),
+            "camera_rel": (camera_rotation_rel, (n, 4)),
+            "sensor_origin": (sensor_origin, (3,)),
+            "camera_q": (camera_rotation, (n, 4)),
+            "light_t": (light_translation, (nl, n, 3)),
+            "light_q": (light_rotation, (nl, n, 4)),
+            "light_rgb": (light_color, (nl, 3)),
+        }
+        flat = []
+        for name in FRAME_BLOCKS:
+            value, shape = blocks[name]
+            value = np.asarray(value, dtype=np.float32)
+            if value.shape != shape:
+                raise RendererError(f"frame data {name!r} has shape {value.shape}, expected {shape}")
+            flat.append(value.ravel())
         # element offsets of each block; the gathers below index in units of 3 or 4 floats
-        self._layout = tuple(int(x) for x in np.cumsum([0, *sizes[:-1]]))  # type: ignore[assignment]
+        offsets = np.cumsum([0, *(len(a) for a in flat[:-1])])
+        self._at = {name: int(o) for name, o in zip(FRAME_BLOCKS, offsets)}
         self._frame_data = mi.Float(np.concatenate(flat))
         # opaque: new values each frame must not become new literals in the kernel
         dr.make_opaque(self._frame_data)
@@ -148,8 +185,13 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
 
     def _mover_poses(self, u: Any, active: Any) -> list[tuple[Any, Any]]:
         i, f = self._segment(u)
-        mt, mq = self._layout[0], self._layout[1]
+        mt, mq = self._at["mover_t"], self._at["mover_q"]
         return [self._pose(mt, mq, k * self.n_samples, i, f, active) for k in range(len(self.movers))]
+
+    def _light_poses(self, u: Any, active: Any) -> list[tuple[Any, Any]]:
+        i, f = self._segment(u)
+        lt, lq = self._at["light_t"], self._at["light_q"]
+        return [self._pose(lt, lq, k * self.n_samples, i, f, active) for k in range(len(self.lights))]
 
     # --- scene queries over the static set and the movers --------------------------------
 
@@ -206,13 +248,70 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             hit |= mover.ray_test(local, active & ~hit)
         return hit
 
+    # --- lights at the path's time ---------------------------------------------------------
+
+    def _moving_light_terms(
+        self,
+        scene: mi.Scene,
+        sampler: mi.Sampler,
+        si: Any,
+        bsdf: Any,
+        ctx: Any,
+        poses: list[tuple[Any, Any]],
+        light_poses: list[tuple[Any, Any]],
+        k_slice: Any,
+        active: Any,
+    ) -> Any:
+        """Direct light at si from the moving lights and the emitters on movers, each posed
+        at the path's time: the reference point goes into the light's (or mover's) rest
+        frame, Mitsuba's own emitter samples a direction there, and it comes back to world
+        space; the shadow ray is tested against every scene at the same time."""
+        L = mi.Spectrum(0.0)
+        # delta lights (point, spot, directional): one deterministic sample each, no MIS
+        for index, (kind, emitter) in enumerate(self.lights):
+            t, q = light_poses[index]
+            it = mi.Interaction3f(si.t, si.time, si.wavelengths, _qrot(_qconj(q), si.p - t), _qrot(_qconj(q), si.n))
+            ds, weight = emitter.sample_direction(it, mi.Point2f(0.5), active)
+            d = _qrot(q, ds.d)
+            shadow = si.spawn_ray(d) if kind == "directional" else si.spawn_ray_to(_qrot(q, ds.p) + t)
+            ok = active & (ds.pdf != 0.0)
+            ok &= ~self._occluded(scene, shadow, poses, ok, k_slice)
+            rgb = self._vec(self._at["light_rgb"], 3, mi.UInt32(index), ok)
+            value = bsdf.eval(ctx, si, si.to_local(d), ok)
+            L += dr.select(ok, value * weight * mi.Spectrum(rgb.x, rgb.y, rgb.z), 0.0)
+        # area emitters on movers: sampled in the mover's rest frame, MIS against BSDF sampling
+        for k in self.emissive:
+            t, q = poses[k]
+            it = mi.Interaction3f(si.t, si.time, si.wavelengths, _qrot(_qconj(q), si.p - t), _qrot(_qconj(q), si.n))
+            ds, weight = self.movers[k].sample_emitter_direction(it, sampler.next_2d(), False, active)
+            d = _qrot(q, ds.d)
+            ok = active & (ds.pdf != 0.0)
+            ok &= ~self._occluded(scene, si.spawn_ray_to(_qrot(q, ds.p) + t), poses, ok, k_slice)
+            value, bsdf_pdf = bsdf.eval_pdf(ctx, si, si.to_local(d), ok)
+            mis = dr.select(ds.delta, 1.0, _mis(ds.pdf, bsdf_pdf))
+            L += dr.select(ok, mis * value * weight, 0.0)
+        return L
+
+    def _mover_emitter_pdf(self, ds: Any, ref: Any, hit_mover: Any, poses: list[tuple[Any, Any]], pdf: Any, active: Any) -> Any:
+        """The solid-angle pdf with which `_moving_light_terms` would have sampled the
+        emitter that a BSDF-sampled ray hit on a mover (in the mover's rest frame)."""
+        for k in self.emissive:
+            t, q = poses[k]
+            qi = _qconj(q)
+            mine = active & (hit_mover == k)
+            # (built field by field: the structs' copy constructors lose fields in drjit 1.5)
+            local = mi.DirectionSample3f(_qrot(qi, ds.p - t), _qrot(qi, ds.n), ds.uv, ds.time, ds.pdf, ds.delta, _qrot(qi, ds.d), ds.dist, ds.emitter)
+            it = mi.Interaction3f(ref.t, ref.time, ref.wavelengths, _qrot(qi, ref.p - t), _qrot(qi, ref.n))
+            pdf = dr.select(mine, self.movers[k].pdf_emitter_direction(it, local, mine), pdf)
+        return pdf
+
     # --- AOVs -----------------------------------------------------------------------------
 
     def _project(self, p: Any, record: int, active: Any) -> Any:
         """Pixel coordinates of world point p seen by the camera at shutter sample `record`."""
         kind, scale, cx, cy = self._projection
-        o = self._vec(self._layout[2], 3, mi.UInt32(record), active)
-        q = self._vec(self._layout[5], 4, mi.UInt32(record), active)
+        o = self._vec(self._at["camera_t"], 3, mi.UInt32(record), active)
+        q = self._vec(self._at["camera_q"], 4, mi.UInt32(record), active)
         local = _qrot(_qconj(q), p - o)  # camera space: +Z forward, +Y up, +X left
         if kind == "orthographic":
             x, y = local.x * scale, local.y * scale
@@ -229,10 +328,10 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             mine = hit_mover == index
             rest = _qrot(_qconj(q), si.p - t)
             r = index * self.n_samples
-            t0 = self._vec(self._layout[0], 3, mi.UInt32(r), active)
-            q0 = self._vec(self._layout[1], 4, mi.UInt32(r), active)
-            t1 = self._vec(self._layout[0], 3, mi.UInt32(r + last), active)
-            q1 = self._vec(self._layout[1], 4, mi.UInt32(r + last), active)
+            t0 = self._vec(self._at["mover_t"], 3, mi.UInt32(r), active)
+            q0 = self._vec(self._at["mover_q"], 4, mi.UInt32(r), active)
+            t1 = self._vec(self._at["mover_t"], 3, mi.UInt32(r + last), active)
+            q1 = self._vec(self._at["mover_q"], 4, mi.UInt32(r + last), active)
             p0 = dr.select(mine, _qrot(q0, rest) + t0, p0)
             p1 = dr.select(mine, _qrot(q1, rest) + t1, p1)
         v = self._project(p1, last, active) - self._project(p0, 0, active)
@@ -252,13 +351,14 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         u = mi.Float(ray.time)  # shutter fraction in [0, 1]
         # camera motion inside the shutter: C(u) C(frame)^-1 applied to the primary ray
         ci, cf = self._segment(u)
-        cam_t, cam_q = self._pose(self._layout[2], self._layout[3], 0, ci, cf, active)
-        cam_origin = self._vec(self._layout[4], 3, mi.UInt32(0), active)
+        cam_t, cam_q = self._pose(self._at["camera_t"], self._at["camera_rel"], 0, ci, cf, active)
+        cam_origin = self._vec(self._at["sensor_origin"], 3, mi.UInt32(0), active)
         ray = mi.Ray3f(ray)
         ray.o = _qrot(cam_q, ray.o - cam_origin) + cam_t
         ray.d = _qrot(cam_q, ray.d)
 
         poses = self._mover_poses(u, active)
+        light_poses = self._light_poses(u, active)
         k_slice = self._slice_of(u)
         bsdf_ctx = mi.BSDFContext()
         L = mi.Spectrum(0.0)
@@ -282,20 +382,21 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
                 first = active & (depth == 0) & si.is_valid()
                 if "depth" in self.aovs:
                     # camera-space depth along the view axis, with the camera at this time
-                    cam_p, cam_r = self._pose(self._layout[2], self._layout[5], 0, ci, cf, first)
+                    cam_p, cam_r = self._pose(self._at["camera_t"], self._at["camera_q"], 0, ci, cf, first)
                     aov_z = dr.select(first, _qrot(_qconj(cam_r), si.p - cam_p).z, aov_z)
                 if "normal" in self.aovs:
                     aov_n = dr.select(first, si.sh_frame.n, aov_n)
                 if "motion" in self.aovs:
                     aov_mv = dr.select(first, self._motion_vector(si, hit_mover, poses, first), aov_mv)
-            # emission reached by BSDF sampling, MIS-weighted against emitter sampling;
-            # emitters on movers are not in the static scene's light list: pdf 0, weight 1
+            # emission reached by BSDF sampling, MIS-weighted against emitter sampling of the
+            # same emitter: the static scene's, or the emissive mover's in its rest frame
             ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
             em_pdf = dr.select(
                 ~prev_bsdf_delta & ~on_mover,
                 scene.pdf_emitter_direction(prev_si, ds, ~prev_bsdf_delta & ~on_mover),
                 0.0,
             )
+            em_pdf = self._mover_emitter_pdf(ds, prev_si, hit_mover, poses, em_pdf, ~prev_bsdf_delta & on_mover)
             mis_bsdf = dr.select(depth == 0, 1.0, _mis(prev_bsdf_pdf, em_pdf))
             L += beta * mis_bsdf * ds.emitter.eval(si, active & (prev_bsdf_pdf > 0))
 
@@ -313,6 +414,9 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, wo, active_em)
             mis_em = dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, bsdf_pdf))
             L += dr.select(active_em, beta * mis_em * bsdf_val * em_weight, 0.0)
+            # moving lights and emitters on movers, each at this path's time u
+            lit = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+            L += beta * self._moving_light_terms(scene, sampler, si, bsdf, bsdf_ctx, poses, light_poses, k_slice, lit)
 
             # BSDF sampling: the next segment of the path
             bs, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(), active_next)
