@@ -92,6 +92,13 @@ CASES: list[tuple[str, str, str, int, str]] = [
         15,
         "unknown channel 'wiggle'",
     ),
+    (
+        "light-channel-of-another-light",
+        BASE + "lights:\n  - {type: point, position: [0, 3, 0], motion: {type: keyframes, channels: {radiance: {keys: [{time: 0, value: 1}]}}}}\n",
+        "lights[0].motion.channels.radiance",
+        13,
+        "unknown channel 'radiance' for a point light",
+    ),
     ("rotation-form", BASE + "    transform: {rotate: {spin: 3}}\n", "objects[0].transform.rotate", 12, "a rotation needs one of"),
     ("quaternion-zero", BASE + "    transform: {rotate: {quaternion: [0, 0, 0, 0]}}\n", "objects[0].transform.rotate.quaternion", 12, "must not be zero"),
     ("spring-unknown-body", BASE + "dynamics: {springs: [{a: ball, b: ghost, stiffness: 10}]}\n", "dynamics.springs[0].a", 12, "not a dynamics body"),

@@ -17,8 +17,13 @@ if TYPE_CHECKING:
 # Scalar channels each kind of owner may animate besides translate/rotate/scale.
 SCALAR_CHANNELS = {
     "camera": ("fov", "ortho_width"),
-    "light": ("intensity", "radiance", "irradiance", "scale"),
     "object": (),
+    # each light's own emission quantity (render/build.py LIGHT_CHANNEL); a keyed value replaces it
+    "point light": ("intensity",),
+    "spot light": ("intensity",),
+    "directional light": ("irradiance",),
+    "constant light": ("radiance",),
+    "envmap light": ("scale",),
 }
 # Channels keyed with exactly one number (lights' channels also take colours).
 NUMBER_CHANNELS = ("fov", "ortho_width")
@@ -124,7 +129,7 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap") -> list
     for i, obj in enumerate(scene.objects):
         check_channels(("objects", i, "motion"), obj.motion, "object", add)
     for i, light in enumerate(scene.lights):
-        check_channels(("lights", i, "motion"), light.motion, "light", add)
+        check_channels(("lights", i, "motion"), light.motion, f"{light.type} light", add)
     problems.extend(expression_problems(scene, source))
     return problems
 

@@ -128,6 +128,10 @@ class PointLight(_Light):
 
 
 class SpotLight(_Light):
+    """Spot light at `position` shining towards `look_at`; intensity in W sr^-1 per channel on
+    its axis; dark beyond `cutoff_angle`, full inside `beam_width` (default 3/4 of the cutoff,
+    as Mitsuba's), a linear falloff in angle between."""
+
     type: Literal["spot"]
     position: Vec3
     look_at: Vec3
@@ -137,7 +141,8 @@ class SpotLight(_Light):
 
 
 class DirectionalLight(_Light):
-    """Distant light (the sun); irradiance in W m^-2 per channel."""
+    """Distant light (the sun); `direction` is where its light travels; irradiance in W m^-2
+    per channel on a surface facing it."""
 
     type: Literal["directional"]
     direction: Vec3
