@@ -32,7 +32,7 @@ import numpy as np
 from ..errors import RendererError
 
 # The blocks of the per-frame data array, in order (see `set_frame`).
-FRAME_BLOCKS = ("mover_t", "mover_q", "camera_t", "camera_rel", "sensor_origin", "camera_q", "light_t", "light_q", "light_rgb")
+FRAME_BLOCKS = ("mover_t", "mover_q", "camera_t", "camera_rel", "sensor_origin", "camera_q", "light_t", "light_q", "light_rgb", "mover_sphere")
 
 
 def _mis(a: Any, b: Any) -> Any:
@@ -53,6 +53,16 @@ def _qrot(q: Any, v: Any) -> Any:
 
 def _qconj(q: Any) -> Any:
     return mi.Vector4f(q.x, -q.y, -q.z, -q.w)
+
+
+def _to_rest(ray: Any, t: Any, q: Any) -> Any:
+    """The ray in the rest frame of a body posed at (t, q): mapped by the inverse rigid
+    transform (lengths, and so ray parameters t, are kept)."""
+    qi = _qconj(q)
+    local = mi.Ray3f(ray)
+    local.o = _qrot(qi, ray.o - t)
+    local.d = _qrot(qi, ray.d)
+    return local
 
 
 def _slerp(q0: Any, q1: Any, f: Any) -> Any:
@@ -131,7 +141,8 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         """Per-frame poses. mover_*: [M, N, 3|4]; camera_*: [N, 3|4], where the camera
         rotation is relative to the sensor's (C(u) C(frame)^-1); sensor_origin: [3];
         light_*: [L, N, 3|4] world_from_light across the shutter and light_color [L, 3]
-        (the moving lights of `set_lights`, in order)."""
+        (the moving lights of `set_lights`, in order). Each mover's bounding sphere in its
+        rest frame (from its scene's box, which follows a per-frame scale) joins them."""
         m, n, nl = len(self.movers), self.n_samples, len(self.lights)
         if camera_rotation is None:
             camera_rotation = camera_rotation_rel
@@ -147,6 +158,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             "light_t": (light_translation, (nl, n, 3)),
             "light_q": (light_rotation, (nl, n, 4)),
             "light_rgb": (light_color, (nl, 3)),
+            "mover_sphere": (_spheres(self.movers), (m, 4)),
         }
         flat = []
         for name in FRAME_BLOCKS:
@@ -188,6 +200,14 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         mt, mq = self._at["mover_t"], self._at["mover_q"]
         return [self._pose(mt, mq, k * self.n_samples, i, f, active) for k in range(len(self.movers))]
 
+    def _mover_spheres(self, poses: list[tuple[Any, Any]], active: Any) -> list[tuple[Any, Any]]:
+        """Each mover's bounding sphere (world centre, squared radius) at the path's time."""
+        out = []
+        for index, (t, q) in enumerate(poses):
+            s = self._vec(self._at["mover_sphere"], 4, mi.UInt32(index), active)
+            out.append((_qrot(q, mi.Vector3f(s.x, s.y, s.z)) + t, dr.square(s.w)))
+        return out
+
     def _light_poses(self, u: Any, active: Any) -> list[tuple[Any, Any]]:
         i, f = self._segment(u)
         lt, lq = self._at["light_t"], self._at["light_q"]
@@ -201,7 +221,20 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         count = len(self.slices[0]) if self.slices else 1
         return mi.UInt32(dr.round(dr.clip(u, 0.0, 1.0) * (count - 1)))
 
-    def _intersect(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[tuple[Any, Any]], active: Any, k: Any = None) -> tuple[Any, Any, Any]:
+    @staticmethod
+    def _may_hit(sphere: tuple[Any, Any], ray: mi.Ray3f, active: Any) -> Any:
+        """Whether the ray meets a mover's bounding sphere (`_mover_spheres`, posed at the
+        path's time): rays that miss it never pay for the mover's traversal."""
+        centre, r2 = sphere
+        oc = ray.o - centre
+        a = dr.squared_norm(ray.d)
+        b = dr.dot(oc, ray.d)
+        disc = dr.square(b) - a * (dr.squared_norm(oc) - r2)
+        root = dr.safe_sqrt(disc)
+        # the segment [0, maxt] meets the sphere: roots (-b -+ root) / a straddle some of it
+        return active & (disc >= 0) & (-b + root >= 0) & (-b - root <= ray.maxt * a)
+
+    def _intersect(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[tuple[Any, Any]], active: Any, k: Any, spheres: list[tuple[Any, Any]]) -> tuple[Any, Any, Any]:
         """Nearest hit over all scenes, in world space; whether it is on a mover or a
         slice; and which mover (len(movers) for none)."""
         si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
@@ -214,13 +247,25 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
                 closer = mine & si_s.is_valid() & (si_s.t < si.t)
                 si = dr.select(closer, si_s, si)
                 on_mover |= closer
+        # movers: a preliminary hit per mover (traversal only, and only for rays that meet
+        # its bounding sphere at their time); the surface interaction of the nearest is
+        # computed once, in its rest frame, and moved to world space
+        nearest = dr.select(si.is_valid(), si.t, dr.inf)
+        best = dr.zeros(mi.PreliminaryIntersection3f)
         for index, (mover, (t, q)) in enumerate(zip(self.movers, poses)):
-            qi = _qconj(q)
-            local = mi.Ray3f(ray)
-            local.o = _qrot(qi, ray.o - t)
-            local.d = _qrot(qi, ray.d)
-            si_m = mover.ray_intersect(local, mi.RayFlags.All, coherent=False, active=active)
-            closer = si_m.is_valid() & (si_m.t < si.t)
+            near = self._may_hit(spheres[index], ray, active)
+            pi = mover.ray_intersect_preliminary(_to_rest(ray, t, q), coherent=False, active=near)
+            closer = active & pi.is_valid() & (pi.t < nearest)
+            best = dr.select(closer, pi, best)
+            nearest = dr.select(closer, pi.t, nearest)
+            hit_mover = dr.select(closer, mi.UInt32(index), hit_mover)
+        if self.movers:
+            won = active & (hit_mover < len(self.movers))
+            t, q = poses[0]
+            for index in range(1, len(self.movers)):
+                t = dr.select(hit_mover == index, poses[index][0], t)
+                q = dr.select(hit_mover == index, poses[index][1], q)
+            si_m = best.compute_surface_interaction(_to_rest(ray, t, q), mi.RayFlags.All, won)
             # back to world space: p, normals and the shading frame rotate; wi is local
             si_m.p = _qrot(q, si_m.p) + t
             si_m.n = _qrot(q, si_m.n)
@@ -229,23 +274,18 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             si_m.sh_frame.n = _qrot(q, si_m.sh_frame.n)
             si_m.dp_du = _qrot(q, si_m.dp_du)
             si_m.dp_dv = _qrot(q, si_m.dp_dv)
-            si_m.wi = dr.select(closer, si_m.wi, si.wi)
-            si = dr.select(closer, si_m, si)
-            on_mover |= closer
-            hit_mover = dr.select(closer, mi.UInt32(index), hit_mover)
+            si = dr.select(won, si_m, si)
+            on_mover |= won
         return si, on_mover, hit_mover
 
-    def _occluded(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[tuple[Any, Any]], active: Any, k: Any = None) -> Any:
+    def _occluded(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[tuple[Any, Any]], active: Any, k: Any, spheres: list[tuple[Any, Any]]) -> Any:
         hit = scene.ray_test(ray, active)
         for group in self.slices:
             for s, slice_scene in enumerate(group):
                 hit |= slice_scene.ray_test(ray, active & ~hit & (k == s))
-        for mover, (t, q) in zip(self.movers, poses):
-            qi = _qconj(q)
-            local = mi.Ray3f(ray)
-            local.o = _qrot(qi, ray.o - t)
-            local.d = _qrot(qi, ray.d)
-            hit |= mover.ray_test(local, active & ~hit)
+        for index, (mover, (t, q)) in enumerate(zip(self.movers, poses)):
+            near = self._may_hit(spheres[index], ray, active & ~hit)
+            hit |= mover.ray_test(_to_rest(ray, t, q), near)
         return hit
 
     # --- lights at the path's time ---------------------------------------------------------
@@ -261,6 +301,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         light_poses: list[tuple[Any, Any]],
         k_slice: Any,
         active: Any,
+        spheres: list[tuple[Any, Any]],
     ) -> Any:
         """Direct light at si from the moving lights and the emitters on movers, each posed
         at the path's time: the reference point goes into the light's (or mover's) rest
@@ -275,7 +316,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             d = _qrot(q, ds.d)
             shadow = si.spawn_ray(d) if kind == "directional" else si.spawn_ray_to(_qrot(q, ds.p) + t)
             ok = active & (ds.pdf != 0.0)
-            ok &= ~self._occluded(scene, shadow, poses, ok, k_slice)
+            ok &= ~self._occluded(scene, shadow, poses, ok, k_slice, spheres)
             rgb = self._vec(self._at["light_rgb"], 3, mi.UInt32(index), ok)
             value = bsdf.eval(ctx, si, si.to_local(d), ok)
             L += dr.select(ok, value * weight * mi.Spectrum(rgb.x, rgb.y, rgb.z), 0.0)
@@ -286,7 +327,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             ds, weight = self.movers[k].sample_emitter_direction(it, sampler.next_2d(), False, active)
             d = _qrot(q, ds.d)
             ok = active & (ds.pdf != 0.0)
-            ok &= ~self._occluded(scene, si.spawn_ray_to(_qrot(q, ds.p) + t), poses, ok, k_slice)
+            ok &= ~self._occluded(scene, si.spawn_ray_to(_qrot(q, ds.p) + t), poses, ok, k_slice, spheres)
             value, bsdf_pdf = bsdf.eval_pdf(ctx, si, si.to_local(d), ok)
             mis = dr.select(ds.delta, 1.0, _mis(ds.pdf, bsdf_pdf))
             L += dr.select(ok, mis * value * weight, 0.0)
@@ -358,6 +399,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         ray.d = _qrot(cam_q, ray.d)
 
         poses = self._mover_poses(u, active)
+        spheres = self._mover_spheres(poses, active)
         light_poses = self._light_poses(u, active)
         k_slice = self._slice_of(u)
         bsdf_ctx = mi.BSDFContext()
@@ -376,7 +418,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         want_aovs = len(self.aovs) > 0  # a Python bool: @dr.syntax keeps it a plain `if`
 
         while dr.hint(active, max_iterations=self.max_depth, label="motion_path"):
-            si, on_mover, hit_mover = self._intersect(scene, ray, poses, active, k_slice)
+            si, on_mover, hit_mover = self._intersect(scene, ray, poses, active, k_slice, spheres)
             valid |= active & si.is_valid() & (depth == 0)
             if want_aovs:
                 first = active & (depth == 0) & si.is_valid()
@@ -408,7 +450,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), False, active_em)
             active_em &= ds_em.pdf != 0.0
             shadow = si.spawn_ray_to(ds_em.p)
-            occluded = self._occluded(scene, shadow, poses, active_em, k_slice)
+            occluded = self._occluded(scene, shadow, poses, active_em, k_slice, spheres)
             active_em &= ~occluded
             wo = si.to_local(ds_em.d)
             bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, wo, active_em)
@@ -416,7 +458,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             L += dr.select(active_em, beta * mis_em * bsdf_val * em_weight, 0.0)
             # moving lights and emitters on movers, each at this path's time u
             lit = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-            L += beta * self._moving_light_terms(scene, sampler, si, bsdf, bsdf_ctx, poses, light_poses, k_slice, lit)
+            L += beta * self._moving_light_terms(scene, sampler, si, bsdf, bsdf_ctx, poses, light_poses, k_slice, lit, spheres)
 
             # BSDF sampling: the next segment of the path
             bs, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(), active_next)
@@ -525,28 +567,58 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         channels = [L[0], L[1], L[2], dr.select(valid, 1.0, 0.0), *aovs]
         dr.eval(channels, film_pos)
 
-        # reconstruction: every target pixel gathers, offset by offset, the filter-weighted
-        # sums of the samples of the pixel `offset` away from it
+        # reconstruction, one row of filter offsets oy at a time: every source pixel sums,
+        # over its own samples in order, the filter-weighted channels it sends to each of
+        # the pixels (ox, oy) away (`_row_sums`: one kernel); then every target pixel
+        # gathers those sums from its neighbours, offset by offset in a fixed order
         rfilter = sensor.film().rfilter()
         reach = max(0, int(np.ceil(rfilter.radius() - 0.5)))
         target = dr.arange(mi.UInt32, n_px)
         tx, ty = mi.Int32(target % width), mi.Int32(target // width)
         acc = [mi.Float(dr.zeros(mi.Float, n_px)) for _ in range(len(channels) + 1)]
-        # the filter is separable: its 1-D weights per x and y offset, evaluated once
-        wx = {o: rfilter.eval(px.x + (o + 0.5) - film_pos.x) for o in range(-reach, reach + 1)}
-        wy = {o: rfilter.eval(px.y + (o + 0.5) - film_pos.y) for o in range(-reach, reach + 1)}
-        dr.eval(wx, wy)
         for oy in range(-reach, reach + 1):
+            sums = self._row_sums(rfilter, channels, film_pos, spp, width, n_px, oy, reach)
+            dr.eval(sums)
             for ox in range(-reach, reach + 1):
-                w = wx[ox] * wy[oy]  # the sample's weight for the pixel (ox, oy) from its own
-                sums = [dr.block_sum(c * w, spp) for c in channels] + [dr.block_sum(w, spp)]
-                dr.eval(sums)
                 sx, sy = tx - ox, ty - oy  # the source pixel whose samples land here
                 ok = (sx >= 0) & (sx < width) & (sy >= 0) & (sy < height)
                 src = mi.UInt32(dr.select(ok, sy * width + sx, 0))
-                acc = [a + dr.gather(mi.Float, v, src, ok) for a, v in zip(acc, sums)]
-                dr.eval(acc)
+                acc = [a + dr.gather(mi.Float, v, src, ok) for a, v in zip(acc, sums[ox + reach])]
+            dr.eval(acc)
         return acc, spp
+
+    @staticmethod
+    def _row_sums(rfilter: Any, channels: list[Any], film_pos: Any, spp: int, width: int, n_px: int, oy: int, reach: int) -> list[list[Any]]:
+        """For every source pixel (one lane each) and each x offset ox in [-reach, reach]:
+        the sums over the pixel's spp samples, in sample order, of channel * w and of w,
+        where w = f(x) f(y) is the separable filter's weight of the sample for the pixel
+        (ox, oy) away. Returns [2 reach + 1][channels + 1] arrays of n_px."""
+        source = dr.arange(mi.UInt32, n_px)
+        sx, sy = mi.Float(source % width), mi.Float(source // width)
+        widths = 2 * reach + 1
+        zero = [mi.Float(dr.zeros(mi.Float, n_px)) for _ in range(widths * (len(channels) + 1))]
+
+        def body(s: Any, *acc: Any) -> tuple[Any, ...]:
+            index = source * spp + s
+            fx = dr.gather(mi.Float, film_pos.x, index)
+            fy = dr.gather(mi.Float, film_pos.y, index)
+            values = [dr.gather(mi.Float, c, index) for c in channels]
+            wy = rfilter.eval(sy + (oy + 0.5) - fy)  # the target pixel's centre minus the sample
+            out = list(acc)
+            k = 0
+            for ox in range(-reach, reach + 1):
+                w = rfilter.eval(sx + (ox + 0.5) - fx) * wy
+                for v in values:
+                    out[k] = out[k] + v * w
+                    k += 1
+                out[k] = out[k] + w
+                k += 1
+            return (s + 1, *out)
+
+        state = dr.while_loop((mi.UInt32(0), *zero), lambda s, *acc: s < spp, body, label="film_row")
+        flat = list(state[1:])
+        per = len(channels) + 1
+        return [flat[i * per : (i + 1) * per] for i in range(widths)]
 
     def aov_names(self) -> list[str]:
         names: list[str] = []
@@ -560,6 +632,18 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
 
     def to_string(self) -> str:
         return f"MotionPathIntegrator[max_depth={self.max_depth}, movers={len(self.movers)}]"
+
+
+def _spheres(movers: Sequence[mi.Scene]) -> np.ndarray:
+    """Each scene's bounding sphere (centre, radius) from its bounding box, padded a little
+    so that a grazing ray is never culled by rounding."""
+    out = np.zeros((len(movers), 4))
+    for k, mover in enumerate(movers):
+        box = mover.bbox()
+        lo, hi = np.array(box.min, dtype=float).ravel(), np.array(box.max, dtype=float).ravel()
+        out[k, :3] = (lo + hi) / 2
+        out[k, 3] = np.linalg.norm(hi - lo) / 2 * (1 + 1e-4) + 1e-5
+    return out
 
 
 _registered = False
