@@ -409,7 +409,11 @@ class FrameRenderer:
     def _full_scene(self, fi: FrameInput, u: float | None) -> Any:
         """The whole scene at one instant (u = shutter fraction, None = the frame time),
         with Mitsuba's `path` integrator: the scalar fallback and its sub-frames."""
-        mi = self._mi
+        return self._mi.load_dict(self._full_scene_dict(fi, u))
+
+    def _full_scene_dict(self, fi: FrameInput, u: float | None) -> dict[str, Any]:
+        """The Mitsuba dictionary of `_full_scene` (rigid objects and lights; particle
+        systems and deforming meshes are the renderer's own geometry and are not in it)."""
         scene = self.loaded.scene
         materials = {m.name: material_dict(m, self.loaded) for m in scene.materials}
         d: dict[str, Any] = {"type": "scene", "integrator": {"type": "path", "max_depth": self.max_depth, "rr_depth": self.settings.rr_depth}}
@@ -421,7 +425,7 @@ class FrameRenderer:
         d["sensor"] = sensor_dict(scene.camera, trs_matrix(ct, cq), float(fi.fov[0]), self.settings.resolution, self.spp, self.settings.filter, ortho_width=_ortho(fi))
         self._add_shapes(d, scene.objects, fi, materials, u)
         self._add_lights(d, fi, u)
-        return mi.load_dict(d)
+        return d
 
     def _render_scalar(self, fi: FrameInput, mode: str, seed: int) -> Any:
         mi = self._mi
