@@ -35,6 +35,9 @@ from typing import Any
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from _light_scenes import light_scene_yaml, reference_scene  # noqa: E402
+
 RES = (160, 120)
 
 
@@ -50,39 +53,12 @@ def cpu_model() -> str:
 
 
 def scene_yaml(lights: str, objects: str = "", spp: int = 16, blur: str = "stochastic") -> str:
-    return f"""
-timeline: {{fps: 24, first: 0, last: 8}}
-camera: {{position: [0, 5, 5], look_at: [0, 0, 0], fov: 50}}
-lights:
-{lights}
-materials:
-  - {{name: floor, type: diffuse, color: 0.5}}
-  - {{name: black, type: diffuse, color: 0.0}}
-objects:
-  - {{name: floor, shape: rectangle, width: 8, height: 8, material: floor, transform: {{rotate: {{euler: [-90, 0, 0]}}}}}}
-{objects}
-render: {{resolution: [{RES[0]}, {RES[1]}], spp: {spp}, max_depth: 3, rr_depth: 3, motion_blur: {blur}}}
-"""
+    return light_scene_yaml(lights, objects, resolution=RES, spp=spp, blur=blur, last=8)
 
 
 def reference(mi: Any, emitters: dict[str, Any], spp: int, shapes: dict[str, Any] | None = None) -> Any:
     """The same floor and camera in Mitsuba's own terms, lit by `emitters`, with `path`."""
-    T = mi.ScalarTransform4f
-    d: dict[str, Any] = {
-        "type": "scene",
-        "integrator": {"type": "path", "max_depth": 3, "rr_depth": 3},
-        "sensor": {
-            "type": "perspective",
-            "fov": 50.0,
-            "to_world": T().look_at(origin=[0, 5, 5], target=[0, 0, 0], up=[0, 1, 0]),
-            "film": {"type": "hdrfilm", "width": RES[0], "height": RES[1], "rfilter": {"type": "gaussian"}, "sample_border": False},
-            "sampler": {"type": "independent", "sample_count": spp},
-        },
-        "floor": {"type": "rectangle", "to_world": T().rotate([1, 0, 0], -90) @ T().scale([4, 4, 1]), "bsdf": {"type": "diffuse", "reflectance": 0.5}},
-    }
-    d.update(shapes or {})
-    d.update(emitters)
-    return mi.load_dict(d)
+    return reference_scene(mi, emitters, shapes, resolution=RES, spp=spp)
 
 
 def load(folder: Path, text: str, name: str) -> Any:

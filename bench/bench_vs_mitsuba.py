@@ -1,6 +1,6 @@
 """Our warm frame against the engine's own speed: Mitsuba's `path` on the same frame (issue 10).
 
-    python bench/bench_vs_mitsuba.py [--quick] [--final] [--frames N] [--json FILE]
+    python bench/bench_vs_mitsuba.py [--quick] [--final] [--presets P,..] [--frames N] [--json FILE]
 
 For each case the bench shot of bench_render.py (100k-triangle terrain, constant +
 directional light, orbiting spheres) is rendered two ways, interleaved frame by frame in
@@ -113,6 +113,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="ci-smoke and preview at 0 and 4 movers only")
     parser.add_argument("--final", action="store_true", help="also the final preset (1080p, 256 spp): minutes per frame")
+    parser.add_argument("--presets", default="ci-smoke,preview", help="comma-separated presets for the mover and particle cases (default: ci-smoke,preview)")
     parser.add_argument("--frames", type=int, default=5, help="warm frames per case (median)")
     parser.add_argument("--json", type=Path, help="also write the figures as JSON")
     args = parser.parse_args()
@@ -120,12 +121,17 @@ def main() -> None:
 
     chosen = variant.activate("auto", quiet=True).variant
     cases: list[tuple[str, int, int, str]] = []
-    for preset in ("ci-smoke", "preview"):
+    presets = [p for p in args.presets.split(",") if p]
+    unknown = [p for p in presets if p not in PRESETS or p == "final"]
+    if unknown:
+        parser.error(f"--presets takes ci-smoke and/or preview (the final preset is --final), not {', '.join(unknown)}")
+    for preset in presets:
         for movers in (0, 4) if args.quick else (0, 1, 4, 16):
             cases.append((preset, movers, 0, "stochastic"))
         if not args.quick:
             cases.append((preset, 0, 10_000, "stochastic"))
-    cases.append(("preview", 4, 0, "off"))
+    if "preview" in presets:
+        cases.append(("preview", 4, 0, "off"))
     if args.final:
         cases += [("final", 0, 0, "stochastic"), ("final", 4, 0, "stochastic")]
     print(f"# ours vs Mitsuba path: {cpu_model()}, {chosen}; median of {args.frames} warm frames, interleaved")
@@ -145,11 +151,12 @@ def main() -> None:
                 f"{b['path_kernel_ms']:.0f} | {b['film_and_other_kernels_ms']:.0f} | {b['python_and_rest_ms']:.0f} |",
                 flush=True,
             )
-    blurred = next(r for r in rows if r["preset"] == "preview" and r["movers"] == 4 and r["blur"] == "stochastic")
-    still = next(r for r in rows if r["preset"] == "preview" and r["movers"] == 4 and r["blur"] == "off")
-    # each side divided by the twin measured beside it, so that machine noise between the
-    # two cases cancels: (ours_blur / path) / (ours_off / path)
-    print(f"\nstochastic motion blur at 4 movers vs blur off (preview, each against its own twin): {blurred['ratio'] / still['ratio']:.2f}x")
+    if "preview" in presets:
+        blurred = next(r for r in rows if r["preset"] == "preview" and r["movers"] == 4 and r["blur"] == "stochastic")
+        still = next(r for r in rows if r["preset"] == "preview" and r["movers"] == 4 and r["blur"] == "off")
+        # each side divided by the twin measured beside it, so that machine noise between the
+        # two cases cancels: (ours_blur / path) / (ours_off / path)
+        print(f"\nstochastic motion blur at 4 movers vs blur off (preview, each against its own twin): {blurred['ratio'] / still['ratio']:.2f}x")
     if args.json:
         args.json.write_text(json.dumps({"cpu": cpu_model(), "variant": chosen, "rows": rows}, indent=2))
 

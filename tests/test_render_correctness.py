@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from _light_scenes import BALL, ball_shape, light_scene_yaml, reference_scene
 from _render_support import activate, load
 
 pytestmark = pytest.mark.render
@@ -91,24 +92,11 @@ def test_agrees_with_mitsuba_path(tmp_path: Path, moving: bool) -> None:
 # cannot agree with itself. Frames 0 (cold) and 2 (warm, one renderer) are both checked.
 
 LIGHT_SPP = 64
-FLOOR_WIDTH = 8.0
+LIGHT_RES = (40, 30)
 
 
 def _light_scene(lights: str, extra_objects: str = "", blur: str = "off") -> str:
-    return f"""
-timeline: {{fps: 24, first: 0, last: 2}}
-camera: {{position: [0, 5, 5], look_at: [0, 0, 0], fov: 50}}
-lights:
-{lights}
-materials:
-  - {{name: floor, type: diffuse, color: 0.5}}
-  - {{name: ball, type: diffuse, color: [0.7, 0.3, 0.2]}}
-objects:
-  - {{name: floor, shape: rectangle, width: {FLOOR_WIDTH}, height: {FLOOR_WIDTH}, material: floor, transform: {{rotate: {{euler: [-90, 0, 0]}}}}}}
-  - {{name: ball, shape: sphere, radius: 0.4, material: ball, transform: {{translate: [0.6, 0.4, 0.3]}}}}
-{extra_objects}
-render: {{resolution: [40, 30], spp: {LIGHT_SPP}, max_depth: 3, rr_depth: 3, motion_blur: {blur}}}
-"""
+    return light_scene_yaml(lights, BALL + extra_objects, resolution=LIGHT_RES, spp=LIGHT_SPP, blur=blur)
 
 
 def _T() -> Any:
@@ -118,34 +106,10 @@ def _T() -> Any:
 
 
 def _reference_scene(emitters: dict[str, Any], shapes: dict[str, Any] | None = None, spp: int = LIGHT_SPP) -> Any:
-    """The test scene in Mitsuba's own terms, lit by `emitters`, rendered by `path`."""
+    """The test scene in Mitsuba's own terms (with the ball), lit by `emitters`."""
     import mitsuba as mi
 
-    d: dict[str, Any] = {
-        "type": "scene",
-        "integrator": {"type": "path", "max_depth": 3, "rr_depth": 3},
-        "sensor": {
-            "type": "perspective",
-            "fov": 50.0,
-            "fov_axis": "x",
-            "to_world": _T().look_at(origin=[0, 5, 5], target=[0, 0, 0], up=[0, 1, 0]),
-            "film": {"type": "hdrfilm", "width": 40, "height": 30, "rfilter": {"type": "gaussian"}, "sample_border": False},
-            "sampler": {"type": "independent", "sample_count": spp},
-        },
-        "floor": {
-            "type": "rectangle",
-            "to_world": _T().rotate([1, 0, 0], -90) @ _T().scale([FLOOR_WIDTH / 2, FLOOR_WIDTH / 2, 1]),
-            "bsdf": {"type": "diffuse", "reflectance": 0.5},
-        },
-        "ball": {
-            "type": "sphere",
-            "to_world": _T().translate([0.6, 0.4, 0.3]) @ _T().scale(0.4),
-            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.3, 0.2]}},
-        },
-    }
-    d.update(shapes or {})
-    d.update(emitters)
-    return mi.load_dict(d)
+    return reference_scene(mi, emitters, {**ball_shape(mi), **(shapes or {})}, resolution=LIGHT_RES, spp=spp)
 
 
 def _spot_to_world(origin: list[float], target: list[float]) -> Any:
@@ -283,11 +247,7 @@ def test_every_light_agrees_with_mitsuba_path(tmp_path: Path, case: str) -> None
     from _render_support import render
 
     lights, extra, reference = LIGHT_CASES[case]
-    if "black" in extra:
-        extra_materials = "  - {name: black, type: diffuse, color: 0.0}\n"
-        text = _light_scene(lights, extra).replace("materials:\n", "materials:\n" + extra_materials)
-    else:
-        text = _light_scene(lights, extra)
+    text = _light_scene(lights, extra)
     if reference == "envmap":
         _env_image(tmp_path)
         env = {"type": "envmap", "filename": str(tmp_path / "sky.exr"), "scale": 1.5, "to_world": _T().rotate([0, 1, 0], 90)}
@@ -389,7 +349,7 @@ def test_small_emissive_mover_converges_like_a_static_light(tmp_path: Path) -> N
     errors = {}
     reference = None
     for label, motion in (("static", ""), ("mover", still)):
-        text = _light_scene("  - {type: constant, radiance: 0.02}", lamp.format(motion=motion)).replace("materials:\n", "materials:\n  - {name: black, type: diffuse, color: 0.0}\n")
+        text = _light_scene("  - {type: constant, radiance: 0.02}", lamp.format(motion=motion))
         text = text.replace(f"spp: {LIGHT_SPP}", f"spp: {spp}")
         loaded = load(tmp_path, text, name=f"{label}.yaml")
         (image,), _, renderer = render(loaded, [0])
