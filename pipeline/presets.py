@@ -9,6 +9,7 @@ preset name too.
 
 from __future__ import annotations
 
+import os
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,7 @@ from typing import Any
 from pydantic import Field, ValidationError
 
 from .errors import Problem, SceneError, UsageError
-from .scene.loader import parse_yaml, problems_from_validation
+from .scene.loader import parse_yaml, problems_from_validation, read_yaml_file
 from .scene.types import Model
 
 
@@ -35,8 +36,9 @@ def preset_names() -> list[str]:
 def load_preset(name: str) -> tuple[Preset, str]:
     """A preset by name (configs/NAME.yaml) or path; returns it and its file name."""
     path = Path(name)
-    if path.suffix in (".yaml", ".yml") and path.is_file():
-        text, file = path.read_text(), str(path)
+    if path.suffix in (".yaml", ".yml") and os.path.lexists(path):
+        # bounded like a scene: a regular file within the size limit (docs/scene-format.md)
+        text, file = read_yaml_file(path, "preset file"), str(path)
     else:
         entry = resources.files("motion.configs") / f"{name}.yaml"
         if name == "farm" or not entry.is_file():

@@ -17,8 +17,10 @@ import re
 from typing import Sequence
 
 from ..errors import UsageError
+from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
 
-_PART = re.compile(r"^(-?\d+)(?:-(-?\d+)(?:x(\d+))?)?$")
+# at most 10 digits per number: frame numbers are bounded (MAX_FRAME_NUMBER) anyway
+_PART = re.compile(r"^(-?\d{1,10})(?:-(-?\d{1,10})(?:x(\d{1,10}))?)?$")
 
 
 def parse_frames(spec: str, first: int | None = None, last: int | None = None) -> list[int]:
@@ -31,7 +33,8 @@ def parse_frames(spec: str, first: int | None = None, last: int | None = None) -
     """
     if not spec or not spec.strip():
         raise UsageError("--frames: empty frame spec; expected e.g. 0-119, 0-119x2 or 1,5,9")
-    frames: set[int] = set()
+    parts: list[range] = []
+    total = 0
     for raw in spec.split(","):
         part = raw.strip().replace(" ", "")
         m = _PART.match(part)
@@ -45,13 +48,22 @@ def parse_frames(spec: str, first: int | None = None, last: int | None = None) -
             raise UsageError(f"--frames: range {part!r} is reversed (write {hi}-{lo})")
         if s < 1:
             raise UsageError(f"--frames: step in {part!r} must be at least 1")
-        frames.update(range(lo, hi + 1, s))
-    out = sorted(frames)
-    if first is not None and last is not None:
-        outside = [f for f in out if f < first or f > last]
-        if outside:
-            raise UsageError(f"--frames: {format_frames(outside)} outside the scene's timeline {first}-{last}")
-    return out
+        if max(abs(lo), abs(hi)) > MAX_FRAME_NUMBER:
+            raise UsageError(f"--frames: {part!r}: frame numbers are limited to +-{MAX_FRAME_NUMBER}")
+        r = range(lo, hi + 1, s)
+        if first is not None and last is not None and (lo < first or r[-1] > last):
+            # name the frames outside without listing a huge range one by one
+            outside = [x for x in (range(lo, min(hi, first - 1) + 1, s), range(max(lo, last + 1), hi + 1, s)) if len(x)]
+            text = ",".join(format_frames(x) if len(x) <= 1000 else f"{x[0]}-{x[-1]}" for x in outside)
+            raise UsageError(f"--frames: {text} outside the scene's timeline {first}-{last}")
+        total += len(r)  # an upper bound on the selection (parts may overlap)
+        if total > MAX_FRAMES:
+            raise UsageError(f"--frames: {spec!r} selects more than {MAX_FRAMES} frames (the limit for one job)")
+        parts.append(r)
+    frames: set[int] = set()
+    for r in parts:
+        frames.update(r)
+    return sorted(frames)
 
 
 def format_frames(frames: Sequence[int]) -> str:
