@@ -76,7 +76,9 @@ def _run(argv: list[str] | None) -> int:
         click.echo("interrupted", err=True)
         return 130
     except click.ClickException as err:
-        err.show()
+        # one line, like every other error (click's usage banner is two more)
+        hint = f" (see 'motion {err.ctx.command_path.split(' ', 1)[1]} --help')" if isinstance(err, click.UsageError) and err.ctx is not None and " " in err.ctx.command_path else ""
+        click.echo(f"error: {err.format_message()}{hint}", err=True)
         return err.exit_code
     except click.exceptions.Exit as err:
         return err.exit_code

@@ -83,6 +83,7 @@ def bake(loaded: "LoadedScene", frames: Sequence[int], simulation: Any | None = 
     if not frames:
         raise UsageError("nothing to bake: the frame list is empty")
     scene = loaded.scene
+    _check_budget(loaded, len(frames))
     n = scene.render.shutter_samples
     exact = [frame_sample_times(loaded, f) for f in frames]
     frame_times = np.array([float(t) for t, _, _ in exact])
@@ -282,6 +283,16 @@ def _read_npz(fh: Any, path: Path) -> dict[str, Any]:
         if isinstance(doc, dict):
             doc["arrays"] = {k: data[k] for k in data.files if k != "meta"}
     return doc
+
+
+def _check_budget(loaded: "LoadedScene", frames: int) -> None:
+    """Refuse a bake whose particle positions would not fit the budget (checks.py)."""
+    from .errors import SceneError
+    from .scene.checks import bake_budget_problems
+
+    problems = bake_budget_problems(loaded.scene, loaded.source, frames)
+    if problems:
+        raise SceneError(problems)
 
 
 # --- guards: every evaluated pose and every loaded bake is finite, rotations are unit ------

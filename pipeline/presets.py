@@ -64,6 +64,13 @@ def load_preset(name: str) -> tuple[Preset, str]:
             except ValidationError as exc:
                 for p in problems_from_validation(exc, section, source.sub((key,)), model):
                     problems.append(Problem(p.file, p.line, p.column, f"{key}.{p.yaml_path}", p.message))
+    out = data.get("output") if isinstance(data, dict) else None
+    if isinstance(out, dict) and isinstance(out.get("filename"), str):
+        from .scene.checks import output_pattern_problem
+
+        reason = output_pattern_problem(out["filename"])
+        if reason is not None:
+            problems.append(source.problem(("output", "filename"), f"output pattern {out['filename']!r}: {reason}"))
     if problems or preset is None:
         raise SceneError(sorted(problems, key=lambda p: (p.line or 0, p.column or 0)))
     return preset, file

@@ -19,8 +19,7 @@ from typing import Sequence
 from ..errors import UsageError
 from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
 
-# at most 10 digits per number: frame numbers are bounded (MAX_FRAME_NUMBER) anyway
-_PART = re.compile(r"^(-?\d{1,10})(?:-(-?\d{1,10})(?:x(\d{1,10}))?)?$")
+_PART = re.compile(r"^(-?\d+)(?:-(-?\d+)(?:x(\d+))?)?$")
 
 
 def parse_frames(spec: str, first: int | None = None, last: int | None = None) -> list[int]:
@@ -33,14 +32,17 @@ def parse_frames(spec: str, first: int | None = None, last: int | None = None) -
     """
     if not spec or not spec.strip():
         raise UsageError("--frames: empty frame spec; expected e.g. 0-119, 0-119x2 or 1,5,9")
+    shown = spec if len(spec) <= 60 else spec[:57] + "..."
     parts: list[range] = []
     total = 0
     for raw in spec.split(","):
         part = raw.strip().replace(" ", "")
         m = _PART.match(part)
         if not m:
-            raise UsageError(f"--frames: cannot read {raw.strip()!r} in {spec!r}; expected N, A-B or A-BxSTEP (e.g. 0-119x2)")
+            raise UsageError(f"--frames: cannot read {raw.strip()[:40]!r} in {shown!r}; expected N, A-B or A-BxSTEP (e.g. 0-119x2)")
         a, b, step = m.group(1), m.group(2), m.group(3)
+        if any(g is not None and len(g.lstrip("-")) > 10 for g in (a, b, step)):
+            raise UsageError(f"--frames: {part[:40]!r}: frame numbers are limited to +-{MAX_FRAME_NUMBER}")
         lo = int(a)
         hi = int(b) if b is not None else lo
         s = int(step) if step is not None else 1
@@ -58,7 +60,7 @@ def parse_frames(spec: str, first: int | None = None, last: int | None = None) -
             raise UsageError(f"--frames: {text} outside the scene's timeline {first}-{last}")
         total += len(r)  # an upper bound on the selection (parts may overlap)
         if total > MAX_FRAMES:
-            raise UsageError(f"--frames: {spec!r} selects more than {MAX_FRAMES} frames (the limit for one job)")
+            raise UsageError(f"--frames: {shown!r} selects more than {MAX_FRAMES} frames (the limit for one job)")
         parts.append(r)
     frames: set[int] = set()
     for r in parts:

@@ -131,6 +131,8 @@ def check_writable(folder: str | Path, what: str) -> None:
     """Before any work: `folder` exists or can be made, and a file can be created in it.
     UsageError (exit 2) naming the folder and the reason otherwise."""
     folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise UsageError(f"{what} {folder}: cannot write there: it is a file, not a folder")
     try:
         folder.mkdir(parents=True, exist_ok=True)
         fd, probe = tempfile.mkstemp(prefix=".motion-probe.", suffix=".tmp", dir=folder)

@@ -97,6 +97,11 @@ def default_workers(frames: int) -> int:
     return max(1, min(cores, frames, MAX_DEFAULT_WORKERS))
 
 
+MAX_WORKERS = 256  # local worker processes
+MAX_THREADS = 1024  # drjit threads per worker
+MAX_RETRIES = 100  # extra attempts per chunk
+
+
 def _preflight(req: RenderRequest, loaded: Any, job: RenderJob, out_dir: Path, frames: list[int]) -> None:
     """Before any work: frames land inside the output folder, the bake fits its budget,
     and the output folder and the report's folder can be written (docs/farm.md)."""
@@ -104,6 +109,9 @@ def _preflight(req: RenderRequest, loaded: Any, job: RenderJob, out_dir: Path, f
     from ..frame_output import inside
     from ..scene.checks import bake_budget_problems
 
+    for flag, value, limit in (("--workers", req.workers, MAX_WORKERS), ("--threads", req.threads, MAX_THREADS), ("--retries", req.retries, MAX_RETRIES)):
+        if value is not None and value > limit:
+            raise UsageError(f"{flag} {value}: the limit is {limit}")
     if frames and not inside(out_dir, frame_path(job, loaded, frames[0])):
         raise OutputConfinementError(f"frame {frames[0]} would be written to {frame_path(job, loaded, frames[0])}, outside the output folder {out_dir}")
     if not req.motion_file:
@@ -182,6 +190,8 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         variant=scene.render.variant,
     )
 
+    _preflight(req, loaded, job, out_dir, frames)
+
     if not req.scheduler:
         # the local workers will make the same choice (cached probe); warn here, once,
         # rather than once per worker. Probing runs in subprocesses: no drjit import here.
@@ -190,8 +200,6 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         choice = variant_mod.choose(scene.render.variant)
         if choice.fallback:
             variant_mod.warn_fallback(choice)
-
-    _preflight(req, loaded, job, out_dir, frames)
 
     # motion: simulated over the whole selection, baked for this shard (or read from file)
     t0 = time.perf_counter()

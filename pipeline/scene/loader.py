@@ -63,7 +63,14 @@ def read_bounded(path: str | Path, limit: int, what: str) -> bytes:
     that grows past the limit while being read is refused too."""
     with open_bounded(path, limit, what) as fh:
         try:
-            data = fh.read(limit + 1)
+            # read what fstat promised (+1 to see growth), then more only while under the
+            # limit: read(n) reserves n bytes up front, so never ask for the whole limit
+            data = fh.read(os.fstat(fh.fileno()).st_size + 1)
+            while data and len(data) <= limit:
+                more = fh.read(min(1 << 20, limit + 1 - len(data)))
+                if not more:
+                    break
+                data += more
         except OSError as exc:
             raise InputFileError(str(path), f"cannot read {what}: {exc.strerror or exc}") from None
     if len(data) > limit:
@@ -254,14 +261,14 @@ def parse_yaml(text: str, file: str) -> tuple[Any, SourceMap]:
             loader.dispose()
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
-        msg = " ".join(str(p) for p in (exc.context, exc.problem) if p)
+        msg = " ".join(" ".join(str(p).split()) for p in (exc.context, exc.problem) if p)
         if "could not determine a constructor" in msg:
             msg = f"tag not allowed (scene files are plain YAML): {exc.problem}"
         line = mark.line + 1 if mark else None
         col = mark.column + 1 if mark else None
         raise SceneError([Problem(file, line, col, "", f"invalid YAML: {msg}")]) from None
     except yaml.YAMLError as exc:
-        raise SceneError([Problem(file, None, None, "", f"invalid YAML: {exc}")]) from None
+        raise SceneError([Problem(file, None, None, "", "invalid YAML: " + " ".join(str(exc).split()))]) from None
     positions: dict[Loc, tuple[int, int]] = {}
     _positions(node, (), positions)
     return data, SourceMap(file, positions)
