@@ -204,21 +204,28 @@ CASES: list[tuple[str, str, dict[str, Any], list[str]]] = [
 ]
 
 DRIVER = r"""
-import contextlib, io, json, os, sys, time, traceback
+import contextlib, io, json, os, signal, sys, time, traceback
 from motion.cli.main import main
-cases = json.loads(sys.stdin.read())
+cases, limit = json.loads(sys.stdin.read())
 out = []
 root = os.getcwd()
+
+def overtime(signum, frame):
+    raise TimeoutError(f"still running after {limit} s")
+
+signal.signal(signal.SIGALRM, overtime)
 for case_id, argv in cases:
     os.chdir(os.path.join(root, case_id))
     err = io.StringIO()
     t0 = time.perf_counter()
     escaped = None
+    signal.alarm(int(limit))  # a case that hangs (a FIFO, an endless loop) fails alone
     try:
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
             code = main(argv)
     except BaseException as exc:
         code, escaped = None, traceback.format_exc()
+    signal.alarm(0)
     out.append({"id": case_id, "code": code, "stderr": err.getvalue(), "seconds": time.perf_counter() - t0, "escaped": escaped})
     os.chdir(root)
 print(json.dumps(out))
@@ -254,13 +261,13 @@ def results(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, set[str], s
     env = {**os.environ, "MOTION_CACHE_DIR": str(root / "cache"), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
     proc = subprocess.run(
         [sys.executable, "-c", DRIVER],
-        input=json.dumps([(c[0], c[3]) for c in CASES]),
+        input=json.dumps([[(c[0], c[3]) for c in CASES], SECONDS_PER_CASE]),
         capture_output=True,
         text=True,
         cwd=work,
         env=env,
         preexec_fn=_limit_memory,
-        timeout=SECONDS_PER_CASE * len(CASES),
+        timeout=SECONDS_PER_CASE * len(CASES) + 60,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     rows = {r["id"]: r for r in json.loads(proc.stdout.strip().splitlines()[-1])}

@@ -64,9 +64,9 @@ def claim_path(frame_file: str | Path) -> Path:
 
 
 def read_claim(path: Path) -> dict | None:
-    """The claim's content; {} if unreadable (being written); None if it is gone."""
+    """The claim's content; {} if empty or unreadable; None if it is gone."""
     try:
-        text = path.read_text()
+        text = path.read_bytes()
     except FileNotFoundError:
         return None
     except OSError:
@@ -74,7 +74,7 @@ def read_claim(path: Path) -> dict | None:
     try:
         data = json.loads(text)
         return data if isinstance(data, dict) else {}
-    except ValueError:
+    except ValueError:  # not JSON, or not UTF-8 (UnicodeDecodeError is a ValueError)
         return {}
 
 
