@@ -5,7 +5,8 @@ a list of click commands. Modules import their heavy dependencies (mitsuba, av,
 matplotlib) inside the command body so `motion --help` stays fast.
 
 `main()` is the one place that turns a `MotionError` into one line per problem on stderr
-and its exit code (2 for bad input, 3 for an incomplete job), never a traceback.
+and its exit code (2 for bad input, 3 for an incomplete job, 4 for a disk fault that
+stopped the job: docs/farm.md), never a traceback.
 """
 
 from __future__ import annotations
