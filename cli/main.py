@@ -5,7 +5,8 @@ a list of click commands. Modules import their heavy dependencies (mitsuba, av,
 matplotlib) inside the command body so `motion --help` stays fast.
 
 `main()` is the one place that turns a `MotionError` into one line per problem on stderr
-and its exit code (2 for bad input, 3 for an incomplete job), never a traceback.
+and its exit code (2 for bad input, 3 for an incomplete job, 4 for a disk fault that
+stopped the job: docs/farm.md), never a traceback.
 """
 
 from __future__ import annotations
@@ -76,7 +77,9 @@ def _run(argv: list[str] | None) -> int:
         click.echo("interrupted", err=True)
         return 130
     except click.ClickException as err:
-        err.show()
+        # one line, like every other error (click's usage banner is two more)
+        hint = f" (see 'motion {err.ctx.command_path.split(' ', 1)[1]} --help')" if isinstance(err, click.UsageError) and err.ctx is not None and " " in err.ctx.command_path else ""
+        click.echo(f"error: {err.format_message()}{hint}", err=True)
         return err.exit_code
     except click.exceptions.Exit as err:
         return err.exit_code

@@ -9,6 +9,8 @@ particles included). What the farm ships to workers is this small, plain data.
 from __future__ import annotations
 
 import json
+import zipfile
+import zlib
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -81,6 +83,7 @@ def bake(loaded: "LoadedScene", frames: Sequence[int], simulation: Any | None = 
     if not frames:
         raise UsageError("nothing to bake: the frame list is empty")
     scene = loaded.scene
+    _check_budget(loaded, len(frames))
     n = scene.render.shutter_samples
     exact = [frame_sample_times(loaded, f) for f in frames]
     frame_times = np.array([float(t) for t, _, _ in exact])
@@ -90,7 +93,9 @@ def bake(loaded: "LoadedScene", frames: Sequence[int], simulation: Any | None = 
         from .dynamics import simulate
 
         simulation = simulate(loaded, t_end=float(everything.max()), t_start=min(0.0, float(everything.min())))
-    motion = evaluate(loaded, everything, simulation)
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is reported by check_motion
+        motion = evaluate(loaded, everything, simulation)
+    check_motion(loaded, motion)
     count = len(frames)
     baked = []
     for k, (f, (_, (t_open, t_close), _)) in enumerate(zip(frames, exact)):
@@ -210,24 +215,159 @@ def _nest(flat: dict[str, np.ndarray]) -> dict[str, Any]:
     return out
 
 
+MAX_BAKE_BYTES = 2 * 1024**3  # a baked-motion file on disk
+MAX_BAKE_ARRAY_BYTES = 4 * 1024**3  # its arrays once decompressed (NPZ)
+
+
 def read_baked(path: str | Path) -> dict[str, Any]:
     """Read a baked file back as plain data: the meta fields plus `frames`, and for NPZ
-    every array by its key (docs/bake-format.md). Raises BakeFileError on a bad file."""
+    every array by its key (docs/bake-format.md). Raises BakeFileError on a bad file.
+
+    Bounded like a scene: a regular file of at most MAX_BAKE_BYTES, JSON nesting and
+    numbers as Python's json module allows (a RecursionError is a bad file), NPZ arrays
+    declared no larger than MAX_BAKE_ARRAY_BYTES in all before any is decompressed, and
+    no pickled objects."""
+    from .errors import InputFileError
+    from .scene.loader import open_bounded
+
     path = Path(path)
     try:
-        if path.suffix.lower() == ".json":
-            doc = json.loads(path.read_text(encoding="utf-8"))
-        else:
-            with np.load(path, allow_pickle=False) as data:
-                doc = json.loads(str(data["meta"]))
-                doc["arrays"] = {k: data[k] for k in data.files if k != "meta"}
-    except (OSError, ValueError, KeyError) as exc:
-        raise BakeFileError(f"{path}: not a readable baked-motion file: {exc}") from None
+        fh = open_bounded(path, MAX_BAKE_BYTES, "baked-motion file")
+    except InputFileError as exc:
+        raise BakeFileError(f"{path}: {exc.reason}") from None
+    try:
+        with fh:
+            head = fh.read(6)
+            fh.seek(0)
+            if not head:
+                raise BakeFileError(f"{path}: the baked-motion file is empty")
+            if path.suffix.lower() == ".json" or head[:1] in (b"{", b"[", b" ", b"\n"):
+                doc = json.loads(fh.read().decode("utf-8"))
+            elif head[:4] == b"PK\x03\x04":
+                doc = _read_npz(fh, path)
+            else:
+                raise BakeFileError(f"{path}: not a baked-motion file (neither JSON nor NPZ)")
+    except BakeFileError:
+        raise
+    except (OSError, ValueError, KeyError, EOFError, RecursionError, TypeError, UnicodeDecodeError, zipfile.BadZipFile, zlib.error) as exc:
+        raise BakeFileError(f"{path}: not a readable baked-motion file: {type(exc).__name__}: {str(exc)[:200]}") from None
+    if not isinstance(doc, dict):
+        raise BakeFileError(f"{path}: not a baked-motion file (the top level is a {type(doc).__name__}, not an object)")
     if doc.get("format") != FORMAT:
-        raise BakeFileError(f"{path}: not a baked-motion file (format {doc.get('format')!r})")
+        raise BakeFileError(f"{path}: not a baked-motion file (format {str(doc.get('format'))[:40]!r})")
     if doc.get("version") != VERSION:
-        raise BakeFileError(f"{path}: baked-motion version {doc.get('version')!r}; this build reads {VERSION}")
+        raise BakeFileError(f"{path}: baked-motion version {str(doc.get('version'))[:40]!r}; this build reads {VERSION}")
     return doc
+
+
+def _read_npz(fh: Any, path: Path) -> dict[str, Any]:
+    """An NPZ bake: each member's header is read first and the declared sizes summed, so a
+    small file cannot decompress into gigabytes; object arrays (pickles) are refused."""
+    with zipfile.ZipFile(fh) as zf:
+        declared = 0
+        for info in zf.infolist():
+            with zf.open(info) as member:
+                version = np.lib.format.read_magic(member)
+                read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+                shape, _, dtype = read_header(member)  # the header only, nothing decompressed
+            if dtype.hasobject:
+                raise BakeFileError(f"{path}: array {info.filename!r} holds Python objects (refused)")
+            declared += int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+            if declared > MAX_BAKE_ARRAY_BYTES:
+                raise BakeFileError(f"{path}: its arrays declare more than {MAX_BAKE_ARRAY_BYTES} bytes (the limit)")
+    fh.seek(0)
+    with np.load(fh, allow_pickle=False) as data:
+        if "meta" not in data.files:
+            raise BakeFileError(f"{path}: not a baked-motion file (no 'meta' array)")
+        doc = json.loads(str(data["meta"]))
+        if isinstance(doc, dict):
+            doc["arrays"] = {k: data[k] for k in data.files if k != "meta"}
+    return doc
+
+
+def _check_budget(loaded: "LoadedScene", frames: int) -> None:
+    """Refuse a bake whose particle positions would not fit the budget (checks.py)."""
+    from .errors import SceneError
+    from .scene.checks import bake_budget_problems
+
+    problems = bake_budget_problems(loaded.scene, loaded.source, frames)
+    if problems:
+        raise SceneError(problems)
+
+
+# --- guards: every evaluated pose and every loaded bake is finite, rotations are unit ------
+
+UNIT_TOLERANCE = 1e-6  # | |q| - 1 | allowed for a rotation quaternion
+
+
+def pose_problem(translation: Any, rotation: Any, scale: Any, times: Any) -> str | None:
+    """What is wrong with one pose track ([T, 3], [T, 4], [T, 3] at `times` [T]), or None:
+    a wrong shape, a non-finite translation, rotation or scale, a rotation that is not a
+    unit quaternion. The message names the channel and the first time at fault."""
+    times = np.asarray(times, dtype=np.float64).reshape(-1)
+    for channel, arr, width in (("translation", translation, 3), ("rotation", rotation, 4), ("scale", scale, 3)):
+        a = np.asarray(arr)
+        if a.dtype.kind not in "fiu" or a.ndim != 2 or a.shape != (times.size, width):
+            return f"{channel} has shape {a.shape} ({a.dtype}), expected [{times.size}, {width}] numbers"
+        bad = ~np.isfinite(a.astype(np.float64)).all(axis=1)
+        if bad.any():
+            k = int(np.argmax(bad))
+            return f"{channel} is not finite at t = {times[k]:.6g} s ({', '.join(f'{v:g}' for v in a[k])})"
+    norm = np.linalg.norm(np.asarray(rotation, dtype=np.float64), axis=1)
+    off = np.abs(norm - 1.0) > UNIT_TOLERANCE
+    if off.any():
+        k = int(np.argmax(off))
+        return f"rotation is not a unit quaternion at t = {times[k]:.6g} s (|q| = {norm[k]:.6g})"
+    return None
+
+
+def scalar_problem(name: str, arr: Any, times: Any) -> str | None:
+    """A scalar or colour channel ([T] or [T, C]) that is not finite, or None."""
+    times = np.asarray(times, dtype=np.float64).reshape(-1)
+    a = np.asarray(arr)
+    if a.dtype.kind not in "fiu" or a.ndim not in (1, 2) or a.shape[0] != times.size:
+        return f"{name} has shape {a.shape} ({a.dtype}), expected [{times.size}] or [{times.size}, C] numbers"
+    bad = ~np.isfinite(a.astype(np.float64).reshape(times.size, -1)).all(axis=1)
+    if bad.any():
+        return f"{name} is not finite at t = {times[int(np.argmax(bad))]:.6g} s"
+    return None
+
+
+def check_motion(loaded: "LoadedScene", motion: "SceneMotion") -> None:
+    """Refuse evaluated motion with a non-finite value or a non-unit rotation (an
+    overflowing expression or generator would otherwise make an object vanish): SceneError
+    at the owner's `motion` block, naming the object, the channel and the time."""
+    from .errors import SceneError
+
+    scene = loaded.scene
+    times = motion.times
+    owners: list[tuple[tuple[Any, ...], str, Any]] = [(("camera", "motion"), "camera", motion.camera)]
+    index = {o.name: i for i, o in enumerate(scene.objects)}
+    owners += [(("objects", index.get(n, 0), "motion"), f"object '{n}'", p) for n, p in motion.objects.items()]
+    light_index = {(light.name or f"light{i}"): i for i, light in enumerate(scene.lights)}
+    owners += [(("lights", light_index.get(n, 0), "motion"), f"light '{n}'", p) for n, p in motion.lights.items()]
+    problems = []
+    for loc, who, pose in owners:
+        why = pose_problem(*pose, times)
+        if why is not None:
+            problems.append(loaded.source.problem(loc, f"{who}: {why}"))
+    scalars = [(("camera", "motion"), "camera", name, arr) for name, arr in motion.camera_scalars.items()]
+    scalars += [(("lights", light_index.get(n, 0), "motion"), f"light '{n}'", c, arr) for n, d in motion.light_scalars.items() for c, arr in d.items()]
+    for loc, who, name, arr in scalars:
+        why = scalar_problem(name, arr, times)
+        if why is not None:
+            problems.append(loaded.source.problem(loc, f"{who}: {why}"))
+    for name, verts in motion.vertices.items():
+        why = scalar_problem("vertices", np.asarray(verts).reshape(len(times), -1), times)
+        if why is not None:
+            problems.append(loaded.source.problem(("objects", index.get(name, 0), "deform"), f"object '{name}': {why}"))
+    for name, ps in motion.particles.items():
+        pos = np.asarray(ps.positions)
+        if pos.size and not np.isfinite(pos).all():
+            k = int(np.argmax(~np.isfinite(pos.reshape(len(times), -1)).all(axis=1)))
+            problems.append(loaded.source.problem(("objects", index.get(name, 0), "emitter"), f"particles '{name}': positions are not finite at t = {times[k]:.6g} s"))
+    if problems:
+        raise SceneError(problems)
 
 
 def summary(baked: BakedMotion) -> dict[str, Any]:

@@ -75,6 +75,30 @@ class FrameIOError(MotionError):
     """An EXR frame is missing, truncated, unreadable or inconsistent with its sequence."""
 
 
+class InputFileError(MotionError):
+    """An input file (scene, preset, baked motion, asset) is not a regular file within the
+    size limit, or cannot be read at all. Callers usually re-raise it as their own error."""
+
+    def __init__(self, file: str, reason: str) -> None:
+        self.file = file
+        self.reason = reason
+        super().__init__(f"{file}: {reason}")
+
+
+class OutputConfinementError(MotionError):
+    """A path the job would write (a frame, a claim) lies outside the output folder."""
+
+
+class DiskFaultError(MotionError):
+    """The disk refused a write (full, read-only, permission denied) while a job ran.
+
+    The job stops at once: finished frames stay, no temporary or empty file and no claim
+    of ours is left behind, no worker is blamed, and the report is written wherever it
+    can be. Exit code 4 (docs/farm.md, "Disk faults")."""
+
+    exit_code = 4
+
+
 class IncompleteJobError(MotionError):
     """Some frames failed everywhere; the others finished. Exit code 3."""
 

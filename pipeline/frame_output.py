@@ -7,6 +7,7 @@ or absent; never half-written, whatever kills the process.
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from dataclasses import dataclass, field
@@ -17,7 +18,7 @@ from typing import Any, Literal, Mapping
 import numpy as np
 import OpenEXR
 
-from .errors import FrameIOError
+from .errors import DiskFaultError, FrameIOError
 
 PixelType = Literal["half", "float"]
 Compression = Literal["zip", "zips", "piz", "zstd", "none"]
@@ -39,6 +40,68 @@ def _read_umask() -> int:
 
 
 _UMASK = _read_umask()
+
+
+# Errors that mean "this disk will not take our writes" (full, over quota, read-only, not
+# ours): a job stops on them at once instead of retrying elsewhere (docs/farm.md).
+DISK_FAULT_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG)
+
+
+def disk_fault_errno(exc: BaseException) -> int | None:
+    """The errno of a disk fault, or None. OpenEXR reports write errors as RuntimeError
+    with the system's message ('... No space left on device.'), so that is read too."""
+    if isinstance(exc, DiskFaultError):
+        return getattr(exc, "errno", None) or errno.EIO
+    if isinstance(exc, OSError) and exc.errno in DISK_FAULT_ERRNOS:
+        return exc.errno
+    if isinstance(exc, RuntimeError):
+        text = str(exc)
+        for code in DISK_FAULT_ERRNOS:
+            if os.strerror(code) in text:
+                return code
+    return None
+
+
+def disk_fault(exc: BaseException, doing: str, path: str | Path) -> DiskFaultError | None:
+    """A DiskFaultError (one line: what failed, where, why) for a disk fault, else None."""
+    code = disk_fault_errno(exc)
+    if code is None:
+        return None
+    if isinstance(exc, DiskFaultError):
+        return exc
+    err = DiskFaultError(f"disk fault: {os.strerror(code)} ({errno.errorcode.get(code, code)}) {doing} {path}")
+    err.errno = code  # type: ignore[attr-defined]
+    return err
+
+
+def _unlink_quietly(path: str | Path) -> None:
+    try:
+        os.unlink(path)
+    except OSError:
+        pass  # gone already, or the disk is read-only now: the next run's cleanup removes it
+
+
+def write_atomic(path: str | Path, data: bytes, doing: str = "writing") -> Path:
+    """Write `data` to `path` through a temporary file in the same folder and a rename:
+    a reader sees the old file or the whole new one. On any failure the temporary file is
+    removed (no zero-byte or partial file is left); a disk fault raises DiskFaultError."""
+    path = Path(path)
+    tmp = None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        publish(tmp, path)
+        tmp = None
+    except BaseException as exc:
+        if tmp is not None:
+            _unlink_quietly(tmp)
+        fault = disk_fault(exc, doing, path)
+        if fault is not None:
+            raise fault from None
+        raise
+    return path
 
 
 def publish(tmp: str | Path, path: str | Path) -> None:
@@ -149,16 +212,60 @@ def write_frame(
     for key, value in (meta or {}).items():
         header[META_PREFIX + key] = _header_value(value)
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
+    tmp = None
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        os.close(fd)
         OpenEXR.File(header, channels).write(tmp)
+        _verify_written(tmp, path)
         publish(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+    except BaseException as exc:
+        if tmp is not None:
+            _unlink_quietly(tmp)
+        fault = disk_fault(exc, "writing frame", path)
+        if fault is not None:
+            raise fault from None
         raise
     return path
+
+
+def _verify_written(tmp: str, path: Path) -> None:
+    """Read the temporary file back whole before it is renamed into place.
+
+    OpenEXR does not always report a failed write (a full tmpfs gave a zero-byte file and
+    no error), so a frame is published only once it decodes; a file that does not is the
+    disk losing our write: a DiskFaultError (ENOSPC when the file system is full)."""
+    try:
+        size = os.stat(tmp).st_size
+        if size > 0:
+            with OpenEXR.File(tmp) as f:
+                for ch in f.channels().values():
+                    np.asarray(ch.pixels)
+            return
+    except OSError as exc:
+        fault = disk_fault(exc, "writing frame", path)
+        if fault is not None:
+            raise fault from None
+    except Exception:  # the bindings raise RuntimeError for a short or corrupt file
+        pass
+    code = errno.EIO
+    try:
+        st = os.statvfs(os.path.dirname(tmp) or ".")
+        if st.f_bavail == 0 or st.f_favail == 0:
+            code = errno.ENOSPC
+    except OSError:
+        pass
+    err = DiskFaultError(f"disk fault: {os.strerror(code)} ({errno.errorcode[code]}) writing frame {path} (the written file did not read back whole)")
+    err.errno = code  # type: ignore[attr-defined]
+    raise err
+
+
+def inside(folder: str | Path, path: str | Path) -> bool:
+    """Whether `path` lies inside `folder` (lexically, after normalising `..`)."""
+    base = os.path.normpath(os.path.abspath(folder))
+    target = os.path.normpath(os.path.abspath(path))
+    return target.startswith(base.rstrip(os.sep) + os.sep)
 
 
 def read_header(path: str | Path) -> dict[str, Any]:

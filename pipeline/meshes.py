@@ -1,30 +1,72 @@
 """Triangle meshes from .obj and .ply (ascii and binary) files, read with numpy: for mesh
-colliders and bodies (dynamics) and for bind and key meshes (deformation). Vertices stay
-in file order; polygons are fan-triangulated. Returns vertices [v, 3] and triangle
-indices [t, 3]. (The renderer reads meshes through Mitsuba and its asset cache.)"""
+colliders and bodies (dynamics), for bind and key meshes (deformation), and for the
+validation stage, which opens every mesh a scene names before any task starts.
+Vertices stay in file order; polygons are fan-triangulated. Returns vertices [v, 3] and
+triangle indices [t, 3]. (The renderer reads meshes through Mitsuba and its asset cache.)
+
+Reading is strict, so that a mesh that would fail (or render wrong) in a worker fails
+here instead, with the line or element at fault: at least one vertex and one face, finite
+coordinates, indices inside the vertex list, and, for PLY, declared element counts that
+match the bytes of the file (a truncated file is refused). The file must be a regular
+file of at most MAX_MESH_BYTES.
+"""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 
-from .errors import AssetError
+from .errors import AssetError, InputFileError
+
+MAX_MESH_BYTES = 2 * 1024**3  # one mesh file
+MAX_POLYGON = 256  # vertices of one face
 
 _PLY_TYPES = {"char": "i1", "uchar": "u1", "short": "i2", "ushort": "u2", "int": "i4", "uint": "u4", "float": "f4", "double": "f8",
               "int8": "i1", "uint8": "u1", "int16": "i2", "uint16": "u2", "int32": "i4", "uint32": "u4", "float32": "f4", "float64": "f8"}
 
 
+class MeshFormatError(ValueError):
+    """What is wrong with a mesh file, and where (line or element)."""
+
+
 def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """(vertices, triangles) of an .obj or .ply file; AssetError if unreadable."""
+    """(vertices, triangles) of an .obj or .ply file; AssetError with the reason if the file
+    is unreadable, malformed, truncated, or has non-finite vertices or bad indices."""
+    from .scene.loader import read_bounded
+
+    path = Path(path)
+    try:
+        data = read_bounded(path, MAX_MESH_BYTES, "mesh file")
+    except InputFileError as exc:
+        raise AssetError(f"{path}: {exc.reason}") from None
     try:
         if path.suffix.lower() == ".obj":
-            return _load_obj(path)
-        return _load_ply(path)
-    except AssetError:
-        raise
-    except (OSError, ValueError, IndexError, KeyError) as exc:
+            verts, tris = _load_obj(data)
+        else:
+            verts, tris = _load_ply(data)
+        _check(verts, tris)
+    except MeshFormatError as exc:
+        raise AssetError(f"{path}: {exc}") from None
+    except (ValueError, IndexError, KeyError, OverflowError, MemoryError) as exc:
         raise AssetError(f"{path}: cannot read mesh: {exc}") from None
+    return verts, tris
+
+
+def _check(verts: np.ndarray, tris: np.ndarray) -> None:
+    if len(verts) == 0:
+        raise MeshFormatError("the mesh has no vertices")
+    if len(tris) == 0:
+        raise MeshFormatError("the mesh has no faces")
+    bad = ~np.isfinite(verts).all(axis=1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise MeshFormatError(f"vertex {i} is not finite ({', '.join(f'{c:g}' for c in verts[i])})")
+    out = (tris < 0) | (tris >= len(verts))
+    if out.any():
+        t = int(np.argmax(out.any(axis=1)))
+        raise MeshFormatError(f"face {t} refers to vertex {int(tris[t][out[t]][0])}; the mesh has {len(verts)} vertices (0-based)")
 
 
 def _fan(polygons: list[list[int]]) -> np.ndarray:
@@ -32,86 +74,167 @@ def _fan(polygons: list[list[int]]) -> np.ndarray:
     return np.asarray(tris, dtype=np.int64).reshape(-1, 3)
 
 
-def _load_obj(path: Path) -> tuple[np.ndarray, np.ndarray]:
+def _load_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     verts: list[list[float]] = []
     faces: list[list[int]] = []
-    for line in path.read_text(encoding="utf-8", errors="replace").splitlines():
+    counts = {"vt": 0, "vn": 0}
+    for number, line in enumerate(data.decode("utf-8", errors="replace").splitlines(), start=1):
         parts = line.split()
-        if not parts:
+        if not parts or parts[0].startswith("#"):
             continue
         if parts[0] == "v":
-            verts.append([float(c) for c in parts[1:4]])
+            if len(parts) < 4:
+                raise MeshFormatError(f"line {number}: a vertex needs x y z, got {line.strip()!r}")
+            try:
+                xyz = [float(c) for c in parts[1:4]]
+            except ValueError:
+                raise MeshFormatError(f"line {number}: vertex coordinates are not numbers: {line.strip()[:80]!r}") from None
+            if not all(math.isfinite(c) for c in xyz):
+                raise MeshFormatError(f"line {number}: vertex {len(verts)} is not finite: {line.strip()[:80]!r}")
+            verts.append(xyz)
+        elif parts[0] in counts:
+            counts[parts[0]] += 1
         elif parts[0] == "f":
-            idx = [int(p.split("/")[0]) for p in parts[1:]]
-            faces.append([i - 1 if i > 0 else len(verts) + i for i in idx])
+            if not 4 <= len(parts) <= MAX_POLYGON + 1:
+                raise MeshFormatError(f"line {number}: a face needs 3 to {MAX_POLYGON} vertices, got {len(parts) - 1}")
+            idx = []
+            for p in parts[1:]:
+                refs = p.split("/")
+                try:
+                    nums = [int(r) if r else None for r in refs[:3]]
+                except ValueError:
+                    raise MeshFormatError(f"line {number}: face index {p!r} is not an integer") from None
+                for value, have, what in zip(nums, (len(verts), counts["vt"], counts["vn"]), ("vertex", "texture coordinate", "normal")):
+                    if value is None:
+                        continue
+                    if value == 0 or abs(value) > have or (value > 0 and value > have):
+                        raise MeshFormatError(f"line {number}: face refers to {what} {value}; {have} are defined before it")
+                v = nums[0]
+                if v is None:
+                    raise MeshFormatError(f"line {number}: face index {p!r} has no vertex")
+                idx.append(v - 1 if v > 0 else len(verts) + v)
+            faces.append(idx)
     return np.asarray(verts, dtype=np.float64).reshape(-1, 3), _fan(faces)
 
 
-def _load_ply(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    data = path.read_bytes()
+def _load_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     end = data.find(b"end_header")
     if not data.startswith(b"ply") or end < 0:
-        raise AssetError(f"{path}: not a PLY file")
+        raise MeshFormatError("not a PLY file (no 'ply' magic or no end_header)")
+    nl = data.find(b"\n", end)
+    if nl < 0:
+        raise MeshFormatError("the file ends inside its header")
     header = data[:end].decode("ascii", errors="replace").splitlines()
-    body_start = data.index(b"\n", end) + 1
-    fmt = "ascii"
+    body_start = nl + 1
+    fmt = None
     elements: list[tuple[str, int, list[tuple[str, ...]]]] = []
     for line in header:
         p = line.split()
         if not p:
             continue
         if p[0] == "format":
+            if len(p) < 2 or p[1] not in ("ascii", "binary_little_endian", "binary_big_endian"):
+                raise MeshFormatError(f"unknown PLY format {' '.join(p[1:])!r}")
             fmt = p[1]
         elif p[0] == "element":
+            if len(p) != 3 or not p[2].isdigit() or len(p[2]) > 12:
+                raise MeshFormatError(f"header line {line.strip()!r}: expected 'element NAME COUNT'")
             elements.append((p[1], int(p[2]), []))
         elif p[0] == "property" and elements:
+            types = p[2:4] if p[1:2] == ["list"] else p[1:2]
+            if len(p) < (5 if p[1:2] == ["list"] else 3) or any(t not in _PLY_TYPES for t in types):
+                raise MeshFormatError(f"header line {line.strip()!r}: unknown property type")
             elements[-1][2].append(tuple(p[1:]))
+    if fmt is None:
+        raise MeshFormatError("the PLY header has no format line")
+    vertex = [e for e in elements if e[0] == "vertex"]
+    if not vertex:
+        raise MeshFormatError("the PLY file has no vertex element")
+    names = [pr[-1] for pr in vertex[0][2]]
+    if not all(c in names for c in "xyz"):
+        raise MeshFormatError("the PLY vertex element has no x, y, z properties")
     if fmt == "ascii":
-        tokens = data[body_start:].split()
-        pos = 0
-        verts = np.zeros((0, 3))
-        faces: list[list[int]] = []
-        for name, count, props in elements:
+        return _ply_ascii(data[body_start:], elements)
+    return _ply_binary(data, body_start, elements, "<" if fmt == "binary_little_endian" else ">")
+
+
+def _ply_ascii(body: bytes, elements: list[tuple[str, int, list[tuple[str, ...]]]]) -> tuple[np.ndarray, np.ndarray]:
+    tokens = body.split()
+    pos = 0
+    verts = np.zeros((0, 3))
+    faces: list[list[int]] = []
+
+    def need(n: int, name: str) -> None:
+        if pos + n > len(tokens):
+            raise MeshFormatError(f"the file is truncated: element '{name}' needs more values than the file holds")
+
+    for name, count, props in elements:
+        if all(pr[0] != "list" for pr in props):
+            width = len(props)
+            need(count * width, name)
+            block = np.asarray(tokens[pos : pos + count * width], dtype=np.float64).reshape(count, width)
             if name == "vertex":
-                width = len(props)
-                block = np.asarray(tokens[pos : pos + count * width], dtype=np.float64).reshape(count, width)
                 names = [pr[-1] for pr in props]
                 verts = block[:, [names.index("x"), names.index("y"), names.index("z")]]
-                pos += count * width
-            else:
-                for _ in range(count):
-                    for pr in props:
-                        if pr[0] == "list":
-                            k = int(tokens[pos])
-                            if name == "face":
-                                faces.append([int(t) for t in tokens[pos + 1 : pos + 1 + k]])
-                            pos += 1 + k
-                        else:
-                            pos += 1
-        return verts, _fan(faces)
-    order = "<" if fmt == "binary_little_endian" else ">"
-    offset = body_start
+            pos += count * width
+            continue
+        for _ in range(count):
+            for pr in props:
+                need(1, name)
+                if pr[0] == "list":
+                    k = int(tokens[pos])
+                    if k < 0 or k > MAX_POLYGON:
+                        raise MeshFormatError(f"element '{name}': a list of {k} values (at most {MAX_POLYGON})")
+                    need(1 + k, name)
+                    if name == "face":
+                        faces.append([int(t) for t in tokens[pos + 1 : pos + 1 + k]])
+                    pos += 1 + k
+                else:
+                    pos += 1
+    if pos != len(tokens):
+        raise MeshFormatError(f"{len(tokens) - pos} values after the last declared element (the declared counts do not match the data)")
+    return verts, _fan(faces)
+
+
+def _ply_binary(data: bytes, offset: int, elements: list[tuple[str, int, list[tuple[str, ...]]]], order: str) -> tuple[np.ndarray, np.ndarray]:
     verts = np.zeros((0, 3))
-    faces = []
+    faces: list[list[int]] = []
+    size = len(data)
     for name, count, props in elements:
         if all(pr[0] != "list" for pr in props):
             dtype = np.dtype([(pr[1], order + _PLY_TYPES[pr[0]]) for pr in props])
+            if offset + dtype.itemsize * count > size:
+                raise MeshFormatError(
+                    f"the file is truncated: element '{name}' declares {count} items of {dtype.itemsize} bytes, "
+                    f"{max(0, size - offset)} bytes are left"
+                )
             rec = np.frombuffer(data, dtype=dtype, count=count, offset=offset)
             offset += dtype.itemsize * count
             if name == "vertex":
                 verts = np.stack([rec["x"], rec["y"], rec["z"]], axis=1).astype(np.float64)
             continue
-        for _ in range(count):
+        for item in range(count):
             for pr in props:
                 if pr[0] == "list":
                     ct = np.dtype(order + _PLY_TYPES[pr[1]])
                     it = np.dtype(order + _PLY_TYPES[pr[2]])
+                    if offset + ct.itemsize > size:
+                        raise MeshFormatError(f"the file is truncated: element '{name}' item {item} of {count}")
                     k = int(np.frombuffer(data, ct, 1, offset)[0])
                     offset += ct.itemsize
+                    if k < 0 or k > MAX_POLYGON:
+                        raise MeshFormatError(f"element '{name}' item {item}: a list of {k} values (at most {MAX_POLYGON})")
+                    if offset + it.itemsize * k > size:
+                        raise MeshFormatError(f"the file is truncated: element '{name}' item {item} of {count}")
                     idx = np.frombuffer(data, it, k, offset)
                     offset += it.itemsize * k
                     if name == "face":
-                        faces.append(idx.astype(int).tolist())
+                        faces.append(idx.astype(np.int64).tolist())
                 else:
                     offset += np.dtype(_PLY_TYPES[pr[0]]).itemsize
+                    if offset > size:
+                        raise MeshFormatError(f"the file is truncated: element '{name}' item {item} of {count}")
+    trailing = data[offset:]
+    if trailing.strip():
+        raise MeshFormatError(f"{len(trailing)} bytes after the last declared element (the declared counts do not match the data)")
     return verts, _fan(faces)

@@ -9,6 +9,7 @@ preset name too.
 
 from __future__ import annotations
 
+import os
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,7 @@ from typing import Any
 from pydantic import Field, ValidationError
 
 from .errors import Problem, SceneError, UsageError
-from .scene.loader import parse_yaml, problems_from_validation
+from .scene.loader import parse_yaml, problems_from_validation, read_yaml_file
 from .scene.types import Model
 
 
@@ -35,8 +36,9 @@ def preset_names() -> list[str]:
 def load_preset(name: str) -> tuple[Preset, str]:
     """A preset by name (configs/NAME.yaml) or path; returns it and its file name."""
     path = Path(name)
-    if path.suffix in (".yaml", ".yml") and path.is_file():
-        text, file = path.read_text(), str(path)
+    if path.suffix in (".yaml", ".yml") and os.path.lexists(path):
+        # bounded like a scene: a regular file within the size limit (docs/scene-format.md)
+        text, file = read_yaml_file(path, "preset file"), str(path)
     else:
         entry = resources.files("motion.configs") / f"{name}.yaml"
         if name == "farm" or not entry.is_file():
@@ -62,6 +64,13 @@ def load_preset(name: str) -> tuple[Preset, str]:
             except ValidationError as exc:
                 for p in problems_from_validation(exc, section, source.sub((key,)), model):
                     problems.append(Problem(p.file, p.line, p.column, f"{key}.{p.yaml_path}", p.message))
+    out = data.get("output") if isinstance(data, dict) else None
+    if isinstance(out, dict) and isinstance(out.get("filename"), str):
+        from .scene.checks import output_pattern_problem
+
+        reason = output_pattern_problem(out["filename"])
+        if reason is not None:
+            problems.append(source.problem(("output", "filename"), f"output pattern {out['filename']!r}: {reason}"))
     if problems or preset is None:
         raise SceneError(sorted(problems, key=lambda p: (p.line or 0, p.column or 0)))
     return preset, file

@@ -26,6 +26,13 @@ from typing import Literal
 
 ShutterPosition = Literal["start", "center", "end"]
 
+# Limits (docs/scene-format.md, "Limits"): what a timeline or a frame selection may ask for.
+MAX_FRAMES = 1_000_000  # frames in a timeline and in one job's selection (11.5 h at 24 fps)
+MAX_FRAME_NUMBER = 10**9  # |frame number|
+MIN_FPS = Fraction(1, 1000)  # one frame per 1000 s
+MAX_FPS = Fraction(100_000)
+MAX_FPS_TERM = 10**9  # numerator and denominator of a rational rate
+
 
 def parse_fps(value: int | float | str | Fraction) -> Fraction:
     """Parse a frame rate: an integer, a decimal, or a rational string such as "30000/1001".
@@ -35,6 +42,7 @@ def parse_fps(value: int | float | str | Fraction) -> Fraction:
     >>> parse_fps(25), parse_fps("24000/1001"), parse_fps("23.976")
     (Fraction(25, 1), Fraction(24000, 1001), Fraction(2997, 125))
     """
+    shown = repr(value) if len(repr(value)) <= 40 else repr(value)[:37] + "..."
     if isinstance(value, bool):
         raise ValueError("expected a frame rate (integer or 'num/den' string), got a boolean")
     try:
@@ -45,12 +53,16 @@ def parse_fps(value: int | float | str | Fraction) -> Fraction:
             rate = Fraction(int(num.strip()), int(den.strip()))
         else:
             rate = Fraction(value)
-    except (ValueError, ZeroDivisionError, TypeError):
+    except (ValueError, ZeroDivisionError, TypeError, OverflowError):
         raise ValueError(
-            f"expected a frame rate as an integer or 'num/den' string, got {value!r}"
+            f"expected a frame rate as an integer or 'num/den' string, got {shown}"
         ) from None
     if rate <= 0:
-        raise ValueError(f"frame rate must be > 0, got {value!r}")
+        raise ValueError(f"frame rate must be > 0, got {shown}")
+    if rate.numerator > MAX_FPS_TERM or rate.denominator > MAX_FPS_TERM:
+        raise ValueError(f"frame rate {shown}: numerator and denominator are limited to {MAX_FPS_TERM}")
+    if not MIN_FPS <= rate <= MAX_FPS:
+        raise ValueError(f"frame rate must be between {MIN_FPS} and {MAX_FPS} frames/s, got {shown}")
     return rate
 
 

@@ -1,20 +1,31 @@
 """Frame claims: two renders into one folder never write the same frame twice.
 
 Before a worker renders a frame it creates `<output>/.motion-claims/<frame file>.claim`
-with `O_CREAT | O_EXCL` (atomic on local file systems and on NFSv3+), holding JSON with
-the run id, host, pid and time. While the claim exists no other render touches the frame;
-the worker removes it once the frame has been renamed into place (or has failed).
+holding JSON with its owner: run id, host, pid and time. The claim is written whole to a
+temporary file first and then hard-linked to its name (`link` fails if the name exists:
+atomic on local file systems and on NFS), so a claim is never seen empty or half-written;
+where the file system has no hard links, `O_CREAT | O_EXCL` and a write are used instead.
+While the claim exists no other render touches the frame; the worker removes it once the
+frame has been renamed into place (or has failed).
 
 A claim found on disk is
 - ours (same run id): a retry of our own chunk after its worker died; taken over;
-- stale: its pid is gone on this host, or it is older than `stale_after_s` (default: the
-  task timeout, which no live task outlives); broken by an atomic rename and re-claimed;
+- stale: empty or unreadable (older than WRITE_GRACE_S, which covers a writer without hard
+  links between its create and its write), its pid is gone on this host, or it is older
+  than `stale_after_s` (default: the task timeout, which no live task outlives); broken by
+  an atomic rename and re-claimed;
 - live: the frame is left alone; the farm checks back later and re-queues it only if the
   other render gives up without finishing it.
+
+A disk fault (full, read-only, permission denied) while claiming raises DiskFaultError,
+leaving no temporary or empty file of ours; releasing never raises (a claim that cannot be
+removed from a read-only disk names a process that will be gone: the next run finds it
+stale).
 """
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import socket
@@ -23,7 +34,10 @@ import uuid
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from ..frame_output import disk_fault
+
 CLAIM_DIR = ".motion-claims"
+WRITE_GRACE_S = 5.0  # an empty claim younger than this may still be being written
 
 
 @dataclass(frozen=True)
@@ -50,9 +64,9 @@ def claim_path(frame_file: str | Path) -> Path:
 
 
 def read_claim(path: Path) -> dict | None:
-    """The claim's content; {} if unreadable (being written); None if it is gone."""
+    """The claim's content; {} if empty or unreadable; None if it is gone."""
     try:
-        text = path.read_text()
+        text = path.read_bytes()
     except FileNotFoundError:
         return None
     except OSError:
@@ -60,7 +74,7 @@ def read_claim(path: Path) -> dict | None:
     try:
         data = json.loads(text)
         return data if isinstance(data, dict) else {}
-    except ValueError:
+    except ValueError:  # not JSON, or not UTF-8 (UnicodeDecodeError is a ValueError)
         return {}
 
 
@@ -75,31 +89,39 @@ def _pid_alive(pid: int) -> bool:
 
 
 def is_stale(path: Path, info: dict, stale_after_s: float) -> bool:
-    """A claim whose process is gone (same host) or that is older than the limit."""
+    """A claim that is empty or unreadable (past the write grace), whose process is gone
+    (same host), or that is older than the limit."""
     try:
         age = time.time() - path.stat().st_mtime
     except FileNotFoundError:
         return True
-    if info.get("host") == socket.gethostname() and isinstance(info.get("pid"), int):
+    except OSError:
+        return True  # cannot even stat it: it protects nothing
+    if not info.get("run_id") or not isinstance(info.get("pid"), int):
+        return age > WRITE_GRACE_S or age < -WRITE_GRACE_S
+    if info.get("host") == socket.gethostname():
         if not _pid_alive(info["pid"]):
             return True
     return age > stale_after_s
 
 
 def try_claim(frame_file: str | Path, who: Claimant, stale_after_s: float) -> tuple[bool, dict | None]:
-    """Claim a frame. Returns (True, None) when we hold it, else (False, holder info)."""
+    """Claim a frame. Returns (True, None) when we hold it, else (False, holder info).
+    Raises DiskFaultError when the disk refuses the claim."""
     path = claim_path(frame_file)
-    path.parent.mkdir(parents=True, exist_ok=True)
     body = json.dumps({**asdict(who), "time": time.time()}).encode()
-    for _ in range(5):
-        try:
-            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
-        except FileExistsError:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        _write_whole(tmp, body)
+        for _ in range(5):
+            if _create(tmp, path, body):
+                return True, None
             info = read_claim(path)
             if info is None:
-                continue  # released between our open and our read: try again
+                continue  # released between our attempt and our read: try again
             if info.get("run_id") == who.run_id:
-                _rewrite(path, body)  # our own earlier attempt (its worker died): take over
+                os.replace(tmp, path)  # our own earlier attempt (its worker died): take over
                 return True, None
             if is_stale(path, info, stale_after_s):
                 # break it atomically: only one breaker's rename succeeds
@@ -111,26 +133,77 @@ def try_claim(frame_file: str | Path, who: Claimant, stale_after_s: float) -> tu
                     pass
                 continue
             return False, info
-        else:
-            with os.fdopen(fd, "wb") as f:
-                f.write(body)
-            return True, None
-    info = read_claim(path)
-    return False, info or {}
+        info = read_claim(path)
+        return False, info or {}
+    except OSError as exc:
+        fault = disk_fault(exc, "claiming frame", path)
+        if fault is not None:
+            raise fault from None
+        raise
+    finally:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
 
 
-def _rewrite(path: Path, body: bytes) -> None:
-    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-    tmp.write_bytes(body)
-    os.replace(tmp, path)
+def _write_whole(tmp: Path, body: bytes) -> None:
+    """The claim's content, complete, under a temporary name (removed if the write fails)."""
+    fd = os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(body)
+    except BaseException:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        raise
 
 
-def release(frame_file: str | Path, run_id: str) -> None:
-    """Remove our claim on a frame (never someone else's)."""
+_NO_LINKS = (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EMLINK, errno.ENOSYS)
+
+
+def _create(tmp: Path, path: Path, body: bytes) -> bool:
+    """Make `path` hold `body` if it does not exist yet; False if it exists."""
+    try:
+        os.link(tmp, path)
+        return True
+    except FileExistsError:
+        return False
+    except OSError as exc:
+        if exc.errno not in _NO_LINKS:
+            raise
+    # no hard links here: exclusive create, then write (an empty claim is stale only
+    # after WRITE_GRACE_S, so a reader between the two steps leaves it alone)
+    try:
+        fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
+    except FileExistsError:
+        return False
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(body)
+    except BaseException:
+        try:
+            path.unlink(missing_ok=True)
+        except OSError:
+            pass
+        raise
+    return True
+
+
+def release(frame_file: str | Path, run_id: str) -> bool:
+    """Remove our claim on a frame (never someone else's). Never raises: False when the
+    claim could not be removed (a read-only disk); it names a process that will be gone,
+    so the next run finds it stale."""
     path = claim_path(frame_file)
     info = read_claim(path)
     if info is not None and info.get("run_id") == run_id:
-        path.unlink(missing_ok=True)
+        try:
+            path.unlink(missing_ok=True)
+        except OSError:
+            return False
+    return True
 
 
 def release_all(frame_files: list[str], run_id: str) -> None:
@@ -147,6 +220,6 @@ def remove_partials(frame_file: str | Path) -> int:
         for p in frame_file.parent.glob(f".{frame_file.name}.*.tmp"):
             p.unlink(missing_ok=True)
             n += 1
-    except FileNotFoundError:
-        pass
+    except OSError:
+        pass  # gone, or a read-only disk: nothing we can remove now
     return n

@@ -17,6 +17,7 @@ import re
 from typing import Sequence
 
 from ..errors import UsageError
+from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
 
 _PART = re.compile(r"^(-?\d+)(?:-(-?\d+)(?:x(\d+))?)?$")
 
@@ -31,13 +32,17 @@ def parse_frames(spec: str, first: int | None = None, last: int | None = None) -
     """
     if not spec or not spec.strip():
         raise UsageError("--frames: empty frame spec; expected e.g. 0-119, 0-119x2 or 1,5,9")
-    frames: set[int] = set()
+    shown = spec if len(spec) <= 60 else spec[:57] + "..."
+    parts: list[range] = []
+    total = 0
     for raw in spec.split(","):
         part = raw.strip().replace(" ", "")
         m = _PART.match(part)
         if not m:
-            raise UsageError(f"--frames: cannot read {raw.strip()!r} in {spec!r}; expected N, A-B or A-BxSTEP (e.g. 0-119x2)")
+            raise UsageError(f"--frames: cannot read {raw.strip()[:40]!r} in {shown!r}; expected N, A-B or A-BxSTEP (e.g. 0-119x2)")
         a, b, step = m.group(1), m.group(2), m.group(3)
+        if any(g is not None and len(g.lstrip("-")) > 10 for g in (a, b, step)):
+            raise UsageError(f"--frames: {part[:40]!r}: frame numbers are limited to +-{MAX_FRAME_NUMBER}")
         lo = int(a)
         hi = int(b) if b is not None else lo
         s = int(step) if step is not None else 1
@@ -45,13 +50,22 @@ def parse_frames(spec: str, first: int | None = None, last: int | None = None) -
             raise UsageError(f"--frames: range {part!r} is reversed (write {hi}-{lo})")
         if s < 1:
             raise UsageError(f"--frames: step in {part!r} must be at least 1")
-        frames.update(range(lo, hi + 1, s))
-    out = sorted(frames)
-    if first is not None and last is not None:
-        outside = [f for f in out if f < first or f > last]
-        if outside:
-            raise UsageError(f"--frames: {format_frames(outside)} outside the scene's timeline {first}-{last}")
-    return out
+        if max(abs(lo), abs(hi)) > MAX_FRAME_NUMBER:
+            raise UsageError(f"--frames: {part!r}: frame numbers are limited to +-{MAX_FRAME_NUMBER}")
+        r = range(lo, hi + 1, s)
+        if first is not None and last is not None and (lo < first or r[-1] > last):
+            # name the frames outside without listing a huge range one by one
+            outside = [x for x in (range(lo, min(hi, first - 1) + 1, s), range(max(lo, last + 1), hi + 1, s)) if len(x)]
+            text = ",".join(format_frames(x) if len(x) <= 1000 else f"{x[0]}-{x[-1]}" for x in outside)
+            raise UsageError(f"--frames: {text} outside the scene's timeline {first}-{last}")
+        total += len(r)  # an upper bound on the selection (parts may overlap)
+        if total > MAX_FRAMES:
+            raise UsageError(f"--frames: {shown!r} selects more than {MAX_FRAMES} frames (the limit for one job)")
+        parts.append(r)
+    frames: set[int] = set()
+    for r in parts:
+        frames.update(r)
+    return sorted(frames)
 
 
 def format_frames(frames: Sequence[int]) -> str:

@@ -6,9 +6,12 @@ from __future__ import annotations
 import json
 import os
 import statistics
+import tempfile
 from pathlib import Path
 from typing import Any
 
+from ..errors import DiskFaultError, UsageError
+from ..frame_output import disk_fault, write_atomic
 from ..render.job import RenderJob
 from ..scene.loader import LoadedScene
 from .config import FarmConfig
@@ -91,6 +94,7 @@ def build_report(
         "executor": executor_info,
         "config": {"retries": cfg.retries, "task_timeout_s": cfg.task_timeout_s, "max_worker_failures": cfg.max_worker_failures, "claim_stale_s": cfg.stale_after_s},
         "interrupted": interrupted,
+        "disk_fault": sched.disk_fault if sched is not None else None,
         "totals": totals,
         "failed": failed,
         "workers": workers,
@@ -99,10 +103,42 @@ def build_report(
 
 
 def write_report(report: dict[str, Any], path: str | Path) -> Path:
-    """Write atomically (a reader never sees half a report)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(report, indent=2) + "\n")
-    os.replace(tmp, path)
-    return path
+    """Write atomically (a reader never sees half a report; a failed write leaves no
+    temporary file). A disk fault raises DiskFaultError."""
+    return write_atomic(path, (json.dumps(report, indent=2) + "\n").encode(), "writing the report")
+
+
+def fallback_report_path(run_id: str) -> Path:
+    """Where a report goes when its own place refuses it: the system's temporary folder."""
+    return Path(tempfile.gettempdir()) / f"motion-render-report-{run_id}.json"
+
+
+def write_report_somewhere(report: dict[str, Any], path: str | Path, run_id: str) -> tuple[Path | None, str | None]:
+    """Write the report at `path`, or, if that disk refuses it, in the temporary folder.
+    Returns (where it went or None, the disk fault at `path` or None)."""
+    try:
+        return write_report(report, path), None
+    except DiskFaultError as exc:
+        fault = str(exc)
+    report = {**report, "report_fault": fault}
+    try:
+        return write_report(report, fallback_report_path(run_id)), fault
+    except (DiskFaultError, OSError):
+        return None, fault
+
+
+def check_writable(folder: str | Path, what: str) -> None:
+    """Before any work: `folder` exists or can be made, and a file can be created in it.
+    UsageError (exit 2) naming the folder and the reason otherwise."""
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise UsageError(f"{what} {folder}: cannot write there: it is a file, not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".motion-probe.", suffix=".tmp", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        fault = disk_fault(exc, "creating a file in", folder)
+        reason = str(fault) if fault is not None else f"{exc.strerror or exc}"
+        raise UsageError(f"{what} {folder}: cannot write there: {reason}") from None

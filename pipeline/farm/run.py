@@ -25,7 +25,7 @@ from .config import load_farm_config
 from .frames import chunks as make_chunks
 from .frames import default_chunk_size, format_frames, parse_frames, parse_shard, shard
 from .progress import Progress
-from .report import build_report, write_report
+from .report import build_report, check_writable, write_report_somewhere
 from .scheduler import Scheduler
 from .task import TaskContext
 
@@ -97,6 +97,50 @@ def default_workers(frames: int) -> int:
     return max(1, min(cores, frames, MAX_DEFAULT_WORKERS))
 
 
+MAX_WORKERS = 256  # local worker processes
+MAX_THREADS = 1024  # drjit threads per worker
+MAX_RETRIES = 100  # extra attempts per chunk
+
+
+def _preflight(req: RenderRequest, loaded: Any, job: RenderJob, out_dir: Path, frames: list[int]) -> None:
+    """Before any work: frames land inside the output folder, the bake fits its budget,
+    and the output folder and the report's folder can be written (docs/farm.md)."""
+    from ..errors import OutputConfinementError, SceneError
+    from ..frame_output import inside
+    from ..scene.checks import bake_budget_problems
+
+    for flag, value, limit in (("--workers", req.workers, MAX_WORKERS), ("--threads", req.threads, MAX_THREADS), ("--retries", req.retries, MAX_RETRIES)):
+        if value is not None and value > limit:
+            raise UsageError(f"{flag} {value}: the limit is {limit}")
+    if frames and not inside(out_dir, frame_path(job, loaded, frames[0])):
+        raise OutputConfinementError(f"frame {frames[0]} would be written to {frame_path(job, loaded, frames[0])}, outside the output folder {out_dir}")
+    if not req.motion_file:
+        problems = bake_budget_problems(loaded.scene, loaded.source, len(frames))
+        if problems:
+            raise SceneError(problems)
+    if req.check:
+        return  # --check writes nothing
+    check_writable(out_dir, "output folder")
+    if req.report is not None:
+        check_writable(Path(req.report).resolve().parent, f"--report {req.report}: folder")
+
+
+def _stop_on_disk_fault(sched: Scheduler | None, report: dict[str, Any], report_path: Path | None, report_fault: str | None) -> None:
+    """A disk fault ends the job with one line and exit 4: what the disk refused, how many
+    frames were kept, where the report went."""
+    from ..errors import DiskFaultError
+
+    fault = sched.disk_fault if sched is not None else None
+    if fault is None and report_fault is None:
+        return
+    totals = report["totals"]
+    where = f"report {report_path}" if report_path is not None else "no report could be written anywhere"
+    if report_fault is not None and report_path is not None:
+        where += f" (its own place refused it: {report_fault})"
+    head = fault or report_fault
+    raise DiskFaultError(f"{head}; {totals['rendered'] + totals['skipped']} of {totals['frames']} frames complete and kept, {totals['failed']} not rendered; {where}")
+
+
 def run_render(req: RenderRequest) -> dict[str, Any]:
     """Render the request; returns the report. Raises IncompleteJobError (exit 3) if any
     frame failed everywhere, KeyboardInterrupt after a clean stop on Ctrl-C."""
@@ -145,6 +189,8 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         threads=threads,
         variant=scene.render.variant,
     )
+
+    _preflight(req, loaded, job, out_dir, frames)
 
     if not req.scheduler:
         # the local workers will make the same choice (cached probe); warn here, once,
@@ -237,12 +283,13 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         motion_file=str(req.motion_file) if req.motion_file else None,
     )
     default_name = f"render-report.shard-{shard_spec[0]}-of-{shard_spec[1]}.json" if shard_spec else "render-report.json"
-    report_path = write_report(report, req.report or out_dir / default_name)
+    report_path, report_fault = write_report_somewhere(report, req.report or out_dir / default_name, run_id)
     totals = report["totals"]
     progress.log(
         f"motion: {label}: {totals['rendered']} rendered, {totals['skipped']} skipped, {totals['done_elsewhere']} by another job, "
         f"{totals['failed']} failed in {totals['wall_s']:.1f}s ({totals['frames_per_minute']:.1f} frames/min); report {report_path}"
     )
+    _stop_on_disk_fault(sched, report, report_path, report_fault)
     if interrupted:
         raise KeyboardInterrupt
     failed = report["failed"]

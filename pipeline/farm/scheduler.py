@@ -6,6 +6,10 @@ retried on another worker, up to `retries` more times; a worker with
 `max_worker_failures` failures is excluded for the job; frames that fail on every attempt
 are recorded with their last error, and the rest of the job still finishes. Frames another
 render holds a claim on are watched and re-queued only if that render gives up on them.
+
+A disk fault (the output disk full, read-only or refusing us) is no worker's fault and no
+retry can mend it: the job stops taking chunks at once (`disk_fault` says why), running
+chunks come back on their own, and nobody is excluded.
 """
 
 from __future__ import annotations
@@ -90,6 +94,7 @@ class Scheduler:
         self._next_id = 0
         self._no_worker_since: float | None = None
         self._last_wait_check = 0.0
+        self.disk_fault: str | None = None  # set when the disk refused a write: the job stops
 
     # --- bookkeeping ------------------------------------------------------------------
     def _worker(self, name: str) -> WorkerRecord:
@@ -137,6 +142,10 @@ class Scheduler:
                 self.frames[f] = FrameRecord(f)
             self.pending.append(self._chunk(frames))
         while self.pending or self.running or self.waiting:
+            if self.disk_fault is not None:
+                self._stop_for_disk_fault()
+                if not self.running:
+                    break
             self._assign()
             for event in self.ex.poll(self.poll_s):
                 if isinstance(event, Done):
@@ -148,6 +157,8 @@ class Scheduler:
             self._check_workers()
 
     def _assign(self) -> None:
+        if self.disk_fault is not None:
+            return
         usable = [w for w in self.ex.live_workers() if w not in self.excluded]
         for w in self.ex.idle_workers():
             if w in self.excluded or w in self.running or not self.pending:
@@ -177,11 +188,51 @@ class Scheduler:
         del self.running[worker]
         return entry[0]
 
+    def _stop_for_disk_fault(self) -> None:
+        """Drop every queued chunk and watched frame: they stay 'pending' with the reason."""
+        why = f"not rendered: the job stopped on a disk fault ({self.disk_fault})"
+        while self.pending:
+            for f in self.pending.popleft().frames:
+                if self.frames[f].status == "pending":
+                    self.frames[f].errors.append(why)
+        for f in list(self.waiting):
+            del self.waiting[f]
+            self.frames[f].errors.append(why)
+
+    def _disk_fault_done(self, ev: Done, chunk: Chunk) -> None:
+        """A chunk that hit a disk fault: keep what it finished, blame no worker, retry
+        nothing, and stop the job."""
+        res = ev.result
+        wrec = self._worker(ev.worker)
+        wrec.chunks += 1
+        reported = set()
+        for r in res.results:
+            reported.add(r.frame)
+            rec = self.frames[r.frame]
+            rec.result = r
+            if r.ok:
+                wrec.frames += 1
+                self._final(r.frame, "rendered")
+            else:
+                self._final(r.frame, "failed", r.error or "disk fault")
+        for f in res.already_done:
+            reported.add(f)
+            self._final(f, "skipped")
+        if self.disk_fault is None:
+            self.disk_fault = res.disk_fault or next((r.error for r in res.results if getattr(r, "disk_fault", False)), "disk fault")
+            self.notify("disk_fault", {"worker": ev.worker, "error": self.disk_fault})
+        for f in chunk.frames:
+            if f not in reported and f not in res.held_elsewhere:
+                self.frames[f].errors.append(f"not rendered: the job stopped on a disk fault ({self.disk_fault})")
+
     def _done(self, ev: Done) -> None:
         chunk = self._take_running(ev.worker, ev.chunk_id)
         if chunk is None:
             return
         res = ev.result
+        if getattr(res, "disk_fault", None) or any(getattr(r, "disk_fault", False) for r in res.results):
+            self._disk_fault_done(ev, chunk)
+            return
         wrec = self._worker(ev.worker)
         wrec.chunks += 1
         failed: list[int] = []

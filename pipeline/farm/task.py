@@ -8,6 +8,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Sequence
 
+from ..errors import DiskFaultError
 from ..frame_output import is_complete
 from ..render.frame_renderer import FrameInput
 from ..render.job import FrameResult, RenderJob, expected_meta, render_frames, worker_id
@@ -35,6 +36,7 @@ class ChunkResult:
     held_elsewhere: dict[int, str] = field(default_factory=dict)
     already_done: list[int] = field(default_factory=list)
     seconds: float = 0.0
+    disk_fault: str | None = None  # the disk refused a write: the chunk stopped there
 
 
 def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[FrameInput], ctx: TaskContext) -> ChunkResult:
@@ -44,7 +46,11 @@ def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[FrameInput], ctx: 
     out = ChunkResult(chunk_id=chunk_id, worker=worker_id())
     for fi in inputs:
         path = ctx.paths[fi.frame]
-        ok, holder = try_claim(path, me, ctx.stale_after_s)
+        try:
+            ok, holder = try_claim(path, me, ctx.stale_after_s)
+        except DiskFaultError as exc:
+            out.disk_fault = str(exc)  # the farm stops the job; the rest of the chunk waits
+            break
         if not ok:
             owner = holder or {}
             out.held_elsewhere[fi.frame] = f"{owner.get('host', '?')}:{owner.get('pid', '?')} (run {owner.get('run_id', '?')})"
@@ -54,7 +60,12 @@ def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[FrameInput], ctx: 
             if ctx.resume and is_complete(path, expected_meta(job, fi)):
                 out.already_done.append(fi.frame)
                 continue
-            out.results.extend(render_frames(job, [fi]))
+            results = render_frames(job, [fi])
+            out.results.extend(results)
+            fault = next((r.error for r in results if getattr(r, "disk_fault", False)), None)
+            if fault:
+                out.disk_fault = fault
+                break
         finally:
             release(path, ctx.run_id)
     out.seconds = time.perf_counter() - t0

@@ -61,6 +61,7 @@ class FrameResult:
     asset_cache_hits: int = 0
     error: str | None = None
     skipped: bool = False
+    disk_fault: bool = False  # the error is the disk refusing the write (docs/farm.md)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -112,7 +113,7 @@ def _renderer(job: RenderJob) -> tuple[FrameRenderer, LoadedScene, str]:
     import mitsuba as mi
 
     mi.set_log_level(mi.LogLevel.Error)
-    loaded = load_scene(job.scene_path, job.overrides)
+    loaded = load_scene(job.scene_path, job.overrides, assets=False)  # the main process checked them
     renderer = FrameRenderer(loaded)
     _WORKER.update(key=job.key, renderer=renderer, loaded=loaded, variant=choice.variant)
     return renderer, loaded, choice.variant
@@ -193,5 +194,9 @@ def _render_one(job: RenderJob, fi: FrameInput) -> FrameResult:
             asset_cache_hits=stats.asset_cache_hits,
         )
     except Exception as exc:  # reported per frame; the farm decides on retries
+        from ..errors import DiskFaultError
+
+        if isinstance(exc, DiskFaultError):  # the renderer is fine; the disk is not
+            return FrameResult(frame=fi.frame, path="", ok=False, worker=worker_id(), error=str(exc), disk_fault=True)
         _WORKER.clear()  # rebuild from scratch for the next frame rather than trust this state
         return FrameResult(frame=fi.frame, path="", ok=False, worker=worker_id(), error=_root_cause(exc))

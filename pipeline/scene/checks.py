@@ -1,15 +1,28 @@
 """Semantic checks a schema cannot express: names and references across the scene, parent
-cycles, asset files, channel names and value shapes, expressions. All problems at once."""
+cycles, asset files, channel names and value shapes, expressions; and the validation
+stage's limits: every asset opened and decoded, every derived quantity (frame duration,
+shutter sampling, particle and simulation budgets, timeline length) and the output
+pattern's confinement checked before any task starts. All problems at once."""
 
 from __future__ import annotations
 
 import difflib
-from pathlib import Path
+import math
+import re
+from fractions import Fraction
+from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING
 
-from ..errors import Problem
-from .motion_schema import KeyframeMotion, ProceduralMotion, TRANSFORM_CHANNELS
-from .schema import EnvmapLight, Mesh, Scene, Texture
+from ..errors import AssetError, Problem
+from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
+from .motion_schema import BlendShapes, KeyframeMotion, ProceduralMotion, TRANSFORM_CHANNELS
+from .schema import EnvmapLight, Mesh, Particles, Scene, Texture
+
+# Budgets (docs/scene-format.md, "Limits"), checked over the whole timeline before any work.
+MAX_SIMULATION_STEPS = 10_000_000  # fixed steps of the dynamics stage (5.8 h of shot at 1/480 s)
+MAX_PARTICLES = 1_000_000  # particles spawned by all emitters together
+MAX_PARTICLE_STEPS = 1_000_000_000  # particles x simulation steps (minutes of simulation)
+MAX_PARTICLE_SAMPLES = 100_000_000  # particles x baked sample times held by one bake (2.4 GB)
 
 if TYPE_CHECKING:
     from .loader import Loc, SourceMap
@@ -38,7 +51,9 @@ def _suggest(name: str, options: list[str]) -> str:
 
 
 
-def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap") -> list[Problem]:
+def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets: bool = True) -> list[Problem]:
+    """Every problem a schema cannot see. `assets`: also open and decode every mesh and
+    image (the validation stage; a worker that reloads a checked scene skips it)."""
     problems: list[Problem] = []
 
     def add(loc: "Loc", message: str) -> None:
@@ -108,21 +123,45 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap") -> list
         if spring.a == spring.b:
             add(("dynamics", "springs", j), "a spring needs two different bodies")
 
-    # asset files
-    def check_file(loc: "Loc", rel: str) -> None:
+    # asset files: present, and (when `assets`) opened and decoded as the renderer will
+    def check_file(loc: "Loc", rel: str, kind: str) -> None:
         if not (base_dir / rel).is_file():
-            add(loc, f"file not found: {rel} (relative to {base_dir})")
+            if (base_dir / rel).exists():
+                add(loc, f"not a regular file: {rel} (relative to {base_dir})")
+            else:
+                add(loc, f"file not found: {rel} (relative to {base_dir})")
+            return
+        if not assets:
+            return
+        try:
+            if kind == "mesh":
+                from ..meshes import load_mesh
+
+                load_mesh((base_dir / rel).resolve())
+            else:
+                from ..render.assets import check_image
+
+                check_image((base_dir / rel).resolve())
+        except AssetError as exc:
+            add(loc, f"{kind} file {rel}: {str(exc).split(': ', 1)[-1]}")
 
     for i, obj in enumerate(scene.objects):
         if isinstance(obj, Mesh):
-            check_file(("objects", i, "file"), obj.file)
+            check_file(("objects", i, "file"), obj.file, "mesh")
+        if isinstance(obj.deform, BlendShapes):
+            for k, key in enumerate(obj.deform.keys):
+                if key.file is not None:
+                    check_file(("objects", i, "deform", "keys", k, "file"), key.file, "mesh")
     for i, light in enumerate(scene.lights):
         if isinstance(light, EnvmapLight):
-            check_file(("lights", i, "file"), light.file)
+            check_file(("lights", i, "file"), light.file, "image")
     for i, mat in enumerate(scene.materials):
-        tex = getattr(mat, "color", None)
-        if isinstance(tex, Texture):
-            check_file(("materials", i, "color", "file"), tex.file)
+        for field in type(mat).model_fields:
+            tex = getattr(mat, field, None)
+            if isinstance(tex, Texture):
+                check_file(("materials", i, field, "file"), tex.file, "image")
+
+    problems.extend(derived_problems(scene, source))
 
     # motion channels
     check_channels(("camera", "motion"), scene.camera.motion, "camera", add)
@@ -131,6 +170,122 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap") -> list
     for i, light in enumerate(scene.lights):
         check_channels(("lights", i, "motion"), light.motion, f"{light.type} light", add)
     problems.extend(expression_problems(scene, source))
+    return problems
+
+
+def output_pattern_problem(pattern: str) -> str | None:
+    """Why an output filename pattern could write outside the output folder, or None.
+
+    A pattern may name sub-folders inside the output folder (`shots/{name}.####.exr`),
+    never an absolute path, a drive, `..`, or an empty or hidden (`.`) component."""
+    if "\x00" in pattern or "\\" in pattern:
+        return "the pattern must not contain NUL or backslash characters"
+    if pattern.startswith("/") or re.match(r"^[A-Za-z]:", pattern):
+        return "an absolute path; a pattern is relative to the output folder (sub-folders inside it are fine)"
+    parts = PurePosixPath(pattern).parts
+    if any(part == ".." for part in pattern.split("/")):
+        return "'..' would leave the output folder; a pattern may name sub-folders inside it, never leave it"
+    if any(part in ("", ".") for part in pattern.split("/")) or not parts:
+        return "empty or '.' path components are not allowed"
+    if parts[-1].startswith("."):
+        return "hidden file names (starting with '.') are reserved for temporary files"
+    return None
+
+
+def derived_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
+    """Quantities that follow from several fields together and would fail (or never end)
+    only once work starts: timeline length, frame and shutter times as float64, particle
+    and simulation budgets, the output pattern. Each is checked over the whole timeline."""
+    problems: list[Problem] = []
+
+    def add(loc: "Loc", message: str) -> None:
+        problems.append(source.problem(loc, message))
+
+    tl = scene.timeline
+    for end in ("first", "last"):
+        if abs(getattr(tl, end)) > MAX_FRAME_NUMBER:
+            add(("timeline", end), f"frame numbers are limited to +-{MAX_FRAME_NUMBER} (got {getattr(tl, end)})")
+    if problems:
+        return problems
+    count = tl.last - tl.first + 1
+    if count > MAX_FRAMES:
+        add(("timeline", "last"), f"the timeline has {count} frames; the limit is {MAX_FRAMES}")
+        return problems
+
+    # frame and shutter times as the motion stage sees them (float64 seconds): the shutter
+    # interval must be longer than zero and its samples distinct at the timeline's ends
+    timeline = tl.timeline()
+    angle = Fraction(scene.camera.shutter.angle)
+    n = scene.render.shutter_samples
+    for frame in (tl.first, tl.last):
+        t_open, t_close = timeline.shutter(frame, angle, scene.camera.shutter.position)
+        samples = [float(t_open + (t_close - t_open) * k / (n - 1)) for k in range(n)]
+        if not all(math.isfinite(x) for x in samples) or any(b <= a for a, b in zip(samples, samples[1:])):
+            add(
+                ("camera", "shutter", "angle"),
+                f"frame {frame}: a shutter of {float(t_close - t_open):.3g} s at t = {float(timeline.seconds(frame)):.6g} s "
+                f"cannot hold {n} distinct sample times in float64 (raise the shutter angle or lower render.shutter_samples)",
+            )
+            break
+
+    # simulation and particle budgets over the span the dynamics stage would simulate
+    t_lo = min(0.0, float(timeline.shutter(tl.first, angle, scene.camera.shutter.position)[0]))
+    t_hi = float(timeline.shutter(tl.last, angle, scene.camera.shutter.position)[1])
+    span = max(0.0, t_hi - t_lo)
+    dynamic = [i for i, o in enumerate(scene.objects) if o.motion.type == "dynamics" or isinstance(o, Particles)]
+    steps = math.ceil(span / scene.dynamics.step) if dynamic else 0
+    if steps > MAX_SIMULATION_STEPS:
+        add(("dynamics", "step"), f"simulating {span:.6g} s at a step of {scene.dynamics.step:g} s takes {steps} steps; the limit is {MAX_SIMULATION_STEPS}")
+    total = 0
+    for i, obj in enumerate(scene.objects):
+        if not isinstance(obj, Particles):
+            continue
+        spawned = particle_count(obj.emitter, t_hi)
+        total += spawned
+        if total > MAX_PARTICLES:
+            add(("objects", i, "emitter"), f"emitters spawn {total} particles up to t = {t_hi:.6g} s (rate x emission time, capped by max_count); the limit is {MAX_PARTICLES}")
+            break
+        if total * max(steps, 1) > MAX_PARTICLE_STEPS:
+            add(("objects", i, "emitter"), f"{total} particles x {steps} simulation steps is over the budget of {MAX_PARTICLE_STEPS} particle-steps")
+            break
+
+    reason = output_pattern_problem(scene.output.filename)
+    if reason is not None:
+        add(("output", "filename"), f"output pattern {scene.output.filename!r}: {reason}")
+    return problems
+
+
+def particle_count(emitter: object, t_end: float) -> int:
+    """Particles an emitter spawns before t_end (as dynamics.particles.emit counts them),
+    computed without overflow for any rate."""
+    e = emitter
+    stop = t_end if e.stop is None else min(e.stop, t_end)  # type: ignore[attr-defined]
+    if stop < e.start:  # type: ignore[attr-defined]
+        return 0
+    expected = (stop - e.start) * e.rate  # type: ignore[attr-defined]
+    if not math.isfinite(expected) or expected >= e.max_count:  # type: ignore[attr-defined]
+        return int(e.max_count)  # type: ignore[attr-defined]
+    return min(int(e.max_count), int(math.floor(expected)) + 1)  # type: ignore[attr-defined]
+
+
+def bake_budget_problems(scene: Scene, source: "SourceMap", frames: int) -> list[Problem]:
+    """What a bake of `frames` frames would hold: particle positions at every frame time
+    and shutter sample (float64). Checked with the selection, before baking."""
+    samples = frames * (scene.render.shutter_samples + 1)
+    timeline = scene.timeline.timeline()
+    t_hi = float(timeline.seconds(scene.timeline.last)) + float(timeline.frame_duration)
+    problems = []
+    for i, obj in enumerate(scene.objects):
+        if isinstance(obj, Particles):
+            held = particle_count(obj.emitter, t_hi) * samples
+            if held > MAX_PARTICLE_SAMPLES:
+                problems.append(
+                    source.problem(
+                        ("objects", i, "emitter"),
+                        f"baking {frames} frames x {scene.render.shutter_samples + 1} times would hold {held} particle positions; "
+                        f"the limit is {MAX_PARTICLE_SAMPLES} (render fewer frames per job: --frames or --shard)",
+                    )
+                )
     return problems
 
 

@@ -7,6 +7,8 @@ are collected and raised together as one `SceneError`, before any long job start
 from __future__ import annotations
 
 import difflib
+import os
+import stat
 import typing
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,17 +17,154 @@ from typing import Any, Iterable, Mapping, Union
 import yaml
 from pydantic import BaseModel, ValidationError
 
-from ..errors import Problem, SceneError
+from ..errors import InputFileError, Problem, SceneError
 from .schema import Scene
 
 Loc = tuple[Union[str, int], ...]
+
+# --- limits on what an input file can make us allocate (docs/scene-format.md, "Limits") ---
+
+MAX_YAML_BYTES = 16 * 1024**2  # a scene or preset file
+MAX_DEPTH = 64  # nesting of mappings and sequences
+MAX_ALIAS_NODES = 100_000  # nodes aliases may add beyond those written in the file
+MAX_INT_CHARS = 32  # characters of one integer literal (int64 needs 19 digits)
+
+
+def open_bounded(path: str | Path, limit: int, what: str) -> typing.BinaryIO:
+    """Open an input file for reading after checking that it is a regular file of at most
+    `limit` bytes: a device (/dev/zero), a pipe or a folder is refused before a byte is
+    read. The caller closes the file. Raises InputFileError with the reason."""
+    file = str(path)
+    try:
+        # O_NONBLOCK: opening a FIFO must not wait for a writer; fstat then refuses it
+        fd = os.open(file, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except FileNotFoundError:
+        raise InputFileError(file, f"{what} not found") from None
+    except IsADirectoryError:
+        raise InputFileError(file, f"{what} is a folder, not a file") from None
+    except OSError as exc:
+        raise InputFileError(file, f"cannot read {what}: {exc.strerror or exc}") from None
+    try:
+        st = os.fstat(fd)
+        if stat.S_ISDIR(st.st_mode):
+            raise InputFileError(file, f"{what} is a folder, not a file")
+        if not stat.S_ISREG(st.st_mode):
+            raise InputFileError(file, f"{what} is not a regular file (a device, pipe or socket)")
+        if st.st_size > limit:
+            raise InputFileError(file, f"{what} is {st.st_size} bytes; the limit is {limit} bytes")
+    except BaseException:
+        os.close(fd)
+        raise
+    return os.fdopen(fd, "rb")
+
+
+def read_bounded(path: str | Path, limit: int, what: str) -> bytes:
+    """The bytes of a regular file of at most `limit` bytes (see `open_bounded`); a file
+    that grows past the limit while being read is refused too."""
+    with open_bounded(path, limit, what) as fh:
+        try:
+            # read what fstat promised (+1 to see growth), then more only while under the
+            # limit: read(n) reserves n bytes up front, so never ask for the whole limit
+            data = fh.read(os.fstat(fh.fileno()).st_size + 1)
+            while data and len(data) <= limit:
+                more = fh.read(min(1 << 20, limit + 1 - len(data)))
+                if not more:
+                    break
+                data += more
+        except OSError as exc:
+            raise InputFileError(str(path), f"cannot read {what}: {exc.strerror or exc}") from None
+    if len(data) > limit:
+        raise InputFileError(str(path), f"{what} is over the limit of {limit} bytes")
+    return data
+
+
+def read_yaml_file(path: str | Path, what: str) -> str:
+    """A scene or preset file's text, bounded (MAX_YAML_BYTES); SceneError if unreadable."""
+    file = str(path)
+    try:
+        data = read_bounded(path, MAX_YAML_BYTES, what)
+        return data.decode("utf-8")
+    except InputFileError as exc:
+        raise SceneError([Problem(file, None, None, "", exc.reason)]) from None
+    except UnicodeDecodeError as exc:
+        raise SceneError([Problem(file, None, None, "", f"cannot read {what}: not UTF-8 text ({exc.reason} at byte {exc.start})")]) from None
 
 
 # --- YAML with positions ------------------------------------------------------------------
 
 
 class _Loader(yaml.SafeLoader):
-    """SafeLoader that also rejects duplicate keys (a silent overwrite hides mistakes)."""
+    """SafeLoader that also rejects duplicate keys (a silent overwrite hides mistakes),
+    bounds nesting depth and integer literals, and records where aliases are used."""
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self._depth = 0
+        self.alias_marks: list[yaml.Mark] = []
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node:  # type: ignore[override]
+        if self.check_event(yaml.AliasEvent):
+            self.alias_marks.append(self.peek_event().start_mark)
+        self._depth += 1
+        try:
+            if self._depth > MAX_DEPTH:
+                raise yaml.composer.ComposerError(
+                    None, None, f"nesting deeper than {MAX_DEPTH} levels (the limit)", self.peek_event().start_mark
+                )
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+
+def _construct_int(loader: _Loader, node: yaml.ScalarNode) -> int:
+    if len(str(node.value)) > MAX_INT_CHARS:
+        raise yaml.constructor.ConstructorError(
+            None, None, f"integer literal of {len(str(node.value))} characters (the limit is {MAX_INT_CHARS})", node.start_mark
+        )
+    return yaml.SafeLoader.construct_yaml_int(loader, node)
+
+
+_Loader.add_constructor("tag:yaml.org,2002:int", _construct_int)
+
+
+def _expanded_size(root: yaml.Node) -> tuple[int, int, yaml.Node | None]:
+    """(nodes written, nodes after expanding every alias, a node that contains itself).
+
+    Iterative, memoised per node: aliases share node objects, so the document is a graph
+    whose expansion can be exponential (or, with a recursive anchor, infinite)."""
+    size: dict[int, int] = {}
+    on_path: set[int] = set()
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, done = stack.pop()
+        key = id(node)
+        if done:
+            on_path.discard(key)
+            total = 1
+            for child in _children(node):
+                total += size[id(child)]
+            size[key] = total
+            continue
+        if key in size:
+            continue
+        if key in on_path:
+            return len(size), -1, node
+        on_path.add(key)
+        stack.append((node, True))
+        for child in _children(node):
+            if id(child) in on_path:
+                return len(size), -1, child
+            if id(child) not in size:
+                stack.append((child, False))
+    return len(size), size[id(root)], None
+
+
+def _children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.MappingNode):
+        return [n for pair in node.value for n in pair]
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    return []
 
 
 def _construct_mapping(loader: _Loader, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
@@ -103,20 +242,33 @@ def yaml_path(loc: Iterable[str | int]) -> str:
 def parse_yaml(text: str, file: str) -> tuple[Any, SourceMap]:
     """Parse one YAML document safely; returns the data and its source map."""
     try:
-        node = yaml.compose(text, Loader=_Loader)
-        if node is None:
-            return None, SourceMap(file, {})
-        data = _Loader(text).get_single_data()
+        loader = _Loader(text)
+        try:
+            node = loader.get_single_node()
+            if node is None:
+                return None, SourceMap(file, {})
+            written, expanded, cyclic = _expanded_size(node)
+            if cyclic is not None or expanded - written > MAX_ALIAS_NODES:
+                mark = loader.alias_marks[0] if loader.alias_marks else node.start_mark
+                why = (
+                    "a recursive alias (an anchor used inside itself)"
+                    if cyclic is not None
+                    else f"aliases expand the document to {expanded} nodes from {written} written (at most {MAX_ALIAS_NODES} more are allowed)"
+                )
+                raise SceneError([Problem(file, mark.line + 1, mark.column + 1, "", f"invalid YAML: {why}")])
+            data = loader.construct_document(node)
+        finally:
+            loader.dispose()
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
-        msg = " ".join(str(p) for p in (exc.context, exc.problem) if p)
+        msg = " ".join(" ".join(str(p).split()) for p in (exc.context, exc.problem) if p)
         if "could not determine a constructor" in msg:
             msg = f"tag not allowed (scene files are plain YAML): {exc.problem}"
         line = mark.line + 1 if mark else None
         col = mark.column + 1 if mark else None
         raise SceneError([Problem(file, line, col, "", f"invalid YAML: {msg}")]) from None
     except yaml.YAMLError as exc:
-        raise SceneError([Problem(file, None, None, "", f"invalid YAML: {exc}")]) from None
+        raise SceneError([Problem(file, None, None, "", "invalid YAML: " + " ".join(str(exc).split()))]) from None
     positions: dict[Loc, tuple[int, int]] = {}
     _positions(node, (), positions)
     return data, SourceMap(file, positions)
@@ -230,7 +382,8 @@ def _message(err: Mapping[str, Any], data: Any, loc: Loc, root: type[BaseModel])
         msg = msg[len("Value error, ") :]
     got = err.get("input")
     if kind not in ("model_type", "dict_type") and not isinstance(got, (dict, list)) and got is not None and "got" not in msg:
-        msg += f" (got {got!r})"
+        shown = repr(got)
+        msg += f" (got {shown if len(shown) <= 60 else shown[:57] + '...'})"
     return msg, False
 
 
@@ -282,19 +435,16 @@ class LoadedScene:
         return (self.base_dir / relative).resolve()
 
 
-def load_scene(path: str | Path, overrides: Mapping[str, Any] | None = None) -> LoadedScene:
+def load_scene(path: str | Path, overrides: Mapping[str, Any] | None = None, assets: bool = True) -> LoadedScene:
     """Read, validate and cross-check a scene file. Raises SceneError with every problem.
 
     overrides: nested dict merged over the document before validation (presets, CLI flags).
+    assets: open and decode every mesh and image the scene names (the validation stage);
+    a worker reloading a scene the main process has already checked passes False.
     """
     path = Path(path)
     file = str(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SceneError([Problem(file, None, None, "", "scene file not found")]) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SceneError([Problem(file, None, None, "", f"cannot read scene file: {exc}")]) from None
+    text = read_yaml_file(path, "scene file")
     data, source = parse_yaml(text, file)
     if data is None:
         raise SceneError([Problem(file, 1, 1, "", "the scene file is empty; expected a mapping with at least 'camera'")])
@@ -308,7 +458,7 @@ def load_scene(path: str | Path, overrides: Mapping[str, Any] | None = None) -> 
         raise SceneError(problems_from_validation(exc, data, source, Scene)) from None
     from .checks import semantic_problems
 
-    problems = semantic_problems(scene, path.parent, source)
+    problems = semantic_problems(scene, path.parent, source, assets=assets)
     if problems:
         raise SceneError(problems)
     return LoadedScene(scene=scene, path=path.resolve(), source=source, data=data)

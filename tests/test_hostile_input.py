@@ -1,0 +1,381 @@
+"""Hostile and careless input, by class (issue 11): every case ends with exit 2, one located
+error and no traceback, in bounded time and memory, before any render, and nothing is
+written outside the output folder.
+
+All cases run in ONE subprocess under a memory rlimit (RLIMIT_AS, set with
+`resource.setrlimit` before the interpreter starts): a driver calls `motion`'s real
+`main()` for each case in its own folder, records exit code, stderr, seconds and whether
+an exception escaped, and prints the results as JSON. One process keeps ~60 cases within
+seconds; a resource bomb that escaped its bound would blow the rlimit or the clock.
+A hypothesis fuzz of structural YAML mutations (aliases, nesting, huge scalars) checks
+in-process that loading never raises anything but a located SceneError.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import struct
+import subprocess
+import sys
+import zlib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from motion.pipeline.errors import SceneError
+from motion.pipeline.presets import load_preset
+from motion.pipeline.scene import load_scene
+
+MEMORY_LIMIT = 2 << 30  # bytes of address space for the driver process (RLIMIT_AS)
+SECONDS_PER_CASE = 15.0  # each case's own bound (most take well under a second)
+
+BASE = """\
+timeline: {fps: 24, first: 0, last: 2}
+camera: {position: [0, 1, 5], look_at: [0, 0, 0]}
+lights: [{type: constant, radiance: 0.5}]
+render: {resolution: [16, 12], spp: 1, max_depth: 2, shutter_samples: 2, variant: scalar_rgb}
+objects:
+  - {name: ball, shape: sphere, radius: 0.5}
+"""
+
+
+def _obj(extra: str) -> str:
+    """BASE with one more object (a YAML flow mapping)."""
+    return BASE + f"  - {extra}\n"
+
+
+def _alias_bomb(levels: int = 25) -> str:
+    lines = ["a0: &a0 [x, x, x, x, x, x, x, x, x, x]"]
+    for i in range(1, levels):
+        lines.append(f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 10) + "]")
+    return "\n".join(lines) + "\n"
+
+
+def _png(width: int, height: int, declared: tuple[int, int] | None = None) -> bytes:
+    """A real PNG (8-bit RGB), written by hand so the fixture needs no image library;
+    `declared` puts another size in its (valid) header."""
+    raw = b"".join(b"\x00" + bytes([200, 100, 50]) * width for _ in range(height))
+    if declared is not None:
+        width, height = declared
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)) + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b"")
+
+
+PLY_HEAD = "ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty float x\nproperty float y\nproperty float z\nelement face {f}\nproperty list uchar int vertex_indices\nend_header\n"
+
+
+def _ply(n_declared: int, verts: np.ndarray, faces: list[list[int]]) -> bytes:
+    body = verts.astype("<f4").tobytes() + b"".join(struct.pack("<B", len(f)) + np.asarray(f, "<i4").tobytes() for f in faces)
+    return PLY_HEAD.format(n=n_declared, f=len(faces)).encode() + body
+
+
+TRI = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float64)
+
+
+def _bake_json(mutate: str) -> bytes:
+    """A baked-motion JSON file for BASE (3 frames, 2 samples) with one value broken."""
+    frames = []
+    for f in range(3):
+        t = f / 24
+        pose = lambda k: {"translation": [[0.0, 0.0, 0.0]] * k, "rotation": [[1.0, 0.0, 0.0, 0.0]] * k, "scale": [[1.0, 1.0, 1.0]] * k}  # noqa: E731
+        at = {"objects": {"ball": {k: v[0] for k, v in pose(1).items()}}, "camera": {k: v[0] for k, v in pose(1).items()}, "camera_scalars": {"fov": 40.0}, "lights": {}, "light_scalars": {}}
+        sm = {"objects": {"ball": pose(2)}, "camera": pose(2), "camera_scalars": {"fov": [40.0, 40.0]}, "lights": {}, "light_scalars": {}}
+        frames.append({"frame": f, "time": t, "shutter": [t - 1 / 96, t + 1 / 96], "sample_times": [t - 1 / 96, t + 1 / 96], "at_frame": at, "samples": sm})
+    doc: dict[str, Any] = {"format": "motion-bake", "version": 1, "scene": "scene", "fps": "24", "shutter": {"angle": 180.0, "position": "center"}, "samples_per_frame": 2, "frames": frames}
+    ball = doc["frames"][1]["samples"]["objects"]["ball"]
+    if mutate == "nan-translation":
+        ball["translation"][0][0] = float("nan")
+    elif mutate == "inf-scale":
+        ball["scale"][1] = [float("inf"), 1.0, 1.0]
+    elif mutate == "zero-quaternion":
+        ball["rotation"][0] = [0.0, 0.0, 0.0, 0.0]
+    elif mutate == "wrong-shape":
+        ball["translation"] = [[0.0, 0.0]]
+    elif mutate == "no-frames":
+        del doc["frames"]
+    return json.dumps(doc).replace("Infinity", "1e999").encode()
+
+
+# (id, class, files {name: text | bytes | "<fifo>" | ("sparse", size)}, argv run in the case folder)
+V = ["validate", "scene.yaml"]
+
+
+def _r(*extra: str) -> list[str]:
+    return ["render", "scene.yaml", "-o", "out", "--workers", "1", "--no-progress", *extra]
+
+
+CASES: list[tuple[str, str, dict[str, Any], list[str]]] = [
+    # --- resource bombs in YAML (scene and preset) ---
+    ("alias-bomb", "yaml-bomb", {"scene.yaml": _alias_bomb() + BASE}, V),
+    ("alias-bomb-preset", "yaml-bomb", {"scene.yaml": BASE, "p.yaml": _alias_bomb() + "render: {spp: 1}\n"}, [*V, "--preset", "p.yaml"]),
+    ("alias-bomb-render", "yaml-bomb", {"scene.yaml": _alias_bomb() + BASE}, _r()),
+    ("recursive-alias", "yaml-bomb", {"scene.yaml": "x: &a [*a]\n" + BASE}, V),
+    ("recursive-alias-map", "yaml-bomb", {"scene.yaml": "x: &a {y: *a}\n" + BASE}, V),
+    ("deep-sequences", "yaml-bomb", {"scene.yaml": BASE + "dynamics: " + "[" * 50000 + "]" * 50000 + "\n"}, V),
+    ("deep-mappings", "yaml-bomb", {"scene.yaml": BASE + "dynamics: " + "{a: " * 5000 + "1" + "}" * 5000 + "\n"}, V),
+    ("deep-block", "yaml-bomb", {"scene.yaml": BASE + "x:\n" + "".join(" " * i + "- \n" for i in range(1, 200))}, V),
+    ("deep-preset", "yaml-bomb", {"scene.yaml": BASE, "p.yaml": "render: " + "[" * 20000 + "]" * 20000 + "\n"}, [*V, "--preset", "p.yaml"]),
+    ("huge-int", "yaml-bomb", {"scene.yaml": BASE.replace("last: 2", "last: " + "9" * 5000)}, V),
+    ("huge-int-preset", "yaml-bomb", {"scene.yaml": BASE, "p.yaml": "frame_count: " + "7" * 6000 + "\n"}, [*V, "--preset", "p.yaml"]),
+    ("huge-int-hex", "yaml-bomb", {"scene.yaml": BASE.replace("variant: scalar_rgb", "variant: scalar_rgb, seed: 0x" + "f" * 4000)}, V),
+    ("huge-float", "yaml-bomb", {"scene.yaml": BASE.replace("radius: 0.5", "radius: 1e99999")}, V),
+    ("huge-file", "yaml-bomb", {"scene.yaml": ("sparse", 64 << 20)}, V),
+    ("dev-zero", "yaml-bomb", {}, ["validate", "/dev/zero"]),
+    ("dev-zero-render", "yaml-bomb", {}, ["render", "/dev/zero", "-o", "out"]),
+    ("fifo", "yaml-bomb", {"scene.yaml": "<fifo>"}, V),
+    ("preset-fifo", "yaml-bomb", {"scene.yaml": BASE, "p.yaml": "<fifo>"}, [*V, "--preset", "p.yaml"]),
+    ("not-utf8", "yaml-bomb", {"scene.yaml": b"camera: {}\n\xff\xfe\x00bad"}, V),
+    ("nul-bytes", "yaml-bomb", {"scene.yaml": BASE + "\x00\x00\n"}, V),
+    # --- sizes without limits ---
+    ("frames-1e11", "sizes", {"scene.yaml": BASE.replace("last: 2", "last: 999999")}, _r("--frames", "0-100000000000")),
+    ("frames-1e11-bake", "sizes", {"scene.yaml": BASE}, ["bake", "scene.yaml", "-o", "out/m.json", "--frames", "0-100000000000"]),
+    ("frames-many-parts", "sizes", {"scene.yaml": BASE.replace("last: 2", "last: 999999")}, _r("--frames", ",".join(["0-999999"] * 3))),
+    ("frames-digits", "sizes", {"scene.yaml": BASE}, _r("--frames", "1" * 5000)),
+    ("timeline-1e11", "sizes", {"scene.yaml": BASE.replace("last: 2", "last: 100000000000")}, V),
+    ("timeline-long", "sizes", {"scene.yaml": BASE.replace("last: 2", "last: 5000000")}, V),
+    ("particles-1e21", "sizes", {"scene.yaml": _obj("{name: p, shape: particles, emitter: {rate: 1e21, lifetime: 1e10, max_count: 10000000}}")}, V),
+    ("particles-rate-1e300", "sizes", {"scene.yaml": _obj("{name: p, shape: particles, emitter: {rate: 1e300, lifetime: 10, max_count: 5000000}}")}, _r()),
+    ("particle-steps", "sizes", {"scene.yaml": BASE.replace("last: 2", "last: 100000") + "  - {name: p, shape: particles, emitter: {rate: 100000, lifetime: 10, max_count: 1000000}}\n"}, V),
+    ("particle-steps-bake", "sizes", {"scene.yaml": BASE.replace("last: 2", "last: 2000") + "  - {name: p, shape: particles, emitter: {rate: 100000, max_count: 1000000}}\n"}, ["bake", "scene.yaml", "-o", "out/m.npz"]),
+    ("particle-bake-budget", "sizes", {"scene.yaml": BASE.replace("last: 2", "last: 47") + "  - {name: p, shape: particles, emitter: {rate: 10000000, max_count: 1000000}}\n"}, ["bake", "scene.yaml", "-o", "out/m.npz"]),
+    ("particle-render-budget", "sizes", {"scene.yaml": BASE.replace("last: 2", "last: 47") + "  - {name: p, shape: particles, emitter: {rate: 10000000, max_count: 1000000}}\n"}, _r()),
+    ("sim-steps", "sizes", {"scene.yaml": _obj("{name: b, shape: sphere, motion: {type: dynamics}}") + "dynamics: {step: 1e-12}\n"}, V),
+    ("workers-1e6", "sizes", {"scene.yaml": BASE}, _r("--workers", "1000000")),
+    # --- problems found only at render time ---
+    ("fps-tiny", "render-time", {"scene.yaml": BASE.replace("fps: 24", "fps: '1/" + "9" * 400 + "'")}, V),
+    ("fps-huge", "render-time", {"scene.yaml": BASE.replace("fps: 24", "fps: '" + "9" * 400 + "/1'")}, _r()),
+    ("fps-1e-9", "render-time", {"scene.yaml": BASE.replace("fps: 24", "fps: 1e-9")}, V),
+    ("fps-inf", "render-time", {"scene.yaml": BASE.replace("fps: 24", "fps: .inf")}, V),
+    ("fps-1e6", "render-time", {"scene.yaml": BASE.replace("fps: 24", "fps: 1000000")}, _r()),
+    ("shutter-1e-300", "render-time", {"scene.yaml": BASE.replace("look_at: [0, 0, 0]}", "look_at: [0, 0, 0], shutter: {angle: 1e-300}}")}, _r()),
+    ("mesh-garbage", "render-time", {"scene.yaml": _obj("{name: m, shape: mesh, file: m.obj}"), "m.obj": b"\x00\x01garbage\xff" * 50}, _r()),
+    ("mesh-empty", "render-time", {"scene.yaml": _obj("{name: m, shape: mesh, file: m.obj}"), "m.obj": ""}, V),
+    ("mesh-nan", "render-time", {"scene.yaml": _obj("{name: m, shape: mesh, file: m.obj}"), "m.obj": "v 0 0 0\nv nan 1 0\nv 1 0 0\nf 1 2 3\n"}, _r()),
+    ("mesh-inf", "render-time", {"scene.yaml": _obj("{name: m, shape: mesh, file: m.obj}"), "m.obj": "v 0 0 0\nv 1e999 1 0\nv 1 0 0\nf 1 2 3\n"}, V),
+    ("mesh-bad-index", "render-time", {"scene.yaml": _obj("{name: m, shape: mesh, file: m.obj}"), "m.obj": "v 0 0 0\nv 0 1 0\nv 1 0 0\nf 1 2 4\n"}, V),
+    ("mesh-short-vertex", "render-time", {"scene.yaml": _obj("{name: m, shape: mesh, file: m.obj}"), "m.obj": "v 0 0\nv 0 1 0\nv 1 0 0\nf 1 2 3\n"}, V),
+    ("mesh-ply-truncated", "render-time", {"scene.yaml": _obj("{name: m, shape: mesh, file: m.ply}"), "m.ply": _ply(3, TRI, [[0, 1, 2]])[:-7]}, _r()),
+    ("mesh-ply-count-lies", "render-time", {"scene.yaml": _obj("{name: m, shape: mesh, file: m.ply}"), "m.ply": _ply(1000000, TRI, [[0, 1, 2]])}, V),
+    ("mesh-ply-nan", "render-time", {"scene.yaml": _obj("{name: m, shape: mesh, file: m.ply}"), "m.ply": _ply(3, np.array([[0, 0, 0], [np.nan, 0, 0], [0, 1, 0]]), [[0, 1, 2]])}, V),
+    ("mesh-ply-index", "render-time", {"scene.yaml": _obj("{name: m, shape: mesh, file: m.ply}"), "m.ply": _ply(3, TRI, [[0, 1, 7]])}, V),
+    ("mesh-is-folder", "render-time", {"scene.yaml": _obj("{name: m, shape: mesh, file: m.obj}"), "m.obj/x": "v 0 0 0\n"}, V),
+    ("texture-not-image", "render-time", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, material: t}") + "materials: [{name: t, type: diffuse, color: {file: t.png}}]\n", "t.png": "hello"}, _r()),
+    ("texture-empty", "render-time", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, material: t}") + "materials: [{name: t, type: diffuse, color: {file: t.png}}]\n", "t.png": b""}, V),
+    ("texture-truncated", "render-time", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, material: t}") + "materials: [{name: t, type: principled, color: {file: t.png}}]\n", "t.png": _png(64, 64)[:-40]}, V),
+    ("texture-unknown-format", "render-time", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, material: t}") + "materials: [{name: t, type: diffuse, color: {file: t.tif}}]\n", "t.tif": _png(4, 4)}, V),
+    ("envmap-not-image", "render-time", {"scene.yaml": BASE.replace("{type: constant, radiance: 0.5}", "{type: envmap, file: sky.exr}"), "sky.exr": "not an exr"}, _r()),
+    ("envmap-hdr-truncated", "render-time", {"scene.yaml": BASE.replace("{type: constant, radiance: 0.5}", "{type: envmap, file: sky.hdr}"), "sky.hdr": b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 64 +X 64\n" + b"\x80" * 100}, V),
+    ("envmap-pfm-nan", "render-time", {"scene.yaml": BASE.replace("{type: constant, radiance: 0.5}", "{type: envmap, file: sky.pfm}"), "sky.pfm": b"PF\n2 1\n-1.0\n" + np.array([1, 1, 1, np.nan, 0, 0], "<f4").tobytes()}, V),
+    ("envmap-huge-header", "render-time", {"scene.yaml": BASE.replace("{type: constant, radiance: 0.5}", "{type: envmap, file: sky.png}"), "sky.png": _png(1, 1, declared=(100000, 100000))}, V),
+    # --- outputs outside the output folder ---
+    ("pattern-dotdot", "output", {"scene.yaml": BASE + "output: {filename: '../escaped/{name}.####.exr'}\n"}, _r()),
+    ("pattern-absolute", "output", {"scene.yaml": BASE + "output: {filename: '/tmp/motion-escaped/{name}.####.exr'}\n"}, _r()),
+    ("pattern-inner-dotdot", "output", {"scene.yaml": BASE + "output: {filename: 'a/../../b/{name}.####.exr'}\n"}, _r()),
+    ("pattern-preset", "output", {"scene.yaml": BASE, "p.yaml": "output: {filename: '../../{name}.####.exr'}\n"}, _r("--preset", "p.yaml")),
+    ("pattern-name-dotdot", "output", {"...yaml": BASE + "output: {filename: '{name}/####.exr'}\n"}, ["render", "...yaml", "-o", "out", "--no-progress"]),
+    # --- non-finite values ---
+    ("ballistic-overflow", "non-finite", {"scene.yaml": BASE.replace("last: 2", "last: 60").replace("radius: 0.5}", "radius: 0.5, motion: {type: procedural, generators: [{type: ballistic, v0: [0, 0, 0], a: [1e308, 0, 0]}]}}")}, _r()),
+    ("ballistic-overflow-bake", "non-finite", {"scene.yaml": BASE.replace("last: 2", "last: 60").replace("radius: 0.5}", "radius: 0.5, motion: {type: procedural, generators: [{type: ballistic, v0: [1e308, 0, 0], a: [0, 0, 0]}]}}")}, ["bake", "scene.yaml", "-o", "out/m.json"]),
+    ("expression-overflow", "non-finite", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, motion: {type: procedural, channels: {scale: '10**60 * 10**60 * 10**60 * 10**60 * 10**60 * 10**60'}}}")}, _r()),
+    ("bake-nan", "non-finite", {"scene.yaml": BASE, "m.json": _bake_json("nan-translation")}, _r("--motion", "m.json")),
+    ("bake-inf-scale", "non-finite", {"scene.yaml": BASE, "m.json": _bake_json("inf-scale")}, _r("--motion", "m.json")),
+    ("bake-zero-quaternion", "non-finite", {"scene.yaml": BASE, "m.json": _bake_json("zero-quaternion")}, _r("--motion", "m.json")),
+    ("bake-wrong-shape", "non-finite", {"scene.yaml": BASE, "m.json": _bake_json("wrong-shape")}, _r("--motion", "m.json")),
+    # --- misreported files ---
+    ("motion-empty-json", "misreported", {"scene.yaml": BASE, "m.json": b""}, _r("--motion", "m.json")),
+    ("motion-empty-npz", "misreported", {"scene.yaml": BASE, "m.npz": b""}, _r("--motion", "m.npz")),
+    ("motion-text", "misreported", {"scene.yaml": BASE, "m.npz": "hello\n"}, _r("--motion", "m.npz")),
+    ("motion-json-list", "misreported", {"scene.yaml": BASE, "m.json": "[1, 2, 3]"}, _r("--motion", "m.json")),
+    ("motion-json-deep", "misreported", {"scene.yaml": BASE, "m.json": "[" * 100000 + "]" * 100000}, _r("--motion", "m.json")),
+    ("motion-no-frames", "misreported", {"scene.yaml": BASE, "m.json": _bake_json("no-frames")}, _r("--motion", "m.json")),
+    ("motion-dev-zero", "misreported", {"scene.yaml": BASE}, _r("--motion", "/dev/zero")),
+    ("motion-folder", "misreported", {"scene.yaml": BASE, "m.json/x": "1"}, _r("--motion", "m.json")),
+    ("report-unwritable", "misreported", {"scene.yaml": BASE, "afile": "x"}, _r("--report", "afile/report.json")),
+    ("output-unwritable", "misreported", {"scene.yaml": BASE, "afile": "x"}, ["render", "scene.yaml", "-o", "afile/out", "--no-progress"]),
+]
+
+DRIVER = r"""
+import contextlib, io, json, os, signal, sys, time, traceback
+from motion.cli.main import main
+cases, limit = json.loads(sys.stdin.read())
+out = []
+root = os.getcwd()
+
+def overtime(signum, frame):
+    raise TimeoutError(f"still running after {limit} s")
+
+signal.signal(signal.SIGALRM, overtime)
+for case_id, argv in cases:
+    os.chdir(os.path.join(root, case_id))
+    err = io.StringIO()
+    t0 = time.perf_counter()
+    escaped = None
+    signal.alarm(int(limit))  # a case that hangs (a FIFO, an endless loop) fails alone
+    try:
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            code = main(argv)
+    except BaseException as exc:
+        code, escaped = None, traceback.format_exc()
+    signal.alarm(0)
+    out.append({"id": case_id, "code": code, "stderr": err.getvalue(), "seconds": time.perf_counter() - t0, "escaped": escaped})
+    os.chdir(root)
+print(json.dumps(out))
+"""
+
+
+def _limit_memory() -> None:
+    resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
+
+
+def _files(root: Path) -> set[str]:
+    return {str(p.relative_to(root)) for p in root.rglob("*")}
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, set[str], set[str], dict[str, dict[str, Any]]]:
+    root = tmp_path_factory.mktemp("hostile")
+    work = root / "cases"
+    for case_id, _, files, _ in CASES:
+        folder = work / case_id
+        folder.mkdir(parents=True)
+        for name, content in files.items():
+            path = folder / name
+            path.parent.mkdir(parents=True, exist_ok=True)
+            if content == "<fifo>":
+                os.mkfifo(path)
+            elif isinstance(content, tuple):
+                with open(path, "wb") as fh:
+                    fh.truncate(content[1])  # sparse: size without disk
+            else:
+                path.write_bytes(content if isinstance(content, bytes) else content.encode())
+    before = _files(root)
+    env = {**os.environ, "MOTION_CACHE_DIR": str(root / "cache"), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    proc = subprocess.run(
+        [sys.executable, "-c", DRIVER],
+        input=json.dumps([[(c[0], c[3]) for c in CASES], SECONDS_PER_CASE]),
+        capture_output=True,
+        text=True,
+        cwd=work,
+        env=env,
+        preexec_fn=_limit_memory,
+        timeout=SECONDS_PER_CASE * len(CASES) + 60,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    rows = {r["id"]: r for r in json.loads(proc.stdout.strip().splitlines()[-1])}
+    return root, before, _files(root), rows
+
+
+@pytest.mark.parametrize("case_id,kind", [(c[0], c[1]) for c in CASES], ids=[c[0] for c in CASES])
+def test_hostile_case_is_a_clean_error(results: tuple[Path, set[str], set[str], dict[str, dict[str, Any]]], case_id: str, kind: str) -> None:
+    root, before, after, rows = results
+    row = rows[case_id]
+    assert row["escaped"] is None, f"{case_id}: an exception escaped main():\n{row['escaped']}"
+    assert row["code"] == 2, f"{case_id}: exit {row['code']}, stderr:\n{row['stderr'][-2000:]}"
+    lines = [line for line in row["stderr"].splitlines() if line.strip()]
+    assert lines, f"{case_id}: no error message"
+    assert "Traceback" not in row["stderr"]
+    assert len(lines) <= 2, f"{case_id}: expected one error line, got:\n{row['stderr']}"
+    assert all(len(line) < 600 for line in lines), f"{case_id}: an error line is too long"
+    assert row["seconds"] < SECONDS_PER_CASE, f"{case_id}: took {row['seconds']:.1f}s"
+    # nothing written outside this case's output folder (nor anywhere by `validate`)
+    new = sorted(p for p in after - before if p.startswith(f"cases/{case_id}/") or not p.startswith("cases/"))
+    allowed = f"cases/{case_id}/out"
+    stray = [p for p in new if not (p == allowed or p.startswith(allowed + "/")) and not p.startswith("cache")]
+    assert not stray, f"{case_id}: wrote outside the output folder: {stray}"
+    assert not any(f.endswith(".exr") for f in new), f"{case_id}: rendered frames before failing: {new}"
+
+
+def test_every_class_is_covered() -> None:
+    kinds = {c[1] for c in CASES}
+    assert kinds == {"yaml-bomb", "sizes", "render-time", "output", "non-finite", "misreported"}
+    assert not Path("/tmp/motion-escaped").exists()
+
+
+def test_located_errors_point_at_the_field(results: tuple[Path, set[str], set[str], dict[str, dict[str, Any]]]) -> None:
+    """A sample of classes: the line is FILE:LINE:COL: yaml.path: message."""
+    rows = results[3]
+    expect = {
+        "alias-bomb": ("scene.yaml:", "aliases expand"),
+        "deep-sequences": ("scene.yaml:", "nesting deeper than"),
+        "huge-int": ("scene.yaml:", "integer literal of 5000 characters"),
+        "timeline-1e11": ("scene.yaml:1:", "timeline.last"),
+        "particles-1e21": ("scene.yaml:", "objects[1].emitter"),
+        "mesh-nan": ("scene.yaml:7:", "objects[1].file: mesh file m.obj: line 2: vertex 1 is not finite"),
+        "mesh-ply-truncated": ("scene.yaml:7:", "truncated"),
+        "texture-not-image": ("scene.yaml:", "materials[0].color.file"),
+        "pattern-dotdot": ("scene.yaml:", "output.filename"),
+        "pattern-preset": ("p.yaml:1:", "output.filename"),
+        "particle-bake-budget": ("scene.yaml:", "particle positions; the limit is"),
+        "envmap-huge-header": ("scene.yaml:", "over the limit of"),
+        "frames-1e11": ("--frames", "limited to"),
+        "ballistic-overflow": ("scene.yaml:6:", "object 'ball': translation is not finite at t ="),
+        "bake-zero-quaternion": ("m.json", "object 'ball': rotation is not a unit quaternion"),
+        "motion-empty-json": ("m.json", "empty"),
+        "report-unwritable": ("--report", "cannot write"),
+    }
+    for case_id, (where, what) in expect.items():
+        text = rows[case_id]["stderr"]
+        assert where in text and what in text, f"{case_id}: {text}"
+
+
+# --- fuzz: structural YAML mutations never produce anything but a located SceneError ------
+
+_SCALARS = st.one_of(
+    st.integers(min_value=-(10**40), max_value=10**40).map(str),
+    st.sampled_from(["1e999", "-.inf", ".nan", "0x" + "f" * 60, "9" * 200, "~", "''", "!!binary aGVsbG8=", "!!python/object:os.system ls", "*undefined", "&x 1", "1:2:3:4:5:6"]),
+    st.text(alphabet="abcxyz012 ", max_size=20).map(lambda s: repr(s)),
+)
+
+
+@st.composite
+def _mutated(draw: st.DrawFn) -> str:
+    lines = BASE.splitlines()
+    kind = draw(st.sampled_from(["nest", "alias", "scalar", "anchor-chain", "duplicate", "indent"]))
+    i = draw(st.integers(min_value=0, max_value=len(lines) - 1))
+    depth = draw(st.integers(min_value=1, max_value=200))
+    if kind == "nest":
+        opener = draw(st.sampled_from(["[", "{a: "]))
+        closer = "]" if opener == "[" else "}"
+        key = lines[i].split(":")[0] if ":" in lines[i] and not lines[i].startswith(" ") else "timeline"
+        lines[i] = f"{key}: " + opener * depth + "1" + closer * depth
+    elif kind == "alias":
+        width = draw(st.integers(min_value=2, max_value=12))
+        levels = draw(st.integers(min_value=1, max_value=12))
+        head = ["b0: &b0 [1, 2]"] + [f"b{k}: &b{k} [" + ", ".join([f"*b{k - 1}"] * width) + "]" for k in range(1, levels)]
+        lines = head + lines
+    elif kind == "scalar":
+        lines[i] = lines[i].replace(draw(st.sampled_from(["24", "0.5", "5", "1", "2", "16", "0"])), draw(_SCALARS), 1)
+    elif kind == "anchor-chain":
+        lines.insert(0, "z: &z " + "[" * min(depth, 80) + "*z" + "]" * min(depth, 80))
+    elif kind == "duplicate":
+        lines.append(lines[i])
+    else:
+        lines[i] = " " * depth + lines[i]
+    return "\n".join(lines) + "\n"
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(text=_mutated())
+def test_fuzz_structural_yaml_mutations(tmp_path: Path, text: str) -> None:
+    scene = tmp_path / "fuzz.yaml"
+    scene.write_text(text)
+    try:
+        load_scene(scene)
+    except SceneError as err:
+        for problem in err.problems:
+            assert problem.file == str(scene) and problem.message
+    preset = tmp_path / "fuzz-preset.yaml"
+    preset.write_text(text)
+    try:
+        load_preset(str(preset))
+    except SceneError as err:
+        assert err.problems
