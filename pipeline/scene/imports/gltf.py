@@ -318,23 +318,42 @@ class GltfReader:
         anims = g.animations or []
         if not anims or spec.animation == -1:
             return {}
-        if isinstance(spec.animation, str):
+        targets = [{(ch.target.node, ch.target.path) for ch in a.channels or []} for a in anims]
+        if spec.animation == "*":
+            selected = list(range(len(anims)))
+        elif isinstance(spec.animation, str):
             found = [k for k, a in enumerate(anims) if a.name == spec.animation]
             if not found:
-                raise SpecError("animation", f"no animation named '{spec.animation}' in {self.shown} (animations: {', '.join(str(a.name) for a in anims)})")
-            a_index = found[0]
+                raise SpecError("animation", f"no animation named '{spec.animation}' in {self.shown} (animations: {', '.join(str(a.name) for a in anims)}; '*' plays them all)")
+            selected = found[:1]
+        elif spec.animation is not None:
+            if spec.animation >= len(anims):
+                raise SpecError("animation", f"animation {spec.animation} does not exist in {self.shown} ({len(anims)} animations)")
+            selected = [spec.animation]
         else:
-            a_index = spec.animation or 0
-            if a_index >= len(anims):
-                raise SpecError("animation", f"animation {a_index} does not exist in {self.shown} ({len(anims)} animations)")
-        anim = anims[a_index]
+            # by default every animation plays when they key disjoint things (an exporter's
+            # one animation per object, as Blender writes); takes of one rig: the first
+            disjoint = sum(len(t) for t in targets) == len(set().union(*targets))
+            selected = list(range(len(anims))) if disjoint else [0]
         out: dict[int, dict[str, Any]] = {}
         channels: dict[int, dict[str, Any]] = {}
+        keyed: dict[tuple[int, str], int] = {}
+        for a_index in selected:
+            self._animation(anims[a_index], a_index, included, out, channels, keyed)
+        for node, chans in channels.items():
+            out.setdefault(node, {})["transform"] = {"type": "keyframes", "time_unit": "seconds", "extrapolation": "hold", "channels": chans}
+        return out
+
+    def _animation(self, anim: Any, a_index: int, included: set[int], out: dict[int, dict[str, Any]], channels: dict[int, dict[str, Any]], keyed: dict[tuple[int, str], int]) -> None:
+        """The channels of one animation into `out` (weights) and `channels` (transforms)."""
         for c, ch in enumerate(anim.channels or []):
             node = ch.target.node
             if node is None or node not in included:
                 continue
             where = f"animations[{a_index}].channels[{c}]"
+            first = keyed.setdefault((node, ch.target.path), a_index)
+            if first != a_index or sum(1 for x in anim.channels if (x.target.node, x.target.path) == (node, ch.target.path)) > 1:
+                self.fail(where, f"node {node} '{self.gltf.nodes[node].name}' {ch.target.path} is keyed twice (also in animations[{first}]); pick one with `animation`")
             samplers = anim.samplers or []
             if not 0 <= ch.sampler < len(samplers):
                 self.fail(where, f"sampler {ch.sampler} does not exist")
@@ -368,9 +387,6 @@ class GltfReader:
                 self.fail(f"{swhere}.output (accessor {s.output})", f"{len(values)} values of {values.shape[1]} for {len(times)} {interp} keys of {path}; expected {len(times) * per_key} of {width}")
             name = {"translation": "translate", "rotation": "rotate", "scale": "scale"}[path]
             channels.setdefault(node, {})[name] = self._channel(times, values.reshape(len(times), per_key, width), interp, path == "rotation")
-        for node, chans in channels.items():
-            out.setdefault(node, {})["transform"] = {"type": "keyframes", "time_unit": "seconds", "extrapolation": "hold", "channels": chans}
-        return out
 
     def _channel(self, times: np.ndarray, values: np.ndarray, interp: str, rotation: bool) -> dict[str, Any]:
         """values [n, 1 or 3 (in-tangent, value, out-tangent), width] -> a channel record."""

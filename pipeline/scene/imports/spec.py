@@ -32,7 +32,9 @@ class ImportSpec(Model):
     transform: Transform = Transform()
     scene: Union[Annotated[int, Field(ge=0)], str, None] = None  # glTF: which scene (default: the file's)
     nodes: list[str] | None = None  # glTF node / USD prim names: import only these subtrees
-    animation: Union[Annotated[int, Field(ge=-1)], str, None] = None  # glTF: name or index; -1: none
+    # glTF: a name or index, "*" for all at once, -1 for none; default: all when they key
+    # disjoint nodes (Blender writes one animation per object), else the first
+    animation: Union[Annotated[int, Field(ge=-1)], str, None] = None
     camera: str | None = None  # the camera node (prim) that becomes the shot's camera
     light_scale: NonNegative = 1.0  # multiplies imported light intensities (docs/imports.md, units)
     time_offset: FiniteFloat = 0.0  # seconds: the file's time 0 plays at this scene time
