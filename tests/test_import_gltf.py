@@ -539,3 +539,33 @@ def test_animation_selection(tmp_path):
     assert motion.objects["a.A"].translation[0] == pytest.approx([1, 8, 3])
     msg = _one_line_error(scene_yaml(tmp_path, "takes.glb", extra=cam, imports_extra="    animation: '*'"))
     assert "takes.glb: animations[1].channels[0]: node 0 'A' translation is keyed twice (also in animations[0])" in msg
+
+
+def test_metallic_roughness_texture_splits_into_grey_textures(tmp_path):
+    """glTF packs roughness in G and metallic in B; each becomes a raw grey texture with
+    its factor multiplied in, which the renderer's principled material accepts."""
+    from PIL import Image
+    import io
+
+    img = np.zeros((2, 2, 3), np.uint8)
+    img[..., 1], img[..., 2] = 200, 100
+    buf = io.BytesIO()
+    Image.fromarray(img).save(buf, format="PNG")
+    b = GltfBuilder()
+    pos = b.accessor(np.eye(3), target="vertex", bounds=True)
+    tex = b.image(buf.getvalue())
+    b.gltf["materials"] = [{"name": "Metal", "pbrMetallicRoughness": {"metallicFactor": 0.5, "roughnessFactor": 1.0, "metallicRoughnessTexture": {"index": tex}}}]
+    b.gltf["meshes"].append({"primitives": [{"attributes": {"POSITION": pos}, "material": 0}]})
+    b.gltf["scenes"][0]["nodes"] = [b.node(name="Thing", mesh=0)]
+    b.save(tmp_path / "mr.glb")
+    loaded = load_scene(scene_yaml(tmp_path, "mr.glb", extra="camera: {position: [0, 0, 5], look_at: [0, 0, 0]}"))
+    mat = next(m for m in loaded.scene.materials if m.name == "a.Metal")
+    assert mat.roughness.raw and mat.metallic.raw
+    assert np.asarray(Image.open(mat.roughness.file)).max() == 200
+    assert np.asarray(Image.open(mat.metallic.file)).max() == 50
+    from motion.pipeline.render.build import material_dict
+    from motion.pipeline.variant import activate
+
+    activate("auto", quiet=True)
+    d = material_dict(mat, loaded)
+    assert d["roughness"]["type"] == "bitmap" and d["metallic"]["filename"] == mat.metallic.file

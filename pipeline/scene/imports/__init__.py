@@ -149,9 +149,11 @@ def expand_imports(data: dict[str, Any], source: "SourceMap", base_dir: Path) ->
         if isinstance(user, dict):
             # the scene file's camera keys refine the imported camera (shutter, fov, ...)
             rec = {**rec, **user}
-            if "position" in user or "look_at" in user:
+            if ("position" in user or "look_at" in user) and "transform" not in user:
+                # the scene places the camera itself, in world space
                 rec.pop("transform", None)
-                rec.pop("parent", None) if "parent" not in user else None
+                if "parent" not in user:
+                    rec.pop("parent", None)
             origin = Origin(origin.file, origin.where, {k: ("camera", k) for k in user})
         out["camera"] = rec
         camera_origin = origin
