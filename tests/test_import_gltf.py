@@ -262,6 +262,15 @@ def root_matrix() -> np.ndarray:
     return m
 
 
+@pytest.fixture(autouse=True, scope="module")
+def fresh_cache(tmp_path_factory):
+    """A cache of our own: every run converts cold first (and leaves the user's alone)."""
+    mp = pytest.MonkeyPatch()
+    mp.setenv("MOTION_CACHE_DIR", str(tmp_path_factory.mktemp("cache")))
+    yield
+    mp.undo()
+
+
 @pytest.fixture(scope="module")
 def asset(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("gltf")
@@ -569,3 +578,25 @@ def test_metallic_roughness_texture_splits_into_grey_textures(tmp_path):
     activate("auto", quiet=True)
     d = material_dict(mat, loaded)
     assert d["roughness"]["type"] == "bitmap" and d["metallic"]["filename"] == mat.metallic.file
+
+
+def test_second_load_is_warm_and_the_same(asset, tmp_path):
+    """The second load reads the cached records and converted files, decoding nothing;
+    a changed source file is converted again."""
+    from motion.pipeline.scene.imports import cache
+
+    tmp, _, _ = asset
+    shutil.copy(tmp / "rig.glb", tmp_path / "rig.glb")
+    shot = scene_yaml(tmp_path, "rig.glb")
+    before = dict(cache.STATS)
+    cold = load_scene(shot).scene
+    misses = cache.STATS["misses"] - before["misses"]
+    warm = load_scene(shot).scene
+    assert cache.STATS["misses"] - before["misses"] == misses  # nothing converted again
+    assert cache.STATS["records"] == before["records"] + 1  # the records came from the cache
+    assert warm == cold
+    data = bytearray((tmp_path / "rig.glb").read_bytes())
+    data[-4:] = b"\x00\x00\x80\x3f"  # change the last float of the binary chunk
+    (tmp_path / "rig.glb").write_bytes(bytes(data))
+    load_scene(shot)
+    assert cache.STATS["misses"] > before["misses"] + misses

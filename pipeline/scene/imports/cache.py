@@ -19,7 +19,7 @@ from ...variant import cache_root
 
 CONVERSION_VERSION = "import-v1"
 _lock = threading.Lock()
-STATS = {"hits": 0, "misses": 0}
+STATS = {"hits": 0, "misses": 0, "records": 0}  # converted-file hits / misses; record-set hits
 _DIGESTS: dict[tuple[str, int, int], str] = {}
 
 
@@ -52,15 +52,21 @@ def cached(stem: str, key: str, suffix: str, write: Callable[[Path], None]) -> P
         return target
     with _lock:
         STATS["misses"] += 1
+    write_atomic(target, write)
+    return target
+
+
+def write_atomic(target: Path, write: Callable[[Path], None]) -> None:
+    """`write(tmp)` to a temporary name beside `target`, then rename it into place: a
+    concurrent reader sees the whole file or none."""
     target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".tmp{suffix}", dir=target.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".tmp{target.suffix}", dir=target.parent)
     os.close(fd)
     try:
         write(Path(tmp))
         os.replace(tmp, target)
     finally:
         Path(tmp).unlink(missing_ok=True)
-    return target
 
 
 def write_ply(path: Path, positions: np.ndarray, faces: np.ndarray | None, normals: np.ndarray | None = None, uvs: np.ndarray | None = None) -> None:
