@@ -600,3 +600,39 @@ def test_second_load_is_warm_and_the_same(asset, tmp_path):
     (tmp_path / "rig.glb").write_bytes(bytes(data))
     load_scene(shot)
     assert cache.STATS["misses"] > before["misses"] + misses
+
+
+def test_mutated_files_give_located_errors_never_a_traceback(asset, tmp_path):
+    """Random damage to the JSON of a valid asset (wrong types, out-of-range indices,
+    deleted keys) is either imported or reported as located lines: never another error."""
+    import copy
+    import random
+
+    tmp, _, _ = asset
+    data = (tmp / "rig.glb").read_bytes()
+    n = int.from_bytes(data[12:16], "little")
+    doc, blob = json.loads(data[20 : 20 + n]), data[20 + n + 8 :]
+    values = [None, -1, 0, 1, 10**9, "x", 3.5, [], {}, [1, 2], True]
+    rng = random.Random(15)
+    shot = scene_yaml(tmp_path, "m.glb", extra="camera: {position: [0, 0, 5], look_at: [0, 0, 0]}")
+    for _ in range(80):
+        mutated = copy.deepcopy(doc)
+        for _ in range(rng.randint(1, 3)):
+            node, path = mutated, []
+            while isinstance(node, (dict, list)) and node and rng.random() < 0.8:
+                key = rng.choice(list(node)) if isinstance(node, dict) else rng.randrange(len(node))
+                path.append((node, key))
+                node = node[key]
+            if path:
+                parent, key = path[-1]
+                if rng.random() < 0.2 and isinstance(parent, dict):
+                    del parent[key]
+                else:
+                    parent[key] = rng.choice(values)
+        b = GltfBuilder()
+        b.gltf, b.blob = mutated, bytearray(blob)
+        b.save(tmp_path / "m.glb")
+        try:
+            evaluate(load_scene(shot), np.array([0.0, 0.3]))
+        except SceneError as err:
+            assert err.problems and all(p.file.endswith(("m.glb", "shot.yaml")) for p in err.problems), str(err)

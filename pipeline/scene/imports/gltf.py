@@ -91,6 +91,7 @@ class GltfReader:
                 self.fail("extensionsRequired", f"unsupported extension '{ext}' is marked required (supported: {', '.join(SUPPORTED_EXTENSIONS)})")
         self._buffers: dict[int, bytes] = {}
         self.digest = source_digest(path)
+        self.at = "<file>"  # what is being read: the location of an unforeseen malformation
 
     # --- errors and raw data ------------------------------------------------------------
 
@@ -166,7 +167,8 @@ class GltfReader:
     def accessor(self, i: int | None, where: str = "") -> np.ndarray:
         """Accessor `i` as [count, width]: float64 (floats, normalised integers) or int64."""
         accessors = self.gltf.accessors or []
-        if i is None or not 0 <= i < len(accessors):
+        self.at = f"accessors[{i}]" + (f" ({where})" if where else "")
+        if not isinstance(i, int) or not 0 <= i < len(accessors):
             self.fail(where or f"accessors[{i}]", f"accessor {i} does not exist")
         a = accessors[i]
         at = f"accessors[{i}]" + (f" ({where})" if where else "")
@@ -261,6 +263,7 @@ class GltfReader:
         for k in order:
             n = nodes[k]
             where = f"nodes[{k}] '{n.name}'" if n.name else f"nodes[{k}]"
+            self.at = where
             origin = Origin(self.shown, where)
             par = node_name[parent[k]] if k in parent and parent[k] in included and k not in roots else root_name
             rec: dict[str, Any] = {"name": node_name[k], "shape": "empty", "parent": par, "transform": self._transform(n, where)}
@@ -347,6 +350,7 @@ class GltfReader:
     def _animation(self, anim: Any, a_index: int, included: set[int], out: dict[int, dict[str, Any]], channels: dict[int, dict[str, Any]], keyed: dict[tuple[int, str], int]) -> None:
         """The channels of one animation into `out` (weights) and `channels` (transforms)."""
         for c, ch in enumerate(anim.channels or []):
+            self.at = f"animations[{a_index}].channels[{c}]"
             node = ch.target.node
             if node is None or node not in included:
                 continue
@@ -592,6 +596,7 @@ class GltfReader:
             return {"name": name, "type": "principled", "color": 1.0, "metallic": 1.0, "roughness": 1.0}
         mat = self.gltf.materials[index]
         where = f"materials[{index}]" + (f" '{mat.name}'" if mat.name else "")
+        self.at = where
         pbr = mat.pbrMetallicRoughness
         factor = list(pbr.baseColorFactor) if pbr is not None and pbr.baseColorFactor is not None else [1.0, 1.0, 1.0, 1.0]
         metallic = float(pbr.metallicFactor) if pbr is not None and pbr.metallicFactor is not None else 1.0
@@ -639,6 +644,7 @@ class GltfReader:
         if not 0 <= tex < len(textures):
             self.fail(where, f"texture {tex} does not exist")
         t = textures[tex]
+        self.at = f"textures[{tex}]"
         if t.source is None:
             self.fail(f"textures[{tex}]", "has no image source")
         data, iwhere = self._image_bytes(t.source, f"textures[{tex}].source")
@@ -688,6 +694,7 @@ class GltfReader:
         if not 0 <= index < len(cams):
             self.fail(f"cameras[{index}]", "does not exist")
         cam = cams[index]
+        self.at = f"cameras[{index}]"
         # glTF cameras look along -Z with +Y up; ours (Mitsuba's) along +Z: turn 180 about Y
         rec: dict[str, Any] = {"parent": node, "transform": {"rotate": {"axis": [0.0, 1.0, 0.0], "angle": 180.0}}}
         if cam.type == "orthographic" and cam.orthographic is not None:
@@ -709,6 +716,9 @@ class GltfReader:
             self.fail(f"{where}.extensions.KHR_lights_punctual", f"light {k} does not exist")
         light = lights[k]
         lwhere = f"KHR_lights_punctual.lights[{k}]"
+        self.at = lwhere
+        if not isinstance(light, dict):
+            self.fail(lwhere, "a light is a JSON object")
         rgb = np.asarray(light.get("color", [1.0, 1.0, 1.0]), dtype=np.float64)
         power = rgb * float(light.get("intensity", 1.0)) * self.spec.light_scale
         if not np.isfinite(power).all() or (power < 0).any():
@@ -811,6 +821,16 @@ def read_gltf(path: Path, shown: str, spec: Any, index: int) -> Expansion:
                 return ex
         except (OSError, ValueError, KeyError, TypeError):
             pass  # rebuilt below
-    ex = GltfReader(path, shown, spec, index).expand()
+    reader = None
+    try:
+        reader = GltfReader(path, shown, spec, index)
+        ex = reader.expand()
+    except (SpecError, ImportFileError):
+        raise
+    except (TypeError, AttributeError, KeyError, IndexError, ValueError, OverflowError, struct.error) as exc:
+        # a value of the wrong JSON type or shape that the checks above did not foresee:
+        # still one located line (the item being read), never a traceback
+        where = reader.at if reader is not None else "<file>"
+        raise ImportFileError(shown, where, f"malformed glTF: {type(exc).__name__}: {exc}") from None
     write_atomic(memo, lambda tmp: tmp.write_text(json.dumps(_to_json(ex))))
     return ex

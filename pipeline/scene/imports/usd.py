@@ -72,6 +72,7 @@ class UsdReader:
             _fail(shown, "<stage>.timeCodesPerSecond", f"{self.tcps} is not a positive number")
         self.digest = file_digest(path)
         self.names = _Names()
+        self.at = "<stage>"  # the prim being read: the location of an unforeseen problem
 
     def seconds(self, code: float) -> float:
         return code / self.tcps + self.spec.time_offset
@@ -102,6 +103,7 @@ class UsdReader:
                 if not prim.IsA(UsdGeom.Xformable):
                     continue
                 path = str(prim.GetPath())
+                self.at = path
                 parent = prim.GetParent()
                 while parent and parent.IsValid() and str(parent.GetPath()) not in names:
                     parent = parent.GetParent()
@@ -303,4 +305,14 @@ def read_usd(path: Path, shown: str, spec: Any, index: int) -> Expansion:
         raise ImportFileError(shown, "<stage>", f"usd-core is not installed: {exc}") from None
     if spec.animation not in (None, -1):
         raise SpecError("animation", "USD stages have one timeline; `animation` applies to glTF files")
-    return UsdReader(path, shown, spec, index).expand()
+    from pxr import Tf
+
+    reader = None
+    try:
+        reader = UsdReader(path, shown, spec, index)
+        return reader.expand()
+    except (SpecError, ImportFileError):
+        raise
+    except (Tf.ErrorException, TypeError, AttributeError, ValueError, IndexError, OverflowError) as exc:
+        where = reader.at if reader is not None else "<stage>"
+        raise ImportFileError(shown, where, f"cannot read: {type(exc).__name__}: {str(exc).strip().splitlines()[-1] if str(exc).strip() else ''}") from None
