@@ -388,6 +388,12 @@ def test_accessor_out_of_range(asset, tmp_path):
     b.save(tmp_path / "range.glb")
     msg = _one_line_error(scene_yaml(tmp_path, "range.glb"))
     assert f"range.glb: accessors[{pos}] (meshes[1] 'Strip'.primitives[0].attributes.POSITION): out of range" in msg
+    # an accessor without a buffer view is zeros: its count must not make us allocate at will
+    del bad["accessors"][pos]["bufferView"]
+    bad["accessors"][pos]["count"] = 10**9
+    b.save(tmp_path / "range.glb")
+    msg = _one_line_error(scene_yaml(tmp_path, "range.glb"))
+    assert f"range.glb: accessors[{pos}] (meshes[1] 'Strip'.primitives[0].attributes.POSITION): count 1000000000 is out of range" in msg
 
 
 def test_missing_texture_file(tmp_path):

@@ -32,6 +32,9 @@ SUPPORTED_EXTENSIONS = ("KHR_lights_punctual", "KHR_materials_emissive_strength"
 MODES = {"STEP": "hold", "LINEAR": "linear", "CUBICSPLINE": "hermite"}
 WRAP = {10497: "repeat", 33071: "clamp", 33648: "mirror"}
 MAX_FILE_BYTES = 4 << 30  # refuse absurd files before reading them
+# values one accessor may hold: a buffer view bounds the others by the file's size, but an
+# accessor without one (zeros, then sparse values) would allocate whatever `count` says
+MAX_ACCESSOR_VALUES = 1 << 27
 
 
 def sanitize(name: str) -> str:
@@ -176,8 +179,8 @@ class GltfReader:
         width = WIDTHS.get(a.type)
         if dtype is None or width is None:
             self.fail(at, f"unknown componentType {a.componentType} or type {a.type}")
-        if a.count < 0 or a.count > (1 << 31):
-            self.fail(at, f"count {a.count} is out of range")
+        if not isinstance(a.count, int) or a.count < 0 or a.count * width > MAX_ACCESSOR_VALUES:
+            self.fail(at, f"count {a.count} is out of range (at most {MAX_ACCESSOR_VALUES // width} elements of {a.type})")
         if a.bufferView is None:
             out = np.zeros((a.count, width), dtype=dtype)
         else:
