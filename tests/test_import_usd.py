@@ -140,3 +140,43 @@ def test_bad_usd_files_are_located(tmp_path):
     (tmp_path / "shot.yaml").write_text("camera: {position: [0, 0, 5], look_at: [0, 0, 0]}\nimports: [{file: bad.usda}]\n")
     with pytest.raises(SceneError, match=r"bad\.usda: /Bad\.faceVertexIndices: index 7 is out of range for 3 points"):
         load_scene(tmp_path / "shot.yaml")
+
+
+@pytest.mark.render
+def test_textured_usd_card_renders_the_right_way_up(tmp_path):
+    """primvars:st (faceVarying, t up as USD has it) and a UsdUVTexture on diffuseColor:
+    a card whose image is red above and blue below renders red at the top."""
+    from PIL import Image
+
+    from _support import run_motion
+    from motion.pipeline.frame_output import read_frame
+
+    img = np.zeros((8, 8, 3), np.uint8)
+    img[:4], img[4:] = (255, 0, 0), (0, 0, 255)
+    Image.fromarray(img).save(tmp_path / "card.png")
+    stage = Usd.Stage.CreateNew(str(tmp_path / "card.usda"))
+    mesh = UsdGeom.Mesh.Define(stage, "/Card")
+    mesh.GetPointsAttr().Set([Gf.Vec3f(-1, -1, 0), Gf.Vec3f(1, -1, 0), Gf.Vec3f(1, 1, 0), Gf.Vec3f(-1, 1, 0)])
+    mesh.GetFaceVertexCountsAttr().Set([4])
+    mesh.GetFaceVertexIndicesAttr().Set([0, 1, 2, 3])
+    st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying)
+    st.Set([Gf.Vec2f(0, 0), Gf.Vec2f(1, 0), Gf.Vec2f(1, 1), Gf.Vec2f(0, 1)])
+    mat = UsdShade.Material.Define(stage, "/Looks/Card")
+    surface = UsdShade.Shader.Define(stage, "/Looks/Card/Surface")
+    surface.CreateIdAttr("UsdPreviewSurface")
+    tex = UsdShade.Shader.Define(stage, "/Looks/Card/Image")
+    tex.CreateIdAttr("UsdUVTexture")
+    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("card.png")
+    surface.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3))
+    mat.CreateSurfaceOutput().ConnectToSource(surface.ConnectableAPI(), "surface")
+    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(mat)
+    stage.GetRootLayer().Save()
+    (tmp_path / "card.yaml").write_text(
+        "camera: {position: [0, 0, 4], look_at: [0, 0, 0], fov: 40}\nimports: [{file: card.usda}]\n"
+        "lights: [{type: constant, radiance: 1}]\nrender: {resolution: [16, 16], spp: 2}\n"
+    )
+    proc = run_motion("render", str(tmp_path / "card.yaml"), "-o", str(tmp_path / "out"))
+    assert proc.returncode == 0, proc.stderr
+    rgb = read_frame(next((tmp_path / "out").glob("card.*.exr"))).rgba[..., :3]
+    top, bottom = rgb[5, 8], rgb[11, 8]
+    assert top[0] > 5 * top[2] and bottom[2] > 5 * bottom[0], (top, bottom)

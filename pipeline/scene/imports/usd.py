@@ -164,16 +164,34 @@ class UsdReader:
             _fail(self.shown, f"{where}.faceVertexCounts", f"face vertex counts (sum {int(counts.sum())}) do not match {len(indices)} face vertex indices")
         if len(indices) and (indices.min() < 0 or indices.max() >= len(points)):
             _fail(self.shown, f"{where}.faceVertexIndices", f"index {int(indices.max())} is out of range for {len(points)} points")
-        # fan-triangulate each polygon: (v0, v_i, v_i+1)
-        starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
-        fan = [(indices[s], indices[s + i], indices[s + i + 1]) for s, c in zip(starts, counts) for i in range(1, c - 1)]
-        faces = np.asarray(fan, dtype=np.int64).reshape(-1, 3)
-        if mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
-            faces = faces[:, ::-1]
         if not np.isfinite(points).all():
             _fail(self.shown, f"{where}.points", "non-finite point")
+        # texture coordinates (primvars:st): per point, or per face corner (then every
+        # corner becomes its own vertex, and the faces index corners); USD's t runs up
+        corner_point = None
+        uvs = None
+        st = UsdGeom.PrimvarsAPI(prim).GetPrimvar("st")
+        if st and st.HasValue():
+            values = np.asarray(st.ComputeFlattened(first) or [], dtype=np.float64).reshape(-1, 2)
+            interp = st.GetInterpolation()
+            if interp in (UsdGeom.Tokens.vertex, UsdGeom.Tokens.varying) and len(values) == len(points):
+                uvs = values
+            elif interp == UsdGeom.Tokens.faceVarying and len(values) == len(indices):
+                uvs, corner_point = values, indices
+            if uvs is not None:
+                if not np.isfinite(uvs).all():
+                    _fail(self.shown, f"{where}.primvars:st", "non-finite texture coordinate")
+                uvs = np.column_stack((uvs[:, 0], 1.0 - uvs[:, 1]))
+        # fan-triangulate each polygon: (v0, v_i, v_i+1), over points or over corners
+        corners = np.arange(len(indices)) if corner_point is not None else indices
+        starts = np.repeat(np.concatenate(([0], np.cumsum(counts)[:-1])), counts - 2)
+        step = np.arange(len(starts)) - np.repeat(np.concatenate(([0], np.cumsum(counts - 2)[:-1])), counts - 2) + 1
+        faces = np.stack((corners[starts], corners[starts + step], corners[starts + step + 1]), axis=1).reshape(-1, 3)
+        if mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
+            faces = faces[:, ::-1]
+        expand = (lambda p: p[corner_point]) if corner_point is not None else (lambda p: p)
         rec["shape"] = "mesh"
-        rec["file"] = str(cached(sanitize(prim.GetName()), f"{self.digest}|usd-mesh|{where}|{times[0] if times else 'default'}", ".ply", lambda tmp: write_ply(tmp, points, faces)))
+        rec["file"] = str(cached(sanitize(prim.GetName()), f"{self.digest}|usd-mesh|{where}|{times[0] if times else 'default'}", ".ply", lambda tmp: write_ply(tmp, expand(points), faces, None, uvs)))
         if len(times) > 1:
             if len(times) > MAX_SAMPLES:
                 _fail(self.shown, f"{where}.points", f"{len(times)} time samples; the limit is {MAX_SAMPLES}")
@@ -182,7 +200,7 @@ class UsdReader:
                 pts = np.asarray(points_attr.Get(Usd.TimeCode(code)), dtype=np.float64).reshape(-1, 3)
                 if pts.shape != points.shape or not np.isfinite(pts).all():
                     _fail(self.shown, f"{where}.points (time {code})", f"{len(pts)} points; expected {len(points)} finite (the same topology at every sample)")
-                file = cached(sanitize(prim.GetName()), f"{self.digest}|usd-points|{where}|{code}", ".ply", lambda tmp, pts=pts: write_ply(tmp, pts, faces))
+                file = cached(sanitize(prim.GetName()), f"{self.digest}|usd-points|{where}|{code}", ".ply", lambda tmp, pts=pts: write_ply(tmp, expand(pts), faces))
                 keys.append({"time": self.seconds(code), "file": str(file)})
             rec["deform"] = {"type": "blend-shapes", "time_unit": "seconds", "interpolation": "linear", "keys": keys}
         material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
@@ -218,6 +236,27 @@ class UsdReader:
             return [float(v) for v in value]
         return float(value)
 
+    def _texture(self, mat_path: str, name: str) -> dict[str, Any] | None:
+        """A UsdUVTexture connected to the surface input `name`, as a texture record."""
+        from pxr import UsdShade
+
+        shader = self._shader(mat_path)
+        inp = shader.GetInput(name) if shader is not None else None
+        if not inp:
+            return None
+        sources = inp.GetConnectedSources()[0]
+        if not sources:
+            return None
+        tex = UsdShade.Shader(sources[0].source.GetPrim())
+        if tex.GetIdAttr().Get() != "UsdUVTexture" or not tex.GetInput("file"):
+            return None
+        asset = tex.GetInput("file").Get()
+        where = f"{tex.GetPath()}.inputs:file"
+        if asset is None or not asset.resolvedPath:
+            _fail(self.shown, where, f"texture file not found: {asset.path if asset is not None else '(none)'}")
+        space = tex.GetInput("sourceColorSpace").Get() if tex.GetInput("sourceColorSpace") else None
+        return {"file": asset.resolvedPath, "raw": space == "raw"}
+
     def _material(self, mat_path: str, name: str) -> dict[str, Any]:
         """UsdPreviewSurface -> principled: diffuseColor, metallic, roughness, clearcoat
         (constants; texture-connected inputs take the shader's fallback value)."""
@@ -226,6 +265,9 @@ class UsdReader:
             return {"name": name, "type": "diffuse"}
         color = self._surface_input(mat_path, "diffuseColor")
         rec["color"] = [min(max(c, 0.0), 1e6) for c in color] if isinstance(color, list) else 0.18
+        texture = self._texture(mat_path, "diffuseColor")
+        if texture is not None:
+            rec["color"] = texture
         for key, src in (("metallic", "metallic"), ("roughness", "roughness"), ("clearcoat", "clearcoat")):
             v = self._surface_input(mat_path, src)
             if isinstance(v, float):
