@@ -215,7 +215,10 @@ class RotationTrack:
             for field, target, eased in (("tangent_in", w_in, ("in", "in-out")), ("tangent_out", w_out, ("out", "in-out"))):
                 given = getattr(k, field)
                 if given is not None and isinstance(given, tuple) and len(given) == 4:
-                    continue  # a quaternion-component tangent: hermite segments only (below)
+                    hermite_side = modes[i - 1] == HERMITE if field == "tangent_in" and i > 0 else field == "tangent_out" and i < n - 1 and modes[i] == HERMITE
+                    if not hermite_side:
+                        raise TrackError(("keys", i, field), "four numbers (a quaternion derivative) are a tangent of hermite segments only")
+                    continue  # read by _quaternion_tangents below
                 if given is not None:
                     if not isinstance(given, tuple):
                         raise TrackError(("keys", i, field), "a rotation tangent is an angular velocity [x, y, z] in degrees/s")
