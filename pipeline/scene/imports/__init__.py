@@ -83,11 +83,10 @@ def expand_imports(data: dict[str, Any], source: "SourceMap", base_dir: Path) ->
         raise SceneError(problems_from_validation(exc, {"imports": raw}, source, ImportList)) from None
 
     out = dict(data)
-    objects = list(out.get("objects") or [])
-    materials = list(out.get("materials") or [])
-    lights = list(out.get("lights") or [])
-    if not all(isinstance(x, list) for x in (objects, materials, lights)):
+    lists = [[] if out.get(key) is None else out[key] for key in ("objects", "materials", "lights")]
+    if not all(isinstance(x, list) for x in lists):
         return data, source  # the schema reports the malformed lists
+    objects, materials, lights = (list(x) for x in lists)
     origins: dict[tuple[str, int], Origin] = {}
     camera_origin: Origin | None = None
     problems: list[Problem] = []
