@@ -215,8 +215,8 @@ class RotationTrack:
             for field, target, eased in (("tangent_in", w_in, ("in", "in-out")), ("tangent_out", w_out, ("out", "in-out"))):
                 given = getattr(k, field)
                 if given is not None and isinstance(given, tuple) and len(given) == 4:
-                    hermite_side = modes[i - 1] == HERMITE if field == "tangent_in" and i > 0 else field == "tangent_out" and i < n - 1 and modes[i] == HERMITE
-                    if not hermite_side:
+                    # glTF gives both tangents on every key, the unused end ones too
+                    if not ((i > 0 and modes[i - 1] == HERMITE) or (i < n - 1 and modes[i] == HERMITE)):
                         raise TrackError(("keys", i, field), "four numbers (a quaternion derivative) are a tangent of hermite segments only")
                     continue  # read by _quaternion_tangents below
                 if given is not None:
