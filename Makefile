@@ -1,5 +1,5 @@
 # The two entry points of the README. Both run tools/setup.sh first (idempotent).
-.PHONY: setup render test bench
+.PHONY: setup render test bench render-example
 
 setup:
 	@bash tools/setup.sh
@@ -12,3 +12,9 @@ test: setup
 
 bench: setup
 	for b in bench/bench_*.py; do echo "== $$b"; .venv/bin/python $$b || exit 1; done
+
+# The imported-character example (docs/imports.md): regenerate the skinned, keyframed glTF
+# walker, then render its shot to out/walker/.
+render-example: setup
+	.venv/bin/python tools/make_walker.py scenes/assets/walker.glb
+	.venv/bin/motion render scenes/walker.yaml -o out/walker $(ARGS)

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import AssetError, SceneError
 from ..meshes import load_mesh
-from ..scene.motion_schema import BlendShapes, Skinning
+from ..scene.motion_schema import BlendShapes, JointSkin, MorphTargets, Skinning
 from ..scene.schema import Cube, Cylinder, Mesh, Rectangle
 from .keyframes import MODES, VectorTrack, _catmull_rom_tangents
 from .pose import Pose, compose
@@ -228,9 +228,121 @@ def deformed_vertices(loaded: "LoadedScene", t: np.ndarray, world: dict[str, Pos
             if isinstance(deform, BlendShapes):
                 count = len(load_mesh(loaded.asset(obj.file))[0]) if isinstance(obj, Mesh) else None
                 out[obj.name] = blend_shapes(loaded, loc, deform, t, count)
+            elif isinstance(deform, MorphTargets):
+                out[obj.name] = morph_targets(loaded, loc, deform, _file_mesh(loaded, obj)[0], t)
+            elif isinstance(deform, JointSkin):
+                out[obj.name] = joint_skin(loaded, loc, deform, obj.name, _file_mesh(loaded, obj)[0], t, world)
             else:
                 vertices, _ = bind_mesh(loaded, obj, deform.detail)
                 out[obj.name] = skinning(loaded, loc, deform, vertices, t)
         except (ValueError, OSError) as exc:
             raise SceneError([loaded.source.problem(loc, str(exc))]) from None
+    return out
+
+
+# --- morph targets and joint skins (glTF's skins and blend shapes; docs/imports.md) --------
+
+_MESHES: dict[tuple[str, int, int], tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _cached_mesh(path: "Any") -> tuple[np.ndarray, np.ndarray]:
+    """load_mesh, memoised per (path, size, mtime): bind and target meshes are read once
+    per process, not once per evaluation."""
+    st = path.stat()
+    key = (str(path), st.st_size, st.st_mtime_ns)
+    if key not in _MESHES:
+        if len(_MESHES) > 256:
+            _MESHES.clear()
+        _MESHES[key] = load_mesh(path)
+    return _MESHES[key]
+
+
+def _file_mesh(loaded: "LoadedScene", obj: Any) -> tuple[np.ndarray, np.ndarray]:
+    if not isinstance(obj, Mesh):
+        raise ValueError("morph targets and joint skins deform a mesh object (shape: mesh)")
+    return _cached_mesh(loaded.asset(obj.file))
+
+
+def morph_weights(loaded: "LoadedScene", loc: "Loc", deform: MorphTargets, t: np.ndarray) -> np.ndarray:
+    """Weights [T, K] of the targets: keyed channels by target name, else `weight`."""
+    from .evaluate import _local  # the same keyframe rules as every channel
+
+    names = [target.name for target in deform.targets]
+    weights = np.tile(np.array([target.weight for target in deform.targets]), (len(t), 1))
+    if deform.animation is not None:
+        unknown = [n for n in deform.animation.channels if n not in names]
+        if unknown:
+            raise SceneError([loaded.source.problem((*loc, "animation", "channels", unknown[0]), f"no morph target named '{unknown[0]}'; targets: {', '.join(names)}")])
+        zero = (np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.ones(3))
+        local = _local(loaded, loc, deform.animation, zero, t, {n: 1 for n in names})
+        for k, n in enumerate(names):
+            if n in local.scalars:
+                weights[:, k] = local.scalars[n]
+    return weights
+
+
+def morph_targets(loaded: "LoadedScene", loc: "Loc", deform: MorphTargets, base: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """base + sum_k w_k(t) (target_k - base) -> [T, V, 3]."""
+    deltas = np.empty((len(deform.targets), *base.shape))
+    for k, target in enumerate(deform.targets):
+        try:
+            verts = _cached_mesh(loaded.asset(target.file))[0]
+        except (OSError, AssetError) as exc:
+            raise SceneError([loaded.source.problem((*loc, "targets", k, "file"), f"cannot read morph target: {exc}")]) from None
+        if verts.shape != base.shape:
+            raise SceneError([loaded.source.problem((*loc, "targets", k), f"morph target has {len(verts)} vertices; the mesh has {len(base)}")])
+        deltas[k] = verts - base
+    w = morph_weights(loaded, loc, deform, t)
+    return base[None] + np.einsum("tk,kvc->tvc", w, deltas)
+
+
+_SKINS: dict[tuple[str, int, int], dict[str, np.ndarray]] = {}
+
+
+def _skin_arrays(loaded: "LoadedScene", loc: "Loc", deform: JointSkin, count: int) -> dict[str, np.ndarray]:
+    path = loaded.asset(deform.file)
+    try:
+        st = path.stat()
+        key = (str(path), st.st_size, st.st_mtime_ns)
+        if key not in _SKINS:
+            with np.load(path, allow_pickle=False) as z:
+                _SKINS[key] = {n: np.asarray(z[n]) for n in ("inverse_bind", "joint_indices", "joint_weights")}
+        arrays = _SKINS[key]
+    except (OSError, KeyError, ValueError) as exc:
+        raise SceneError([loaded.source.problem((*loc, "file"), f"cannot read skin file: {exc}")]) from None
+    ibm, idx, w = arrays["inverse_bind"], arrays["joint_indices"], arrays["joint_weights"]
+    joints = len(deform.joints)
+    problem = None
+    if ibm.shape != (joints, 4, 4) or not np.isfinite(ibm).all():
+        problem = f"inverse_bind is {ibm.shape}; expected ({joints}, 4, 4) finite"
+    elif idx.shape != w.shape or idx.ndim != 2 or len(idx) != count:
+        problem = f"joint_indices {idx.shape} / joint_weights {w.shape} for a mesh of {count} vertices"
+    elif idx.size and (idx.min() < 0 or idx.max() >= joints):
+        problem = f"a joint index is out of range for {joints} joints"
+    elif not np.isfinite(w).all() or (w < 0).any() or (w.sum(axis=1) <= 0).any():
+        problem = "joint weights must be finite, non-negative and positive in sum per vertex"
+    if problem:
+        raise SceneError([loaded.source.problem((*loc, "file"), problem)])
+    return arrays
+
+
+def joint_skin(loaded: "LoadedScene", loc: "Loc", deform: JointSkin, name: str, vertices: np.ndarray, t: np.ndarray, world: dict[str, Pose]) -> np.ndarray:
+    """Object-space vertices [T, V, 3] of a mesh skinned to scene objects (its joints)."""
+    missing = [k for k, j in enumerate(deform.joints) if j not in world]
+    if missing:
+        k = missing[0]
+        raise SceneError([loaded.source.problem((*loc, "joints", k), f"unknown joint object '{deform.joints[k]}'")])
+    arrays = _skin_arrays(loaded, loc, deform, len(vertices))
+    w = arrays["joint_weights"] / arrays["joint_weights"].sum(axis=1, keepdims=True)
+    idx = arrays["joint_indices"].astype(np.int64)
+    # M_j(t) = object_from_world(t) world_from_joint_j(t) joint_from_bind_j
+    world_from_joint = np.stack([world[j].matrices() for j in deform.joints], axis=1)  # [T, J, 4, 4]
+    object_from_world = np.linalg.inv(world[name].matrices())  # [T, 4, 4]
+    skin_m = object_from_world[:, None] @ world_from_joint @ arrays["inverse_bind"][None]
+    if deform.morph is None:
+        return linear_blend_skinning(vertices, skin_m[:, :, :3, :], idx, w)
+    morphed = morph_targets(loaded, (*loc, "morph"), deform.morph, vertices, t)
+    out = np.empty_like(morphed)
+    for ti in range(len(t)):
+        out[ti] = linear_blend_skinning(morphed[ti], skin_m[ti : ti + 1, :, :3, :], idx, w)[0]
     return out

@@ -3,7 +3,9 @@
 Modes per segment (the key that starts a segment may override its channel's mode):
 hold (value of the previous key), nearest (ties go to the later key), linear,
 catmull-rom (cubic Hermite through every key with tangents (p[i+1] - p[i-1]) /
-(t[i+1] - t[i-1]); C1), bezier (cubic Hermite with the keys' tangents or ease shorthand).
+(t[i+1] - t[i-1]); C1), bezier (cubic Hermite with the keys' tangents or ease shorthand), hermite (glTF's
+CUBICSPLINE: for vectors the same cubic as bezier; for rotations the cubic Hermite of the
+quaternion's four components with the keys' 4-component tangents, then normalised).
 End conditions and extrapolation (hold / linear / cycle) are in docs/motion.md.
 
 Rotations interpolate on the sphere: slerp for linear, a cumulative cubic spherical Bezier
@@ -21,8 +23,8 @@ from ..scene.motion_schema import Channel, Key
 from .pose import quat_conj, quat_exp, quat_log, quat_mul, quat_normalize, quat_rotate
 from .rotation import key_axis, key_quat, segment_rotvecs, unwrap_near
 
-HOLD, NEAREST, LINEAR, CATMULL_ROM, BEZIER = range(5)
-MODES = {"hold": HOLD, "nearest": NEAREST, "linear": LINEAR, "catmull-rom": CATMULL_ROM, "bezier": BEZIER}
+HOLD, NEAREST, LINEAR, CATMULL_ROM, BEZIER, HERMITE = range(6)
+MODES = {"hold": HOLD, "nearest": NEAREST, "linear": LINEAR, "catmull-rom": CATMULL_ROM, "bezier": BEZIER, "hermite": HERMITE}
 
 
 class TrackError(ValueError):
@@ -175,6 +177,7 @@ class RotationTrack:
     omega_start: np.ndarray  # [3] body-frame angular velocity leaving the first key (rad/s)
     omega_end: np.ndarray  # [3] arriving at the last key
     extrapolation: str
+    hermite: tuple[np.ndarray, np.ndarray] | None = None  # [n, 4] dq/dt in, out (hermite segments)
 
     @classmethod
     def compile(cls, channel: Channel, mode: str, extrapolation: str, seconds: float) -> "RotationTrack":
@@ -211,6 +214,11 @@ class RotationTrack:
         for i, k in enumerate(keys):
             for field, target, eased in (("tangent_in", w_in, ("in", "in-out")), ("tangent_out", w_out, ("out", "in-out"))):
                 given = getattr(k, field)
+                if given is not None and isinstance(given, tuple) and len(given) == 4:
+                    # glTF gives both tangents on every key, the unused end ones too
+                    if not ((i > 0 and modes[i - 1] == HERMITE) or (i < n - 1 and modes[i] == HERMITE)):
+                        raise TrackError(("keys", i, field), "four numbers (a quaternion derivative) are a tangent of hermite segments only")
+                    continue  # read by _quaternion_tangents below
                 if given is not None:
                     if not isinstance(given, tuple):
                         raise TrackError(("keys", i, field), "a rotation tangent is an angular velocity [x, y, z] in degrees/s")
@@ -229,7 +237,15 @@ class RotationTrack:
         controls = np.stack((w1, w2, w3), axis=1)
         start = {HOLD: np.zeros(3), NEAREST: np.zeros(3), LINEAR: arcs[0] / h[0]}.get(int(modes[0]), w_out[0])
         end = {HOLD: np.zeros(3), NEAREST: np.zeros(3), LINEAR: arcs[-1] / h[-1]}.get(int(modes[-1]), w_in[-1])
-        return cls(times, quats, modes, arcs, controls, start, end, extrap)
+        hermite = None
+        if (modes == HERMITE).any():
+            hermite = _quaternion_tangents(keys, modes)
+            # the end slopes of a hermite segment: the body-frame angular velocity 2 q* q'
+            if modes[0] == HERMITE:
+                start = 2.0 * quat_mul(quat_conj(quats[0]), hermite[1][0])[1:]
+            if modes[-1] == HERMITE:
+                end = 2.0 * quat_mul(quat_conj(quats[-1]), hermite[0][-1])[1:]
+        return cls(times, quats, modes, arcs, controls, start, end, extrap, hermite)
 
     def __call__(self, t: np.ndarray) -> np.ndarray:
         """Unit quaternions at times t [T] -> [T, 4]."""
@@ -248,6 +264,13 @@ class RotationTrack:
         cubic = quat_mul(quat_mul(quat_mul(q0, quat_exp(b1 * c[:, 0])), quat_exp(b2 * c[:, 1])), quat_exp(b3 * c[:, 2]))
         held = np.where((mode == NEAREST) & (u >= 0.5), self.quats[f.seg + 1], q0)
         out = np.where(mode >= CATMULL_ROM, cubic, np.where(mode == LINEAR, slerp, held))
+        if self.hermite is not None:
+            # glTF CUBICSPLINE: the Hermite cubic of the components, normalised below
+            h00, h10, h01, h11 = _hermite(u)
+            h = (self.times[f.seg + 1] - self.times[f.seg])[:, None]
+            q_in, q_out = self.hermite
+            herm = h00 * q0 + h10 * h * q_out[f.seg] + h01 * self.quats[f.seg + 1] + h11 * h * q_in[f.seg + 1]
+            out = np.where(mode == HERMITE, herm, out)
         out[f.after] = self.quats[-1]
         if self.extrapolation == "hold":
             out[f.before] = self.quats[0]
@@ -257,3 +280,19 @@ class RotationTrack:
             out[f.before] = quat_mul(self.quats[0], quat_exp(dt0 * self.omega_start))
             out[f.after] = quat_mul(self.quats[-1], quat_exp(dtn * self.omega_end))
         return quat_normalize(out)
+
+
+def _quaternion_tangents(keys: list[Key], modes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-key quaternion-component tangents (dq/dt, per second) of hermite segments:
+    a key's `tangent_in` / `tangent_out` given as four numbers (w, x, y, z); zero if absent."""
+    n = len(keys)
+    q_in, q_out = np.zeros((n, 4)), np.zeros((n, 4))
+    for i, k in enumerate(keys):
+        for field, target, used in (("tangent_in", q_in, i > 0 and modes[i - 1] == HERMITE), ("tangent_out", q_out, i < n - 1 and modes[i] == HERMITE)):
+            given = getattr(k, field)
+            if given is None or not used:
+                continue
+            if not isinstance(given, tuple) or len(given) != 4:
+                raise TrackError(("keys", i, field), "a hermite rotation tangent is a quaternion derivative [w, x, y, z] per second")
+            target[i] = given
+    return q_in, q_out

@@ -140,8 +140,8 @@ def _principled(m: Principled, loaded: LoadedScene) -> Dict:
     return {
         "type": "principled",
         "base_color": color(m.color, loaded),
-        "metallic": m.metallic,
-        "roughness": m.roughness,
+        "metallic": color(m.metallic, loaded),
+        "roughness": color(m.roughness, loaded),
         "specular": m.specular,
         "clearcoat": m.clearcoat,
     }

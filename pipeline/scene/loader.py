@@ -452,6 +452,9 @@ def load_scene(path: str | Path, overrides: Mapping[str, Any] | None = None, ass
         raise SceneError([source.problem((), f"expected a mapping at the top level, got {type(data).__name__}")])
     if overrides:
         data = deep_merge(data, overrides)
+    from .imports import expand_imports
+
+    data, source = expand_imports(data, source, path.parent)
     try:
         scene = Scene.model_validate(data)
     except ValidationError as exc:

@@ -18,20 +18,23 @@ from pydantic import Field, field_validator, model_validator
 from .dynamics_schema import DynamicsMotion
 from .types import FiniteFloat, Model, NonNegative as NonNegativeFloat, Positive, Transform, Vec3
 
-Interpolation = Literal["hold", "nearest", "linear", "catmull-rom", "bezier"]
+Interpolation = Literal["hold", "nearest", "linear", "catmull-rom", "bezier", "hermite"]
 Extrapolation = Literal["hold", "linear", "cycle"]
 Ease = Literal["in", "out", "in-out", "none"]
 
 # A keyed value: a scalar (fov, intensity, uniform scale), a 3-vector (translate, scale),
 # or a rotation given as Euler angles, axis-angle or quaternion (rotate channel).
 ScalarOrVec = Union[FiniteFloat, tuple[FiniteFloat, FiniteFloat, FiniteFloat]]
+# A tangent: like a value, or for `hermite` rotation keys a quaternion derivative (w, x, y, z) per second.
+Tangent = Union[ScalarOrVec, tuple[FiniteFloat, FiniteFloat, FiniteFloat, FiniteFloat]]
 
 
 class Key(Model):
     """One key of a channel. `time` is in frames or seconds (the block's `time_unit`).
 
     `interpolation` overrides the channel's for the segment that starts at this key.
-    Bezier keys may give `tangent_in` / `tangent_out` (value units per second) or `ease`.
+    Bezier keys may give `tangent_in` / `tangent_out` (value units per second) or `ease`;
+    hermite rotation keys give them as quaternion derivatives (w, x, y, z) per second.
     Rotation keys give exactly one of `value` (Euler xyz degrees), `euler` (+ `order`),
     `axis` + `angle`, or `quaternion` (w, x, y, z). The segment arriving at a key takes the
     shortest arc; `turns` adds whole extra turns about that arc's axis (a deliberate
@@ -49,8 +52,8 @@ class Key(Model):
     turns: int = 0
     interpolation: Interpolation | None = None
     ease: Ease | None = None
-    tangent_in: ScalarOrVec | None = None
-    tangent_out: ScalarOrVec | None = None
+    tangent_in: Tangent | None = None
+    tangent_out: Tangent | None = None
 
     @model_validator(mode="after")
     def _one_value(self) -> "Key":
@@ -266,4 +269,34 @@ class Skinning(Model):
         return self
 
 
-Deformation = Annotated[Union[BlendShapes, Skinning], Field(discriminator="type")]
+class MorphTarget(Model):
+    """One morph target (a blend shape in the artist's sense): a mesh file of the same
+    topology as the object's; `weight` is its weight when not animated."""
+
+    name: Annotated[str, Field(min_length=1, max_length=128)]
+    file: str
+    weight: FiniteFloat = 0.0
+
+
+class MorphTargets(Model):
+    """vertex(t) = base + sum_i w_i(t) (target_i - base), per vertex; the weights are keyed
+    by target name in `animation` (scalar channels), as glTF morph targets are."""
+
+    type: Literal["morph-targets"]
+    targets: Annotated[list[MorphTarget], Field(min_length=1, max_length=1024)]
+    animation: KeyframeMotion | None = None
+
+
+class JointSkin(Model):
+    """Linear blend skinning driven by scene objects (joints), as glTF skins are:
+    object-space vertex(t) = world_from_object(t)^-1 sum_k w_k world_from_joint_k(t)
+    inverse_bind_k vertex_bind. `file` (.npz) holds `inverse_bind` [J, 4, 4],
+    `joint_indices` [V, 4] and `joint_weights` [V, 4]; `morph` deforms the bind mesh first."""
+
+    type: Literal["joint-skin"]
+    joints: Annotated[list[Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_.\-]*$")]], Field(min_length=1)]
+    file: str
+    morph: MorphTargets | None = None
+
+
+Deformation = Annotated[Union[BlendShapes, Skinning, MorphTargets, JointSkin], Field(discriminator="type")]

@@ -14,6 +14,7 @@ from pydantic import Field, field_validator, model_validator
 
 from ..timeline import Timeline, parse_fps
 from .dynamics_schema import DynamicsSettings, ParticleEmitter
+from .imports.spec import ImportSpec
 from .motion_schema import Deformation, MotionBlock, StaticMotion
 from .types import (
     Color,
@@ -201,8 +202,8 @@ class Dielectric(_Material):
 class Principled(_Material):
     type: Literal["principled"]
     color: ColorOrTexture = 0.5
-    metallic: Annotated[float, Field(ge=0, le=1)] = 0.0
-    roughness: Annotated[float, Field(ge=0, le=1)] = 0.5
+    metallic: Union[Annotated[float, Field(ge=0, le=1)], Texture] = 0.0  # a texture: grey, raw
+    roughness: Union[Annotated[float, Field(ge=0, le=1)], Texture] = 0.5  # a texture: grey, raw
     specular: Annotated[float, Field(ge=0, le=1)] = 0.5
     clearcoat: Annotated[float, Field(ge=0, le=1)] = 0.0
 
@@ -363,6 +364,7 @@ class Scene(Model):
 
     version: Literal[1] = 1
     name: Name | None = None
+    imports: list[ImportSpec] = []  # glTF / USD files expanded into the lists below (docs/imports.md)
     timeline: TimelineSpec = TimelineSpec()
     camera: Camera
     lights: list[Light] = []
@@ -387,6 +389,7 @@ __all__ = [
     "Empty",
     "EnvmapLight",
     "FiniteFloat",
+    "ImportSpec",
     "Light",
     "Material",
     "Mesh",

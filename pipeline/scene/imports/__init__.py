@@ -1,0 +1,174 @@
+"""Imports: glTF 2.0 and USD files expanded into the records a hand-written scene has
+(docs/imports.md).
+
+`expand_imports` runs in the scene stage, between YAML parsing and validation: each
+`imports:` entry is read (pygltflib for glTF, usd-core for USD) and becomes plain
+records (objects, materials, lights, the camera) appended to the document, with keyframe
+motion, skins and morph targets in the scene format's own terms. Meshes, textures and
+skin weights go to the content-addressed asset cache. Nothing downstream knows where a
+record came from; only the source map does: a problem in an imported record is reported
+at the asset file and node (or prim), or at the override in the scene file that set it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from ...errors import Problem, SceneError
+
+if TYPE_CHECKING:
+    from ..loader import Loc, SourceMap
+
+__all__ = ["ImportFileError", "SpecError", "Origin", "Expansion", "expand_imports"]
+
+
+class ImportFileError(SceneError):
+    """An imported asset file is unreadable, malformed or uses what we do not support;
+    names the file and the node / mesh / accessor (glTF) or prim (USD)."""
+
+    def __init__(self, file: str, where: str, message: str) -> None:
+        super().__init__([Problem(file, None, None, where, message)])
+
+
+class SpecError(ValueError):
+    """A problem with the scene file's import entry itself: its `field` names what."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(message)
+        self.field = field
+
+
+@dataclass(frozen=True)
+class Origin:
+    """Where an expanded record came from: the asset `file` and `where` in it, and the
+    keys that came from the scene file instead (key -> its YAML location)."""
+
+    file: str
+    where: str
+    yaml_keys: dict[str, "Loc"] = field(default_factory=dict)
+    default: "Loc | None" = None  # a record made by the scene file itself (an import's root)
+
+
+@dataclass
+class Expansion:
+    """What one reader produced: records as YAML-like dicts, each with its origin."""
+
+    objects: list[tuple[dict[str, Any], Origin]] = field(default_factory=list)
+    materials: list[tuple[dict[str, Any], Origin]] = field(default_factory=list)
+    lights: list[tuple[dict[str, Any], Origin]] = field(default_factory=list)
+    cameras: list[tuple[str, dict[str, Any], Origin]] = field(default_factory=list)  # (node name, record, origin)
+
+
+# Keys an override may not change: they say what the record is.
+FIXED_KEYS = ("name", "shape", "file", "type")
+
+
+def expand_imports(data: dict[str, Any], source: "SourceMap", base_dir: Path) -> tuple[dict[str, Any], "SourceMap"]:
+    """The scene document with every `imports:` entry expanded into records, and a source
+    map that locates problems in them. Returns `data` and `source` unchanged when the
+    scene imports nothing. Raises SceneError (located) for bad entries or asset files."""
+    raw = data.get("imports")
+    if not raw:
+        return data, source
+    from pydantic import ValidationError
+
+    from ..loader import problems_from_validation
+    from .spec import ImportList
+
+    try:
+        specs = ImportList.model_validate({"imports": raw}).imports
+    except ValidationError as exc:
+        raise SceneError(problems_from_validation(exc, {"imports": raw}, source, ImportList)) from None
+
+    out = dict(data)
+    lists = [[] if out.get(key) is None else out[key] for key in ("objects", "materials", "lights")]
+    if not all(isinstance(x, list) for x in lists):
+        return data, source  # the schema reports the malformed lists
+    objects, materials, lights = (list(x) for x in lists)
+    origins: dict[tuple[str, int], Origin] = {}
+    camera_origin: Origin | None = None
+    problems: list[Problem] = []
+    chosen_camera: tuple[dict[str, Any], Origin] | None = None
+    for i, spec in enumerate(specs):
+        path = base_dir / spec.file
+        shown = str(path) if not Path(spec.file).is_absolute() else spec.file
+        if not path.is_file():
+            problems.append(source.problem(("imports", i, "file"), f"file not found: {spec.file} (relative to {base_dir})"))
+            continue
+        try:
+            expansion = _read(path, shown, spec, i)
+        except SceneError as exc:
+            problems.extend(exc.problems)
+            continue
+        except SpecError as exc:
+            problems.append(source.problem(("imports", i, exc.field), str(exc)))
+            continue
+        # overrides, by (prefixed) name, over the imported records
+        by_name = {rec.get("name"): (kind, j) for kind, recs in (("objects", expansion.objects), ("lights", expansion.lights)) for j, (rec, _) in enumerate(recs)}
+        for name, over in spec.overrides.items():
+            oloc = ("imports", i, "overrides", name)
+            if name not in by_name:
+                import difflib
+
+                close = difflib.get_close_matches(name, [n for n in by_name if n], n=1, cutoff=0.6)
+                hint = f"; did you mean '{close[0]}'?" if close else ""
+                problems.append(source.problem(oloc, f"no imported object or light named '{name}'{hint}", key=True))
+                continue
+            fixed = [k for k in over if k in FIXED_KEYS]
+            if fixed:
+                problems.append(source.problem((*oloc, fixed[0]), f"an override cannot change '{fixed[0]}'", key=True))
+                continue
+            kind, j = by_name[name]
+            recs = expansion.objects if kind == "objects" else expansion.lights
+            rec, origin = recs[j]
+            rec = {**rec, **over}
+            keys = {**origin.yaml_keys, **{k: (*oloc, k) for k in over}}
+            recs[j] = (rec, Origin(origin.file, origin.where, keys, origin.default))
+        for kind, target, recs in (("objects", objects, expansion.objects), ("materials", materials, expansion.materials), ("lights", lights, expansion.lights)):
+            for rec, origin in recs:
+                origins[(kind, len(target))] = origin
+                target.append(rec)
+        # the shot's camera: the one named, else the first imported when the scene has none
+        if spec.camera is not None:
+            found = [(rec, o) for name, rec, o in expansion.cameras if name == spec.camera]
+            if not found:
+                names = ", ".join(n for n, _, _ in expansion.cameras) or "none"
+                problems.append(source.problem(("imports", i, "camera"), f"no camera on node '{spec.camera}' in {spec.file} (cameras on: {names})"))
+            else:
+                chosen_camera = found[0]
+        elif chosen_camera is None and expansion.cameras and "camera" not in data:
+            chosen_camera = (expansion.cameras[0][1], expansion.cameras[0][2])
+    if problems:
+        raise SceneError(problems)
+    if chosen_camera is not None:
+        rec, origin = chosen_camera
+        user = data.get("camera")
+        if isinstance(user, dict):
+            # the scene file's camera keys refine the imported camera (shutter, fov, ...)
+            rec = {**rec, **user}
+            if ("position" in user or "look_at" in user) and "transform" not in user:
+                # the scene places the camera itself, in world space
+                rec.pop("transform", None)
+                if "parent" not in user:
+                    rec.pop("parent", None)
+            origin = Origin(origin.file, origin.where, {k: ("camera", k) for k in user})
+        out["camera"] = rec
+        camera_origin = origin
+    out["objects"], out["materials"], out["lights"] = objects, materials, lights
+    from .sourcemap import ImportedSourceMap
+
+    return out, ImportedSourceMap(source.file, source.positions, origins, camera_origin)
+
+
+def _read(path: Path, shown: str, spec: Any, index: int) -> Expansion:
+    """Dispatch on the file's suffix to the glTF or USD reader."""
+    suffix = path.suffix.lower()
+    if suffix in (".gltf", ".glb"):
+        from .gltf import read_gltf
+
+        return read_gltf(path, shown, spec, index)
+    from .usd import read_usd
+
+    return read_usd(path, shown, spec, index)

@@ -1,0 +1,97 @@
+"""Converted import assets (meshes as binary PLY, skin weights as .npz, textures as
+images) in the content-addressed asset cache: a file's name carries a hash of the source
+file's bytes and the conversion settings, so a second load (in any worker on the machine)
+finds it and skips the conversion; writes go to a temporary name and are renamed."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+import tempfile
+import threading
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ...variant import cache_root
+
+CONVERSION_VERSION = "import-v1"
+_lock = threading.Lock()
+STATS = {"hits": 0, "misses": 0, "records": 0}  # converted-file hits / misses; record-set hits
+_DIGESTS: dict[tuple[str, int, int], str] = {}
+
+
+def cache_dir() -> Path:
+    """Where converted import assets live (beside the renderer's converted meshes)."""
+    return cache_root() / "assets" / "imports"
+
+
+def file_digest(path: Path) -> str:
+    """sha256 of a file's bytes (memoised per path, size and modification time)."""
+    st = path.stat()
+    memo = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    if memo not in _DIGESTS:
+        h = hashlib.sha256()
+        with open(path, "rb") as f:
+            for chunk in iter(lambda: f.read(1 << 20), b""):
+                h.update(chunk)
+        _DIGESTS[memo] = h.hexdigest()
+    return _DIGESTS[memo]
+
+
+def cached(stem: str, key: str, suffix: str, write: Callable[[Path], None]) -> Path:
+    """The cache file for (`key`, conversion version); `write(tmp_path)` makes it on a miss."""
+    digest = hashlib.sha256(f"{CONVERSION_VERSION}|{key}".encode()).hexdigest()[:32]
+    safe = re.sub(r"[^A-Za-z0-9_.-]", "_", stem)[:48]
+    target = cache_dir() / f"{safe}-{digest}{suffix}"
+    if target.is_file():
+        with _lock:
+            STATS["hits"] += 1
+        return target
+    with _lock:
+        STATS["misses"] += 1
+    write_atomic(target, write)
+    return target
+
+
+def write_atomic(target: Path, write: Callable[[Path], None]) -> None:
+    """`write(tmp)` to a temporary name beside `target`, then rename it into place: a
+    concurrent reader sees the whole file or none."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".tmp{target.suffix}", dir=target.parent)
+    os.close(fd)
+    try:
+        write(Path(tmp))
+        os.replace(tmp, target)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+
+
+def write_ply(path: Path, positions: np.ndarray, faces: np.ndarray | None, normals: np.ndarray | None = None, uvs: np.ndarray | None = None) -> None:
+    """A binary little-endian PLY: float x y z [nx ny nz] [u v] per vertex, triangles as
+    `list uchar int`, the layout Mitsuba's PLY loader and pipeline/meshes.py both read."""
+    fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
+    if normals is not None:
+        fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
+    if uvs is not None:
+        fields += [("u", "<f4"), ("v", "<f4")]
+    verts = np.empty(len(positions), dtype=fields)
+    for axis, name in enumerate("xyz"):
+        verts[name] = positions[:, axis]
+    if normals is not None:
+        for axis, name in enumerate(("nx", "ny", "nz")):
+            verts[name] = normals[:, axis]
+    if uvs is not None:
+        verts["u"], verts["v"] = uvs[:, 0], uvs[:, 1]
+    tris = np.empty(0 if faces is None else len(faces), dtype=[("n", "u1"), ("i", "<i4", (3,))])
+    if faces is not None:
+        tris["n"], tris["i"] = 3, faces
+    header = ["ply", "format binary_little_endian 1.0", f"element vertex {len(verts)}"]
+    header += [f"property float {name}" for name, _ in fields]
+    header += [f"element face {len(tris)}", "property list uchar int vertex_indices", "end_header"]
+    with open(path, "wb") as f:
+        f.write(("\n".join(header) + "\n").encode("ascii"))
+        f.write(verts.tobytes())
+        f.write(tris.tobytes())

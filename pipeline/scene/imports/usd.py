@@ -1,0 +1,360 @@
+"""USD (.usd, .usda, .usdc) -> scene records through usd-core (docs/imports.md).
+
+The subset a layout or animation department hands over: Xform (and every Xformable)
+hierarchies with time-sampled transforms, Mesh prims (time-sampled points become
+blend shapes), UsdGeomCamera, UsdLux distant / sphere / rect / dome lights and
+UsdPreviewSurface materials. Time codes become seconds through the stage's
+timeCodesPerSecond (time code 0 is scene time 0, plus the import's `time_offset`).
+
+Transforms are keyed at the union of their ops' sample times as translate / rotate
+(quaternion, slerp) / scale: exact at the samples, and between them exact for
+translate, orient (USD slerps quaternions) and scale ops and for rotations about one
+axis; USD lerps multi-axis Euler angles, which slerp only approximates between samples.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import Expansion, ImportFileError, Origin, SpecError
+from .cache import cached, file_digest, write_ply
+from .gltf import _Names, sanitize
+
+MAX_SAMPLES = 100_000  # time samples per prim we are willing to key
+FOV_SUBKEYS = 16  # fov keys per focal-length sample interval (docs/imports.md)
+
+
+def _fail(shown: str, where: str, message: str) -> None:
+    raise ImportFileError(shown, where, message)
+
+
+def _trs(m: np.ndarray, shown: str, where: str) -> dict[str, Any]:
+    """A column-vector 4x4 matrix -> translate, rotate (quaternion wxyz), scale."""
+    from scipy.spatial.transform import Rotation
+
+    if not np.isfinite(m).all():
+        _fail(shown, where, "non-finite transform")
+    a = m[:3, :3]
+    s = np.linalg.norm(a, axis=0)
+    if (s < 1e-12).any():
+        _fail(shown, where, "a zero scale is not supported")
+    r = a / s
+    if np.linalg.det(r) < 0:
+        _fail(shown, where, "a mirroring (negative scale) transform is not supported")
+    if np.abs(r.T @ r - np.eye(3)).max() > 1e-4:
+        _fail(shown, where, "a sheared transform is not supported (translate, rotate, scale only)")
+    x, y, z, w = Rotation.from_matrix(r).as_quat()
+    return {"translate": [float(v) for v in m[:3, 3]], "rotate": {"quaternion": [float(w), float(x), float(y), float(z)]}, "scale": [float(v) for v in s]}
+
+
+def _matrix(gf: Any) -> np.ndarray:
+    """USD's row-vector Gf.Matrix4d -> our column-vector convention."""
+    return np.array(gf, dtype=np.float64).T
+
+
+class UsdReader:
+    def __init__(self, path: Path, shown: str, spec: Any, index: int) -> None:
+        from pxr import Tf, Usd
+
+        self.path, self.shown, self.spec, self.index = path, shown, spec, index
+        try:
+            self.stage = Usd.Stage.Open(str(path))
+        except Tf.ErrorException as exc:
+            _fail(shown, "<stage>", f"cannot open the USD stage: {str(exc).strip().splitlines()[-1]}")
+        if self.stage is None:
+            _fail(shown, "<stage>", "cannot open the USD stage")
+        self.tcps = float(self.stage.GetTimeCodesPerSecond())
+        if not math.isfinite(self.tcps) or self.tcps <= 0:
+            _fail(shown, "<stage>.timeCodesPerSecond", f"{self.tcps} is not a positive number")
+        self.digest = file_digest(path)
+        self.names = _Names()
+        self.at = "<stage>"  # the prim being read: the location of an unforeseen problem
+
+    def seconds(self, code: float) -> float:
+        return code / self.tcps + self.spec.time_offset
+
+    def expand(self) -> Expansion:
+        from pxr import Usd, UsdGeom, UsdLux
+
+        spec = self.spec
+        ex = Expansion()
+        root = self.names.take(spec.root or f"{spec.prefix}{sanitize(self.path.stem)}")
+        ex.objects.append(({"name": root, "shape": "empty", "transform": spec.transform.model_dump(mode="json", exclude_defaults=True)}, Origin(self.shown, "<root>", {"transform": ("imports", self.index, "transform")}, ("imports", self.index))))
+        if spec.nodes is not None:
+            starts = []
+            for name in spec.nodes:
+                prim = self.stage.GetPrimAtPath(name) if name.startswith("/") else None
+                if prim is None or not prim.IsValid():
+                    found = [p for p in self.stage.Traverse() if p.GetName() == name]
+                    prim = found[0] if found else None
+                if prim is None:
+                    raise SpecError("nodes", f"no prim named '{name}' in {self.shown}")
+                starts.append(prim)
+        else:
+            starts = list(self.stage.GetPseudoRoot().GetChildren())
+        self.materials: dict[str, str] = {}
+        names: dict[str, str] = {}
+        for start in starts:
+            for prim in Usd.PrimRange(start):
+                if not prim.IsA(UsdGeom.Xformable):
+                    continue
+                path = str(prim.GetPath())
+                self.at = path
+                parent = prim.GetParent()
+                while parent and parent.IsValid() and str(parent.GetPath()) not in names:
+                    parent = parent.GetParent()
+                xf = UsdGeom.Xformable(prim)
+                par = names.get(str(parent.GetPath())) if parent and parent.IsValid() else None
+                if xf.GetResetXformStack():
+                    par = None
+                name = self.names.take(spec.prefix + sanitize(prim.GetName()))
+                names[path] = name
+                rec: dict[str, Any] = {"name": name, "shape": "empty", "parent": par or root}
+                self._transform(xf, rec, path)
+                origin = Origin(self.shown, path)
+                ex.objects.append((rec, origin))
+                if prim.IsA(UsdGeom.Mesh):
+                    self._mesh(prim, rec, path, ex)
+                elif prim.IsA(UsdGeom.Camera):
+                    ex.cameras.append((prim.GetName(), self._camera(prim, name, path), Origin(self.shown, path)))
+                elif prim.HasAPI(UsdLux.LightAPI) or prim.IsA(UsdLux.BoundableLightBase) or prim.IsA(UsdLux.NonboundableLightBase):
+                    self._light(prim, name, path, ex)
+        for mat_path, mat_name in self.materials.items():
+            ex.materials.append((self._material(mat_path, mat_name), Origin(self.shown, mat_path)))
+        return ex
+
+    # --- transforms ---------------------------------------------------------------------
+
+    def _transform(self, xf: Any, rec: dict[str, Any], where: str) -> None:
+        from pxr import Usd
+
+        times = sorted(xf.GetTimeSamples())
+        if len(times) > MAX_SAMPLES:
+            _fail(self.shown, where, f"{len(times)} transform time samples; the limit is {MAX_SAMPLES}")
+        if len(times) <= 1:
+            code = Usd.TimeCode(times[0]) if times else Usd.TimeCode.Default()
+            rec["transform"] = _trs(_matrix(xf.GetLocalTransformation(code)), self.shown, f"{where}.xformOp")
+            return
+        keys: dict[str, list[dict[str, Any]]] = {"translate": [], "rotate": [], "scale": []}
+        for code in times:
+            trs = _trs(_matrix(xf.GetLocalTransformation(Usd.TimeCode(code))), self.shown, f"{where}.xformOp (time {code})")
+            t = self.seconds(code)
+            keys["translate"].append({"time": t, "value": trs["translate"]})
+            keys["rotate"].append({"time": t, "quaternion": trs["rotate"]["quaternion"]})
+            keys["scale"].append({"time": t, "value": trs["scale"]})
+        rec["motion"] = {"type": "keyframes", "time_unit": "seconds", "interpolation": "linear", "extrapolation": "hold", "channels": {k: {"keys": v} for k, v in keys.items()}}
+
+    # --- meshes and materials -----------------------------------------------------------
+
+    def _mesh(self, prim: Any, rec: dict[str, Any], where: str, ex: Expansion) -> None:
+        from pxr import Usd, UsdGeom, UsdShade
+
+        mesh = UsdGeom.Mesh(prim)
+        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
+        indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)
+        points_attr = mesh.GetPointsAttr()
+        times = sorted(points_attr.GetTimeSamples())
+        first = Usd.TimeCode(times[0]) if times else Usd.TimeCode.Default()
+        points = np.asarray(points_attr.Get(first) or [], dtype=np.float64).reshape(-1, 3)
+        if counts.sum() != len(indices) or (counts < 3).any():
+            _fail(self.shown, f"{where}.faceVertexCounts", f"face vertex counts (sum {int(counts.sum())}) do not match {len(indices)} face vertex indices")
+        if len(indices) and (indices.min() < 0 or indices.max() >= len(points)):
+            _fail(self.shown, f"{where}.faceVertexIndices", f"index {int(indices.max())} is out of range for {len(points)} points")
+        if not np.isfinite(points).all():
+            _fail(self.shown, f"{where}.points", "non-finite point")
+        # texture coordinates (primvars:st): per point, or per face corner (then every
+        # corner becomes its own vertex, and the faces index corners); USD's t runs up
+        corner_point = None
+        uvs = None
+        st = UsdGeom.PrimvarsAPI(prim).GetPrimvar("st")
+        if st and st.HasValue():
+            values = np.asarray(st.ComputeFlattened(first) or [], dtype=np.float64).reshape(-1, 2)
+            interp = st.GetInterpolation()
+            if interp in (UsdGeom.Tokens.vertex, UsdGeom.Tokens.varying) and len(values) == len(points):
+                uvs = values
+            elif interp == UsdGeom.Tokens.faceVarying and len(values) == len(indices):
+                uvs, corner_point = values, indices
+            if uvs is not None:
+                if not np.isfinite(uvs).all():
+                    _fail(self.shown, f"{where}.primvars:st", "non-finite texture coordinate")
+                uvs = np.column_stack((uvs[:, 0], 1.0 - uvs[:, 1]))
+        # fan-triangulate each polygon: (v0, v_i, v_i+1), over points or over corners
+        corners = np.arange(len(indices)) if corner_point is not None else indices
+        starts = np.repeat(np.concatenate(([0], np.cumsum(counts)[:-1])), counts - 2)
+        step = np.arange(len(starts)) - np.repeat(np.concatenate(([0], np.cumsum(counts - 2)[:-1])), counts - 2) + 1
+        faces = np.stack((corners[starts], corners[starts + step], corners[starts + step + 1]), axis=1).reshape(-1, 3)
+        if mesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
+            faces = faces[:, ::-1]
+        expand = (lambda p: p[corner_point]) if corner_point is not None else (lambda p: p)
+        rec["shape"] = "mesh"
+        rec["file"] = str(cached(sanitize(prim.GetName()), f"{self.digest}|usd-mesh|{where}|{times[0] if times else 'default'}", ".ply", lambda tmp: write_ply(tmp, expand(points), faces, None, uvs)))
+        if len(times) > 1:
+            if len(times) > MAX_SAMPLES:
+                _fail(self.shown, f"{where}.points", f"{len(times)} time samples; the limit is {MAX_SAMPLES}")
+            keys = []
+            for code in times:
+                pts = np.asarray(points_attr.Get(Usd.TimeCode(code)), dtype=np.float64).reshape(-1, 3)
+                if pts.shape != points.shape or not np.isfinite(pts).all():
+                    _fail(self.shown, f"{where}.points (time {code})", f"{len(pts)} points; expected {len(points)} finite (the same topology at every sample)")
+                file = cached(sanitize(prim.GetName()), f"{self.digest}|usd-points|{where}|{code}", ".ply", lambda tmp, pts=pts: write_ply(tmp, expand(pts), faces))
+                keys.append({"time": self.seconds(code), "file": str(file)})
+            rec["deform"] = {"type": "blend-shapes", "time_unit": "seconds", "interpolation": "linear", "keys": keys}
+        material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+        if material:
+            mpath = str(material.GetPath())
+            if mpath not in self.materials:
+                self.materials[mpath] = self.names.take(self.spec.prefix + sanitize(material.GetPrim().GetName()))
+            rec["material"] = self.materials[mpath]
+            emission = self._surface_input(mpath, "emissiveColor")
+            if emission is not None and any(v > 0 for v in emission):
+                rec["emission"] = {"radiance": emission}
+
+    def _shader(self, mat_path: str) -> Any:
+        from pxr import UsdShade
+
+        material = UsdShade.Material(self.stage.GetPrimAtPath(mat_path))
+        surface = material.ComputeSurfaceSource()[0]
+        if surface and surface.GetIdAttr().Get() == "UsdPreviewSurface":
+            return surface
+        return None
+
+    def _surface_input(self, mat_path: str, name: str) -> list[float] | float | None:
+        shader = self._shader(mat_path)
+        if shader is None:
+            return None
+        inp = shader.GetInput(name)
+        if not inp:
+            return None
+        value = inp.Get()
+        if value is None:
+            return None
+        if hasattr(value, "__len__"):
+            return [float(v) for v in value]
+        return float(value)
+
+    def _texture(self, mat_path: str, name: str) -> dict[str, Any] | None:
+        """A UsdUVTexture connected to the surface input `name`, as a texture record."""
+        from pxr import UsdShade
+
+        shader = self._shader(mat_path)
+        inp = shader.GetInput(name) if shader is not None else None
+        if not inp:
+            return None
+        sources = inp.GetConnectedSources()[0]
+        if not sources:
+            return None
+        tex = UsdShade.Shader(sources[0].source.GetPrim())
+        if tex.GetIdAttr().Get() != "UsdUVTexture" or not tex.GetInput("file"):
+            return None
+        asset = tex.GetInput("file").Get()
+        where = f"{tex.GetPath()}.inputs:file"
+        if asset is None or not asset.resolvedPath:
+            _fail(self.shown, where, f"texture file not found: {asset.path if asset is not None else '(none)'}")
+        space = tex.GetInput("sourceColorSpace").Get() if tex.GetInput("sourceColorSpace") else None
+        return {"file": asset.resolvedPath, "raw": space == "raw"}
+
+    def _material(self, mat_path: str, name: str) -> dict[str, Any]:
+        """UsdPreviewSurface -> principled: diffuseColor, metallic, roughness, clearcoat
+        (constants; texture-connected inputs take the shader's fallback value)."""
+        rec: dict[str, Any] = {"name": name, "type": "principled"}
+        if self._shader(mat_path) is None:
+            return {"name": name, "type": "diffuse"}
+        color = self._surface_input(mat_path, "diffuseColor")
+        rec["color"] = [min(max(c, 0.0), 1e6) for c in color] if isinstance(color, list) else 0.18
+        texture = self._texture(mat_path, "diffuseColor")
+        if texture is not None:
+            rec["color"] = texture
+        for key, src in (("metallic", "metallic"), ("roughness", "roughness"), ("clearcoat", "clearcoat")):
+            v = self._surface_input(mat_path, src)
+            if isinstance(v, float):
+                rec[key] = min(max(v, 0.0), 1.0)
+        return rec
+
+    # --- cameras and lights -------------------------------------------------------------
+
+    def _camera(self, prim: Any, node: str, where: str) -> dict[str, Any]:
+        from pxr import Usd, UsdGeom
+
+        cam = UsdGeom.Camera(prim)
+        # USD cameras look along -Z with +Y up; ours along +Z: turn 180 degrees about Y
+        rec: dict[str, Any] = {"parent": node, "transform": {"rotate": {"axis": [0.0, 1.0, 0.0], "angle": 180.0}}}
+        clip = cam.GetClippingRangeAttr().Get()
+        if clip is not None:
+            rec["near"], rec["far"] = float(clip[0]), float(clip[1])
+
+        def fov(code: Any) -> float:
+            focal = float(cam.GetFocalLengthAttr().Get(code))
+            aperture = float(cam.GetHorizontalApertureAttr().Get(code))
+            if not (focal > 0 and aperture > 0):
+                _fail(self.shown, f"{where}.focalLength", f"focal length {focal} and horizontal aperture {aperture} must be positive")
+            return math.degrees(2 * math.atan(aperture / (2 * focal)))
+
+        if cam.GetProjectionAttr().Get() == UsdGeom.Tokens.orthographic:
+            # apertures are in tenths of a scene unit (USD's convention)
+            rec.update({"type": "orthographic", "ortho_width": float(cam.GetHorizontalApertureAttr().Get()) / 10.0})
+            return rec
+        rec.update({"type": "perspective", "fov_axis": "x", "fov": fov(Usd.TimeCode.Default())})
+        times = sorted(set(cam.GetFocalLengthAttr().GetTimeSamples()) | set(cam.GetHorizontalApertureAttr().GetTimeSamples()))
+        if times:
+            rec["fov"] = fov(Usd.TimeCode(times[0]))
+        if len(times) > 1:
+            # USD lerps the focal length; the field of view is not linear in it: key the
+            # samples and FOV_SUBKEYS points between them (USD's own interpolated values)
+            codes = [float(c) for a, b in zip(times[:-1], times[1:]) for c in np.linspace(a, b, FOV_SUBKEYS + 1)[:-1]] + [times[-1]]
+            keys = [{"time": self.seconds(c), "value": fov(Usd.TimeCode(c))} for c in codes]
+            rec["motion"] = {"type": "keyframes", "time_unit": "seconds", "interpolation": "catmull-rom", "channels": {"fov": {"keys": keys}}}
+        return rec
+
+    def _light(self, prim: Any, node: str, where: str, ex: Expansion) -> None:
+        from pxr import UsdLux
+
+        light = UsdLux.LightAPI(prim)
+        intensity = float(light.GetIntensityAttr().Get() or 0.0) * 2.0 ** float(light.GetExposureAttr().Get() or 0.0)
+        color = np.asarray(light.GetColorAttr().Get() or (1.0, 1.0, 1.0), dtype=np.float64)
+        power = [float(v) for v in color * intensity * self.spec.light_scale]
+        if not all(math.isfinite(v) and v >= 0 for v in power):
+            _fail(self.shown, f"{where}.inputs:intensity", "intensity and colour must be finite and non-negative")
+        name = self.names.take(f"{node}.light")
+        origin = Origin(self.shown, where)
+        if prim.IsA(UsdLux.DistantLight):
+            ex.lights.append(({"name": name, "type": "directional", "parent": node, "direction": [0.0, 0.0, -1.0], "irradiance": power}, origin))
+        elif prim.IsA(UsdLux.SphereLight):
+            ex.lights.append(({"name": name, "type": "point", "parent": node, "position": [0.0, 0.0, 0.0], "intensity": power}, origin))
+        elif prim.IsA(UsdLux.DomeLight):
+            file = UsdLux.DomeLight(prim).GetTextureFileAttr().Get()
+            if file and file.resolvedPath:
+                ex.lights.append(({"name": name, "type": "envmap", "file": file.resolvedPath, "scale": intensity * self.spec.light_scale}, origin))
+            else:
+                ex.lights.append(({"name": name, "type": "constant", "radiance": power}, origin))
+        elif prim.IsA(UsdLux.RectLight):
+            rect = UsdLux.RectLight(prim)
+            w, h = float(rect.GetWidthAttr().Get()), float(rect.GetHeightAttr().Get())
+            # an emitting rectangle; UsdLux rect lights emit along -Z, our rectangles along +Z
+            ex.objects.append(({"name": name, "shape": "rectangle", "parent": node, "width": w, "height": h, "transform": {"rotate": {"axis": [0.0, 1.0, 0.0], "angle": 180.0}}, "emission": {"radiance": power}}, origin))
+        else:
+            _fail(self.shown, where, f"light type {prim.GetTypeName()} is not supported (distant, sphere, rect, dome)")
+
+
+def read_usd(path: Path, shown: str, spec: Any, index: int) -> Expansion:
+    """The records of one USD import; ImportFileError (file and prim) otherwise."""
+    try:
+        from pxr import Usd  # noqa: F401
+    except ImportError as exc:  # pragma: no cover - usd-core is a dependency
+        raise ImportFileError(shown, "<stage>", f"usd-core is not installed: {exc}") from None
+    if spec.animation not in (None, -1):
+        raise SpecError("animation", "USD stages have one timeline; `animation` applies to glTF files")
+    from pxr import Tf
+
+    reader = None
+    try:
+        reader = UsdReader(path, shown, spec, index)
+        return reader.expand()
+    except (SpecError, ImportFileError):
+        raise
+    except (Tf.ErrorException, TypeError, AttributeError, ValueError, IndexError, OverflowError) as exc:
+        where = reader.at if reader is not None else "<stage>"
+        raise ImportFileError(shown, where, f"cannot read: {type(exc).__name__}: {str(exc).strip().splitlines()[-1] if str(exc).strip() else ''}") from None

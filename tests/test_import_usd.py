@@ -1,0 +1,182 @@
+"""USD imports: stages authored here with usd-core; our evaluated world transforms,
+vertex animation and camera field of view are compared with what USD itself computes
+(ComputeLocalToWorldTransform, attribute interpolation) at frame and sub-frame times."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pxr = pytest.importorskip("pxr", reason="usd-core is not installed")
+from pxr import Gf, Usd, UsdGeom, UsdLux, UsdShade, Sdf  # noqa: E402
+
+from motion.pipeline.errors import SceneError  # noqa: E402
+from motion.pipeline.motion.evaluate import evaluate  # noqa: E402
+from motion.pipeline.scene.loader import load_scene  # noqa: E402
+
+TCPS = 48.0  # time codes per second: not the scene's fps, to test the mapping
+FPS = 24
+CODES = [0.0, 3.0, 7.5, 12.0, 12.25, 20.0, 29.9, 36.0, 40.0]  # frames, sub-frames, keys, after
+
+
+def author(path: Path) -> None:
+    stage = Usd.Stage.CreateNew(str(path))
+    stage.SetTimeCodesPerSecond(TCPS)
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(36)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    world = UsdGeom.Xform.Define(stage, "/World")
+    world.AddTranslateOp().Set(Gf.Vec3d(0.5, 0, -1))
+    world.AddRotateYOp().Set(25.0)
+    arm = UsdGeom.Xform.Define(stage, "/World/Arm")
+    t = arm.AddTranslateOp()
+    o = arm.AddOrientOp()
+    s = arm.AddScaleOp()
+    for code, pos, quat, scale in ((0, (0, 1, 0), Gf.Quatf(1, 0, 0, 0), 1.0), (12, (1, 1.5, 0.2), Gf.Quatf(math.cos(0.6), math.sin(0.6) * 0.6, math.sin(0.6) * 0.8, 0), 1.5), (36, (0, 0.5, 2), Gf.Quatf(math.cos(1.2), 0, 0, math.sin(1.2)), 0.8)):
+        t.Set(Gf.Vec3d(*pos), code)
+        o.Set(quat, code)
+        s.Set(Gf.Vec3f(scale, scale, scale), code)
+    hand = UsdGeom.Xform.Define(stage, "/World/Arm/Hand")
+    hand.AddTranslateOp().Set(Gf.Vec3d(0, 0.8, 0))
+    r = hand.AddRotateZOp()
+    r.Set(0.0, 0)
+    r.Set(120.0, 24)
+    mesh = UsdGeom.Mesh.Define(stage, "/World/Arm/Hand/Blob")
+    mesh.GetFaceVertexCountsAttr().Set([4, 3])
+    mesh.GetFaceVertexIndicesAttr().Set([0, 1, 2, 3, 0, 2, 4])
+    base = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1]], float)
+    for code, k in ((0, 0.0), (10, 1.0), (30, -0.5)):
+        mesh.GetPointsAttr().Set([Gf.Vec3f(*(p + k * np.array([0, 0, p[0]]))) for p in base], code)
+    mat = UsdShade.Material.Define(stage, "/World/Looks/Red")
+    shader = UsdShade.Shader.Define(stage, "/World/Looks/Red/Surface")
+    shader.CreateIdAttr("UsdPreviewSurface")
+    shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(0.7, 0.1, 0.05))
+    shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.2)
+    shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.4)
+    mat.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(mat)
+    cam = UsdGeom.Camera.Define(stage, "/World/Cam")
+    cam.AddTranslateOp().Set(Gf.Vec3d(0, 1, 6))
+    cam.GetHorizontalApertureAttr().Set(36.0)
+    cam.GetFocalLengthAttr().Set(35.0, 0)
+    cam.GetFocalLengthAttr().Set(70.0, 24)
+    cam.GetClippingRangeAttr().Set(Gf.Vec2f(0.1, 500))
+    sun = UsdLux.DistantLight.Define(stage, "/World/Sun")
+    sun.AddRotateXOp().Set(-45.0)
+    sun.GetIntensityAttr().Set(3.0)
+    UsdLux.SphereLight.Define(stage, "/World/Bulb").GetIntensityAttr().Set(5.0)
+    rect = UsdLux.RectLight.Define(stage, "/World/Panel")
+    rect.GetWidthAttr().Set(2.0)
+    rect.GetHeightAttr().Set(1.0)
+    UsdLux.DomeLight.Define(stage, "/World/Sky").GetIntensityAttr().Set(0.25)
+    stage.GetRootLayer().Save()
+
+
+@pytest.fixture(scope="module")
+def stage_file(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("usd")
+    author(tmp / "layout.usda")
+    (tmp / "shot.yaml").write_text(
+        f"""timeline: {{fps: {FPS}, first: 0, last: 18}}
+imports:
+  - {{file: layout.usda, camera: Cam}}
+render: {{resolution: [32, 24], spp: 2}}
+"""
+    )
+    return tmp
+
+
+def test_world_transforms_points_and_camera_match_usd(stage_file):
+    loaded = load_scene(stage_file / "shot.yaml")
+    stage = Usd.Stage.Open(str(stage_file / "layout.usda"))
+    times = np.array(CODES) / TCPS
+    motion = evaluate(loaded, times)
+    for name, path in (("World", "/World"), ("Arm", "/World/Arm"), ("Hand", "/World/Arm/Hand"), ("Blob", "/World/Arm/Hand/Blob")):
+        ours = motion.objects[name].matrices()
+        xf = UsdGeom.Xformable(stage.GetPrimAtPath(path))
+        for i, code in enumerate(CODES):
+            theirs = np.array(xf.ComputeLocalToWorldTransform(Usd.TimeCode(code))).T
+            np.testing.assert_allclose(ours[i], theirs, atol=1e-5, err_msg=f"{path} at time code {code}")
+    points = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Arm/Hand/Blob")).GetPointsAttr()
+    for i, code in enumerate(CODES):
+        np.testing.assert_allclose(motion.vertices["Blob"][i], np.array(points.Get(Usd.TimeCode(code)), float), atol=1e-5, err_msg=f"points at {code}")
+    cam = UsdGeom.Camera(stage.GetPrimAtPath("/World/Cam"))
+    for i, code in enumerate(CODES):
+        focal = cam.GetFocalLengthAttr().Get(Usd.TimeCode(code))
+        # exact at USD's samples; between them fov is keyed 16 times per interval (catmull-rom) (docs/imports.md)
+        tol = 1e-5 if code in (0.0, 24.0) or code > 24 else 1e-2
+        assert motion.camera_scalars["fov"][i] == pytest.approx(math.degrees(2 * math.atan(36.0 / (2 * focal))), abs=tol)
+        theirs = np.array(cam.ComputeLocalToWorldTransform(Usd.TimeCode(code))).T
+        np.testing.assert_allclose(motion.camera.matrices()[i], theirs @ np.diag([-1.0, 1, -1, 1]), atol=1e-5)
+
+
+def test_materials_and_lights(stage_file):
+    scene = load_scene(stage_file / "shot.yaml").scene
+    red = next(m for m in scene.materials if m.name == "Red")
+    assert red.type == "principled" and red.color == pytest.approx((0.7, 0.1, 0.05)) and red.metallic == pytest.approx(0.2) and red.roughness == pytest.approx(0.4)
+    assert next(o for o in scene.objects if o.name == "Blob").material == "Red"
+    kinds = {light.name: light.type for light in scene.lights}
+    assert kinds == {"Sun.light": "directional", "Bulb.light": "point", "Sky.light": "constant"}
+    panel = next(o for o in scene.objects if o.name == "Panel.light")
+    assert panel.shape == "rectangle" and panel.width == 2.0 and panel.emission.radiance == pytest.approx((1.0, 1.0, 1.0))
+    assert scene.camera.near == pytest.approx(0.1) and scene.camera.far == pytest.approx(500)
+
+
+def test_bad_usd_files_are_located(tmp_path):
+    (tmp_path / "broken.usda").write_text("#usda 1.0\ndef Xform \"A\" {\n  double3 xformOp:translate = (1, 2\n}\n")
+    (tmp_path / "shot.yaml").write_text("camera: {position: [0, 0, 5], look_at: [0, 0, 0]}\nimports: [{file: broken.usda}]\n")
+    with pytest.raises(SceneError) as err:
+        load_scene(tmp_path / "shot.yaml")
+    assert "\n" not in str(err.value) and "broken.usda: <stage>: cannot open the USD stage" in str(err.value)
+    stage = Usd.Stage.CreateNew(str(tmp_path / "bad.usda"))
+    mesh = UsdGeom.Mesh.Define(stage, "/Bad")
+    mesh.GetPointsAttr().Set([Gf.Vec3f(0, 0, 0), Gf.Vec3f(1, 0, 0), Gf.Vec3f(0, 1, 0)])
+    mesh.GetFaceVertexCountsAttr().Set([3])
+    mesh.GetFaceVertexIndicesAttr().Set([0, 1, 7])
+    stage.GetRootLayer().Save()
+    (tmp_path / "shot.yaml").write_text("camera: {position: [0, 0, 5], look_at: [0, 0, 0]}\nimports: [{file: bad.usda}]\n")
+    with pytest.raises(SceneError, match=r"bad\.usda: /Bad\.faceVertexIndices: index 7 is out of range for 3 points"):
+        load_scene(tmp_path / "shot.yaml")
+
+
+@pytest.mark.render
+def test_textured_usd_card_renders_the_right_way_up(tmp_path):
+    """primvars:st (faceVarying, t up as USD has it) and a UsdUVTexture on diffuseColor:
+    a card whose image is red above and blue below renders red at the top."""
+    from PIL import Image
+
+    from _support import run_motion
+    from motion.pipeline.frame_output import read_frame
+
+    img = np.zeros((8, 8, 3), np.uint8)
+    img[:4], img[4:] = (255, 0, 0), (0, 0, 255)
+    Image.fromarray(img).save(tmp_path / "card.png")
+    stage = Usd.Stage.CreateNew(str(tmp_path / "card.usda"))
+    mesh = UsdGeom.Mesh.Define(stage, "/Card")
+    mesh.GetPointsAttr().Set([Gf.Vec3f(-1, -1, 0), Gf.Vec3f(1, -1, 0), Gf.Vec3f(1, 1, 0), Gf.Vec3f(-1, 1, 0)])
+    mesh.GetFaceVertexCountsAttr().Set([4])
+    mesh.GetFaceVertexIndicesAttr().Set([0, 1, 2, 3])
+    st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.faceVarying)
+    st.Set([Gf.Vec2f(0, 0), Gf.Vec2f(1, 0), Gf.Vec2f(1, 1), Gf.Vec2f(0, 1)])
+    mat = UsdShade.Material.Define(stage, "/Looks/Card")
+    surface = UsdShade.Shader.Define(stage, "/Looks/Card/Surface")
+    surface.CreateIdAttr("UsdPreviewSurface")
+    tex = UsdShade.Shader.Define(stage, "/Looks/Card/Image")
+    tex.CreateIdAttr("UsdUVTexture")
+    tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set("card.png")
+    surface.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3))
+    mat.CreateSurfaceOutput().ConnectToSource(surface.ConnectableAPI(), "surface")
+    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(mat)
+    stage.GetRootLayer().Save()
+    (tmp_path / "card.yaml").write_text(
+        "camera: {position: [0, 0, 4], look_at: [0, 0, 0], fov: 40}\nimports: [{file: card.usda}]\n"
+        "lights: [{type: constant, radiance: 1}]\nrender: {resolution: [16, 16], spp: 2}\n"
+    )
+    proc = run_motion("render", str(tmp_path / "card.yaml"), "-o", str(tmp_path / "out"))
+    assert proc.returncode == 0, proc.stderr
+    rgb = read_frame(next((tmp_path / "out").glob("card.*.exr"))).rgba[..., :3]
+    top, bottom = rgb[5, 8], rgb[11, 8]
+    assert top[0] > 5 * top[2] and bottom[2] > 5 * bottom[0], (top, bottom)
