@@ -120,38 +120,53 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
     if not group.colliders and group.pairs[0].size == 0:
         return contact, impacts
     p = system.props
+    shaped = group.shapes.shaped() & moving if group.shapes is not None else np.zeros(system.n, dtype=bool)
+    # the first pass's sphere sweeps, done before anything else: most steps of a small
+    # system touch nothing, and then nothing more needs computing
+    first_hits = []
+    for col in group.colliders:
+        hits = col.sweep(s0.x, s1.x, p.radius)
+        hits.hit &= moving
+        if true_shape_collider(col):
+            hits.hit &= ~shaped  # boxes and cylinders: their true shape, below
+        first_hits.append(hits)
+    if not shaped.any() and group.pairs[0].size == 0 and not any(h.hit.any() for h in first_hits):
+        return contact, impacts
     inv_mass = np.where(moving, p.inv_mass, 0.0)
     inv_I = None
     if system.rotating:
         inv_I = inverse_inertia_world(s1.q, np.where(moving[:, None], p.inv_inertia, 0.0))
     bodies = ContactBodies(s0.x, s0.v, s1.x, s1.v, s1.w, inv_I, p.radius, inv_mass, p.restitution, p.friction, p.static_friction)
     v_rest = max(2.0 * g_mag * ctx.dt, 1e-6)
-    shaped = group.shapes.shaped() & moving if group.shapes is not None else np.zeros(system.n, dtype=bool)
     shaped_idx = np.flatnonzero(shaped)
     if group.shapes is not None:
         group.shapes.begin_step()
     seen = None  # shaped bodies' end positions after their last contact pass
-    for _ in range(iterations):
+    for iteration in range(iterations):
         found = False
+        fresh = iteration == 0  # the first pass's sweeps are still valid (nothing moved since)
         if shaped_idx.size and group.colliders:
             # after the first pass only bodies that something else moved can have new contacts
             check = shaped_idx if seen is None else shaped_idx[np.any(s1.x[shaped_idx] != seen, axis=1)]
             cs = find_contacts(bodies, group.shapes, check, s0.q, s1.q, group.colliders) if check.size else None
             seen = s1.x[shaped_idx].copy()
             if cs is not None:
-                found = True
+                found, fresh = True, False
                 contact[cs.body] = True
                 out = resolve_shaped(bodies, cs, group.shapes, s1.q, ctx.dt, v_rest, 4 * iterations)
                 if out.shape[1]:
                     impacts.append(np.stack((ctx.t + out[3] * ctx.dt, out[0], out[1], out[2], *out[4:7]), axis=1))
         for ci, col in enumerate(group.colliders):
-            hits = col.sweep(s0.x, s1.x, p.radius)
-            hits.hit &= moving
-            if true_shape_collider(col):
-                hits.hit &= ~shaped  # boxes and cylinders: their true shape, above
+            if fresh:
+                hits = first_hits[ci]
+            else:
+                hits = col.sweep(s0.x, s1.x, p.radius)
+                hits.hit &= moving
+                if true_shape_collider(col):
+                    hits.hit &= ~shaped  # boxes and cylinders: their true shape, above
             if not hits.hit.any():
                 continue
-            found = True
+            found, fresh = True, False
             contact |= hits.hit
             out = resolve_static(bodies, hits, col, ctx.dt, v_rest)
             if out.shape[1]:
