@@ -84,10 +84,10 @@ def simulation_range(loaded: "LoadedScene", frames: Sequence[int] = ()) -> tuple
     return min(0.0, float(min(t_lo, open_lo))), float(max(t_hi, close_hi))
 
 
-def simulate_for(loaded: "LoadedScene", frames: Sequence[int] = ()) -> Any | None:
+def simulate_for(loaded: "LoadedScene", frames: Sequence[int] = (), on_progress: Any = None) -> Any | None:
     """The scene's dynamics simulated over `simulation_range` (None without dynamics).
     What `bake` runs when it is given no simulation, and what the farm runs once before
-    sharding."""
+    sharding. `on_progress(t, t_start, t_end)` is called as the simulation advances."""
     from .motion import has_dynamics
 
     if not has_dynamics(loaded):
@@ -95,7 +95,7 @@ def simulate_for(loaded: "LoadedScene", frames: Sequence[int] = ()) -> Any | Non
     from .dynamics import simulate
 
     t_start, t_end = simulation_range(loaded, frames)
-    return simulate(loaded, t_end=t_end, t_start=t_start)
+    return simulate(loaded, t_end=t_end, t_start=t_start, on_progress=on_progress)
 
 
 def bake(loaded: "LoadedScene", frames: Sequence[int], simulation: Any | None = None) -> BakedMotion:

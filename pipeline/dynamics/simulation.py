@@ -183,8 +183,10 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
     return contact, impacts
 
 
-def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: float, iterations: int, guard: Guard) -> Track:
-    """Advance a group from t0 to t1 through the named stages; returns its Track."""
+def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: float, iterations: int, guard: Guard,
+              on_progress: Callable[[float, float, float], None] | None = None) -> Track:
+    """Advance a group from t0 to t1 through the named stages; returns its Track.
+    `on_progress(t, t0, t1)` is called every 64 steps and at the end."""
     system = group.system
     g_mag = float(np.linalg.norm(system.env.gravity))
     rec_t: list[float] = []
@@ -261,6 +263,10 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
         if index % group.record_stride == 0 or t >= t1 - 1e-9 * max(1.0, abs(t1)):
             record(t, X1, pending, energy)
             pending[:] = False
+        if on_progress is not None and index % 64 == 0:
+            on_progress(t, t0, t1)
+    if on_progress is not None:
+        on_progress(t, t0, t1)
     return Track(
         times=np.asarray(rec_t),
         x=np.stack(rec_x),
@@ -592,8 +598,11 @@ class Simulation:
         return out
 
 
-def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0) -> Simulation:
-    """Simulate every dynamics body and particle system of the scene from t_start to t_end."""
+def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0, on_progress: Callable[[float, float, float], None] | None = None) -> Simulation:
+    """Simulate every dynamics body and particle system of the scene from t_start to t_end.
+
+    `on_progress(t, t_start, t_end)` is called every few steps of each group (bodies first,
+    then each particle system) with the time simulated so far."""
     if not (math.isfinite(t_start) and math.isfinite(t_end)) or t_end < t_start:
         raise SimulationError(f"cannot simulate from t = {t_start} s to t = {t_end} s")
     d = loaded.scene.dynamics
@@ -607,7 +616,7 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0) -> Simul
         names = group.system.props.names
         p = group.system.props
         guard = Guard(names, d.integrator, d.energy_growth_limit, 0.0, float((p.mass * g_mag * p.radius).sum()) + 1e-9)
-        track = run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard)
+        track = run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard, on_progress)
     systems: dict[str, ParticleSystem] = {}
     for i, obj in enumerate(loaded.scene.objects):
         if obj.shape != "particles":
@@ -618,5 +627,5 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0) -> Simul
         p = group.system.props
         guard = Guard([f"{obj.name}[{k}]" for k in range(spawns.count)] if spawns.count <= 100_000 else [obj.name], d.integrator, d.energy_growth_limit, 0.0,
                       float((p.mass * g_mag * np.maximum(p.radius, 1e-3)).sum()) + 1e-9)
-        systems[obj.name] = ParticleSystem(obj.name, spawns, run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard))
+        systems[obj.name] = ParticleSystem(obj.name, spawns, run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard, on_progress))
     return Simulation(t_start, t_end, d.integrator, d.step, names, scales, track, systems, [c.name for c in colliders])

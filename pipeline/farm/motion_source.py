@@ -22,7 +22,7 @@ def _light_keys(loaded: LoadedScene) -> list[str]:
     return [light.name or f"light{i}" for i, light in enumerate(loaded.scene.lights)]
 
 
-def simulation_for(loaded: LoadedScene, frames: Sequence[int]) -> Any:
+def simulation_for(loaded: LoadedScene, frames: Sequence[int], on_progress: Any = None) -> Any:
     """Simulate once (before sharding), if the scene has dynamics, over the range bake
     owns (`bake.simulation_range`: the whole timeline, not the selection), so every shard
     and every frame range bakes the same motion for the same frame."""
@@ -30,7 +30,7 @@ def simulation_for(loaded: LoadedScene, frames: Sequence[int]) -> Any:
 
     if not frames:
         return None
-    return simulate_for(loaded, frames)
+    return simulate_for(loaded, frames, on_progress=on_progress)
 
 
 def baked_inputs(loaded: LoadedScene, frames: Sequence[int], simulation: Any = None) -> list[FrameInput]:

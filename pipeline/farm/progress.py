@@ -16,6 +16,7 @@ class Progress:
         self.total = total
         self.done = already
         self.already = already
+        self._counted: set[int] = set()  # frames counted done (written, then confirmed)
         self.failed = 0
         self.retries = 0
         self.label = label
@@ -74,9 +75,15 @@ class Progress:
             self._bar.update(self._task, completed=self.done + self.failed, fpm=self.rate_fpm, failed=self.failed)
 
     def event(self, kind: str, data: dict[str, Any]) -> None:
-        """Scheduler notifications: rendered, skipped, done_elsewhere, failed, retry,
-        excluded, held."""
-        if kind in ("rendered", "skipped", "done_elsewhere"):
+        """Scheduler notifications: written (a worker finished a frame; its chunk is still
+        running), rendered, skipped, done_elsewhere, failed, retry, excluded, held. A frame
+        is counted once, when it is first reported written or done."""
+        if kind in ("written", "rendered", "skipped", "done_elsewhere"):
+            frame = data.get("frame")
+            if frame in self._counted:
+                return
+            if frame is not None:
+                self._counted.add(frame)
             self.done += 1
         elif kind == "failed":
             self.failed += 1
@@ -90,7 +97,7 @@ class Progress:
         elif kind == "held":
             self.log(f"  frame {data['frame']} is being rendered by another job ({data['holder']}); waiting")
         self._refresh()
-        if self._bar is None and kind in ("rendered", "skipped", "done_elsewhere", "failed"):
+        if self._bar is None and kind in ("written", "rendered", "skipped", "done_elsewhere", "failed"):
             now = time.monotonic()
             finished = self.done + self.failed >= self.total
             if finished or now - self._last_line >= 2.0:
@@ -102,3 +109,67 @@ class Progress:
                     file=self.stream,
                     flush=True,
                 )
+
+
+class BakeProgress:
+    """The bake's status before any frame renders: the simulation's progress in simulated
+    seconds per second with an ETA (a line every 2 s, or one line redrawn on a terminal),
+    then one summary line (time simulated, rate, frames baked)."""
+
+    def __init__(self, stream: TextIO | None = None, live: bool | None = None, every_s: float = 2.0) -> None:
+        self.stream = stream or sys.stderr
+        self.live = self.stream.isatty() if live is None else live
+        self.every_s = every_s
+        self.t0 = time.monotonic()
+        self._last = self.t0
+        self._sim_end: float | None = None
+        self._simulated = 0.0  # seconds simulated in finished groups
+        self._group_t = 0.0
+        self._span = 0.0
+        self._groups = 0
+        self._sim_wall = 0.0
+        self._drawn = False
+
+    def __enter__(self) -> "BakeProgress":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        if self._drawn and self.live:
+            print(file=self.stream, flush=True)
+
+    def simulated(self, t: float, t_start: float, t_end: float) -> None:
+        """The simulation reached `t` of [t_start, t_end] (one call per few steps)."""
+        span = t_end - t_start
+        done = t - t_start
+        if done < self._group_t or self._groups == 0:  # a new group (bodies, then each particle system)
+            self._simulated += self._group_t
+            self._groups += 1
+        self._group_t, self._span = done, span
+        now = time.monotonic()
+        self._sim_wall = now - self.t0
+        if now - self._last < self.every_s:
+            return
+        self._last = now
+        rate = (self._simulated + done) / self._sim_wall if self._sim_wall > 0 else 0.0
+        eta = (span - done) / rate if rate > 0 else float("inf")
+        group = f" (group {self._groups})" if self._groups > 1 else ""
+        line = f"  bake: simulated {done:.2f} of {span:.2f} s{group}, {rate:.3g} simulated s per s, ETA {eta:.0f} s"
+        if self.live:
+            print("\r" + line, end="", file=self.stream, flush=True)
+            self._drawn = True
+        else:
+            print(line, file=self.stream, flush=True)
+
+    def baked(self, frames: int) -> None:
+        """The bake is done: one summary line."""
+        total = time.monotonic() - self.t0
+        if self._drawn and self.live:
+            print(file=self.stream)
+            self._drawn = False
+        simulated = self._simulated + self._group_t
+        if self._groups:
+            rate = simulated / self._sim_wall if self._sim_wall > 0 else float("inf")
+            sim = f"simulated {simulated:.2f} s of dynamics in {self._sim_wall:.2f} s ({rate:.3g} simulated s per s), "
+        else:
+            sim = ""
+        print(f"motion: bake: {sim}{frames} frames baked in {total:.2f} s", file=self.stream, flush=True)

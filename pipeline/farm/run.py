@@ -97,6 +97,15 @@ def default_workers(frames: int) -> int:
     return max(1, min(cores, frames, MAX_DEFAULT_WORKERS))
 
 
+def summary_line(label: str, totals: dict[str, Any], report_path: Path) -> str:
+    """The run's one-line summary; interrupted frames are "not rendered", never failed."""
+    not_rendered = f", {totals['not_rendered']} not rendered (interrupted)" if totals.get("not_rendered") else ""
+    return (
+        f"motion: {label}: {totals['rendered']} rendered, {totals['skipped']} skipped, {totals['done_elsewhere']} by another job, "
+        f"{totals['failed']} failed{not_rendered} in {totals['wall_s']:.1f}s ({totals['frames_per_minute']:.1f} frames/min); report {report_path}"
+    )
+
+
 def run_render(req: RenderRequest) -> dict[str, Any]:
     """Render the request; returns the report. Raises IncompleteJobError (exit 3) if any
     frame failed everywhere, KeyboardInterrupt after a clean stop on Ctrl-C."""
@@ -127,6 +136,8 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     frames = shard(selected, *shard_spec) if shard_spec else selected
 
     out_dir = Path(req.output_dir or scene.output.directory or Path("out") / loaded.name).resolve()
+    if req.deliver:
+        check_deliver(req, loaded, frames, out_dir)  # every check that can fail, before the first task
     scene_hash, settings_hash = scene_hashes(loaded)
     workers = 1 if req.scheduler else (req.workers or default_workers(len(frames)))
     if req.scheduler:
@@ -162,7 +173,12 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     if req.motion_file:
         inputs = file_inputs(loaded, req.motion_file, frames)
     else:
-        inputs = baked_inputs(loaded, frames, simulation_for(loaded, selected))
+        from .progress import BakeProgress
+
+        with BakeProgress(live=req.progress) as shown:
+            simulation = simulation_for(loaded, selected, on_progress=shown.simulated)
+            inputs = baked_inputs(loaded, frames, simulation)
+            shown.baked(len(frames))
     bake_s = time.perf_counter() - t0
     by_frame = {fi.frame: fi for fi in inputs}
     paths = {f: str(frame_path(job, loaded, f)) for f in frames}
@@ -215,6 +231,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
             executor = None
         if sched is not None:
             sched.abandon()
+            sched.settle_interrupted()
     finally:
         if executor is not None:
             executor.close()
@@ -239,10 +256,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     default_name = f"render-report.shard-{shard_spec[0]}-of-{shard_spec[1]}.json" if shard_spec else "render-report.json"
     report_path = write_report(report, req.report or out_dir / default_name)
     totals = report["totals"]
-    progress.log(
-        f"motion: {label}: {totals['rendered']} rendered, {totals['skipped']} skipped, {totals['done_elsewhere']} by another job, "
-        f"{totals['failed']} failed in {totals['wall_s']:.1f}s ({totals['frames_per_minute']:.1f} frames/min); report {report_path}"
-    )
+    progress.log(summary_line(label, totals, report_path))
     if interrupted:
         raise KeyboardInterrupt
     failed = report["failed"]
@@ -250,7 +264,60 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         listing = "\n".join(f"frame {f['frame']}: {f['error']} (attempts {f['attempts']})" for f in failed)
         raise IncompleteJobError(f"{len(failed)} of {len(frames)} frames failed everywhere; the others finished:\n{listing}")
     if req.deliver:
-        from ..telecine.deliver import deliver, parse_formats
-
-        deliver(out_dir, out_dir / "deliver", parse_formats(req.deliver), **{k: v for k, v in req.deliver_view.items() if v is not None})
+        report["deliverables"] = deliver_and_record(req, out_dir, report, report_path, progress.log)
     return report
+
+
+def check_deliver(req: RenderRequest, loaded: Any, frames: list[int], out_dir: Path) -> None:
+    """What `--deliver` would find wrong after the last frame, found before the first:
+    format names, the view transform (OCIO config, display, view), interlaced formats on an
+    odd height, a selection with gaps (the telecine needs a gapless sequence), the movie
+    encoders, a deliver folder that cannot be created."""
+    from ..telecine.deliver import parse_formats
+    from ..telecine.movie import CODECS, ViewTransform
+
+    wanted = parse_formats(req.deliver or "")
+    ViewTransform(**{k: v for k, v in req.deliver_view.items() if v is not None})
+    height = loaded.scene.render.resolution[1]
+    interlaced = [f for f in wanted if f in ("60i", "50i")]
+    if interlaced and height % 2:
+        raise UsageError(f"--deliver {','.join(interlaced)}: the render is {height} rows high; interlaced fields need an even height (--resolution)")
+    gaps = [b for a, b in zip(frames, frames[1:]) if b != a + 1]
+    if gaps and any(f != "contact" for f in wanted):
+        raise UsageError(
+            f"--deliver needs a gapless run of frames; this selection ({format_frames(frames)}) has gaps "
+            f"(a preset's frame_count spreads frames over the timeline: pass --frames A-B)"
+        )
+    import av
+
+    for name in {"24p": "prores", "60i": "prores", "50i": "prores", "review": "h264"}.keys() & set(wanted):
+        codec = CODECS[{"review": "h264"}.get(name, "prores")]
+        try:
+            av.codec.Codec(codec.encoder, "w")
+        except Exception:  # PyAV raises its own UnknownCodecError
+            raise UsageError(f"--deliver {name}: this build of PyAV/FFmpeg has no {codec.encoder} encoder") from None
+    try:
+        (out_dir / "deliver").mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"--deliver: cannot create {out_dir / 'deliver'}: {exc.strerror}") from None
+
+
+def deliver_and_record(req: RenderRequest, out_dir: Path, report: dict[str, Any], report_path: Path, say: Any) -> dict[str, list[str]]:
+    """Assemble the deliverables, print where each one is and record them in the report
+    (rewritten in place)."""
+    from ..telecine.deliver import deliver, parse_formats
+
+    done = deliver(out_dir, out_dir / "deliver", parse_formats(req.deliver or ""), **{k: v for k, v in req.deliver_view.items() if v is not None})
+    record: dict[str, list[str]] = {}
+    for fmt, paths in done.items():
+        movies = [p for p in paths if p.suffix.lower() != ".exr"]
+        frames = [p for p in paths if p.suffix.lower() == ".exr"]
+        record[fmt] = [str(p) for p in movies]
+        if frames:
+            record[f"{fmt}_frames"] = [str(frames[0].parent)]
+            say(f"  {fmt}: {len(frames)} frames in {frames[0].parent}")
+        for p in movies:
+            say(f"  {fmt}: {p}")
+    report["deliverables"] = record
+    write_report(report, report_path)
+    return record
