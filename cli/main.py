@@ -24,6 +24,7 @@ COMMAND_MODULES = [
     "bake",
     "plot",
     "telecine",
+    "export",
     "cache",
     "info",
 ]
