@@ -5,6 +5,7 @@ check that can fail runs before the first frame is rendered."""
 from __future__ import annotations
 
 import io
+import logging
 import signal
 import threading
 
@@ -14,13 +15,13 @@ from farm_util import SCENE, SLOW, TINY, frames_in, motion, report, start_motion
 from motion.pipeline.farm.progress import BakeProgress
 
 
-def test_bake_progress_reports_simulated_seconds_per_second_and_eta() -> None:
-    out = io.StringIO()
-    shown = BakeProgress(stream=out, live=False, every_s=0.0)
+def test_bake_progress_reports_simulated_seconds_per_second_and_eta(caplog) -> None:
+    caplog.set_level(logging.INFO, logger="motion")
+    shown = BakeProgress(stream=io.StringIO(), live=False, every_s=0.0)
     for k in range(1, 5):
         shown.simulated(k * 0.5, 0.0, 4.0)
     shown.baked(96)
-    lines = out.getvalue().splitlines()
+    lines = [r.getMessage() for r in caplog.records]
     assert "bake: simulated 2.00 of 4.00 s" in lines[-2] and "simulated s per s, ETA" in lines[-2]
     assert lines[-1].startswith("motion: bake: simulated 2.00 s of dynamics in") and lines[-1].endswith("96 frames baked in " + lines[-1].rsplit(" in ", 1)[1])
 

@@ -58,6 +58,8 @@ class Track:
     kinetic: np.ndarray
     potential: np.ndarray
     impacts: np.ndarray  # [k, 7]: time, body, speed (m/s), other (collider index or -1 - body), centre x, y, z
+    kinetic_each: np.ndarray | None = None  # [K, n] per body (body groups only), J
+    potential_each: np.ndarray | None = None  # [K, n] per body, gravity (zero at x_ref) + buoyancy, J
 
     def interpolate(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """Positions (and orientations) at `times` ([T] or [T, n], clamped to the record).
@@ -196,6 +198,9 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
     rec_c: list[np.ndarray] = []
     rec_ke: list[float] = []
     rec_pe: list[float] = []
+    rec_ke_each: list[np.ndarray] = []
+    rec_pe_each: list[np.ndarray] = []
+    each = bool(system.props.names)  # bodies: a few, named; energies kept per body (plots)
     impacts: list[np.ndarray] = []
     pending = np.zeros(system.n, dtype=bool)
     extra_work = system.env.wind is not None or system.env.force_field is not None
@@ -210,6 +215,9 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
         rec_c.append(contact.copy())
         rec_ke.append(float(energy[0].sum()))
         rec_pe.append(float(energy[1].sum() + energy[2]))
+        if each:
+            rec_ke_each.append(energy[0])
+            rec_pe_each.append(energy[1])
 
     ctx = StepContext(t0, 0.0, math.inf, 0)
     group.activate(group, ctx)
@@ -276,6 +284,8 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
         kinetic=np.asarray(rec_ke),
         potential=np.asarray(rec_pe),
         impacts=np.concatenate(impacts) if impacts else np.zeros((0, 7)),
+        kinetic_each=np.stack(rec_ke_each) if each else None,
+        potential_each=np.stack(rec_pe_each) if each else None,
     )
 
 
@@ -554,6 +564,9 @@ class Simulation:
     bodies: Track | None
     systems: dict[str, ParticleSystem]
     collider_names: list[str]
+    gravity: np.ndarray | None = None  # m/s^2
+    body_mass: np.ndarray | None = None  # kg, per body
+    body_start: np.ndarray | None = None  # [n, 3] m, where each body's gravity potential was zero in the track
 
     def sample(self, times: np.ndarray) -> dict[str, "object"]:
         """World-space Pose of every dynamics body at `times` (seconds, any order)."""
@@ -588,6 +601,18 @@ class Simulation:
     def particle_systems(self) -> list[str]:
         return list(self.systems)
 
+    def body_energy(self) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
+        """(body, times, kinetic, potential) per dynamics body, in J. The potential's zero
+        is the plane through the world origin perpendicular to gravity (height 0 for
+        g along -Y): U = -m g . x, plus buoyancy. Shared terms (springs, gravity between
+        bodies) are not in any one body's energy: `energy()` has the group's total."""
+        b = self.bodies
+        if b is None or b.kinetic_each is None or self.gravity is None:
+            return []
+        # the track's potential is zero at each body's start: shift by -m g . x_start
+        shift = -self.body_mass * (self.body_start @ self.gravity)
+        return [(name, b.times, b.kinetic_each[:, i], b.potential_each[:, i] + shift[i]) for i, name in enumerate(self.body_names)]
+
     def energy(self) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
         """(label, times, kinetic, potential) per group, in J, for plots."""
         out = []
@@ -610,11 +635,13 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0, on_progr
     g_mag = float(np.linalg.norm(d.gravity))
     built = build_bodies(loaded, t_start)
     track, names, scales = None, [], []
+    mass = start = None
     colliders = build_colliders(loaded)
     if built is not None:
         group, scales = built
         names = group.system.props.names
         p = group.system.props
+        mass, start = p.mass.copy(), group.system.x_ref.copy()
         guard = Guard(names, d.integrator, d.energy_growth_limit, 0.0, float((p.mass * g_mag * p.radius).sum()) + 1e-9)
         track = run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard, on_progress)
     systems: dict[str, ParticleSystem] = {}
@@ -628,4 +655,5 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0, on_progr
         guard = Guard([f"{obj.name}[{k}]" for k in range(spawns.count)] if spawns.count <= 100_000 else [obj.name], d.integrator, d.energy_growth_limit, 0.0,
                       float((p.mass * g_mag * np.maximum(p.radius, 1e-3)).sum()) + 1e-9)
         systems[obj.name] = ParticleSystem(obj.name, spawns, run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard, on_progress))
-    return Simulation(t_start, t_end, d.integrator, d.step, names, scales, track, systems, [c.name for c in colliders])
+    return Simulation(t_start, t_end, d.integrator, d.step, names, scales, track, systems, [c.name for c in colliders],
+                      np.asarray(d.gravity, dtype=np.float64), mass, start)

@@ -1,11 +1,19 @@
 """Live progress: a rich bar on a terminal (frames done/total, frames per minute, ETA,
-failures), plain log lines otherwise (CI logs, files)."""
+failures), plain log lines otherwise (CI logs, files).
+
+Lines go through the `motion` logger (INFO: plans, progress, summaries; WARNING: failures,
+retries, excluded workers; DEBUG: each frame as a worker reports it). `motion -q` / `-v`
+set its level (cli/main.py); a library caller configures logging as it likes. The live
+bar draws on the terminal only when INFO is enabled."""
 
 from __future__ import annotations
 
+import logging
 import sys
 import time
 from typing import Any, TextIO
+
+log = logging.getLogger("motion")
 
 
 class Progress:
@@ -21,7 +29,7 @@ class Progress:
         self.retries = 0
         self.label = label
         self.t0 = time.monotonic()
-        self.live = self.stream.isatty() if live is None else live
+        self.live = (self.stream.isatty() if live is None else live) and log.isEnabledFor(logging.INFO)
         self._bar: Any = None
         self._task: Any = None
         self._last_line = 0.0
@@ -64,11 +72,12 @@ class Progress:
             self._refresh()
             self._bar.stop()
 
-    def log(self, message: str) -> None:
-        if self._bar is not None:
-            self._bar.console.print(message)
+    def log(self, message: str, level: int = logging.INFO) -> None:
+        """One line: above the live bar when there is one, else through the logger."""
+        if self._bar is not None and log.isEnabledFor(level):
+            self._bar.console.print(message, markup=False, highlight=False)
         else:
-            print(message, file=self.stream, flush=True)
+            log.log(level, message)
 
     def _refresh(self) -> None:
         if self._bar is not None:
@@ -78,6 +87,8 @@ class Progress:
         """Scheduler notifications: written (a worker finished a frame; its chunk is still
         running), rendered, skipped, done_elsewhere, failed, retry, excluded, held. A frame
         is counted once, when it is first reported written or done."""
+        if kind == "written":
+            log.debug(f"  frame {data.get('frame')} written by {data.get('worker')}")
         if kind in ("written", "rendered", "skipped", "done_elsewhere"):
             frame = data.get("frame")
             if frame in self._counted:
@@ -87,13 +98,13 @@ class Progress:
             self.done += 1
         elif kind == "failed":
             self.failed += 1
-            self.log(f"  frame {data['frame']} FAILED: {data.get('error')}")
+            self.log(f"  frame {data['frame']} FAILED: {data.get('error')}", logging.WARNING)
         elif kind == "retry":
             self.retries += 1
             f = data["frames"]
-            self.log(f"  retrying frames {f[0]}-{f[-1]} (attempt {data['attempt'] + 1}): {data['error']}")
+            self.log(f"  retrying frames {f[0]}-{f[-1]} (attempt {data['attempt'] + 1}): {data['error']}", logging.WARNING)
         elif kind == "excluded":
-            self.log(f"  worker {data['worker']} excluded for this job: {data['reason']}")
+            self.log(f"  worker {data['worker']} excluded for this job: {data['reason']}", logging.WARNING)
         elif kind == "held":
             self.log(f"  frame {data['frame']} is being rendered by another job ({data['holder']}); waiting")
         self._refresh()
@@ -104,11 +115,7 @@ class Progress:
                 self._last_line = now
                 eta = self.eta_s
                 eta_txt = f", ETA {eta:.0f}s" if eta is not None and not finished else ""
-                print(
-                    f"  {self.label}: {self.done}/{self.total} frames, {self.rate_fpm:.1f} frames/min, {self.failed} failed{eta_txt}",
-                    file=self.stream,
-                    flush=True,
-                )
+                log.info(f"  {self.label}: {self.done}/{self.total} frames, {self.rate_fpm:.1f} frames/min, {self.failed} failed{eta_txt}")
 
 
 class BakeProgress:
@@ -118,7 +125,7 @@ class BakeProgress:
 
     def __init__(self, stream: TextIO | None = None, live: bool | None = None, every_s: float = 2.0) -> None:
         self.stream = stream or sys.stderr
-        self.live = self.stream.isatty() if live is None else live
+        self.live = (self.stream.isatty() if live is None else live) and log.isEnabledFor(logging.INFO)
         self.every_s = every_s
         self.t0 = time.monotonic()
         self._last = self.t0
@@ -158,7 +165,7 @@ class BakeProgress:
             print("\r" + line, end="", file=self.stream, flush=True)
             self._drawn = True
         else:
-            print(line, file=self.stream, flush=True)
+            log.info(line)
 
     def baked(self, frames: int) -> None:
         """The bake is done: one summary line."""
@@ -172,4 +179,4 @@ class BakeProgress:
             sim = f"simulated {simulated:.2f} s of dynamics in {self._sim_wall:.2f} s ({rate:.3g} simulated s per s), "
         else:
             sim = ""
-        print(f"motion: bake: {sim}{frames} frames baked in {total:.2f} s", file=self.stream, flush=True)
+        log.info(f"motion: bake: {sim}{frames} frames baked in {total:.2f} s")

@@ -55,6 +55,7 @@ class RenderRequest:
     report: Path | None = None
     progress: bool | None = None  # None: a live bar only on a terminal
     check: bool = False  # only verify every selected frame is complete; render nothing
+    dry_run: bool = False  # only say what would be done (the plan); write nothing
 
 
 def _scheduler_target(spec: str) -> dict[str, str]:
@@ -80,7 +81,9 @@ def _check_only(name: str, out_dir: Path, frames: list[int], todo: list[int], pa
         if stale:
             why.append(f"incomplete or made with other settings {format_frames(stale)}")
         raise IncompleteJobError(f"{out_dir}: {len(todo)} of {len(frames)} frames of {name} not complete: " + "; ".join(why))
-    print(f"motion: {name}: all {len(frames)} frames ({format_frames(frames)}) complete in {out_dir}", file=sys.stderr)
+    from .progress import log
+
+    log.info(f"motion: {name}: all {len(frames)} frames ({format_frames(frames)}) complete in {out_dir}")
     return {"frames": len(frames), "complete": len(frames), "output_dir": str(out_dir)}
 
 
@@ -95,6 +98,57 @@ def default_workers(frames: int) -> int:
 
     cores = threads_per_worker(1)
     return max(1, min(cores, frames, MAX_DEFAULT_WORKERS))
+
+
+def plan(req: RenderRequest, loaded: Any, out_dir: Path, selected: list[int], frames: list[int], shard_spec: tuple[int, int] | None,
+         skipped: list[int], chunk_list: list[list[int]], chunk_size: int, workers: int, threads: int | None, paths: dict[int, str],
+         report_path: Path) -> dict[str, Any]:
+    """`--dry-run`: what this render would do (frames, chunks, executor, outputs), having
+    loaded, validated and baked the scene and looked at the output folder; nothing is
+    written."""
+    from ..telecine.deliver import parse_formats
+
+    first = paths[frames[0]] if frames else None
+    deliver = {}
+    if req.deliver:
+        prefix = Path(first).name.split(".")[0] if first else loaded.name
+        names = {"24p": f"{prefix}_24p.mov", "60i": f"{prefix}_60i.mov", "50i": f"{prefix}_50i.mov", "review": f"{prefix}_review.mp4", "contact": f"{prefix}_contact.png"}
+        deliver = {fmt: str(out_dir / "deliver" / names[fmt]) for fmt in parse_formats(req.deliver)}
+    return {
+        "dry_run": True,
+        "scene": str(loaded.path),
+        "scene_name": loaded.name,
+        "selection": format_frames(selected),
+        "shard": f"{shard_spec[0]}/{shard_spec[1]}" if shard_spec else None,
+        "frames": format_frames(frames),
+        "frame_count": len(frames),
+        "complete": format_frames(skipped),
+        "to_render": format_frames([f for c in chunk_list for f in c]),
+        "chunks": [format_frames(c) for c in chunk_list],
+        "chunk_size": chunk_size,
+        "executor": {"kind": "dask" if req.scheduler else "local", "workers": None if req.scheduler else min(workers, max(1, len(chunk_list))),
+                     "threads": threads, "scheduler": req.scheduler},
+        "outputs": {"output_dir": str(out_dir), "first_frame": first, "last_frame": paths[frames[-1]] if frames else None,
+                    "report": str(report_path), "deliverables": deliver},
+    }
+
+
+def plan_text(p: dict[str, Any]) -> str:
+    """The plan as a few lines for a person."""
+    ex = p["executor"]
+    how = f"dask at {ex['scheduler']}" if ex["kind"] == "dask" else f"local, {ex['workers']} worker processes x {ex['threads']} threads"
+    lines = [
+        f"plan for {p['scene_name']} ({p['scene']}): nothing rendered (--dry-run)",
+        f"  frames:    {p['frames'] or 'none'} ({p['frame_count']})" + (f", shard {p['shard']} of {p['selection']}" if p["shard"] else ""),
+        f"  complete:  {p['complete'] or 'none'} (kept)",
+        f"  to render: {p['to_render'] or 'none'} in {len(p['chunks'])} chunks of <= {p['chunk_size']}",
+        f"  executor:  {how}",
+        f"  frames to: {p['outputs']['first_frame']} .. {p['outputs']['last_frame']}",
+        f"  report:    {p['outputs']['report']}",
+    ]
+    for fmt, path in p["outputs"]["deliverables"].items():
+        lines.append(f"  {fmt}: {path}")
+    return "\n".join(lines)
 
 
 def summary_line(label: str, totals: dict[str, Any], report_path: Path) -> str:
@@ -137,7 +191,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
 
     out_dir = Path(req.output_dir or scene.output.directory or Path("out") / loaded.name).resolve()
     if req.deliver:
-        check_deliver(req, loaded, frames, out_dir)  # every check that can fail, before the first task
+        check_deliver(req, loaded, frames, out_dir, create=not req.dry_run)  # every check that can fail, before the first task
     scene_hash, settings_hash = scene_hashes(loaded)
     workers = 1 if req.scheduler else (req.workers or default_workers(len(frames)))
     if req.scheduler:
@@ -192,10 +246,13 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     todo = [f for f in frames if f not in set(skipped)]
     if req.check:
         return _check_only(loaded.name, out_dir, frames, todo, paths)
-    out_dir.mkdir(parents=True, exist_ok=True)
-
     chunk_size = cfg.chunk_size or default_chunk_size(len(todo), workers if not req.scheduler else 2)
     chunk_list = make_chunks(todo, chunk_size)
+    default_name = f"render-report.shard-{shard_spec[0]}-of-{shard_spec[1]}.json" if shard_spec else "render-report.json"
+    if req.dry_run:
+        return plan(req, loaded, out_dir, selected, frames, shard_spec, skipped, chunk_list, chunk_size, workers, threads, paths,
+                    Path(req.report or out_dir / default_name))
+    out_dir.mkdir(parents=True, exist_ok=True)
     run_id = new_run_id()
     ctx = TaskContext(run_id=run_id, paths=paths, resume=resume, stale_after_s=cfg.stale_after_s)
     label = f"{loaded.name}" + (f" shard {shard_spec[0]}/{shard_spec[1]}" if shard_spec else "")
@@ -253,7 +310,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         interrupted=interrupted,
         motion_file=str(req.motion_file) if req.motion_file else None,
     )
-    default_name = f"render-report.shard-{shard_spec[0]}-of-{shard_spec[1]}.json" if shard_spec else "render-report.json"
+    report["report"] = str(req.report or out_dir / default_name)
     report_path = write_report(report, req.report or out_dir / default_name)
     totals = report["totals"]
     progress.log(summary_line(label, totals, report_path))
@@ -262,13 +319,15 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     failed = report["failed"]
     if failed:
         listing = "\n".join(f"frame {f['frame']}: {f['error']} (attempts {f['attempts']})" for f in failed)
-        raise IncompleteJobError(f"{len(failed)} of {len(frames)} frames failed everywhere; the others finished:\n{listing}")
+        err = IncompleteJobError(f"{len(failed)} of {len(frames)} frames failed everywhere; the others finished:\n{listing}")
+        err.report = report  # type: ignore[attr-defined]  # (for `motion render --json`)
+        raise err
     if req.deliver:
         report["deliverables"] = deliver_and_record(req, out_dir, report, report_path, progress.log)
     return report
 
 
-def check_deliver(req: RenderRequest, loaded: Any, frames: list[int], out_dir: Path) -> None:
+def check_deliver(req: RenderRequest, loaded: Any, frames: list[int], out_dir: Path, create: bool = True) -> None:
     """What `--deliver` would find wrong after the last frame, found before the first:
     format names, the view transform (OCIO config, display, view), interlaced formats on an
     odd height, a selection with gaps (the telecine needs a gapless sequence), the movie
@@ -297,7 +356,8 @@ def check_deliver(req: RenderRequest, loaded: Any, frames: list[int], out_dir: P
         except Exception:  # PyAV raises its own UnknownCodecError
             raise UsageError(f"--deliver {name}: this build of PyAV/FFmpeg has no {codec.encoder} encoder") from None
     try:
-        (out_dir / "deliver").mkdir(parents=True, exist_ok=True)
+        if create:
+            (out_dir / "deliver").mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise UsageError(f"--deliver: cannot create {out_dir / 'deliver'}: {exc.strerror}") from None
 
