@@ -95,6 +95,8 @@ def simulate_for(loaded: "LoadedScene", frames: Sequence[int] = (), on_progress:
     from .dynamics import simulate
 
     t_start, t_end = simulation_range(loaded, frames)
+    if on_progress is None:
+        return simulate(loaded, t_end=t_end, t_start=t_start)
     return simulate(loaded, t_end=t_end, t_start=t_start, on_progress=on_progress)
 
 
