@@ -1,10 +1,14 @@
 # The two entry points of the README. Both run tools/setup.sh first (idempotent).
-.PHONY: setup render test bench render-example
+.PHONY: setup render render-cannonball-full render-example test bench
 
 setup:
 	@bash tools/setup.sh
 
 render: setup
+	.venv/bin/motion render scenes/cannonball.yaml -o out/cannonball $(ARGS)
+
+# the whole 75-second cannonball flight (1,800 frames), by name
+render-cannonball-full: setup
 	.venv/bin/motion render scenes/cannonball.yaml -o out/cannonball $(ARGS)
 
 test: setup

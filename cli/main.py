@@ -25,6 +25,7 @@ COMMAND_MODULES = [
     "bake",
     "plot",
     "telecine",
+    "export",
     "cache",
     "info",
 ]
@@ -32,8 +33,28 @@ COMMAND_MODULES = [
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(package_name="motion-farm", prog_name="motion")
-def cli() -> None:
+@click.option("-v", "--verbose", count=True, help="More detail on stderr (-v: each frame as workers report it).")
+@click.option("-q", "--quiet", count=True, help="Less on stderr (-q: warnings and errors only, no progress; -qq: errors only).")
+def cli(verbose: int, quiet: int) -> None:
     """motion: batch render-farm pipeline for animation (Mitsuba 3, OpenEXR, telecine)."""
+    configure_logging(verbose, quiet)
+
+
+def configure_logging(verbose: int = 0, quiet: int = 0) -> None:
+    """The `motion` logger writes plain lines to stderr at INFO, less with -q, more with -v."""
+    import logging
+
+    level = max(logging.DEBUG, min(logging.ERROR, logging.INFO - 10 * verbose + 10 * quiet))
+    logger = logging.getLogger("motion")
+    for handler in list(logger.handlers):
+        if getattr(handler, "_motion_cli", False):
+            logger.removeHandler(handler)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    handler._motion_cli = True  # type: ignore[attr-defined]
+    logger.addHandler(handler)
+    logger.setLevel(level)
+    logger.propagate = False
 
 
 def _register() -> None:

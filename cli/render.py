@@ -3,6 +3,7 @@ worker processes or a Dask cluster (docs/farm.md)."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import click
@@ -50,6 +51,8 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--ocio", "ocio_config", help="Deliverables' view transform: an OCIO config file or built-in URI (ocio://cg-config-latest).")
 @click.option("--ocio-display", help="OCIO display (default: the config's default).")
 @click.option("--ocio-view", help="OCIO view (default: the display's default).")
+@click.option("--dry-run", is_flag=True, help="Say what would be rendered (frames, chunks, executor, outputs) and write nothing.")
+@click.option("--json", "as_json", is_flag=True, help="Print the plan (--dry-run) or the run's summary as JSON on stdout.")
 def render(
     scene: Path,
     output_dir: Path | None,
@@ -78,9 +81,12 @@ def render(
     ocio_config: str | None,
     ocio_display: str | None,
     ocio_view: str | None,
+    dry_run: bool,
+    as_json: bool,
 ) -> None:
     """Render SCENE's frames to OpenEXR files."""
-    from motion.pipeline.farm.run import RenderRequest, run_render
+    from motion.pipeline.errors import IncompleteJobError
+    from motion.pipeline.farm.run import RenderRequest, plan_text, run_render
 
     request = RenderRequest(
         scene=scene,
@@ -104,8 +110,25 @@ def render(
         report=report_path,
         progress=progress,
         check=check,
+        dry_run=dry_run,
     )
-    run_render(request)
+    try:
+        result = run_render(request)
+    except IncompleteJobError as err:
+        if as_json and getattr(err, "report", None) is not None:
+            click.echo(json.dumps(summary(err.report), indent=2))  # type: ignore[attr-defined]
+        raise
+    if dry_run:
+        click.echo(json.dumps(result, indent=2) if as_json else plan_text(result))
+    elif as_json:
+        click.echo(json.dumps(summary(result) if "totals" in result else result, indent=2))
+
+
+def summary(report: dict) -> dict:
+    """The run's summary for `--json`: where things are and the totals (the full report is
+    the file at `report`)."""
+    keys = ("scene", "scene_name", "output_dir", "selection", "shard", "frames_this_job", "interrupted", "totals", "failed", "not_rendered", "deliverables", "report")
+    return {k: report.get(k) for k in keys if k in report}
 
 
 commands = [render]

@@ -10,25 +10,36 @@ import click
 @click.command("validate")
 @click.argument("scenes", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--preset", help="Also check the scene with this preset applied.")
-def validate(scenes: tuple[Path, ...], preset: str | None) -> None:
+@click.option("--json", "as_json", is_flag=True, help="Print the results as JSON on stdout (problems still go to stderr, exit 2).")
+def validate(scenes: tuple[Path, ...], preset: str | None, as_json: bool) -> None:
     """Check SCENES (YAML) without rendering: one line per problem, exit 2 if any."""
+    import json
+    from dataclasses import asdict
+
     from motion.pipeline.errors import Problem, SceneError
     from motion.pipeline.presets import load_preset, overrides_from
     from motion.pipeline.scene import load_scene
 
     overrides = overrides_from(load_preset(preset)[0], {}) if preset else None
     problems: list[Problem] = []
+    results = []
     for path in scenes:
         try:
             loaded = load_scene(path, overrides)
         except SceneError as err:
             problems.extend(err.problems)
+            results.append({"path": str(path), "ok": False, "problems": [asdict(p) for p in err.problems]})
             continue
         s = loaded.scene
-        click.echo(
-            f"{path}: ok ({loaded.name}: frames {s.timeline.first}-{s.timeline.last} at {s.timeline.fps} fps, "
-            f"{len(s.objects)} objects, {len(s.lights)} lights, {len(s.materials)} materials)"
-        )
+        results.append({"path": str(path), "ok": True, "name": loaded.name, "frames": [s.timeline.first, s.timeline.last], "fps": str(s.timeline.fps),
+                        "objects": len(s.objects), "lights": len(s.lights), "materials": len(s.materials)})
+        if not as_json:
+            click.echo(
+                f"{path}: ok ({loaded.name}: frames {s.timeline.first}-{s.timeline.last} at {s.timeline.fps} fps, "
+                f"{len(s.objects)} objects, {len(s.lights)} lights, {len(s.materials)} materials)"
+            )
+    if as_json:
+        click.echo(json.dumps({"ok": not problems, "preset": preset, "scenes": results}, indent=2))
     if problems:
         raise SceneError(problems)
 

@@ -72,11 +72,41 @@ def frame_sample_times(loaded: "LoadedScene", frame: int) -> tuple[Fraction, tup
     return timeline.seconds(frame), (t_open, t_close), samples
 
 
+def simulation_range(loaded: "LoadedScene", frames: Sequence[int] = ()) -> tuple[float, float]:
+    """The time range (s) the scene's dynamics are simulated over: the whole timeline,
+    from min(0, the first frame's shutter open) to the last frame's shutter close, never
+    the selection. A frame's motion then does not depend on which other frames were
+    selected (the fixed step grid starts at the same time and no run is cut short next to
+    it; emitters spawn the same particles). Frames outside the timeline (the API allows
+    them) widen the range."""
+    timeline = loaded.scene.timeline.timeline()
+    ends = [timeline.first, timeline.last] + ([min(frames), max(frames)] if len(frames) else [])
+    lo, hi = min(ends), max(ends)
+    (t_lo, (open_lo, _), _), (t_hi, (_, close_hi), _) = frame_sample_times(loaded, lo), frame_sample_times(loaded, hi)
+    return min(0.0, float(min(t_lo, open_lo))), float(max(t_hi, close_hi))
+
+
+def simulate_for(loaded: "LoadedScene", frames: Sequence[int] = (), on_progress: Any = None) -> Any | None:
+    """The scene's dynamics simulated over `simulation_range` (None without dynamics).
+    What `bake` runs when it is given no simulation, and what the farm runs once before
+    sharding. `on_progress(t, t_start, t_end)` is called as the simulation advances."""
+    from .motion import has_dynamics
+
+    if not has_dynamics(loaded):
+        return None
+    from .dynamics import simulate
+
+    t_start, t_end = simulation_range(loaded, frames)
+    if on_progress is None:
+        return simulate(loaded, t_end=t_end, t_start=t_start)
+    return simulate(loaded, t_end=t_end, t_start=t_start, on_progress=on_progress)
+
+
 def bake(loaded: "LoadedScene", frames: Sequence[int], simulation: Any | None = None) -> BakedMotion:
     """Evaluate `frames` (each at its time and at N times across its shutter).
 
     If the scene has dynamics and no `simulation` is given, it is simulated here, once,
-    over the whole baked range (motion.pipeline.dynamics.simulate)."""
+    over `simulation_range` (the whole timeline, whatever the selection)."""
     from .motion import evaluate, has_dynamics
 
     frames = [int(f) for f in frames]
@@ -90,9 +120,7 @@ def bake(loaded: "LoadedScene", frames: Sequence[int], simulation: Any | None = 
     sample_times = np.array([[float(s) for s in samples] for _, _, samples in exact])
     everything = np.concatenate([frame_times, sample_times.ravel()])
     if simulation is None and has_dynamics(loaded):
-        from .dynamics import simulate
-
-        simulation = simulate(loaded, t_end=float(everything.max()), t_start=min(0.0, float(everything.min())))
+        simulation = simulate_for(loaded, frames)
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is reported by check_motion
         motion = evaluate(loaded, everything, simulation)
     check_motion(loaded, motion)
@@ -383,4 +411,4 @@ def summary(baked: BakedMotion) -> dict[str, Any]:
     }
 
 
-__all__ = ["BakeFileError", "BakedFrame", "BakedMotion", "bake", "frame_sample_times", "read_baked", "summary", "write_baked"]
+__all__ = ["BakeFileError", "BakedFrame", "BakedMotion", "bake", "frame_sample_times", "read_baked", "simulate_for", "simulation_range", "summary", "write_baked"]

@@ -159,6 +159,11 @@ def _header_value(value: Any) -> Any:
     return value
 
 
+# Mitsuba's *_rgb variants render linear Rec.709 / sRGB primaries with a D65 white:
+# red, green, blue and white (x, y) as OpenEXR's standard `chromaticities` attribute.
+REC709_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
+
+
 def write_frame(
     path: str | Path,
     rgba: np.ndarray,
@@ -202,6 +207,7 @@ def write_frame(
     header: dict[str, Any] = {
         "compression": _COMPRESSION[compression],
         "type": OpenEXR.scanlineimage,
+        "chromaticities": REC709_CHROMATICITIES,  # (a `standard` entry may replace it)
     }
     if fps is not None:
         header["framesPerSecond"] = Fraction(fps)

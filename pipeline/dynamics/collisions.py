@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .forces import coulomb_friction
+from .forces import coulomb_friction, cross
 
 TOL = 1e-9  # m: penetrations smaller than this are contact, not collision
 _MESH_CHUNK = 2_000_000  # bodies x triangles tested at once
@@ -94,6 +94,8 @@ class PlaneCollider(Collider):
         side = np.where(ref >= 0, 1.0, -1.0)
         d0 = side * sd0 - r  # surface distance: > 0 apart, < 0 penetrating
         d1 = side * sd1 - r
+        if not (d1 < -TOL).any():  # nobody ends the step inside: no hit (most steps)
+            return _no_hits(len(x0))
         # d(s) is linear along the segment: d0 + s (d1 - d0) = 0
         s = np.where(d0 > 0, d0 / np.where(d0 - d1 != 0, d0 - d1, 1.0), 0.0)
         point = x0 + s[:, None] * (x1 - x0) - self.point
@@ -188,7 +190,7 @@ class MeshCollider(Collider):
 
     def __post_init__(self) -> None:
         a, b, c = self.triangles[:, 0], self.triangles[:, 1], self.triangles[:, 2]
-        n = np.cross(b - a, c - a)
+        n = cross(b - a, c - a)
         length = np.linalg.norm(n, axis=1)
         keep = length > 1e-15
         self.triangles = self.triangles[keep]
@@ -280,20 +282,20 @@ def _apply_friction(b: ContactBodies, idx: np.ndarray, n: np.ndarray, normal_imp
     r_c = -b.radius[idx, None] * n
     u = b.v1[idx]
     if b.w1 is not None:
-        u = u + np.cross(b.w1[idx], r_c)
+        u = u + cross(b.w1[idx], r_c)
     u_t = u - np.einsum("ij,ij->i", u, n)[:, None] * n
     slip = np.linalg.norm(u_t, axis=1)
     t_hat = u_t / np.where(slip > 0, slip, 1.0)[:, None]
     k_t = inv_m.copy()
     if b.inv_inertia_world is not None:
-        rxt = np.cross(r_c, t_hat)
-        k_t += np.einsum("ij,ij->i", np.cross(np.einsum("nij,nj->ni", b.inv_inertia_world[idx], rxt), r_c), t_hat)
+        rxt = cross(r_c, t_hat)
+        k_t += np.einsum("ij,ij->i", cross(np.einsum("nij,nj->ni", b.inv_inertia_world[idx], rxt), r_c), t_hat)
     jt = coulomb_friction(slip, normal_impulse, k_t, mu, mu_s)
     dv = -(jt * inv_m)[:, None] * t_hat
     b.v1[idx] += dv
     b.x1[idx] += lever[:, None] * dv
     if b.w1 is not None and b.inv_inertia_world is not None:
-        b.w1[idx] -= np.einsum("nij,nj->ni", b.inv_inertia_world[idx], np.cross(r_c, jt[:, None] * t_hat))
+        b.w1[idx] -= np.einsum("nij,nj->ni", b.inv_inertia_world[idx], cross(r_c, jt[:, None] * t_hat))
 
 
 def resolve_static(b: ContactBodies, hits: Hits, col: Collider, h: float, v_rest: float) -> np.ndarray:
@@ -341,7 +343,14 @@ def resolve_pairs(b: ContactBodies, pairs: tuple[np.ndarray, np.ndarray], h: flo
     if i.size == 0:
         return np.zeros((6, 0))
     reach = b.radius[i] + b.radius[j]
-    hits = _sweep_spheres(b.x0[i] - b.x0[j], b.x1[i] - b.x1[j], reach)
+    p0, p1 = b.x0[i] - b.x0[j], b.x1[i] - b.x1[j]
+    # broad phase: along the segment |p0 + s d| >= |p0| - |d|, so no pair with
+    # |p0| > reach + |d| can touch this step (most pairs, most steps)
+    d = p1 - p0
+    near = np.einsum("ij,ij->i", p0, p0) <= (reach + np.sqrt(np.einsum("ij,ij->i", d, d)) + TOL) ** 2
+    if not near.any():
+        return np.zeros((6, 0))
+    hits = _sweep_spheres(p0, p1, reach)
     k = np.flatnonzero(hits.hit & ((b.inv_mass[i] + b.inv_mass[j]) > 0))
     if k.size == 0:
         return np.zeros((6, 0))
@@ -361,15 +370,15 @@ def resolve_pairs(b: ContactBodies, pairs: tuple[np.ndarray, np.ndarray], h: flo
     r_i, r_j = -b.radius[i, None] * n, b.radius[j, None] * n
     u = (b.v1[i] + dv_i) - (b.v1[j] + dv_j)
     if b.w1 is not None:
-        u = u + np.cross(b.w1[i], r_i) - np.cross(b.w1[j], r_j)
+        u = u + cross(b.w1[i], r_i) - cross(b.w1[j], r_j)
     u_t = u - np.einsum("ij,ij->i", u, n)[:, None] * n
     slip = np.linalg.norm(u_t, axis=1)
     t_hat = u_t / np.where(slip > 0, slip, 1.0)[:, None]
     k_t = inv_i + inv_j
     if b.inv_inertia_world is not None:
         for idx, r in ((i, r_i), (j, r_j)):
-            rxt = np.cross(r, t_hat)
-            k_t = k_t + np.einsum("ij,ij->i", np.cross(np.einsum("nij,nj->ni", b.inv_inertia_world[idx], rxt), r), t_hat)
+            rxt = cross(r, t_hat)
+            k_t = k_t + np.einsum("ij,ij->i", cross(np.einsum("nij,nj->ni", b.inv_inertia_world[idx], rxt), r), t_hat)
     mu = np.sqrt(b.friction[i] * b.friction[j])
     mu_s = np.sqrt(b.static_friction[i] * b.static_friction[j])
     jt = coulomb_friction(slip, J, k_t, mu, mu_s)
@@ -382,8 +391,8 @@ def resolve_pairs(b: ContactBodies, pairs: tuple[np.ndarray, np.ndarray], h: flo
     np.add.at(b.x1, j, (1.0 - s)[:, None] * h * dv_j)
     if b.w1 is not None and b.inv_inertia_world is not None:
         imp = -jt[:, None] * t_hat
-        np.add.at(b.w1, i, np.einsum("nij,nj->ni", b.inv_inertia_world[i], np.cross(r_i, imp)))
-        np.add.at(b.w1, j, np.einsum("nij,nj->ni", b.inv_inertia_world[j], np.cross(r_j, -imp)))
+        np.add.at(b.w1, i, np.einsum("nij,nj->ni", b.inv_inertia_world[i], cross(r_i, imp)))
+        np.add.at(b.w1, j, np.einsum("nij,nj->ni", b.inv_inertia_world[j], cross(r_j, -imp)))
     # remove the overlap left, in the ratio of inverse masses (centre of mass unchanged)
     d = b.x1[i] - b.x1[j]
     dist = np.linalg.norm(d, axis=1)

@@ -16,6 +16,19 @@ import numpy as np
 NBODY_LIMIT = 2048
 
 
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b over the last axis (length 3), broadcasting: the arithmetic of np.cross
+    (a1 b2 - a2 b1, a2 b0 - a0 b2, a0 b1 - a1 b0) without its axis handling, which costs
+    more than the products for the few bodies of a small system."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape), dtype=np.result_type(a, b))
+    out[..., 0] = a1 * b2 - a2 * b1
+    out[..., 1] = a2 * b0 - a0 * b2
+    out[..., 2] = a0 * b1 - a1 * b0
+    return out
+
+
 def gravity(mass: np.ndarray, g: np.ndarray) -> np.ndarray:
     """Uniform gravity F = m g (N); g in m/s^2, default (0, -9.81, 0)."""
     return mass[:, None] * g[None, :]

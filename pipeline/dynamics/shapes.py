@@ -61,6 +61,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..motion.pose import quat_mul, quat_normalize, quat_to_matrix
+from .forces import cross
 from .collisions import TOL, BoxCollider, Collider, ContactBodies, PlaneCollider, SphereCollider
 
 BOX, CYLINDER = 1, 2
@@ -236,9 +237,9 @@ def find_contacts(b: ContactBodies, shapes: ShapeSet, idx: np.ndarray, q0: np.nd
 def _tangents(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit tangents orthogonal to unit normals n [..., 3]."""
     helper = np.where(np.abs(n[..., 0:1]) < 0.9, np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
-    t1 = np.cross(n, helper)
+    t1 = cross(n, helper)
     t1 /= np.linalg.norm(t1, axis=-1, keepdims=True)
-    return t1, np.cross(n, t1)
+    return t1, cross(n, t1)
 
 
 def _rotate(q: np.ndarray, theta: np.ndarray) -> np.ndarray:
@@ -263,7 +264,7 @@ def resolve_shaped(b: ContactBodies, c: Contacts, shapes: ShapeSet, q1: np.ndarr
     D = np.stack((n, t1, t2), axis=2).reshape(B, 3 * m, 3)  # rows: contact a, direction (n, t1, t2)
     D = D * np.repeat(c.ok, 3, axis=1)[..., None]
     r = np.repeat(c.lever, 3, axis=1)
-    A = np.cross(r, D)  # r x d
+    A = cross(r, D)  # r x d
     K = inv_m[:, None, None] * np.einsum("bik,bjk->bij", D, D) + np.einsum("bik,bkl,bjl->bij", A, inv_I, A)
     diag = np.einsum("bii->bi", K)
     diag = np.where(diag > 1e-300, diag, 1.0)

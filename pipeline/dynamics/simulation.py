@@ -58,6 +58,8 @@ class Track:
     kinetic: np.ndarray
     potential: np.ndarray
     impacts: np.ndarray  # [k, 7]: time, body, speed (m/s), other (collider index or -1 - body), centre x, y, z
+    kinetic_each: np.ndarray | None = None  # [K, n] per body (body groups only), J
+    potential_each: np.ndarray | None = None  # [K, n] per body, gravity (zero at x_ref) + buoyancy, J
 
     def interpolate(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """Positions (and orientations) at `times` ([T] or [T, n], clamped to the record).
@@ -120,38 +122,53 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
     if not group.colliders and group.pairs[0].size == 0:
         return contact, impacts
     p = system.props
+    shaped = group.shapes.shaped() & moving if group.shapes is not None else np.zeros(system.n, dtype=bool)
+    # the first pass's sphere sweeps, done before anything else: most steps of a small
+    # system touch nothing, and then nothing more needs computing
+    first_hits = []
+    for col in group.colliders:
+        hits = col.sweep(s0.x, s1.x, p.radius)
+        hits.hit &= moving
+        if true_shape_collider(col):
+            hits.hit &= ~shaped  # boxes and cylinders: their true shape, below
+        first_hits.append(hits)
+    if not shaped.any() and group.pairs[0].size == 0 and not any(h.hit.any() for h in first_hits):
+        return contact, impacts
     inv_mass = np.where(moving, p.inv_mass, 0.0)
     inv_I = None
     if system.rotating:
         inv_I = inverse_inertia_world(s1.q, np.where(moving[:, None], p.inv_inertia, 0.0))
     bodies = ContactBodies(s0.x, s0.v, s1.x, s1.v, s1.w, inv_I, p.radius, inv_mass, p.restitution, p.friction, p.static_friction)
     v_rest = max(2.0 * g_mag * ctx.dt, 1e-6)
-    shaped = group.shapes.shaped() & moving if group.shapes is not None else np.zeros(system.n, dtype=bool)
     shaped_idx = np.flatnonzero(shaped)
     if group.shapes is not None:
         group.shapes.begin_step()
     seen = None  # shaped bodies' end positions after their last contact pass
-    for _ in range(iterations):
+    for iteration in range(iterations):
         found = False
+        fresh = iteration == 0  # the first pass's sweeps are still valid (nothing moved since)
         if shaped_idx.size and group.colliders:
             # after the first pass only bodies that something else moved can have new contacts
             check = shaped_idx if seen is None else shaped_idx[np.any(s1.x[shaped_idx] != seen, axis=1)]
             cs = find_contacts(bodies, group.shapes, check, s0.q, s1.q, group.colliders) if check.size else None
             seen = s1.x[shaped_idx].copy()
             if cs is not None:
-                found = True
+                found, fresh = True, False
                 contact[cs.body] = True
                 out = resolve_shaped(bodies, cs, group.shapes, s1.q, ctx.dt, v_rest, 4 * iterations)
                 if out.shape[1]:
                     impacts.append(np.stack((ctx.t + out[3] * ctx.dt, out[0], out[1], out[2], *out[4:7]), axis=1))
         for ci, col in enumerate(group.colliders):
-            hits = col.sweep(s0.x, s1.x, p.radius)
-            hits.hit &= moving
-            if true_shape_collider(col):
-                hits.hit &= ~shaped  # boxes and cylinders: their true shape, above
+            if fresh:
+                hits = first_hits[ci]
+            else:
+                hits = col.sweep(s0.x, s1.x, p.radius)
+                hits.hit &= moving
+                if true_shape_collider(col):
+                    hits.hit &= ~shaped  # boxes and cylinders: their true shape, above
             if not hits.hit.any():
                 continue
-            found = True
+            found, fresh = True, False
             contact |= hits.hit
             out = resolve_static(bodies, hits, col, ctx.dt, v_rest)
             if out.shape[1]:
@@ -168,8 +185,10 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
     return contact, impacts
 
 
-def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: float, iterations: int, guard: Guard) -> Track:
-    """Advance a group from t0 to t1 through the named stages; returns its Track."""
+def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: float, iterations: int, guard: Guard,
+              on_progress: Callable[[float, float, float], None] | None = None) -> Track:
+    """Advance a group from t0 to t1 through the named stages; returns its Track.
+    `on_progress(t, t0, t1)` is called every 64 steps and at the end."""
     system = group.system
     g_mag = float(np.linalg.norm(system.env.gravity))
     rec_t: list[float] = []
@@ -179,6 +198,9 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
     rec_c: list[np.ndarray] = []
     rec_ke: list[float] = []
     rec_pe: list[float] = []
+    rec_ke_each: list[np.ndarray] = []
+    rec_pe_each: list[np.ndarray] = []
+    each = bool(system.props.names)  # bodies: a few, named; energies kept per body (plots)
     impacts: list[np.ndarray] = []
     pending = np.zeros(system.n, dtype=bool)
     extra_work = system.env.wind is not None or system.env.force_field is not None
@@ -193,6 +215,9 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
         rec_c.append(contact.copy())
         rec_ke.append(float(energy[0].sum()))
         rec_pe.append(float(energy[1].sum() + energy[2]))
+        if each:
+            rec_ke_each.append(energy[0])
+            rec_pe_each.append(energy[1])
 
     ctx = StepContext(t0, 0.0, math.inf, 0)
     group.activate(group, ctx)
@@ -246,6 +271,10 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
         if index % group.record_stride == 0 or t >= t1 - 1e-9 * max(1.0, abs(t1)):
             record(t, X1, pending, energy)
             pending[:] = False
+        if on_progress is not None and index % 64 == 0:
+            on_progress(t, t0, t1)
+    if on_progress is not None:
+        on_progress(t, t0, t1)
     return Track(
         times=np.asarray(rec_t),
         x=np.stack(rec_x),
@@ -255,6 +284,8 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
         kinetic=np.asarray(rec_ke),
         potential=np.asarray(rec_pe),
         impacts=np.concatenate(impacts) if impacts else np.zeros((0, 7)),
+        kinetic_each=np.stack(rec_ke_each) if each else None,
+        potential_each=np.stack(rec_pe_each) if each else None,
     )
 
 
@@ -533,6 +564,9 @@ class Simulation:
     bodies: Track | None
     systems: dict[str, ParticleSystem]
     collider_names: list[str]
+    gravity: np.ndarray | None = None  # m/s^2
+    body_mass: np.ndarray | None = None  # kg, per body
+    body_start: np.ndarray | None = None  # [n, 3] m, where each body's gravity potential was zero in the track
 
     def sample(self, times: np.ndarray) -> dict[str, "object"]:
         """World-space Pose of every dynamics body at `times` (seconds, any order)."""
@@ -567,6 +601,18 @@ class Simulation:
     def particle_systems(self) -> list[str]:
         return list(self.systems)
 
+    def body_energy(self) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
+        """(body, times, kinetic, potential) per dynamics body, in J. The potential's zero
+        is the plane through the world origin perpendicular to gravity (height 0 for
+        g along -Y): U = -m g . x, plus buoyancy. Shared terms (springs, gravity between
+        bodies) are not in any one body's energy: `energy()` has the group's total."""
+        b = self.bodies
+        if b is None or b.kinetic_each is None or self.gravity is None:
+            return []
+        # the track's potential is zero at each body's start: shift by -m g . x_start
+        shift = -self.body_mass * (self.body_start @ self.gravity)
+        return [(name, b.times, b.kinetic_each[:, i], b.potential_each[:, i] + shift[i]) for i, name in enumerate(self.body_names)]
+
     def energy(self) -> list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]:
         """(label, times, kinetic, potential) per group, in J, for plots."""
         out = []
@@ -577,8 +623,11 @@ class Simulation:
         return out
 
 
-def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0) -> Simulation:
-    """Simulate every dynamics body and particle system of the scene from t_start to t_end."""
+def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0, on_progress: Callable[[float, float, float], None] | None = None) -> Simulation:
+    """Simulate every dynamics body and particle system of the scene from t_start to t_end.
+
+    `on_progress(t, t_start, t_end)` is called every few steps of each group (bodies first,
+    then each particle system) with the time simulated so far."""
     if not (math.isfinite(t_start) and math.isfinite(t_end)) or t_end < t_start:
         raise SimulationError(f"cannot simulate from t = {t_start} s to t = {t_end} s")
     d = loaded.scene.dynamics
@@ -586,13 +635,15 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0) -> Simul
     g_mag = float(np.linalg.norm(d.gravity))
     built = build_bodies(loaded, t_start)
     track, names, scales = None, [], []
+    mass = start = None
     colliders = build_colliders(loaded)
     if built is not None:
         group, scales = built
         names = group.system.props.names
         p = group.system.props
+        mass, start = p.mass.copy(), group.system.x_ref.copy()
         guard = Guard(names, d.integrator, d.energy_growth_limit, 0.0, float((p.mass * g_mag * p.radius).sum()) + 1e-9)
-        track = run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard)
+        track = run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard, on_progress)
     systems: dict[str, ParticleSystem] = {}
     for i, obj in enumerate(loaded.scene.objects):
         if obj.shape != "particles":
@@ -603,5 +654,6 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0) -> Simul
         p = group.system.props
         guard = Guard([f"{obj.name}[{k}]" for k in range(spawns.count)] if spawns.count <= 100_000 else [obj.name], d.integrator, d.energy_growth_limit, 0.0,
                       float((p.mass * g_mag * np.maximum(p.radius, 1e-3)).sum()) + 1e-9)
-        systems[obj.name] = ParticleSystem(obj.name, spawns, run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard))
-    return Simulation(t_start, t_end, d.integrator, d.step, names, scales, track, systems, [c.name for c in colliders])
+        systems[obj.name] = ParticleSystem(obj.name, spawns, run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard, on_progress))
+    return Simulation(t_start, t_end, d.integrator, d.step, names, scales, track, systems, [c.name for c in colliders],
+                      np.asarray(d.gravity, dtype=np.float64), mass, start)

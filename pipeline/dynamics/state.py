@@ -18,7 +18,7 @@ import numpy as np
 
 from . import forces
 from ..motion.pose import quat_normalize
-from .rigid import angular_acceleration, quat_rate
+from .rigid import angular_acceleration, isotropic, quat_rate
 
 
 @dataclass
@@ -94,11 +94,26 @@ class System:
         self.size = self.n * (13 if rotating else 6)
         self.h = 0.0
         self.active = np.ones(self.n, dtype=bool)
+        # constant for the run (props and environment do not change): computed once
+        self._gravity = forces.gravity(props.mass, env.gravity)
+        self._air_drag = bool(np.any(props.cd > 0) or np.any(props.linear > 0))
+        self._isotropic = rotating and props.count > 0 and isotropic(props.inertia)
+        self._free = props.inv_mass > 0  # not pinned (pinned: inverse mass 0)
         self.x_ref = np.zeros((self.n, 3))  # where gravity's potential is zero
         if env.newtonian is not None and self.n > forces.NBODY_LIMIT:
             from ..errors import SimulationError
 
             raise SimulationError(f"newtonian_gravity is O(n^2) and limited to {forces.NBODY_LIMIT} bodies; this scene has {self.n}")
+
+    @property
+    def active(self) -> np.ndarray:
+        """Bodies that move this step (started, alive); set by the activate stage."""
+        return self._active
+
+    @active.setter
+    def active(self, value: np.ndarray) -> None:
+        self._active = value
+        self._moving: np.ndarray | None = None
 
     # --- layout ---------------------------------------------------------------------------
 
@@ -115,8 +130,12 @@ class System:
     def normalize(self, X: np.ndarray) -> np.ndarray:
         """Project back onto the state manifold: unit quaternions."""
         if self.rotating and self.n:
-            s = self.unpack(X)
-            s.q[:] = quat_normalize(s.q)
+            q = X[3 * self.n : 7 * self.n].reshape(self.n, 4)
+            norm = np.sqrt(np.einsum("ij,ij->i", q, q))
+            if norm.all():  # (the usual case, in two numpy calls; a zero one -> identity)
+                q /= norm[:, None]
+            else:
+                q[:] = quat_normalize(q)
         return X
 
     # --- forces and D ---------------------------------------------------------------------
@@ -125,7 +144,7 @@ class System:
         """Total force on each body (N): gravity, field, drag (air with wind, water),
         buoyancy, springs, Newtonian gravity."""
         p, env = self.props, self.env
-        total = forces.gravity(p.mass, env.gravity)
+        total = self._gravity.copy()
         if env.force_field is not None:
             total += forces.field_force(p.mass, env.force_field, t, x)
         submerged = np.zeros(self.n)
@@ -135,7 +154,7 @@ class System:
             submerged = np.maximum(submerged, frac)
             # water drag on the wetted part of the reference area (the fluid is at rest)
             total += forces.drag(v, p.mass, fluid.density, np.full(self.n, fluid.cd), p.area * frac, np.zeros(self.n), self.h)
-        if np.any(p.cd > 0) or np.any(p.linear > 0):
+        if self._air_drag:
             v_rel = v - forces.wind_velocity(env.wind, t, x) if env.wind is not None else v
             total += forces.drag(v_rel, p.mass, env.air_density, p.cd, p.area * (1.0 - submerged), p.linear, self.h)
         if env.springs is not None and env.springs.count:
@@ -145,20 +164,35 @@ class System:
         return total
 
     def moving(self) -> np.ndarray:
-        return self.active & (self.props.inv_mass > 0)
+        """active and not pinned (cached until `active` is set again; do not modify)."""
+        if self._moving is None:
+            self._moving = self._active & self._free
+        return self._moving
 
     def derivative(self, t: float, X: np.ndarray) -> np.ndarray:
-        """D(t, X): the whole system's rate of change, one vectorised pass."""
+        """D(t, X): the whole system's rate of change, one vectorised pass.
+
+        Small systems are dominated by the cost of each numpy call, not by arithmetic, so
+        two exact shortcuts skip calls: every body moving (no masking) and no body spinning
+        (w = 0 and no torques: dq/dt = 1/2 (0, 0) q = 0 and dw/dt = I^-1 (0 - 0 x I 0) = 0)."""
         s = self.unpack(X)
-        move = self.moving()[:, None]
-        acc = self.forces(t, s.x, s.v) * self.props.inv_mass[:, None]
+        move = self.moving()
+        everyone = bool(move.all())
+        acc = self.forces(t, s.x, s.v)
+        acc *= self.props.inv_mass[:, None]
+        out = np.zeros(X.shape)
+        n = self.n
         if not self.rotating:
-            return np.concatenate((np.where(move, s.v, 0.0).ravel(), np.where(move, acc, 0.0).ravel()))
-        dq = quat_rate(s.q, s.w)
-        alpha = angular_acceleration(s.q, s.w, self.props.inertia, self.props.inv_inertia, np.zeros_like(s.w))
-        return np.concatenate(
-            (np.where(move, s.v, 0.0).ravel(), np.where(move, dq, 0.0).ravel(), np.where(move, acc, 0.0).ravel(), np.where(move, alpha, 0.0).ravel())
-        )
+            parts = ((slice(0, 3 * n), s.v), (slice(3 * n, 6 * n), acc))
+        elif not s.w.any():
+            parts = ((slice(0, 3 * n), s.v), (slice(7 * n, 10 * n), acc))
+        else:
+            dq = quat_rate(s.q, s.w)
+            alpha = angular_acceleration(s.q, s.w, self.props.inertia, self.props.inv_inertia, np.zeros_like(s.w))
+            parts = ((slice(0, 3 * n), s.v), (slice(3 * n, 7 * n), dq), (slice(7 * n, 10 * n), acc), (slice(10 * n, 13 * n), alpha))
+        for where, rate in parts:
+            out[where] = (rate if everyone else np.where(move[:, None], rate, 0.0)).ravel()
+        return out
 
     def position_rate(self, t: float, X: np.ndarray) -> np.ndarray:
         """The position-like part of D (velocities and quaternion rates): no forces needed."""
@@ -166,6 +200,10 @@ class System:
         move = self.moving()[:, None]
         if not self.rotating:
             return np.where(move, s.v, 0.0).ravel()
+        if not s.w.any():  # no spin: dq/dt = 0 exactly
+            out = np.zeros(self.split)
+            out[: 3 * self.n] = np.where(move, s.v, 0.0).ravel()
+            return out
         return np.concatenate((np.where(move, s.v, 0.0).ravel(), np.where(move, quat_rate(s.q, s.w), 0.0).ravel()))
 
     # --- energy ---------------------------------------------------------------------------
@@ -178,7 +216,9 @@ class System:
         p, env = self.props, self.env
         move = self.active & (p.inv_mass > 0)
         kinetic = 0.5 * p.mass * np.einsum("ij,ij->i", s.v, s.v)
-        if self.rotating:
+        if self.rotating and s.w.any() and self._isotropic:  # |R^T w| = |w|
+            kinetic = kinetic + 0.5 * p.inertia[:, 0] * np.einsum("ij,ij->i", s.w, s.w)
+        elif self.rotating and s.w.any():  # (no spin: no rotational energy)
             from ..motion.pose import quat_to_matrix
 
             w_body = np.einsum("nji,nj->ni", quat_to_matrix(s.q), s.w)

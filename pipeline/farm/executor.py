@@ -29,7 +29,17 @@ class Lost:
     reason: str
 
 
-Event = Union[Done, Lost]
+@dataclass(frozen=True)
+class FrameWritten:
+    """A worker finished one frame of the chunk it is running (progress only: the chunk's
+    `Done` still brings every frame's result)."""
+
+    worker: str
+    chunk_id: int
+    frame: int
+
+
+Event = Union[Done, Lost, FrameWritten]
 
 
 class Executor(Protocol):

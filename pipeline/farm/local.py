@@ -20,7 +20,7 @@ from typing import Any, Sequence
 
 from ..render.frame_renderer import FrameInput
 from ..render.job import RenderJob
-from .executor import Done, Event, Lost
+from .executor import Done, Event, FrameWritten, Lost
 from .task import TaskContext, run_chunk
 
 
@@ -49,8 +49,12 @@ def _worker_main(conn: Connection) -> None:
         if msg is None:
             return
         chunk_id, job, inputs, ctx = msg
+
+        def written(frame: int, chunk_id: int = chunk_id) -> None:
+            conn.send(("frame", chunk_id, frame))
+
         try:
-            reply: Any = ("done", chunk_id, run_chunk(chunk_id, job, inputs, ctx))
+            reply: Any = ("done", chunk_id, run_chunk(chunk_id, job, inputs, ctx, on_frame=written))
         except Exception as exc:  # run_chunk reports frame errors itself; this is the rest
             reply = ("error", chunk_id, f"{type(exc).__name__}: {exc}")
         try:
@@ -130,6 +134,9 @@ class LocalExecutor:
                     kind, chunk_id, payload = w.conn.recv()
                 except (EOFError, OSError):
                     continue  # died; the sentinel fires too
+                if kind == "frame":
+                    events.append(FrameWritten(w.name, chunk_id, payload))
+                    continue
                 w.chunk = None
                 events.append(Done(w.name, chunk_id, payload) if kind == "done" else Lost(w.name, chunk_id, payload))
             else:

@@ -23,20 +23,15 @@ def _light_keys(loaded: LoadedScene) -> list[str]:
     return [light.name or f"light{i}" for i, light in enumerate(loaded.scene.lights)]
 
 
-def simulation_for(loaded: LoadedScene, frames: Sequence[int]) -> Any:
-    """Simulate once over the whole selection (before sharding), if the scene has dynamics;
-    every shard computes the same simulation, so every shard bakes the same motion."""
-    from ..bake import frame_sample_times
-    from ..motion import has_dynamics
+def simulation_for(loaded: LoadedScene, frames: Sequence[int], on_progress: Any = None) -> Any:
+    """Simulate once (before sharding), if the scene has dynamics, over the range bake
+    owns (`bake.simulation_range`: the whole timeline, not the selection), so every shard
+    and every frame range bakes the same motion for the same frame."""
+    from ..bake import simulate_for
 
-    if not frames or not has_dynamics(loaded):
+    if not frames:
         return None
-    from ..dynamics import simulate
-
-    ends = [frame_sample_times(loaded, f) for f in (min(frames), max(frames))]
-    t_lo = float(min(ends[0][1][0], ends[0][0]))
-    t_hi = float(max(ends[1][1][1], ends[1][0]))
-    return simulate(loaded, t_end=t_hi, t_start=min(0.0, t_lo))
+    return simulate_for(loaded, frames, on_progress=on_progress)
 
 
 def baked_inputs(loaded: LoadedScene, frames: Sequence[int], simulation: Any = None) -> list[FrameInput]:

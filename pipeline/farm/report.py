@@ -51,7 +51,9 @@ def build_report(
     rows.sort(key=lambda r: r["frame"])
     count = lambda s: sum(1 for r in rows if r["status"] == s)  # noqa: E731
     rendered = [r for r in rows if r["status"] == "rendered"]
+    # interrupted frames are `not_rendered` (run.py settles them), never failed
     failed = [{"frame": r["frame"], "error": (r.get("errors") or ["not rendered"])[-1], "attempts": r.get("attempts", 0)} for r in rows if r["status"] in ("failed", "pending")]
+    not_rendered = [r["frame"] for r in rows if r["status"] == "not_rendered"]
     workers = []
     for w in (sched.workers.values() if sched else []):
         workers.append(
@@ -73,6 +75,7 @@ def build_report(
         "skipped": count("skipped"),
         "done_elsewhere": count("done_elsewhere"),
         "failed": len(failed),
+        "not_rendered": len(not_rendered),
         "retries": sum(r.get("retries", 0) for r in rows),
         "cold_frames": sum(1 for r in rendered if r.get("cold")),
         "render_s_sum": sum(r.get("render_s", 0.0) for r in rendered),
@@ -97,6 +100,7 @@ def build_report(
         "disk_fault": sched.disk_fault if sched is not None else None,
         "totals": totals,
         "failed": failed,
+        "not_rendered": format_frames(not_rendered),
         "workers": workers,
         "frames": rows,
     }

@@ -55,6 +55,7 @@ class RenderRequest:
     report: Path | None = None
     progress: bool | None = None  # None: a live bar only on a terminal
     check: bool = False  # only verify every selected frame is complete; render nothing
+    dry_run: bool = False  # only say what would be done (the plan); write nothing
 
 
 def _scheduler_target(spec: str) -> dict[str, str]:
@@ -80,7 +81,9 @@ def _check_only(name: str, out_dir: Path, frames: list[int], todo: list[int], pa
         if stale:
             why.append(f"incomplete or made with other settings {format_frames(stale)}")
         raise IncompleteJobError(f"{out_dir}: {len(todo)} of {len(frames)} frames of {name} not complete: " + "; ".join(why))
-    print(f"motion: {name}: all {len(frames)} frames ({format_frames(frames)}) complete in {out_dir}", file=sys.stderr)
+    from .progress import log
+
+    log.info(f"motion: {name}: all {len(frames)} frames ({format_frames(frames)}) complete in {out_dir}")
     return {"frames": len(frames), "complete": len(frames), "output_dir": str(out_dir)}
 
 
@@ -138,7 +141,67 @@ def _stop_on_disk_fault(sched: Scheduler | None, report: dict[str, Any], report_
     if report_fault is not None and report_path is not None:
         where += f" (its own place refused it: {report_fault})"
     head = fault or report_fault
-    raise DiskFaultError(f"{head}; {totals['rendered'] + totals['skipped']} of {totals['frames']} frames complete and kept, {totals['failed']} not rendered; {where}")
+    raise DiskFaultError(f"{head}; {totals['rendered'] + totals['skipped']} of {totals['frames']} frames complete and kept, {totals['failed'] + totals.get('not_rendered', 0)} not rendered; {where}")
+
+
+def plan(req: RenderRequest, loaded: Any, out_dir: Path, selected: list[int], frames: list[int], shard_spec: tuple[int, int] | None,
+         skipped: list[int], chunk_list: list[list[int]], chunk_size: int, workers: int, threads: int | None, paths: dict[int, str],
+         report_path: Path) -> dict[str, Any]:
+    """`--dry-run`: what this render would do (frames, chunks, executor, outputs), having
+    loaded, validated and baked the scene and looked at the output folder; nothing is
+    written."""
+    from ..telecine.deliver import parse_formats
+
+    first = paths[frames[0]] if frames else None
+    deliver = {}
+    if req.deliver:
+        prefix = Path(first).name.split(".")[0] if first else loaded.name
+        names = {"24p": f"{prefix}_24p.mov", "60i": f"{prefix}_60i.mov", "50i": f"{prefix}_50i.mov", "review": f"{prefix}_review.mp4", "contact": f"{prefix}_contact.png"}
+        deliver = {fmt: str(out_dir / "deliver" / names[fmt]) for fmt in parse_formats(req.deliver)}
+    return {
+        "dry_run": True,
+        "scene": str(loaded.path),
+        "scene_name": loaded.name,
+        "selection": format_frames(selected),
+        "shard": f"{shard_spec[0]}/{shard_spec[1]}" if shard_spec else None,
+        "frames": format_frames(frames),
+        "frame_count": len(frames),
+        "complete": format_frames(skipped),
+        "to_render": format_frames([f for c in chunk_list for f in c]),
+        "chunks": [format_frames(c) for c in chunk_list],
+        "chunk_size": chunk_size,
+        "executor": {"kind": "dask" if req.scheduler else "local", "workers": None if req.scheduler else min(workers, max(1, len(chunk_list))),
+                     "threads": threads, "scheduler": req.scheduler},
+        "outputs": {"output_dir": str(out_dir), "first_frame": first, "last_frame": paths[frames[-1]] if frames else None,
+                    "report": str(report_path), "deliverables": deliver},
+    }
+
+
+def plan_text(p: dict[str, Any]) -> str:
+    """The plan as a few lines for a person."""
+    ex = p["executor"]
+    how = f"dask at {ex['scheduler']}" if ex["kind"] == "dask" else f"local, {ex['workers']} worker processes x {ex['threads']} threads"
+    lines = [
+        f"plan for {p['scene_name']} ({p['scene']}): nothing rendered (--dry-run)",
+        f"  frames:    {p['frames'] or 'none'} ({p['frame_count']})" + (f", shard {p['shard']} of {p['selection']}" if p["shard"] else ""),
+        f"  complete:  {p['complete'] or 'none'} (kept)",
+        f"  to render: {p['to_render'] or 'none'} in {len(p['chunks'])} chunks of <= {p['chunk_size']}",
+        f"  executor:  {how}",
+        f"  frames to: {p['outputs']['first_frame']} .. {p['outputs']['last_frame']}",
+        f"  report:    {p['outputs']['report']}",
+    ]
+    for fmt, path in p["outputs"]["deliverables"].items():
+        lines.append(f"  {fmt}: {path}")
+    return "\n".join(lines)
+
+
+def summary_line(label: str, totals: dict[str, Any], report_path: Path) -> str:
+    """The run's one-line summary; interrupted frames are "not rendered", never failed."""
+    not_rendered = f", {totals['not_rendered']} not rendered (interrupted)" if totals.get("not_rendered") else ""
+    return (
+        f"motion: {label}: {totals['rendered']} rendered, {totals['skipped']} skipped, {totals['done_elsewhere']} by another job, "
+        f"{totals['failed']} failed{not_rendered} in {totals['wall_s']:.1f}s ({totals['frames_per_minute']:.1f} frames/min); report {report_path}"
+    )
 
 
 def run_render(req: RenderRequest) -> dict[str, Any]:
@@ -171,6 +234,8 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     frames = shard(selected, *shard_spec) if shard_spec else selected
 
     out_dir = Path(req.output_dir or scene.output.directory or Path("out") / loaded.name).resolve()
+    if req.deliver:
+        check_deliver(req, loaded, frames, out_dir, create=not req.dry_run)  # every check that can fail, before the first task
     scene_hash, settings_hash = scene_hashes(loaded)
     workers = 1 if req.scheduler else (req.workers or default_workers(len(frames)))
     if req.scheduler:
@@ -208,7 +273,12 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     if req.motion_file:
         inputs = file_inputs(loaded, req.motion_file, frames)
     else:
-        inputs = baked_inputs(loaded, frames, simulation_for(loaded, selected))
+        from .progress import BakeProgress
+
+        with BakeProgress(live=req.progress) as shown:
+            simulation = simulation_for(loaded, selected, on_progress=shown.simulated)
+            inputs = baked_inputs(loaded, frames, simulation)
+            shown.baked(len(frames))
     bake_s = time.perf_counter() - t0
     by_frame = {fi.frame: fi for fi in inputs}
     paths = {f: str(frame_path(job, loaded, f)) for f in frames}
@@ -222,10 +292,13 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     todo = [f for f in frames if f not in set(skipped)]
     if req.check:
         return _check_only(loaded.name, out_dir, frames, todo, paths)
-    out_dir.mkdir(parents=True, exist_ok=True)
-
     chunk_size = cfg.chunk_size or default_chunk_size(len(todo), workers if not req.scheduler else 2)
     chunk_list = make_chunks(todo, chunk_size)
+    default_name = f"render-report.shard-{shard_spec[0]}-of-{shard_spec[1]}.json" if shard_spec else "render-report.json"
+    if req.dry_run:
+        return plan(req, loaded, out_dir, selected, frames, shard_spec, skipped, chunk_list, chunk_size, workers, threads, paths,
+                    Path(req.report or out_dir / default_name))
+    out_dir.mkdir(parents=True, exist_ok=True)
     run_id = new_run_id()
     ctx = TaskContext(run_id=run_id, paths=paths, resume=resume, stale_after_s=cfg.stale_after_s)
     label = f"{loaded.name}" + (f" shard {shard_spec[0]}/{shard_spec[1]}" if shard_spec else "")
@@ -261,6 +334,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
             executor = None
         if sched is not None:
             sched.abandon()
+            sched.settle_interrupted()
     finally:
         if executor is not None:
             executor.close()
@@ -282,22 +356,75 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         interrupted=interrupted,
         motion_file=str(req.motion_file) if req.motion_file else None,
     )
-    default_name = f"render-report.shard-{shard_spec[0]}-of-{shard_spec[1]}.json" if shard_spec else "render-report.json"
+    report["report"] = str(req.report or out_dir / default_name)
     report_path, report_fault = write_report_somewhere(report, req.report or out_dir / default_name, run_id)
     totals = report["totals"]
-    progress.log(
-        f"motion: {label}: {totals['rendered']} rendered, {totals['skipped']} skipped, {totals['done_elsewhere']} by another job, "
-        f"{totals['failed']} failed in {totals['wall_s']:.1f}s ({totals['frames_per_minute']:.1f} frames/min); report {report_path}"
-    )
+    progress.log(summary_line(label, totals, report_path))
     _stop_on_disk_fault(sched, report, report_path, report_fault)
     if interrupted:
         raise KeyboardInterrupt
     failed = report["failed"]
     if failed:
         listing = "\n".join(f"frame {f['frame']}: {f['error']} (attempts {f['attempts']})" for f in failed)
-        raise IncompleteJobError(f"{len(failed)} of {len(frames)} frames failed everywhere; the others finished:\n{listing}")
+        err = IncompleteJobError(f"{len(failed)} of {len(frames)} frames failed everywhere; the others finished:\n{listing}")
+        err.report = report  # type: ignore[attr-defined]  # (for `motion render --json`)
+        raise err
     if req.deliver:
-        from ..telecine.deliver import deliver, parse_formats
-
-        deliver(out_dir, out_dir / "deliver", parse_formats(req.deliver), **{k: v for k, v in req.deliver_view.items() if v is not None})
+        report["deliverables"] = deliver_and_record(req, out_dir, report, report_path, progress.log)
     return report
+
+
+def check_deliver(req: RenderRequest, loaded: Any, frames: list[int], out_dir: Path, create: bool = True) -> None:
+    """What `--deliver` would find wrong after the last frame, found before the first:
+    format names, the view transform (OCIO config, display, view), interlaced formats on an
+    odd height, a selection with gaps (the telecine needs a gapless sequence), the movie
+    encoders, a deliver folder that cannot be created."""
+    from ..telecine.deliver import parse_formats
+    from ..telecine.movie import CODECS, ViewTransform
+
+    wanted = parse_formats(req.deliver or "")
+    ViewTransform(**{k: v for k, v in req.deliver_view.items() if v is not None})
+    height = loaded.scene.render.resolution[1]
+    interlaced = [f for f in wanted if f in ("60i", "50i")]
+    if interlaced and height % 2:
+        raise UsageError(f"--deliver {','.join(interlaced)}: the render is {height} rows high; interlaced fields need an even height (--resolution)")
+    gaps = [b for a, b in zip(frames, frames[1:]) if b != a + 1]
+    if gaps and any(f != "contact" for f in wanted):
+        raise UsageError(
+            f"--deliver needs a gapless run of frames; this selection ({format_frames(frames)}) has gaps "
+            f"(a preset's frame_count spreads frames over the timeline: pass --frames A-B)"
+        )
+    import av
+
+    for name in {"24p": "prores", "60i": "prores", "50i": "prores", "review": "h264"}.keys() & set(wanted):
+        codec = CODECS[{"review": "h264"}.get(name, "prores")]
+        try:
+            av.codec.Codec(codec.encoder, "w")
+        except Exception:  # PyAV raises its own UnknownCodecError
+            raise UsageError(f"--deliver {name}: this build of PyAV/FFmpeg has no {codec.encoder} encoder") from None
+    try:
+        if create:
+            (out_dir / "deliver").mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"--deliver: cannot create {out_dir / 'deliver'}: {exc.strerror}") from None
+
+
+def deliver_and_record(req: RenderRequest, out_dir: Path, report: dict[str, Any], report_path: Path, say: Any) -> dict[str, list[str]]:
+    """Assemble the deliverables, print where each one is and record them in the report
+    (rewritten in place)."""
+    from ..telecine.deliver import deliver, parse_formats
+
+    done = deliver(out_dir, out_dir / "deliver", parse_formats(req.deliver or ""), **{k: v for k, v in req.deliver_view.items() if v is not None})
+    record: dict[str, list[str]] = {}
+    for fmt, paths in done.items():
+        movies = [p for p in paths if p.suffix.lower() != ".exr"]
+        frames = [p for p in paths if p.suffix.lower() == ".exr"]
+        record[fmt] = [str(p) for p in movies]
+        if frames:
+            record[f"{fmt}_frames"] = [str(frames[0].parent)]
+            say(f"  {fmt}: {len(frames)} frames in {frames[0].parent}")
+        for p in movies:
+            say(f"  {fmt}: {p}")
+    report["deliverables"] = record
+    write_report(report, report_path)
+    return record

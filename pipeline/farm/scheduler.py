@@ -24,7 +24,7 @@ from ..render.frame_renderer import FrameInput
 from ..render.job import FrameResult, RenderJob, expected_meta
 from .claims import claim_path, is_stale, read_claim, release, remove_partials
 from .config import FarmConfig
-from .executor import Done, Executor, Lost
+from .executor import Done, Executor, FrameWritten, Lost
 from .task import TaskContext
 
 
@@ -41,7 +41,7 @@ class FrameRecord:
     """One frame's story for the report."""
 
     frame: int
-    status: str = "pending"  # rendered | skipped | done_elsewhere | failed | pending
+    status: str = "pending"  # rendered | skipped | done_elsewhere | failed | pending | not_rendered (interrupted)
     attempts: int = 0
     result: FrameResult | None = None
     errors: list[str] = field(default_factory=list)
@@ -150,6 +150,8 @@ class Scheduler:
             for event in self.ex.poll(self.poll_s):
                 if isinstance(event, Done):
                     self._done(event)
+                elif isinstance(event, FrameWritten):
+                    self.notify("written", {"frame": event.frame, "worker": event.worker})
                 else:
                     self._lost(event)
             self._check_timeouts()
@@ -325,6 +327,22 @@ class Scheduler:
                     rec = self.frames[f]
                     last = f"; last error: {rec.errors[-1]}" if rec.errors else ""
                     self._final(f, "failed", why + last)
+
+    def settle_interrupted(self) -> tuple[list[int], list[int]]:
+        """After an interrupt: frames still pending whose file a worker finished before
+        the stop are `rendered` (complete on disk, made from this job); the others are
+        `not_rendered`, never `failed` (nothing went wrong with them). Returns both lists."""
+        written, not_rendered = [], []
+        for f, rec in sorted(self.frames.items()):
+            if rec.status != "pending":
+                continue
+            if is_complete(self.ctx.paths[f], expected_meta(self.job, self.inputs[f])):
+                rec.status = "rendered"
+                written.append(f)
+            else:
+                rec.status = "not_rendered"
+                not_rendered.append(f)
+        return written, not_rendered
 
     def abandon(self) -> list[int]:
         """On interrupt: the frames that were running; their partial files and our claims

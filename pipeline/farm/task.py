@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Callable, Sequence
 
 from ..errors import DiskFaultError
 from ..frame_output import is_complete
@@ -39,8 +39,10 @@ class ChunkResult:
     disk_fault: str | None = None  # the disk refused a write: the chunk stopped there
 
 
-def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[FrameInput], ctx: TaskContext) -> ChunkResult:
-    """Render one chunk in this worker process (local or Dask)."""
+def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[FrameInput], ctx: TaskContext, on_frame: Callable[[int], None] | None = None) -> ChunkResult:
+    """Render one chunk in this worker process (local or Dask). `on_frame(frame)` is
+    called as each frame is written (the local executor tells the farm at once, so
+    progress moves per frame, not per chunk)."""
     t0 = time.perf_counter()
     me = Claimant.here(ctx.run_id)
     out = ChunkResult(chunk_id=chunk_id, worker=worker_id())
@@ -66,6 +68,8 @@ def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[FrameInput], ctx: 
             if fault:
                 out.disk_fault = fault
                 break
+            if on_frame is not None and all(r.ok for r in results):
+                on_frame(fi.frame)
         finally:
             release(path, ctx.run_id)
     out.seconds = time.perf_counter() - t0

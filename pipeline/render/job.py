@@ -80,6 +80,20 @@ def frame_path(job: RenderJob, loaded: LoadedScene, frame: int) -> Path:
     return Path(job.output_dir) / loaded.scene.output.frame_name(loaded.name, frame)
 
 
+def scene_reference(scene_path: str | Path, frame_path: str | Path) -> str:
+    """The scene file as stored in a frame's header: relative to the frame's folder when
+    the two share a folder below the root (a project tree with its scenes and renders can
+    move as a whole; no home or checkout path leaks into deliverables), else absolute."""
+    scene, folder = Path(scene_path).absolute(), Path(frame_path).absolute().parent
+    try:
+        common = Path(os.path.commonpath([scene, folder]))
+    except ValueError:  # another drive
+        return str(scene_path)
+    if common == Path(common.anchor):
+        return str(scene)
+    return os.path.relpath(scene, folder).replace(os.sep, "/")
+
+
 def expected_meta(job: RenderJob, fi: FrameInput) -> dict[str, Any]:
     """The attributes a complete frame of this job carries (what --resume compares): the
     frame, the settings hash and the hash of this frame's own baked motion."""
@@ -160,7 +174,7 @@ def _render_one(job: RenderJob, fi: FrameInput) -> FrameResult:
             "motion_blur": scene.render.motion_blur,
             "variant": variant,
             "scene_hash": job.scene_hash,
-            "scene": str(loaded.path),
+            "scene": scene_reference(loaded.path, out),
             "render_seconds": float(stats.render_s),
             "renderer": RENDERER_VERSION,
         }

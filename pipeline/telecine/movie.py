@@ -333,5 +333,14 @@ def sequence_movie(
     frames = (read_checked(seq, i).rgba for i in range(len(seq)))
     return write_movie(
         path, frames, rate, width=seq.width, height=seq.height, codec=codec, field_order=field_order,
-        view=view, progress=progress, total=len(seq),
+        view=view, progress=progress, total=len(seq), timecode=first_timecode(seq),
     )
+
+
+def first_timecode(seq: Sequence) -> str | None:
+    """The sequence's first frame's `timeCode` attribute as HH:MM:SS:FF (None without one):
+    the movie's timecode track starts there, so the movie and its frames agree."""
+    from ..frame_output import read_header, timecode_str
+
+    code = read_header(seq.paths[0]).get("timeCode")
+    return timecode_str(code) if code is not None else None

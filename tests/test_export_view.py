@@ -1,0 +1,106 @@
+"""`motion export` (EXR -> PNG/JPEG through the movies' view transform) and `motion view`
+(the HTML flipbook), on real renders; the flipbook is driven in headless Chromium when it
+is installed (apt-get install chromium), and its structure is checked either way."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from farm_util import SCENE, TINY, motion
+from motion.pipeline.frame_output import read_frame
+from motion.pipeline.telecine.export import to_8bit
+from motion.pipeline.telecine.movie import ViewTransform
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("rendered")
+    res = motion("render", SCENE, "-o", out, "--frames", "0-4", "--resolution", "32x24", "--spp", "2", "--no-progress", "--workers", "1")
+    assert res.returncode == 0, res.stderr
+    return out
+
+
+def test_export_png_and_jpg_use_the_movies_view_transform(rendered: Path, tmp_path: Path) -> None:
+    from PIL import Image
+
+    res = motion("export", rendered, "--format", "png", "--exposure", "1", "-o", tmp_path / "png")
+    assert res.returncode == 0, res.stderr
+    assert str(tmp_path / "png") in res.stdout
+    pngs = sorted((tmp_path / "png").glob("*.png"))
+    assert [p.name for p in pngs] == [f"farm-tiny.{f:04d}.png" for f in range(5)]
+    view = ViewTransform(exposure=1.0)
+    for png in pngs:
+        rgba = read_frame(rendered / png.name.replace(".png", ".exr")).rgba
+        got = np.asarray(Image.open(png).convert("RGB"))
+        assert np.array_equal(got, to_8bit(view(rgba)))
+    dark = np.asarray(Image.open(pngs[0]).convert("RGB")).astype(int)
+    res = motion("export", rendered, "--format", "jpg")  # default folder: IN_DIR/jpg
+    assert res.returncode == 0, res.stderr
+    jpgs = sorted((rendered / "jpg").glob("*.jpg"))
+    assert len(jpgs) == 5
+    jpg = np.asarray(Image.open(jpgs[0]).convert("RGB")).astype(int)
+    assert jpg.shape == (24, 32, 3) and jpg.mean() < dark.mean()  # +1 stop is brighter
+    assert np.abs(to_8bit(ViewTransform()(read_frame(rendered / "farm-tiny.0000.exr").rgba)).astype(int) - jpg).mean() < 6
+
+
+def test_export_reports_bad_input_in_one_line(tmp_path: Path) -> None:
+    (tmp_path / "empty").mkdir()
+    res = motion("export", tmp_path / "empty")
+    assert res.returncode == 2 and "Traceback" not in res.stderr and len(res.stderr.strip().splitlines()) == 1
+
+
+class _Page(HTMLParser):
+    def __init__(self) -> None:
+        super().__init__()
+        self.ids: dict[str, dict[str, str | None]] = {}
+        self.data: str | None = None
+        self._in_data = False
+
+    def handle_starttag(self, tag: str, attrs: list[tuple[str, str | None]]) -> None:
+        a = dict(attrs)
+        if a.get("id"):
+            self.ids[a["id"]] = {"tag": tag, **a}  # type: ignore[dict-item]
+        self._in_data = a.get("id") == "flipbook-data"
+
+    def handle_data(self, data: str) -> None:
+        if self._in_data:
+            self.data = (self.data or "") + data
+
+    def handle_endtag(self, tag: str) -> None:
+        self._in_data = False
+
+
+def test_flipbook_page(rendered: Path) -> None:
+    res = motion("view", rendered)
+    assert res.returncode == 0, res.stderr
+    page = rendered / "flipbook" / "index.html"
+    assert str(page) in res.stdout
+    parsed = _Page()
+    parsed.feed(page.read_text())
+    assert parsed.ids["scrubber"]["tag"] == "input" and parsed.ids["scrubber"]["type"] == "range"
+    assert {"stage", "play", "prev", "next", "info"} <= parsed.ids.keys()
+    data = json.loads(parsed.data or "")
+    assert [f["frame"] for f in data["frames"]] == list(range(5)) and data["fps"] == 24.0
+    assert data["frames"][3]["file"] == "farm-tiny.0003.exr" and data["frames"][3]["spp"] == 2
+    assert data["frames"][3]["timecode"] == "00:00:00:03" and data["frames"][3]["time"] == 0.125
+    for f in data["frames"]:
+        assert (page.parent / f["src"]).is_file()
+
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+    if chromium is None:
+        pytest.skip("no Chromium here (apt-get install chromium): the page's structure was checked, not its script")
+    dom = subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=5000", "--dump-dom",
+                          page.resolve().as_uri() + "#frame=3"], capture_output=True, text=True, timeout=120).stdout
+    shown = _Page()
+    shown.feed(dom)
+    body = dom[dom.index("<body"): dom.index(">", dom.index("<body"))]
+    assert 'data-frame="3"' in body and 'data-loaded="5"' in body and "data-broken" not in body, body
+    assert 'id="info-file">farm-tiny.0003.exr<' in dom and 'id="counter">4 / 5<' in dom
+    assert shown.ids["stage"]["src"] == data["frames"][3]["src"]
