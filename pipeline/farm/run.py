@@ -25,7 +25,7 @@ from .config import load_farm_config
 from .frames import chunks as make_chunks
 from .frames import default_chunk_size, format_frames, parse_frames, parse_shard, shard
 from .progress import Progress
-from .report import build_report, check_writable, write_report_somewhere
+from .report import build_report, check_writable, write_report, write_report_somewhere
 from .scheduler import Scheduler
 from .task import TaskContext
 
@@ -409,7 +409,7 @@ def check_deliver(req: RenderRequest, loaded: Any, frames: list[int], out_dir: P
         raise UsageError(f"--deliver: cannot create {out_dir / 'deliver'}: {exc.strerror}") from None
 
 
-def deliver_and_record(req: RenderRequest, out_dir: Path, report: dict[str, Any], report_path: Path, say: Any) -> dict[str, list[str]]:
+def deliver_and_record(req: RenderRequest, out_dir: Path, report: dict[str, Any], report_path: Path | None, say: Any) -> dict[str, list[str]]:
     """Assemble the deliverables, print where each one is and record them in the report
     (rewritten in place)."""
     from ..telecine.deliver import deliver, parse_formats
@@ -426,5 +426,6 @@ def deliver_and_record(req: RenderRequest, out_dir: Path, report: dict[str, Any]
         for p in movies:
             say(f"  {fmt}: {p}")
     report["deliverables"] = record
-    write_report(report, report_path)
+    if report_path is not None:  # None: no folder would take the report (a disk fault)
+        write_report(report, report_path)
     return record
