@@ -39,6 +39,7 @@ class RenderRequest:
     frames_spec: str | None = None
     preset: str | None = None
     render_overrides: dict[str, Any] = field(default_factory=dict)
+    output_overrides: dict[str, Any] = field(default_factory=dict)  # e.g. aovs (--aov)
     cache: bool = True
     deliver: str | None = None
     deliver_view: dict[str, Any] = field(default_factory=dict)  # exposure / OCIO for the deliverables
@@ -113,9 +114,13 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
 
         parse_formats(req.deliver)  # a wrong name fails now, not after the last frame
     preset, _ = load_preset(req.preset) if req.preset else (None, None)
-    overrides = overrides_from(preset, {"render": req.render_overrides})
+    overrides = overrides_from(preset, {"render": req.render_overrides, "output": req.output_overrides})
     loaded = load_scene(req.scene, overrides)
     scene = loaded.scene
+    if scene.render.denoise != "off" and not req.check:
+        from ..render.denoise import check_available
+
+        check_available()  # a missing or broken OIDN: one line, before any frame
 
     # frames: the selection, then this shard of it
     timeline_frames = list(scene.timeline.timeline().frames)
@@ -249,6 +254,11 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     if failed:
         listing = "\n".join(f"frame {f['frame']}: {f['error']} (attempts {f['attempts']})" for f in failed)
         raise IncompleteJobError(f"{len(failed)} of {len(frames)} frames failed everywhere; the others finished:\n{listing}")
+    if scene.render.temporal != "off":
+        from ..render.temporal import temporal_pass
+
+        report["temporal"] = temporal_pass(loaded, job, out_dir, frames, workers=workers, log=progress.log)
+        write_report(report, report_path)
     if req.deliver:
         from ..telecine.deliver import deliver, parse_formats
 
