@@ -63,14 +63,14 @@ dev = oidn.Device(oidn.DeviceType.CPU)
 img = np.full((8, 8, 3), 0.5, np.float32)
 out = oidn.denoise(img, img, img * 0 + np.float32([0, 0, 1]), hdr=True, device=dev)
 assert out.shape == (8, 8, 3) and np.isfinite(out).all()
-print(json.dumps({"package": oidn.__version__, "oidn": oidn.oidn_version(), "device": str(dev.type).split(".")[-1]}))
+print(json.dumps({"version": oidn.__version__, "oidn": oidn.oidn_version(), "device": str(dev.type).split(".")[-1]}))
 """
 
 
 @functools.lru_cache(maxsize=1)
 def probe() -> dict[str, Any]:
     """Import and run the binding in a subprocess (the farm's main process never loads
-    Dr.Jit's libraries): {package, oidn, device} versions, or {error}."""
+    Dr.Jit's libraries): {version, oidn, device}, or {error}."""
     try:
         proc = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True, timeout=120)
     except (OSError, subprocess.TimeoutExpired) as exc:
@@ -94,7 +94,7 @@ def check_available() -> dict[str, Any]:
 
 def describe(found: Mapping[str, Any]) -> str:
     """'Intel Open Image Denoise 2.5.1 (mitsuba-oidn 0.1.2, CPU)' for headers and `motion info`."""
-    return f"Intel Open Image Denoise {found['oidn']} ({PACKAGE} {found['package']}, {found.get('device', 'CPU')})"
+    return f"Intel Open Image Denoise {found['oidn']} ({PACKAGE} {found['version']}, {found.get('device', 'CPU')})"
 
 
 class Denoiser:
@@ -111,7 +111,7 @@ class Denoiser:
             self._device = oidn.Device(oidn.DeviceType.CPU)
         except Exception as exc:
             raise _unavailable(f"{type(exc).__name__}: {exc}") from None
-        self.version = {"package": oidn.__version__, "oidn": oidn.oidn_version(), "device": "CPU"}
+        self.version = {"version": oidn.__version__, "oidn": oidn.oidn_version(), "device": "CPU"}
         self._filters: dict[tuple[Any, ...], Any] = {}
 
     def _filter(self, key: tuple[Any, ...]) -> Any:
