@@ -5,7 +5,7 @@
 - frames are bit-identical across worker and shard counts with denoising and the temporal
   mode on, and carry the noisy beauty, the guides and the denoised image as layers;
 - a broken OIDN binding is one line naming the package, exit 2; temporal without denoise
-  is a scene error.
+  is a scene error; `--aov` picks the layers (the albedo pass among them).
 """
 
 from __future__ import annotations
@@ -163,10 +163,12 @@ def test_broken_oidn_is_one_line_naming_the_package(tmp_path: Path) -> None:
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "mitsuba-oidn" in lines[0] and "cannot open shared object" in lines[0], proc.stderr
     assert "Traceback" not in proc.stderr and not (tmp_path / "out").exists()
-    # and without denoising the same environment renders
-    proc = run_motion("render", str(scene), "-o", str(tmp_path / "out"), "--no-denoise", env={"PYTHONPATH": str(fake.parent)})
+    # without denoising the same environment renders; --aov picks the layers, in any order
+    proc = run_motion("render", str(scene), "-o", str(tmp_path / "out"), "--no-denoise", "--aov", "albedo", "--aov", "depth", env={"PYTHONPATH": str(fake.parent)})
     assert proc.returncode == 0, proc.stderr
-    assert read_frame(tmp_path / "out" / "plane.0000.exr").meta.get("denoise") is None
+    frame = read_frame(tmp_path / "out" / "plane.0000.exr")
+    assert frame.meta.get("denoise") is None and set(frame.aovs) == {"albedo", "Z"}
+    assert np.allclose(frame.aovs["albedo"], 0.5, atol=1e-5) and np.allclose(frame.aovs["Z"], 5.0, atol=1e-3)
 
 
 def test_temporal_without_denoise_is_a_scene_error(tmp_path: Path) -> None:
