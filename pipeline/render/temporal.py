@@ -118,8 +118,13 @@ def _read(path: Path) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
 
 
 def _layers(channels: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The pass's inputs from a frame's channels. A layer the frame lacks (the scalar
+    fallback renders no AOVs) reads as zeros: no motion, and guides that always agree, so
+    only the colour test decides there."""
+    shape = channels["noisy.R"].shape
+
     def stack(layer: str, comps: str) -> np.ndarray:
-        return np.stack([channels[f"{layer}.{c}"].astype(np.float32) for c in comps], axis=2)
+        return np.stack([channels.get(f"{layer}.{c}", np.zeros(shape)).astype(np.float32) for c in comps], axis=2)
 
     return {"color": stack("noisy", "RGB"), "alpha": channels["noisy.A"].astype(np.float32), "albedo": stack("albedo", "RGB"), "N": stack("N", "XYZ"), "motion": stack("motion", "XY")}
 
