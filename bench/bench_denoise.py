@@ -154,10 +154,10 @@ def flicker(path: Path, label: str, n: int, ref_spp: int, res: tuple[int, int]) 
     change: reprojected by the reference's motion vectors (zero for a static camera's static
     set, the camera's motion for a trucking camera), the same albedo and normal there, and
     the reference's colour within 5%."""
-    from motion.pipeline.render.temporal import blend, warp
+    from motion.pipeline.render.temporal import RADIUS, blend, warp
 
     look = {**PREVIEW, "resolution": res}
-    frames = list(range(n + 2))  # the temporal mode needs a neighbour on each side
+    frames = list(range(n + 4))  # the temporal mode's neighbours on each side (radius 1 or 2)
     ref_shot = Shot(path, spp=ref_spp, **look)
     refs = [ref_shot.render(f)[:2] for f in frames]
     s_frac = ref_shot.shutter_fraction()
@@ -174,11 +174,12 @@ def flicker(path: Path, label: str, n: int, ref_spp: int, res: tuple[int, int]) 
             same &= np.abs(other - aov_k[key]).max(axis=2) < tol
         return flow, inside & same
 
-    masks = [stable(k) for k in range(1, n)]
+    pairs = range(2, n + 2)  # frame k to k + 1, each with two neighbours on either side
+    masks = [stable(k) for k in pairs]
 
     def measure(images: list[np.ndarray]) -> float:
         diffs = []
-        for (flow, mask), k in zip(masks, range(1, n)):
+        for (flow, mask), k in zip(masks, pairs):
             nxt, _ = warp(images[k + 1][..., :3], flow)
             diffs.append(np.abs(_luma(nxt) - _luma(images[k][..., :3]))[mask].mean())
         return float(np.mean(diffs))
@@ -188,13 +189,15 @@ def flicker(path: Path, label: str, n: int, ref_spp: int, res: tuple[int, int]) 
     raw = [per_frame.render(f)[:2] for f in frames]
     out["raw_16"] = measure([r for r, _ in raw])
     out["per_frame_denoised"] = measure([denoise(r, a)[0] for r, a in raw])
-    temporal = []
-    for k in frames:
-        cur = {"color": raw[k][0][..., :3], "albedo": raw[k][1]["albedo"], "N": raw[k][1]["N"], "motion": raw[k][1]["motion"]}
-        near = [(d, {"color": raw[k + d][0][..., :3], "albedo": raw[k + d][1]["albedo"], "N": raw[k + d][1]["N"]}) for d in (-1, 1) if 0 <= k + d < len(frames)]
-        color, _ = blend(cur, near, s_frac)
-        temporal.append(denoise(raw[k][0], raw[k][1], color=color)[0])
-    out["temporal_reproject"] = measure(temporal)
+    for radius in (1, 2):
+        temporal = []
+        for k in frames:
+            cur = {"color": raw[k][0][..., :3], "albedo": raw[k][1]["albedo"], "N": raw[k][1]["N"], "motion": raw[k][1]["motion"]}
+            near = [(d, {"color": raw[k + d][0][..., :3], "albedo": raw[k + d][1]["albedo"], "N": raw[k + d][1]["N"]}) for d in range(-radius, radius + 1) if d and 0 <= k + d < len(frames)]
+            color, _ = blend(cur, near, s_frac)
+            temporal.append(denoise(raw[k][0], raw[k][1], color=color)[0])
+        out[f"temporal_reproject_radius_{radius}"] = measure(temporal)
+    out["temporal_reproject"] = out[f"temporal_reproject_radius_{RADIUS}"]
     del per_frame
     fixed_shot = Shot(path, spp=16, **look, seed_policy="fixed")
     fixed = [fixed_shot.render(f)[:2] for f in frames]
