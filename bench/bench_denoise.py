@@ -193,7 +193,7 @@ def flicker(path: Path, label: str, n: int, ref_spp: int, res: tuple[int, int]) 
         temporal = []
         for k in frames:
             cur = {"color": raw[k][0][..., :3], "albedo": raw[k][1]["albedo"], "N": raw[k][1]["N"], "motion": raw[k][1]["motion"]}
-            near = [(d, {"color": raw[k + d][0][..., :3], "albedo": raw[k + d][1]["albedo"], "N": raw[k + d][1]["N"]}) for d in range(-radius, radius + 1) if d and 0 <= k + d < len(frames)]
+            near = [(d, {"color": raw[k + d][0][..., :3], "albedo": raw[k + d][1]["albedo"], "N": raw[k + d][1]["N"], "motion": raw[k + d][1]["motion"]}) for d in range(-radius, radius + 1) if d and 0 <= k + d < len(frames)]
             color, _ = blend(cur, near, s_frac)
             temporal.append(denoise(raw[k][0], raw[k][1], color=color)[0])
         out[f"temporal_reproject_radius_{radius}"] = measure(temporal)
@@ -228,7 +228,7 @@ def ghosting(folder: Path) -> dict[str, Any]:
         s = Shot(path, spp=spp)
         raw = [s.render(f)[:2] for f in range(3)]
         cur = {"color": raw[1][0][..., :3], "albedo": raw[1][1]["albedo"], "N": raw[1][1]["N"], "motion": raw[1][1]["motion"]}
-        near = [(d, {"color": raw[1 + d][0][..., :3], "albedo": raw[1 + d][1]["albedo"], "N": raw[1 + d][1]["N"]}) for d in (-1, 1)]
+        near = [(d, {"color": raw[1 + d][0][..., :3], "albedo": raw[1 + d][1]["albedo"], "N": raw[1 + d][1]["N"], "motion": raw[1 + d][1]["motion"]}) for d in (-1, 1)]
         color, count = blend(cur, near, s.shutter_fraction())
         temporal = denoise(raw[1][0], raw[1][1], color=color)[0]
         per_frame = denoise(raw[1][0], raw[1][1])[0]

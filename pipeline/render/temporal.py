@@ -39,6 +39,7 @@ RADIUS = 2  # neighbours on each side (bench_denoise: radius 2 flickers 0.4x per
 # colour test in standard errors of the 3x3 local means
 ALBEDO_TOL = 0.05
 NORMAL_TOL = 0.1
+MOTION_TOL = 0.5  # pixels: the neighbour's own motion vector must match (moving edges)
 COLOUR_SIGMAS = 3.0
 
 
@@ -73,8 +74,12 @@ def _box3(image: np.ndarray) -> np.ndarray:
 
 def agreement(cur: dict[str, np.ndarray], other: dict[str, np.ndarray], inside: np.ndarray) -> np.ndarray:
     """Where a reprojected neighbour shows the same thing as the current frame: same
-    albedo and normal guides, and 3x3 colour means within COLOUR_SIGMAS standard errors."""
+    albedo and normal guides, the same motion vector (a pixel that a moving edge covers only
+    in part has an averaged, wrong one: the neighbour's pixel there differs), and 3x3 colour
+    means within COLOUR_SIGMAS standard errors."""
     ok = inside.copy()
+    if "motion" in other:
+        ok &= np.abs(other["motion"] - cur["motion"]).max(axis=2) < MOTION_TOL
     ok &= np.abs(other["albedo"] - cur["albedo"]).max(axis=2) < ALBEDO_TOL
     ok &= np.abs(other["N"] - cur["N"]).max(axis=2) < NORMAL_TOL
     c0, c1 = cur["color"], other["color"]
@@ -96,7 +101,9 @@ def blend(cur: dict[str, np.ndarray], neighbours: Sequence[tuple[int, dict[str, 
         f = d * flow
         warped = {}
         inside = np.ones(total.shape[:2], bool)
-        for key in ("color", "albedo", "N"):
+        for key in ("color", "albedo", "N", "motion"):
+            if key not in other:
+                continue
             warped[key], inside_k = warp(other[key], f)
             inside &= inside_k
         ok = agreement(cur, warped, inside)
