@@ -8,9 +8,9 @@ the denoised RGBA plus the layers the EXR keeps: the noisy beauty (`noisy`), the
 (`albedo`, `N`) and the header attributes that say so.
 
 The binding is `mitsuba-oidn` (nanobind, made for Dr.Jit: OIDN runs on Dr.Jit's own thread
-pool instead of a second oneTBB pool). OIDN's CPU filter gives the same bits whatever the
-number of threads (measured at 320x180 and 1920x1080 with 1, 2 and 4 threads; the farm
-tests check frames across worker and shard counts), so nothing here pins the thread count.
+pool instead of a second oneTBB pool). OIDN's filter gives the same bits whatever the
+number of threads once its HDR input scale is given (`input_scale`, computed here in a
+fixed order); its own auto-exposure is a parallel sum whose last bits follow the threads.
 A missing or broken library is a `DenoiserUnavailableError`: one line naming the package,
 raised before the first frame (`check_available`, a probe in a subprocess) or in the worker.
 """
@@ -135,6 +135,11 @@ class Denoiser:
             guides.append(("normal", np.ascontiguousarray(np.clip(normal[..., :3], -1.0, 1.0), dtype=np.float32)))
         h, w = color.shape[:2]
         flt = self._filter((h, w, tuple(name for name, _ in guides)))
+        # OIDN's own HDR auto-exposure sums over the image in parallel, in an order that
+        # depends on the thread count (1 vs 2 threads differed by a half-float ulp in 35
+        # pixels of a 160x90 frame); the same key value computed here, in a fixed order,
+        # makes the output independent of the threads (checked at 1, 2 and 3)
+        flt.input_scale = input_scale(color)
         out = np.zeros_like(color)
         flt.set_image("color", color)
         for name, image in guides:
@@ -145,6 +150,16 @@ class Denoiser:
         except Exception as exc:
             raise _unavailable(f"{type(exc).__name__}: {exc}") from None
         return out
+
+
+def input_scale(color: np.ndarray) -> float:
+    """HDR exposure for the denoiser: maps the image's log-average luminance to 0.18 (the
+    photographic key OIDN's auto-exposure also aims at); 1 for a black image."""
+    lum = color[..., :3].astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    lit = lum[lum > 1e-8]
+    if lit.size == 0:
+        return 1.0
+    return float(0.18 / np.exp(np.log(lit).mean()))
 
 
 _DENOISER: list[Denoiser] = []
