@@ -32,6 +32,9 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--spp", type=click.IntRange(min=1), help="Samples per pixel (overrides preset and scene).")
 @click.option("--resolution", help="WIDTHxHEIGHT (overrides preset and scene).")
 @click.option("--motion-blur", type=click.Choice(["stochastic", "subframes", "off"]), help="Motion-blur mode.")
+@click.option("--denoise/--no-denoise", "denoise", default=None, help="Denoise each frame with Intel Open Image Denoise, albedo + normal guides (default: the preset's / scene's render.denoise).")
+@click.option("--temporal", type=click.Choice(["off", "reproject"]), help="Temporal stability of denoised frames: reproject neighbours by motion vectors and blend where they agree (docs/denoise.md).")
+@click.option("--aov", "aovs", multiple=True, type=click.Choice(["depth", "normal", "motion", "albedo"]), help="Extra EXR layer (repeatable): depth (Z), normal (N), motion, albedo. Replaces the scene's output.aovs.")
 @click.option("--variant", type=click.Choice(["auto", "llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb"]), help="Mitsuba variant (default: auto).")
 @click.option("--motion", "motion_file", type=click.Path(dir_okay=False, path_type=Path), help="Baked motion from `motion bake` (.json/.npz) instead of baking here.")
 @click.option("--workers", type=click.IntRange(min=1), help="Local worker processes (default: one per core, at most 8 and at most one per frame); drjit threads are divided among them.")
@@ -62,6 +65,9 @@ def render(
     spp: int | None,
     resolution: str | None,
     motion_blur: str | None,
+    denoise: bool | None,
+    temporal: str | None,
+    aovs: tuple[str, ...],
     variant: str | None,
     motion_file: Path | None,
     workers: int | None,
@@ -93,7 +99,15 @@ def render(
         output_dir=output_dir,
         frames_spec=frames_spec,
         preset=preset,
-        render_overrides={"spp": spp, "resolution": _resolution(resolution), "motion_blur": motion_blur, "variant": variant},
+        render_overrides={
+            "spp": spp,
+            "resolution": _resolution(resolution),
+            "motion_blur": motion_blur,
+            "variant": variant,
+            "denoise": None if denoise is None else ("oidn" if denoise else "off"),
+            "temporal": temporal,
+        },
+        output_overrides={"aovs": list(dict.fromkeys(aovs)) or None},
         cache=not no_cache,
         deliver=deliver_spec,
         deliver_view={"exposure": exposure, "ocio_config": ocio_config, "ocio_display": ocio_display, "ocio_view": ocio_view},

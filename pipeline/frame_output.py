@@ -111,6 +111,10 @@ def publish(tmp: str | Path, path: str | Path) -> None:
     os.replace(tmp, path)
 
 
+# Layers holding colours (the denoiser's noisy beauty and albedo guide): channels are
+# named <layer>.R/G/B/A, not .X/Y/Z/W.
+COLOR_LAYERS = ("noisy", "albedo")
+
 # Header attributes written by `write_frame` under our own prefix, so they never collide
 # with standard attribute names.
 META_PREFIX = "motion:"
@@ -200,7 +204,7 @@ def write_frame(
         if layer.ndim == 2:
             channels[name] = np.ascontiguousarray(layer, dtype=np.float32)
         else:
-            suffixes = "XYZW" if layer.shape[2] <= 4 else [str(i) for i in range(layer.shape[2])]
+            suffixes = ("RGBA" if name in COLOR_LAYERS else "XYZW") if layer.shape[2] <= 4 else [str(i) for i in range(layer.shape[2])]
             for i in range(layer.shape[2]):
                 channels[f"{name}.{suffixes[i]}"] = np.ascontiguousarray(layer[..., i], dtype=np.float32)
 

@@ -39,6 +39,7 @@ class RenderRequest:
     frames_spec: str | None = None
     preset: str | None = None
     render_overrides: dict[str, Any] = field(default_factory=dict)
+    output_overrides: dict[str, Any] = field(default_factory=dict)  # e.g. aovs (--aov)
     cache: bool = True
     deliver: str | None = None
     deliver_view: dict[str, Any] = field(default_factory=dict)  # exposure / OCIO for the deliverables
@@ -220,9 +221,13 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
 
         parse_formats(req.deliver)  # a wrong name fails now, not after the last frame
     preset, _ = load_preset(req.preset) if req.preset else (None, None)
-    overrides = overrides_from(preset, {"render": req.render_overrides})
+    overrides = overrides_from(preset, {"render": req.render_overrides, "output": req.output_overrides})
     loaded = load_scene(req.scene, overrides)
     scene = loaded.scene
+    if scene.render.denoise != "off" and not req.check:
+        from ..render.denoise import check_available
+
+        check_available()  # a missing or broken OIDN: one line, before any frame
 
     # frames: the selection, then this shard of it
     timeline_frames = list(scene.timeline.timeline().frames)
@@ -369,6 +374,12 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         err = IncompleteJobError(f"{len(failed)} of {len(frames)} frames failed everywhere; the others finished:\n{listing}")
         err.report = report  # type: ignore[attr-defined]  # (for `motion render --json`)
         raise err
+    if scene.render.temporal != "off":
+        from ..render.temporal import temporal_pass
+
+        report["temporal"] = temporal_pass(loaded, job, out_dir, frames, workers=workers, log=progress.log)
+        if report_path is not None:
+            write_report(report, report_path)
     if req.deliver:
         report["deliverables"] = deliver_and_record(req, out_dir, report, report_path, progress.log)
     return report

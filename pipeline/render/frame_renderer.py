@@ -145,7 +145,9 @@ class FrameRenderer:
         scene = self.loaded.scene
         materials = {m.name: material_dict(m, self.loaded) for m in scene.materials}
         d: dict[str, Any] = {"type": "scene"}
-        aovs = list(self.loaded.scene.output.aovs)
+        from .denoise import integrator_aovs
+
+        aovs = integrator_aovs(self.loaded.scene)  # the user's, plus the denoiser's guides
         d["integrator"] = {"type": "motion_path", "max_depth": self.max_depth, "rr_depth": self.settings.rr_depth, "aovs": ",".join(aovs)}
         world_from_camera = trs_matrix(fi.camera[0][0], fi.camera[1][0])
         d["sensor"] = sensor_dict(
@@ -236,18 +238,16 @@ class FrameRenderer:
 
     def _split_aovs(self, image: np.ndarray) -> np.ndarray:
         """RGBA from the film's output; the AOV channels go to `self.last_aovs` as layers
-        named for the EXR: Z [H, W], N [H, W, 3], motion [H, W, 2]."""
+        named for the EXR: Z [H, W], N [H, W, 3], motion [H, W, 2], albedo [H, W, 3].
+        The integrator's channel names (`aov_names`, in its own order) are the one table:
+        `layer.C` channels group into one layer, a bare name is a one-channel layer."""
         self.last_aovs = {}
         names = self._scene.integrator().aov_names()
-        if not names:
-            return image
-        extra = image[..., 4:]
-        k = 0
-        for aov in self.loaded.scene.output.aovs:
-            width = {"depth": 1, "normal": 3, "motion": 2}[aov]
-            layer = extra[..., k : k + width]
-            self.last_aovs[{"depth": "Z", "normal": "N", "motion": "motion"}[aov]] = layer[..., 0] if width == 1 else layer
-            k += width
+        layers: dict[str, list[int]] = {}
+        for k, name in enumerate(names):
+            layers.setdefault(name.split(".")[0], []).append(4 + k)
+        for layer, index in layers.items():
+            self.last_aovs[layer] = image[..., index[0]] if len(index) == 1 and "." not in names[index[0] - 4] else image[..., index]
         return image[..., :4]
 
     def _slice_count(self, fi: FrameInput) -> int:

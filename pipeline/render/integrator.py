@@ -86,7 +86,8 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         self.max_depth = int(props.get("max_depth", 8))
         self.rr_depth = int(props.get("rr_depth", 5))
         # AOVs of the first hit: "depth" (Z), "normal" (N.X/Y/Z, world), "motion" (motion.X/Y:
-        # screen pixels moved from shutter open to close, +x right, +y down)
+        # screen pixels moved from shutter open to close, +x right, +y down), "albedo"
+        # (albedo.R/G/B: the denoiser's guide, see `_albedo`)
         self.aovs = [a for a in str(props.get("aovs", "")).split(",") if a]
         self._projection = ("perspective", 1.0, 0.0, 0.0)  # kind, scale (px per unit), cx, cy
         self.movers: list[mi.Scene] = []
@@ -378,6 +379,19 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         v = self._project(p1, last, active) - self._project(p0, 0, active)
         return dr.select(si.is_valid(), v, 0.0)
 
+    def _albedo(self, scene: mi.Scene, si: Any, ray: Any, active: Any) -> Any:
+        """First-hit albedo, the denoiser's guide (OIDN's convention): the BSDF's diffuse
+        reflectance; 1 on purely specular surfaces (mirror, glass), which have none; on
+        emitters and where the ray leaves the scene, the emitted radiance clamped to [0, 1]."""
+        bsdf = si.bsdf(ray)
+        diffuse = mi.Color3f(bsdf.eval_diffuse_reflectance(si, active))
+        specular = ~mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+        surface = dr.select(si.is_valid() & specular, mi.Color3f(1.0), diffuse)
+        emitter = si.emitter(scene, active)
+        glow = dr.clip(mi.Color3f(emitter.eval(si, active & (emitter != None))), 0.0, 1.0)  # noqa: E711
+        lit = (emitter != None) | ~si.is_valid()  # noqa: E711
+        return dr.select(lit, glow, surface)
+
     # --- the path ------------------------------------------------------------------------
 
     @dr.syntax
@@ -415,6 +429,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         aov_z = mi.Float(0.0)
         aov_n = mi.Vector3f(0.0)
         aov_mv = mi.Vector2f(0.0)
+        aov_albedo = mi.Color3f(0.0)
         want_aovs = len(self.aovs) > 0  # a Python bool: @dr.syntax keeps it a plain `if`
 
         while dr.hint(active, max_iterations=self.max_depth, label="motion_path"):
@@ -430,6 +445,10 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
                     aov_n = dr.select(first, si.sh_frame.n, aov_n)
                 if "motion" in self.aovs:
                     aov_mv = dr.select(first, self._motion_vector(si, hit_mover, poses, first), aov_mv)
+                if "albedo" in self.aovs:
+                    # misses count too: they see the environment (or nothing)
+                    primary = active & (depth == 0)
+                    aov_albedo = dr.select(primary, self._albedo(scene, si, ray, primary), aov_albedo)
             # emission reached by BSDF sampling, MIS-weighted against emitter sampling of the
             # same emitter: the static scene's, or the emissive mover's in its rest frame
             ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
@@ -485,6 +504,8 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             aovs += [aov_n.x, aov_n.y, aov_n.z]
         if "motion" in self.aovs:
             aovs += [aov_mv.x, aov_mv.y]
+        if "albedo" in self.aovs:
+            aovs += [aov_albedo.x, aov_albedo.y, aov_albedo.z]
         return L, valid, aovs
 
     # --- deterministic film -------------------------------------------------------------
@@ -628,6 +649,8 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             names += ["N.X", "N.Y", "N.Z"]
         if "motion" in self.aovs:
             names += ["motion.X", "motion.Y"]
+        if "albedo" in self.aovs:
+            names += ["albedo.R", "albedo.G", "albedo.B"]
         return names
 
     def to_string(self) -> str:

@@ -57,6 +57,7 @@ class FrameResult:
     setup_s: float = 0.0
     render_s: float = 0.0
     write_s: float = 0.0
+    denoise_s: float = 0.0
     kernels_compiled: int = 0
     asset_cache_hits: int = 0
     error: str | None = None
@@ -159,9 +160,17 @@ def _render_one(job: RenderJob, fi: FrameInput) -> FrameResult:
         extra_setup = time.perf_counter() - t_setup
         rgba, stats = renderer.render(fi)
         aovs = dict(renderer.last_aovs)
+        scene = loaded.scene
+        # the denoiser: right after the render, on the frame's own buffers (docs/denoise.md)
+        denoise_meta: dict[str, Any] = {}
+        if scene.render.denoise != "off":
+            from .denoise import denoise_frame
+
+            rgba, aovs, denoise_meta = denoise_frame(rgba, aovs)
+        if scene.render.temporal != "off":
+            denoise_meta["temporal"] = "pending"  # until the temporal pass (render/temporal.py)
         out = frame_path(job, loaded, fi.frame)
         t_write = time.perf_counter()
-        scene = loaded.scene
         fps = scene.timeline.rate
         meta = {
             **expected_meta(job, fi),
@@ -177,6 +186,7 @@ def _render_one(job: RenderJob, fi: FrameInput) -> FrameResult:
             "scene": scene_reference(loaded.path, out),
             "render_seconds": float(stats.render_s),
             "renderer": RENDERER_VERSION,
+            **denoise_meta,
         }
         standard = {
             "capDate": _dt.datetime.now().strftime("%Y:%m:%d %H:%M:%S"),
@@ -204,6 +214,7 @@ def _render_one(job: RenderJob, fi: FrameInput) -> FrameResult:
             setup_s=stats.setup_s + extra_setup,
             render_s=stats.render_s,
             write_s=time.perf_counter() - t_write,
+            denoise_s=float(denoise_meta.get("denoise_seconds", 0.0)),
             kernels_compiled=stats.kernels_compiled,
             asset_cache_hits=stats.asset_cache_hits,
         )

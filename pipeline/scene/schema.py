@@ -331,12 +331,22 @@ class RenderSettings(Model):
     seed_policy: Literal["per-frame", "fixed"] = "per-frame"
     variant: Literal["auto", "llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb"] = "auto"
     filter: Literal["box", "gaussian", "tent"] = "gaussian"
+    # denoise each frame in the worker (Intel Open Image Denoise, albedo + normal guides)
+    denoise: Literal["off", "oidn"] = "off"
+    # temporal stability of the denoised frames (docs/denoise.md): off | reproject
+    temporal: Literal["off", "reproject"] = "off"
 
-    @field_validator("motion_blur", mode="before")
+    @field_validator("motion_blur", "denoise", "temporal", mode="before")
     @classmethod
     def _yaml_off(cls, value: object) -> object:
         # YAML 1.1 reads a bare `off` as false: take it as the user meant it
         return "off" if value is False else value
+
+    @model_validator(mode="after")
+    def _temporal_needs_denoise(self) -> "RenderSettings":
+        if self.temporal != "off" and self.denoise == "off":
+            raise ValueError(f"temporal: {self.temporal} blends the noisy images of neighbouring frames before denoising them: it needs denoise: oidn")
+        return self
 
 
 class OutputSettings(Model):
@@ -344,7 +354,7 @@ class OutputSettings(Model):
     filename: Annotated[str, Field(pattern=r"#+")] = "{name}.####.exr"
     pixel_type: Literal["half", "float"] = "half"
     compression: Literal["zip", "zips", "piz", "zstd", "none"] = "zip"
-    aovs: list[Literal["depth", "normal", "motion"]] = []
+    aovs: list[Literal["depth", "normal", "motion", "albedo"]] = []
     owner: str | None = None
     comments: str | None = None
 

@@ -1,0 +1,198 @@
+"""Denoising a frame in the worker: Intel Open Image Denoise (OIDN) guided by the first-hit
+albedo and shading-normal passes (docs/denoise.md).
+
+The worker renders the noisy beauty together with the guides (the film averages them over
+each pixel's samples and shutter times exactly as it averages the beauty, so the guides are
+motion-blurred like it), then `denoise_frame` runs OIDN's `RT` filter on them and returns
+the denoised RGBA plus the layers the EXR keeps: the noisy beauty (`noisy`), the guides
+(`albedo`, `N`) and the header attributes that say so.
+
+The binding is `mitsuba-oidn` (nanobind, made for Dr.Jit: OIDN runs on Dr.Jit's own thread
+pool instead of a second oneTBB pool). OIDN's filter gives the same bits whatever the
+number of threads once its HDR input scale is given (`input_scale`, computed here in a
+fixed order); its own auto-exposure is a parallel sum whose last bits follow the threads.
+A missing or broken library is a `DenoiserUnavailableError`: one line naming the package,
+raised before the first frame (`check_available`, a probe in a subprocess) or in the worker.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import subprocess
+import sys
+import time
+from typing import Any, Mapping
+
+import numpy as np
+
+from ..errors import RendererError
+
+PACKAGE = "mitsuba-oidn"  # the PyPI name
+MODULE = "mitsuba_oidn"  # its import name
+GUIDES = ("albedo", "normal")  # integrator AOVs the denoiser reads
+NOISY_LAYER = "noisy"  # the EXR layer that keeps the undenoised beauty (RGBA)
+
+
+class DenoiserUnavailableError(RendererError):
+    """`render.denoise: oidn` was asked for, but the OIDN binding cannot be imported or run."""
+
+
+def integrator_aovs(scene: Any) -> list[str]:
+    """The AOVs the integrator computes for `scene`: the user's `output.aovs` (each once),
+    plus the denoiser's guides when `render.denoise` is on, plus the motion vectors the
+    temporal mode reprojects with."""
+    wanted = list(dict.fromkeys(scene.output.aovs))
+    if scene.render.denoise != "off":
+        wanted += [a for a in GUIDES if a not in wanted]
+    if scene.render.temporal != "off" and "motion" not in wanted:
+        wanted.append("motion")
+    return wanted
+
+
+def _unavailable(reason: str) -> DenoiserUnavailableError:
+    reason = " ".join(str(reason).split())  # one line
+    return DenoiserUnavailableError(f"render.denoise: oidn needs the Python package {PACKAGE} (pip install {PACKAGE}), which failed: {reason}")
+
+
+# A real denoise of a tiny image: an import that succeeds but a library that cannot run
+# (wrong CPU, missing shared object loaded lazily) fails here too.
+_PROBE = """
+import json, numpy as np, mitsuba_oidn as oidn
+dev = oidn.Device(oidn.DeviceType.CPU)
+img = np.full((8, 8, 3), 0.5, np.float32)
+out = oidn.denoise(img, img, img * 0 + np.float32([0, 0, 1]), hdr=True, device=dev)
+assert out.shape == (8, 8, 3) and np.isfinite(out).all()
+print(json.dumps({"version": oidn.__version__, "oidn": oidn.oidn_version(), "device": str(dev.type).split(".")[-1]}))
+"""
+
+
+@functools.lru_cache(maxsize=1)
+def probe() -> dict[str, Any]:
+    """Import and run the binding in a subprocess (the farm's main process never loads
+    Dr.Jit's libraries): {version, oidn, device}, or {error}."""
+    try:
+        proc = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True, timeout=120)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return {"error": f"{type(exc).__name__}: {exc}"}
+    if proc.returncode != 0:
+        lines = [ln for ln in proc.stderr.strip().splitlines() if ln.strip()]
+        return {"error": lines[-1] if lines else f"exit status {proc.returncode}"}
+    try:
+        return dict(json.loads(proc.stdout.strip().splitlines()[-1]))
+    except (ValueError, IndexError):
+        return {"error": f"unexpected probe output {proc.stdout[-200:]!r}"}
+
+
+def check_available() -> dict[str, Any]:
+    """The binding's versions, or DenoiserUnavailableError (one line, names the package)."""
+    found = probe()
+    if "error" in found:
+        raise _unavailable(found["error"])
+    return found
+
+
+def describe(found: Mapping[str, Any]) -> str:
+    """'Intel Open Image Denoise 2.5.1 (mitsuba-oidn 0.1.2, CPU)' for headers and `motion info`."""
+    return f"Intel Open Image Denoise {found['oidn']} ({PACKAGE} {found['version']}, {found.get('device', 'CPU')})"
+
+
+class Denoiser:
+    """One OIDN device and a filter per image size and guide set, kept by the worker across
+    frames (OIDN's filter setup is the expensive part)."""
+
+    def __init__(self) -> None:
+        try:
+            import mitsuba_oidn as oidn
+        except Exception as exc:  # ImportError, OSError from a missing .so, ...
+            raise _unavailable(f"{type(exc).__name__}: {exc}") from None
+        self._oidn = oidn
+        try:
+            self._device = oidn.Device(oidn.DeviceType.CPU)
+        except Exception as exc:
+            raise _unavailable(f"{type(exc).__name__}: {exc}") from None
+        self.version = {"version": oidn.__version__, "oidn": oidn.oidn_version(), "device": "CPU"}
+        self._filters: dict[tuple[Any, ...], Any] = {}
+
+    def _filter(self, key: tuple[Any, ...]) -> Any:
+        flt = self._filters.get(key)
+        if flt is None:
+            self._filters.clear()  # one frame size per job: keep one filter, bounded memory
+            flt = self._device.new_filter("RT")
+            flt.hdr = True  # linear radiance, unbounded
+            flt.clean_aux = False  # guides are averaged over the samples: not noise-free
+            flt.quality = self._oidn.Quality.High
+            self._filters[key] = flt
+        return flt
+
+    def __call__(self, color: np.ndarray, albedo: np.ndarray | None = None, normal: np.ndarray | None = None) -> np.ndarray:
+        """Denoise linear RGB [H, W, 3] with optional guides of the same size; float32 out."""
+        color = np.ascontiguousarray(np.nan_to_num(color[..., :3], nan=0.0, posinf=0.0, neginf=0.0), dtype=np.float32)
+        guides = []
+        if albedo is not None:
+            guides.append(("albedo", np.ascontiguousarray(np.clip(albedo[..., :3], 0.0, 1.0), dtype=np.float32)))
+        if normal is not None:
+            guides.append(("normal", np.ascontiguousarray(np.clip(normal[..., :3], -1.0, 1.0), dtype=np.float32)))
+        h, w = color.shape[:2]
+        flt = self._filter((h, w, tuple(name for name, _ in guides)))
+        # OIDN's own HDR auto-exposure sums over the image in parallel, in an order that
+        # depends on the thread count (1 vs 2 threads differed by a half-float ulp in 35
+        # pixels of a 160x90 frame); the same key value computed here, in a fixed order,
+        # makes the output independent of the threads (checked at 1, 2 and 3)
+        flt.input_scale = input_scale(color)
+        out = np.zeros_like(color)
+        flt.set_image("color", color)
+        for name, image in guides:
+            flt.set_image(name, image)
+        flt.set_image("output", out)
+        try:
+            flt.execute()
+        except Exception as exc:
+            raise _unavailable(f"{type(exc).__name__}: {exc}") from None
+        return out
+
+
+def input_scale(color: np.ndarray) -> float:
+    """HDR exposure for the denoiser: maps the image's log-average luminance to 0.18 (the
+    photographic key OIDN's auto-exposure also aims at); 1 for a black image."""
+    lum = color[..., :3].astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    lit = lum[lum > 1e-8]
+    if lit.size == 0:
+        return 1.0
+    return float(0.18 / np.exp(np.log(lit).mean()))
+
+
+_DENOISER: list[Denoiser] = []
+
+
+def denoiser() -> Denoiser:
+    """The process's denoiser (made on first use)."""
+    if not _DENOISER:
+        _DENOISER.append(Denoiser())
+    return _DENOISER[0]
+
+
+def denoise_frame(rgba: np.ndarray, aovs: Mapping[str, np.ndarray], color: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
+    """The worker step: denoise a rendered frame with its albedo and normal guides.
+
+    rgba: the noisy beauty [H, W, 4]; aovs: the frame's layers (`albedo`, `N` are used when
+    present); color: what to denoise instead of rgba's RGB (the temporal mode's blend).
+    Returns (denoised RGBA with the noisy alpha, layers + `noisy`, header attributes)."""
+    d = denoiser()
+    albedo, normal = aovs.get("albedo"), aovs.get("N")
+    t0 = time.perf_counter()
+    rgb = d(rgba[..., :3] if color is None else color, albedo, normal)
+    seconds = time.perf_counter() - t0
+    out = np.concatenate([rgb, rgba[..., 3:4].astype(np.float32)], axis=2)
+    layers = dict(aovs)
+    layers[NOISY_LAYER] = np.asarray(rgba, dtype=np.float32)
+    used = [name for name, g in (("albedo", albedo), ("N", normal)) if g is not None]
+    meta = {
+        "denoise": "oidn",
+        "denoiser": describe(d.version),
+        "denoise_guides": ",".join(used) or "none",
+        "denoise_seconds": float(seconds),
+        "rgba": "denoised",
+        "noisy_layer": NOISY_LAYER,
+    }
+    return out, layers, meta
