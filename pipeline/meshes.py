@@ -31,9 +31,11 @@ class MeshFormatError(ValueError):
     """What is wrong with a mesh file, and where (line or element)."""
 
 
-def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
+def load_mesh(path: Path, faces: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """(vertices, triangles) of an .obj or .ply file; AssetError with the reason if the file
-    is unreadable, malformed, truncated, or has non-finite vertices or bad indices."""
+    is unreadable, malformed, truncated, or has non-finite vertices or bad indices.
+    `faces=False` accepts positions only (morph targets, blend-shape keys: their topology
+    is the base mesh's)."""
     from .scene.loader import read_bounded
 
     path = Path(path)
@@ -46,7 +48,7 @@ def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
             verts, tris = _load_obj(data)
         else:
             verts, tris = _load_ply(data)
-        _check(verts, tris)
+        _check(verts, tris, faces)
     except MeshFormatError as exc:
         raise AssetError(f"{path}: {exc}") from None
     except (ValueError, IndexError, KeyError, OverflowError, MemoryError) as exc:
@@ -54,10 +56,10 @@ def load_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return verts, tris
 
 
-def _check(verts: np.ndarray, tris: np.ndarray) -> None:
+def _check(verts: np.ndarray, tris: np.ndarray, faces: bool = True) -> None:
     if len(verts) == 0:
         raise MeshFormatError("the mesh has no vertices")
-    if len(tris) == 0:
+    if faces and len(tris) == 0:
         raise MeshFormatError("the mesh has no faces")
     bad = ~np.isfinite(verts).all(axis=1)
     if bad.any():

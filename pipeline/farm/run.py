@@ -122,8 +122,8 @@ def _preflight(req: RenderRequest, loaded: Any, job: RenderJob, out_dir: Path, f
         problems = bake_budget_problems(loaded.scene, loaded.source, len(frames))
         if problems:
             raise SceneError(problems)
-    if req.check:
-        return  # --check writes nothing
+    if req.check or req.dry_run:
+        return  # --check and --dry-run write nothing
     check_writable(out_dir, "output folder")
     if req.report is not None:
         check_writable(Path(req.report).resolve().parent, f"--report {req.report}: folder")

@@ -86,7 +86,7 @@ def blend_shapes(loaded: "LoadedScene", loc: "Loc", deform: BlendShapes, t: np.n
             shapes.append(np.asarray(key.vertices, dtype=np.float64))
         else:
             try:
-                shapes.append(load_mesh(loaded.asset(key.file or ""))[0])
+                shapes.append(load_mesh(loaded.asset(key.file or ""), faces=False)[0])
             except (OSError, AssetError) as exc:
                 raise SceneError([loaded.source.problem((*loc, "keys", i, "file"), f"cannot read key mesh: {exc}")]) from None
     expect = base_count if base_count is not None else len(shapes[0])
@@ -242,18 +242,18 @@ def deformed_vertices(loaded: "LoadedScene", t: np.ndarray, world: dict[str, Pos
 
 # --- morph targets and joint skins (glTF's skins and blend shapes; docs/imports.md) --------
 
-_MESHES: dict[tuple[str, int, int], tuple[np.ndarray, np.ndarray]] = {}
+_MESHES: dict[tuple[str, int, int, bool], tuple[np.ndarray, np.ndarray]] = {}
 
 
-def _cached_mesh(path: "Any") -> tuple[np.ndarray, np.ndarray]:
+def _cached_mesh(path: "Any", faces: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """load_mesh, memoised per (path, size, mtime): bind and target meshes are read once
-    per process, not once per evaluation."""
+    per process, not once per evaluation. `faces=False`: positions only (targets)."""
     st = path.stat()
-    key = (str(path), st.st_size, st.st_mtime_ns)
+    key = (str(path), st.st_size, st.st_mtime_ns, faces)
     if key not in _MESHES:
         if len(_MESHES) > 256:
             _MESHES.clear()
-        _MESHES[key] = load_mesh(path)
+        _MESHES[key] = load_mesh(path, faces)
     return _MESHES[key]
 
 
@@ -286,7 +286,7 @@ def morph_targets(loaded: "LoadedScene", loc: "Loc", deform: MorphTargets, base:
     deltas = np.empty((len(deform.targets), *base.shape))
     for k, target in enumerate(deform.targets):
         try:
-            verts = _cached_mesh(loaded.asset(target.file))[0]
+            verts = _cached_mesh(loaded.asset(target.file), faces=False)[0]
         except (OSError, AssetError) as exc:
             raise SceneError([loaded.source.problem((*loc, "targets", k, "file"), f"cannot read morph target: {exc}")]) from None
         if verts.shape != base.shape:
