@@ -14,7 +14,7 @@ colliders only and do not act on bodies, so each group is run on its own.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
@@ -533,6 +533,13 @@ class Simulation:
     bodies: Track | None
     systems: dict[str, ParticleSystem]
     collider_names: list[str]
+    flocks: dict[str, "object"] = field(default_factory=dict)  # FlockTrack by object name (flock.py)
+
+    def flock(self, name: str) -> "object":
+        """The recorded agents (flock.FlockTrack) of the flock object `name`."""
+        if name not in self.flocks:
+            raise SimulationError(f"no flock named '{name}' (have: {', '.join(self.flocks) or 'none'})")
+        return self.flocks[name]
 
     def sample(self, times: np.ndarray) -> dict[str, "object"]:
         """World-space Pose of every dynamics body at `times` (seconds, any order)."""
@@ -604,4 +611,10 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0) -> Simul
         guard = Guard([f"{obj.name}[{k}]" for k in range(spawns.count)] if spawns.count <= 100_000 else [obj.name], d.integrator, d.energy_growth_limit, 0.0,
                       float((p.mass * g_mag * np.maximum(p.radius, 1e-3)).sum()) + 1e-9)
         systems[obj.name] = ParticleSystem(obj.name, spawns, run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard))
-    return Simulation(t_start, t_end, d.integrator, d.step, names, scales, track, systems, [c.name for c in colliders])
+    flocks: dict[str, object] = {}
+    for obj in loaded.scene.objects:
+        if getattr(getattr(obj, "deform", None), "type", None) == "flock":
+            from .flock import FlockParams, simulate_flock
+
+            flocks[obj.name] = simulate_flock(FlockParams.from_spec(obj.deform), colliders, t_start, t_end, obj.name)
+    return Simulation(t_start, t_end, d.integrator, d.step, names, scales, track, systems, [c.name for c in colliders], flocks)

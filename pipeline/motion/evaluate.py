@@ -80,7 +80,11 @@ def light_name(light: Any, index: int) -> str:
 
 def has_dynamics(loaded: "LoadedScene") -> bool:
     """True when evaluation needs a simulation (dynamics bodies or particle systems)."""
-    return any(o.motion.type == "dynamics" or isinstance(o, Particles) for o in loaded.scene.objects)
+    return any(o.motion.type == "dynamics" or isinstance(o, Particles) or _is_flock(o) for o in loaded.scene.objects)
+
+
+def _is_flock(obj: Any) -> bool:
+    return getattr(getattr(obj, "deform", None), "type", None) == "flock"
 
 
 # --- local poses --------------------------------------------------------------------------
@@ -210,7 +214,7 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
         raise MotionError("times must be finite")
     count = len(t)
     if has_dynamics(loaded) and simulation is None:
-        bodies = [o.name for o in scene.objects if o.motion.type == "dynamics" or isinstance(o, Particles)]
+        bodies = [o.name for o in scene.objects if o.motion.type == "dynamics" or isinstance(o, Particles) or _is_flock(o)]
         raise SimulationRequiredError(
             f"{loaded.path}: scene has dynamics ({', '.join(bodies)}); run motion.pipeline.dynamics.simulate "
             "first and pass its result as simulation="
@@ -265,4 +269,12 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
     from .deform import deformed_vertices
 
     vertices = deformed_vertices(loaded, t, world)
+    for i, obj in enumerate(scene.objects):
+        if _is_flock(obj):  # agents simulated by the dynamics stage (dynamics/flock.py)
+            from ..dynamics.flock import object_vertices
+
+            try:
+                vertices[obj.name] = object_vertices(loaded, obj, simulation.flock(obj.name), t, world[obj.name])  # type: ignore[union-attr]
+            except ValueError as exc:
+                raise SceneError([loaded.source.problem(("objects", i, "deform"), str(exc))]) from None
     return SceneMotion(t, world, camera, camera_scalars, lights, light_scalars, vertices, particles)

@@ -299,4 +299,71 @@ class JointSkin(Model):
     morph: MorphTargets | None = None
 
 
-Deformation = Annotated[Union[BlendShapes, Skinning, MorphTargets, JointSkin], Field(discriminator="type")]
+
+class FlockWeights(Model):
+    """Weights of Reynolds's steering rules (dimensionless; docs/seed-motion.md, "Flocks")."""
+
+    separation: NonNegativeFloat = 1.5
+    alignment: NonNegativeFloat = 1.0
+    cohesion: NonNegativeFloat = 1.0
+    goal: NonNegativeFloat = 0.5
+    avoid: NonNegativeFloat = 3.0
+
+
+class FlockBounds(Model):
+    """An axis-aligned box (world metres) the agents steer back into and never leave."""
+
+    min: Vec3
+    max: Vec3
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "FlockBounds":
+        if any(lo >= hi for lo, hi in zip(self.min, self.max)):
+            raise ValueError(f"bounds min {self.min} must be below max {self.max} on every axis")
+        return self
+
+
+class Flock(Model):
+    """A flock or crowd of `count` agents (boids: separation, alignment, cohesion, goal
+    seeking, obstacle avoidance) simulated by the dynamics stage. Each agent is a copy of
+    the object's own shape (a mesh file, a cube, cylinder or rectangle) turned so its
+    local +Z faces along its velocity, local +Y towards `up`. Agents live in world space;
+    they start in the box `spawn_center` +- `spawn_size` / 2 with speed `speed` in seeded
+    random directions (horizontal ones when `planar`: a crowd on its ground plane)."""
+
+    type: Literal["flock"]
+    count: Annotated[int, Field(ge=1, le=1_000_000)]
+    seed: int = 0
+    spawn_center: Vec3 = (0.0, 0.0, 0.0)
+    spawn_size: tuple[NonNegativeFloat, NonNegativeFloat, NonNegativeFloat] = (1.0, 1.0, 1.0)
+    speed: NonNegativeFloat = 1.0  # m/s, initial
+    min_speed: NonNegativeFloat = 0.2  # m/s
+    max_speed: Positive = 2.0  # m/s
+    max_accel: Positive = 8.0  # m/s^2, bound on the summed steering
+    responsiveness: Positive = 2.0  # 1/s: steering acceleration = responsiveness * weighted sum
+    neighbour_radius: Positive = 1.0  # m: alignment and cohesion see neighbours this close
+    neighbours: Annotated[int, Field(ge=1, le=64)] = 8  # the nearest k within the radius
+    separation: Positive = 0.2  # m: no two agents come closer (hard constraint)
+    separation_range: Positive | None = None  # m: the separation rule acts inside it (default 2 x separation)
+    weights: FlockWeights = FlockWeights()
+    goal: Vec3 | None = None
+    avoid_distance: Positive = 1.0  # m: obstacle avoidance starts this far from a collider
+    look_ahead: NonNegativeFloat = 0.5  # s: obstacles are also tested where the agent will be
+    bounds: FlockBounds | None = None
+    planar: bool = False  # crowds: velocities stay in the plane normal to `up`
+    up: Vec3 = (0.0, 1.0, 0.0)
+    step: Annotated[float, Field(gt=0, le=0.1)] = 1.0 / 120.0  # s, the flock's own fixed step
+    start: FiniteFloat = 0.0  # s: the flock starts moving here
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "Flock":
+        if self.min_speed > self.max_speed:
+            raise ValueError(f"min_speed ({self.min_speed}) exceeds max_speed ({self.max_speed})")
+        if self.separation_range is not None and self.separation_range < self.separation:
+            raise ValueError(f"separation_range ({self.separation_range}) must be at least separation ({self.separation})")
+        if sum(c * c for c in self.up) < 1e-24:
+            raise ValueError("up must not be the zero vector")
+        return self
+
+
+Deformation = Annotated[Union[BlendShapes, Skinning, MorphTargets, JointSkin, Flock], Field(discriminator="type")]
