@@ -534,6 +534,13 @@ class Simulation:
     systems: dict[str, ParticleSystem]
     collider_names: list[str]
     flocks: dict[str, "object"] = field(default_factory=dict)  # FlockTrack by object name (flock.py)
+    followers: dict[str, "object"] = field(default_factory=dict)  # plan.FollowerTrack by object name
+
+    def follower(self, name: str) -> "object":
+        """The simulated follower (motion/plan.py FollowerTrack) of the planned object `name`."""
+        if name not in self.followers:
+            raise SimulationError(f"no planned-path follower named '{name}' (have: {', '.join(self.followers) or 'none'})")
+        return self.followers[name]
 
     def flock(self, name: str) -> "object":
         """The recorded agents (flock.FlockTrack) of the flock object `name`."""
@@ -617,4 +624,10 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0) -> Simul
             from .flock import FlockParams, simulate_flock
 
             flocks[obj.name] = simulate_flock(FlockParams.from_spec(obj.deform), colliders, t_start, t_end, obj.name)
-    return Simulation(t_start, t_end, d.integrator, d.step, names, scales, track, systems, [c.name for c in colliders], flocks)
+    followers: dict[str, object] = {}
+    for i, obj in enumerate(loaded.scene.objects):
+        if obj.motion.type == "plan" and obj.motion.follower is not None:
+            from ..motion.plan import simulate_follower
+
+            followers[obj.name] = simulate_follower(loaded, i, t_start, t_end)
+    return Simulation(t_start, t_end, d.integrator, d.step, names, scales, track, systems, [c.name for c in colliders], flocks, followers)

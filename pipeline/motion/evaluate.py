@@ -80,7 +80,11 @@ def light_name(light: Any, index: int) -> str:
 
 def has_dynamics(loaded: "LoadedScene") -> bool:
     """True when evaluation needs a simulation (dynamics bodies or particle systems)."""
-    return any(o.motion.type == "dynamics" or isinstance(o, Particles) or _is_flock(o) for o in loaded.scene.objects)
+    return any(o.motion.type == "dynamics" or isinstance(o, Particles) or _is_flock(o) or _has_follower(o) for o in loaded.scene.objects)
+
+
+def _has_follower(obj: Any) -> bool:
+    return obj.motion.type == "plan" and obj.motion.follower is not None
 
 
 def _is_flock(obj: Any) -> bool:
@@ -214,7 +218,7 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
         raise MotionError("times must be finite")
     count = len(t)
     if has_dynamics(loaded) and simulation is None:
-        bodies = [o.name for o in scene.objects if o.motion.type == "dynamics" or isinstance(o, Particles) or _is_flock(o)]
+        bodies = [o.name for o in scene.objects if o.motion.type == "dynamics" or isinstance(o, Particles) or _is_flock(o) or _has_follower(o)]
         raise SimulationRequiredError(
             f"{loaded.path}: scene has dynamics ({', '.join(bodies)}); run motion.pipeline.dynamics.simulate "
             "first and pass its result as simulation="
@@ -231,6 +235,14 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
                 raise MotionError(f"the simulation has no samples for dynamics body '{name}'")
             pose = sampled[name]
             world[name] = Pose(*(np.asarray(a, dtype=np.float64) for a in pose))
+            continue
+        if obj.motion.type == "plan":  # planned path (motion/plan.py); its follower is simulated
+            from . import plan
+
+            if obj.motion.follower is not None:
+                world[name] = plan.follower_pose(loaded, i, simulation.follower(name), t)  # type: ignore[union-attr]
+            else:
+                world[name] = plan.kinematic_pose(loaded, i, t)
             continue
         local = _local(loaded, ("objects", i), obj.motion, _object_base(obj), t, {})
         pose = Pose(local.translation, local.rotation, local.scale)

@@ -114,6 +114,13 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
     for i, obj in enumerate(scene.objects):
         if obj.motion.type == "dynamics" and obj.parent is not None:
             add(("objects", i, "parent"), "a dynamics body cannot have a parent (it is simulated in world space)")
+    # planned paths are in world space on the floor plane: objects only, no parent
+    for i, obj in enumerate(scene.objects):
+        if obj.motion.type == "plan" and obj.parent is not None:
+            add(("objects", i, "parent"), "an object with a planned path cannot have a parent (the path is in world space)")
+    for loc, owner in [(("camera", "motion"), scene.camera)] + [(("lights", i, "motion"), light) for i, light in enumerate(scene.lights)]:
+        if owner.motion.type == "plan":
+            add((*loc, "type"), "a planned path moves objects only (parent the camera or light to a planned object)")
     bodies = {o.name for o in scene.objects if o.motion.type == "dynamics"}
     for j, spring in enumerate(scene.dynamics.springs):
         for end in ("a", "b"):
@@ -152,6 +159,8 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
             for k, key in enumerate(obj.deform.keys):
                 if key.file is not None:
                     check_file(("objects", i, "deform", "keys", k, "file"), key.file, "mesh")
+        if obj.motion.type == "plan" and obj.motion.grid.image is not None:
+            check_file(("objects", i, "motion", "grid", "image"), obj.motion.grid.image, "image")
     for i, light in enumerate(scene.lights):
         if isinstance(light, EnvmapLight):
             check_file(("lights", i, "file"), light.file, "image")

@@ -198,8 +198,75 @@ class ProceduralMotion(Model):
         return self
 
 
+# --- motion planning (pipeline/motion/plan.py; docs/seed-motion.md, "Motion planning") ----
+
+
+class OccupancyGrid(Model):
+    """Where the agent may go, on the floor plane (world X right, Z down the image rows,
+    +Y up): from an `image` (pixels darker than `threshold` are walls; one pixel per cell)
+    or from the scene's own static objects (`from_scene: true`: every static cube,
+    sphere, cylinder or mesh (its bounding box) that reaches into the height band `band`
+    is a wall). Cell (0, 0) has its corner at `origin` (x, z); `size` (x, z metres) is the
+    extent of a scene-projected grid. Outside the grid is wall."""
+
+    image: str | None = None
+    threshold: Annotated[float, Field(gt=0, lt=1)] = 0.5
+    from_scene: bool = False
+    cell: Positive = 0.1  # metres per cell
+    origin: tuple[FiniteFloat, FiniteFloat] = (0.0, 0.0)
+    size: tuple[Positive, Positive] | None = None
+    band: tuple[FiniteFloat, FiniteFloat] = (0.05, 3.0)  # heights (y) that block the agent
+
+    @model_validator(mode="after")
+    def _one_source(self) -> "OccupancyGrid":
+        if (self.image is None) == (not self.from_scene):
+            raise ValueError("a grid needs exactly one of image, from_scene: true")
+        if self.from_scene and self.size is None:
+            raise ValueError("a grid from the scene needs its size (x, z metres)")
+        if self.band[0] >= self.band[1]:
+            raise ValueError(f"band {self.band}: the low height must be below the high one")
+        return self
+
+
+class Follower(Model):
+    """A simulated vehicle that tracks the planned path (the dynamics stage): gravity, a
+    hover force that carries its weight, Rayleigh drag, and a steering force towards where
+    the path will be in `look_ahead` seconds, at most `max_accel`. It must stay within
+    `tolerance` metres of the path (checked; the path keeps that much extra clearance)."""
+
+    mass: Positive = 1.5  # kg
+    cd: NonNegativeFloat = 1.0
+    area: Positive = 0.05  # m^2
+    look_ahead: Annotated[float, Field(gt=0, le=5)] = 0.3  # s
+    max_accel: Positive = 20.0  # m/s^2
+    tolerance: Positive = 0.1  # m
+
+
+class PlanMotion(Model):
+    """A planned path: A* (8-connected, octile heuristic) on the occupancy `grid` from
+    `start` through `waypoints` to `goal` for an agent of `radius`, shortened by line of
+    sight, turned into a centripetal Catmull-Rom root-motion spline travelled with a
+    trapezoidal speed profile (accelerate at `accel` to `speed`, cruise, brake at
+    `decel`), from `start_time` seconds. `facing`: along the tangent, also `bank` into
+    turns, or `none`. With `follower`, a simulated vehicle tracks the path (dynamics)."""
+
+    type: Literal["plan"]
+    grid: OccupancyGrid
+    start: Vec3
+    goal: Vec3
+    waypoints: list[Vec3] = []
+    radius: Positive = 0.3  # m, the agent's own radius
+    margin: NonNegativeFloat | None = None  # m of extra clearance for smoothing (default: one cell)
+    speed: Positive = 1.0  # m/s, cruise
+    accel: Positive = 1.0  # m/s^2
+    decel: Positive | None = None  # m/s^2 (default: accel)
+    start_time: FiniteFloat = 0.0  # s
+    facing: Literal["tangent", "bank", "none"] = "tangent"
+    follower: Follower | None = None
+
+
 MotionBlock = Annotated[
-    Union[StaticMotion, KeyframeMotion, ProceduralMotion, DynamicsMotion],
+    Union[StaticMotion, KeyframeMotion, ProceduralMotion, DynamicsMotion, PlanMotion],
     Field(discriminator="type"),
 ]
 
