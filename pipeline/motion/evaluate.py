@@ -227,6 +227,7 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
 
     index = {o.name: i for i, o in enumerate(scene.objects)}
     world: dict[str, Pose] = {}
+    local_poses: dict[str, Pose] = {}  # parent_from_object, for IK (motion/ik.py)
     for name in evaluation_order({o.name: o.parent for o in scene.objects}):
         i = index[name]
         obj = scene.objects[i]
@@ -246,7 +247,12 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
             continue
         local = _local(loaded, ("objects", i), obj.motion, _object_base(obj), t, {})
         pose = Pose(local.translation, local.rotation, local.scale)
+        local_poses[name] = pose
         world[name] = compose(world[obj.parent], pose) if obj.parent is not None else pose
+    if scene.ik:  # after the chains' keyed poses, before their children's world poses are final
+        from .ik import apply_ik
+
+        apply_ik(loaded, t, world, local_poses)
 
     cam = scene.camera
     local = _local(loaded, ("camera",), cam.motion, _camera_base(cam), t, {"fov": 1, "ortho_width": 1})

@@ -265,6 +265,75 @@ class PlanMotion(Model):
     follower: Follower | None = None
 
 
+# --- inverse kinematics (pipeline/motion/ik.py; docs/seed-motion.md, "Inverse kinematics") -
+
+
+class JointLimit(Model):
+    """Limits of one joint of an `ccd` chain, relative to its keyed local rotation: a hinge
+    (`axis` in the joint's keyed local frame, angle in [min, max] degrees about it, no other
+    rotation) or a ball joint (`cone`: at most that many degrees away, any axis)."""
+
+    joint: str
+    axis: Vec3 | None = None
+    min: Annotated[float, Field(ge=-180, le=180)] = -180.0
+    max: Annotated[float, Field(ge=-180, le=180)] = 180.0
+    cone: Annotated[float, Field(gt=0, le=180)] | None = None
+
+    @model_validator(mode="after")
+    def _kind(self) -> "JointLimit":
+        if (self.axis is None) == (self.cone is None):
+            raise ValueError("a joint limit needs exactly one of axis (a hinge, with min/max) or cone (a ball joint)")
+        if self.axis is not None and sum(c * c for c in self.axis) < 1e-24:
+            raise ValueError("axis must not be the zero vector")
+        if self.min > self.max:
+            raise ValueError(f"min ({self.min}) exceeds max ({self.max})")
+        return self
+
+
+class WeightKey(Model):
+    time: FiniteFloat
+    value: Annotated[float, Field(ge=0, le=1)]
+
+
+class IKConstraint(Model):
+    """Inverse kinematics on a chain of parented objects `chain` (root joint first, each
+    the parent of the next, the last is the end effector): after the chain's keyed pose,
+    the joints turn so the effector reaches the world position of `target` (an object).
+    `two-bone` (three names: e.g. hip, knee, ankle) is the analytic solver, the middle
+    joint bending towards `pole`; `ccd` (cyclic coordinate descent) takes any length and
+    joint `limits`. `weight` (a number or keys over time, 0 = keyed pose, 1 = solved)
+    blends the solved rotations with the keyed ones; `keep_effector_rotation` keeps the
+    effector's keyed world orientation (a foot stays flat)."""
+
+    chain: Annotated[list[str], Field(min_length=2, max_length=32)]
+    target: str
+    solver: Literal["two-bone", "ccd"] = "two-bone"
+    pole: str | None = None
+    weight: Union[Annotated[float, Field(ge=0, le=1)], Annotated[list[WeightKey], Field(min_length=1)]] = 1.0
+    time_unit: Literal["frames", "seconds"] = "frames"
+    keep_effector_rotation: bool = False
+    iterations: Annotated[int, Field(ge=1, le=1000)] = 64
+    tolerance: Positive = 1e-5  # m, ccd stops when every time's effector is this close
+    limits: list[JointLimit] = []
+
+    @model_validator(mode="after")
+    def _shape(self) -> "IKConstraint":
+        if self.solver == "two-bone" and len(self.chain) != 3:
+            raise ValueError(f"a two-bone chain has 3 names (root, middle, effector), got {len(self.chain)}")
+        if self.solver == "two-bone" and self.limits:
+            raise ValueError("joint limits apply to the ccd solver (two-bone is exact: limit it with its pole)")
+        if len(set(self.chain)) != len(self.chain):
+            raise ValueError("a chain names each joint once")
+        if isinstance(self.weight, list):
+            for i in range(1, len(self.weight)):
+                if self.weight[i].time <= self.weight[i - 1].time:
+                    raise ValueError(f"weight key times must increase strictly: weight[{i}].time {self.weight[i].time}")
+        for lim in self.limits:
+            if lim.joint not in self.chain[:-1]:
+                raise ValueError(f"limit on '{lim.joint}', which is not a joint of the chain {self.chain[:-1]}")
+        return self
+
+
 MotionBlock = Annotated[
     Union[StaticMotion, KeyframeMotion, ProceduralMotion, DynamicsMotion, PlanMotion],
     Field(discriminator="type"),
