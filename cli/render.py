@@ -50,6 +50,8 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--ocio", "ocio_config", help="Deliverables' view transform: an OCIO config file or built-in URI (ocio://cg-config-latest).")
 @click.option("--ocio-display", help="OCIO display (default: the config's default).")
 @click.option("--ocio-view", help="OCIO view (default: the display's default).")
+@click.option("--fields", "fields", type=click.Choice(["60i", "50i"]), help="Render the video's fields directly (each at its own instant and shutter, only its rows) into OUT/fields/ and weave them into interlaced frames and a movie in OUT; --frames then counts interlaced frames.")
+@click.option("--field-order", type=click.Choice(["tff", "bff"]), default="tff", show_default=True, help="With --fields: which field of each frame is first in time.")
 def render(
     scene: Path,
     output_dir: Path | None,
@@ -78,6 +80,8 @@ def render(
     ocio_config: str | None,
     ocio_display: str | None,
     ocio_view: str | None,
+    fields: str | None,
+    field_order: str,
 ) -> None:
     """Render SCENE's frames to OpenEXR files."""
     from motion.pipeline.farm.run import RenderRequest, run_render
@@ -105,6 +109,11 @@ def render(
         progress=progress,
         check=check,
     )
+    if fields:
+        from motion.pipeline.telecine.field_render import run_field_render
+
+        run_field_render(request, fields, field_order)
+        return
     run_render(request)
 
 

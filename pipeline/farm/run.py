@@ -55,6 +55,8 @@ class RenderRequest:
     report: Path | None = None
     progress: bool | None = None  # None: a live bar only on a terminal
     check: bool = False  # only verify every selected frame is complete; render nothing
+    fields: str | None = None  # field order (tff/bff): the frames are fields, drawn row by parity (telecine/field_render.py)
+    scene_overrides: dict[str, Any] = field(default_factory=dict)  # further sections merged over the scene (the field timeline)
 
 
 def _scheduler_target(spec: str) -> dict[str, str]:
@@ -157,7 +159,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
 
         parse_formats(req.deliver)  # a wrong name fails now, not after the last frame
     preset, _ = load_preset(req.preset) if req.preset else (None, None)
-    overrides = overrides_from(preset, {"render": req.render_overrides})
+    overrides = overrides_from(preset, {"render": req.render_overrides, **req.scene_overrides})
     loaded = load_scene(req.scene, overrides)
     scene = loaded.scene
 
@@ -188,6 +190,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         cache=req.cache,
         threads=threads,
         variant=scene.render.variant,
+        fields=req.fields,
     )
 
     _preflight(req, loaded, job, out_dir, frames)
