@@ -134,3 +134,24 @@ def test_flock_example_validates_and_bakes(tmp_path: Path) -> None:
 def test_tiny_flocks_work(count: int) -> None:
     track = simulate_flock(FlockParams.from_spec(load_spec(count=count)), [], 0.0, 0.2)
     assert track.x.shape[1] == count and np.isfinite(track.x).all()
+
+
+def test_too_many_instance_vertices_is_a_located_error(tmp_path: Path) -> None:
+    from motion.pipeline.errors import SceneError
+
+    path = write_scene(tmp_path, [flock_object(count=200_000)], last=0)
+    with pytest.raises(SceneError) as err:
+        bake(load_scene(path), [0])
+    assert "objects[0].deform.count" in str(err.value) and "more than 4000000 vertices" in str(err.value)
+
+
+def test_a_flock_of_spheres_is_a_located_error(tmp_path: Path) -> None:
+    from motion.pipeline.errors import SceneError
+
+    obj = flock_object()
+    obj.update(shape="sphere", radius=0.05)
+    del obj["size"]
+    path = write_scene(tmp_path, [obj], last=0)
+    with pytest.raises(SceneError) as err:
+        bake(load_scene(path), [0])
+    assert "objects[0].deform" in str(err.value) and "sphere is not supported" in str(err.value)

@@ -7,8 +7,8 @@ One step (fixed dt, the flock's own `step`), every stage over all agents at once
                 velocity change in m/s (Reynolds's "desired velocity - velocity")
   integrate  -> semi-implicit Euler: v += a dt, speed clamped to [min_speed, max_speed],
                 x += v dt
-  separate   -> hard constraint: pairs closer than `separation` are pushed apart
-                symmetrically (cKDTree.query_pairs), repeated until none is left (bounded)
+  separate   -> hard constraint: agents closer than `separation` are pushed apart
+                symmetrically (k nearest by cKDTree), repeated until none is left (bounded)
   contain    -> agents are pushed out of colliders and back into `bounds`
   record     -> x, v (float32) at every step, or every k-th for big flocks
 Between records positions interpolate linearly (the step is small; linear keeps the
@@ -31,6 +31,7 @@ from .collisions import BoxCollider, Collider, PlaneCollider, SphereCollider
 RECORD_BUDGET = 256 * 2**20  # bytes of recorded agent states per flock
 MAX_STEPS = 2_000_000  # steps a flock may be asked to take (t_end - start) / step
 SEPARATION_PASSES = 8  # most projection passes per step
+MAX_INSTANCE_VERTICES = 4_000_000  # rendered vertices of a flock (agents x agent vertices)
 
 
 @dataclass(frozen=True)
@@ -245,30 +246,38 @@ def steering(p: FlockParams, x: np.ndarray, v: np.ndarray, colliders: Sequence[C
     return a * np.minimum(1.0, p.max_accel / np.maximum(mag, 1e-12))
 
 
-def separate(x: np.ndarray, separation: float, passes: int = SEPARATION_PASSES) -> int:
-    """Push apart (in place) every pair closer than `separation`, each agent half the
-    overlap along the pair's line; repeated while pairs remain (at most `passes`).
+def separate(x: np.ndarray, separation: float, passes: int = SEPARATION_PASSES, k: int = 8) -> int:
+    """Push apart (in place) agents closer than `separation`: each agent moves half the
+    overlap away from each of its (at most k) nearest agents inside the separation (the
+    other agent of the pair does the same, so a pair ends exactly apart), the mean of
+    those moves when there are several (Jacobi); repeated while overlaps remain (at most
+    `passes`). A k-nearest table bounds the memory however packed the agents are.
     Returns the number of passes that moved something."""
     n = len(x)
+    if n < 2:
+        return 0
+    k = min(k + 1, n)
     moved = 0
+    rows = np.arange(n)[:, None]
     for _ in range(passes):
-        pairs = cKDTree(x).query_pairs(separation * (1.0 - 1e-9), output_type="ndarray")
-        if len(pairs) == 0:
+        dist, idx = cKDTree(x).query(x, k=k, distance_upper_bound=separation * (1.0 - 1e-9))
+        dist, idx = dist.reshape(n, k), idx.reshape(n, k)
+        near = (idx < n) & (idx != rows)
+        if not near.any():
             break
-        i, j = pairs[:, 0], pairs[:, 1]
-        d = x[i] - x[j]
-        r = np.linalg.norm(d, axis=1)
-        # coincident agents separate along a fixed, pair-dependent direction
-        fallback = np.stack((np.cos(i + 0.5 * j), np.zeros_like(r), np.sin(i + 0.5 * j)), axis=1)
-        u = np.where((r > 1e-12)[:, None], d / np.maximum(r, 1e-12)[:, None], fallback)
-        # half the overlap each, and a hair more so the pair ends just outside
-        corr = (0.5 * (separation - r) * (1.0 + 1e-6))[:, None] * u
-        delta = np.zeros_like(x)
-        for axis in range(3):
-            delta[:, axis] = np.bincount(i, corr[:, axis], minlength=n) - np.bincount(j, corr[:, axis], minlength=n)
-        # an agent in several pairs takes the mean of its corrections (Jacobi averaging)
-        many = np.bincount(i, minlength=n) + np.bincount(j, minlength=n)
-        x += delta / np.maximum(many, 1)[:, None]
+        j = np.where(near, idx, 0)
+        d = x[:, None, :] - x[j]
+        r = np.where(near, dist, 1.0)
+        # coincident agents separate along a fixed, pair-dependent direction (opposite for
+        # the two of a pair)
+        angle = (np.minimum(rows, j) * 0.618 + np.maximum(rows, j) * 0.382).astype(np.float64)
+        sign = np.where(rows < j, 1.0, -1.0)
+        fallback = sign[..., None] * np.stack((np.cos(angle), np.zeros_like(angle), np.sin(angle)), axis=-1)
+        u = np.where((r > 1e-12)[..., None], d / np.maximum(r, 1e-12)[..., None], fallback)
+        # half the overlap, and a hair more so the pair ends just outside
+        push = np.where(near, 0.5 * (separation - r) * (1.0 + 1e-6), 0.0)[..., None] * u
+        count = near.sum(axis=1)
+        x += push.sum(axis=1) / np.maximum(count, 1)[:, None]
         moved += 1
     return moved
 
@@ -357,6 +366,22 @@ def instance_vertices(track: FlockTrack, times: np.ndarray, agent: np.ndarray, u
     return verts.reshape(len(x), -1, 3)
 
 
+def check_instance_budget(loaded: Any, index: int) -> None:
+    """A located error, before any simulation, when the flock's rendered vertices (agents x
+    agent vertices) exceed MAX_INSTANCE_VERTICES or its agent shape cannot be instanced."""
+    from ..errors import SceneError
+    from ..motion.deform import agent_mesh
+
+    obj = loaded.scene.objects[index]
+    try:
+        agent, _ = agent_mesh(loaded, obj)
+    except ValueError as exc:
+        raise SceneError([loaded.source.problem(("objects", index, "deform"), str(exc))]) from None
+    if obj.deform.count * len(agent) > MAX_INSTANCE_VERTICES:
+        raise SceneError([loaded.source.problem(("objects", index, "deform", "count"),
+                         f"{obj.deform.count} agents x {len(agent)} vertices is more than {MAX_INSTANCE_VERTICES} vertices; use fewer agents or a simpler agent mesh")])
+
+
 def object_vertices(loaded: Any, obj: Any, track: FlockTrack, times: np.ndarray, world: Any) -> np.ndarray:
     """Object-space vertices [T, n * V, 3] of a flock object: the agents' world vertices
     mapped through the inverse of the object's own world pose (the renderer maps them
@@ -365,6 +390,8 @@ def object_vertices(loaded: Any, obj: Any, track: FlockTrack, times: np.ndarray,
     from ..motion.pose import quat_conj, quat_rotate
 
     agent, _ = agent_mesh(loaded, obj)
+    if obj.deform.count * len(agent) > MAX_INSTANCE_VERTICES:
+        raise ValueError(f"{obj.deform.count} agents x {len(agent)} vertices is more than {MAX_INSTANCE_VERTICES} vertices; use fewer agents or a simpler agent mesh")
     up = np.asarray(obj.deform.up, dtype=np.float64)
     verts = instance_vertices(track, times, agent, up / np.linalg.norm(up))
     t, q, s = (np.asarray(a, dtype=np.float64) for a in world)

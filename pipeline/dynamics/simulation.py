@@ -619,10 +619,11 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0) -> Simul
                       float((p.mass * g_mag * np.maximum(p.radius, 1e-3)).sum()) + 1e-9)
         systems[obj.name] = ParticleSystem(obj.name, spawns, run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard))
     flocks: dict[str, object] = {}
-    for obj in loaded.scene.objects:
+    for i, obj in enumerate(loaded.scene.objects):
         if getattr(getattr(obj, "deform", None), "type", None) == "flock":
-            from .flock import FlockParams, simulate_flock
+            from .flock import FlockParams, check_instance_budget, simulate_flock
 
+            check_instance_budget(loaded, i)
             flocks[obj.name] = simulate_flock(FlockParams.from_spec(obj.deform), colliders, t_start, t_end, obj.name)
     followers: dict[str, object] = {}
     for i, obj in enumerate(loaded.scene.objects):
