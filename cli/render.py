@@ -56,6 +56,8 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--ocio-view", help="OCIO view (default: the display's default).")
 @click.option("--dry-run", is_flag=True, help="Say what would be rendered (frames, chunks, executor, outputs) and write nothing.")
 @click.option("--json", "as_json", is_flag=True, help="Print the plan (--dry-run) or the run's summary as JSON on stdout.")
+@click.option("--fields", "fields", type=click.Choice(["60i", "50i"]), help="Render the video's fields directly (each at its own instant and shutter, only its rows) into OUT/fields/ and weave them into interlaced frames and a movie in OUT; --frames then counts interlaced frames.")
+@click.option("--field-order", type=click.Choice(["tff", "bff"]), default="tff", show_default=True, help="With --fields: which field of each frame is first in time.")
 def render(
     scene: Path,
     output_dir: Path | None,
@@ -89,6 +91,8 @@ def render(
     ocio_view: str | None,
     dry_run: bool,
     as_json: bool,
+    fields: str | None,
+    field_order: str,
 ) -> None:
     """Render SCENE's frames to OpenEXR files."""
     from motion.pipeline.errors import IncompleteJobError
@@ -126,6 +130,14 @@ def render(
         check=check,
         dry_run=dry_run,
     )
+    if fields:
+        from motion.pipeline.telecine.field_render import run_field_render
+
+        if dry_run or as_json:
+            raise click.UsageError("--fields does not combine with --dry-run or --json")
+
+        run_field_render(request, fields, field_order)
+        return
     try:
         result = run_render(request)
     except IncompleteJobError as err:

@@ -14,7 +14,7 @@ colliders only and do not act on bodies, so each group is run on its own.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
@@ -567,6 +567,20 @@ class Simulation:
     gravity: np.ndarray | None = None  # m/s^2
     body_mass: np.ndarray | None = None  # kg, per body
     body_start: np.ndarray | None = None  # [n, 3] m, where each body's gravity potential was zero in the track
+    flocks: dict[str, "object"] = field(default_factory=dict)  # FlockTrack by object name (flock.py)
+    followers: dict[str, "object"] = field(default_factory=dict)  # plan.FollowerTrack by object name
+
+    def follower(self, name: str) -> "object":
+        """The simulated follower (motion/plan.py FollowerTrack) of the planned object `name`."""
+        if name not in self.followers:
+            raise SimulationError(f"no planned-path follower named '{name}' (have: {', '.join(self.followers) or 'none'})")
+        return self.followers[name]
+
+    def flock(self, name: str) -> "object":
+        """The recorded agents (flock.FlockTrack) of the flock object `name`."""
+        if name not in self.flocks:
+            raise SimulationError(f"no flock named '{name}' (have: {', '.join(self.flocks) or 'none'})")
+        return self.flocks[name]
 
     def sample(self, times: np.ndarray) -> dict[str, "object"]:
         """World-space Pose of every dynamics body at `times` (seconds, any order)."""
@@ -655,5 +669,18 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0, on_progr
         guard = Guard([f"{obj.name}[{k}]" for k in range(spawns.count)] if spawns.count <= 100_000 else [obj.name], d.integrator, d.energy_growth_limit, 0.0,
                       float((p.mass * g_mag * np.maximum(p.radius, 1e-3)).sum()) + 1e-9)
         systems[obj.name] = ParticleSystem(obj.name, spawns, run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard, on_progress))
+    flocks: dict[str, object] = {}
+    for i, obj in enumerate(loaded.scene.objects):
+        if getattr(getattr(obj, "deform", None), "type", None) == "flock":
+            from .flock import FlockParams, check_instance_budget, simulate_flock
+
+            check_instance_budget(loaded, i)
+            flocks[obj.name] = simulate_flock(FlockParams.from_spec(obj.deform), colliders, t_start, t_end, obj.name)
+    followers: dict[str, object] = {}
+    for i, obj in enumerate(loaded.scene.objects):
+        if obj.motion.type == "plan" and obj.motion.follower is not None:
+            from ..motion.plan import simulate_follower
+
+            followers[obj.name] = simulate_follower(loaded, i, t_start, t_end)
     return Simulation(t_start, t_end, d.integrator, d.step, names, scales, track, systems, [c.name for c in colliders],
-                      np.asarray(d.gravity, dtype=np.float64), mass, start)
+                      np.asarray(d.gravity, dtype=np.float64), mass, start, flocks, followers)

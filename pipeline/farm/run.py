@@ -57,6 +57,8 @@ class RenderRequest:
     progress: bool | None = None  # None: a live bar only on a terminal
     check: bool = False  # only verify every selected frame is complete; render nothing
     dry_run: bool = False  # only say what would be done (the plan); write nothing
+    fields: str | None = None  # field order (tff/bff): the frames are fields, drawn row by parity (telecine/field_render.py)
+    scene_overrides: dict[str, Any] = field(default_factory=dict)  # further sections merged over the scene (the field timeline)
 
 
 def _scheduler_target(spec: str) -> dict[str, str]:
@@ -221,7 +223,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
 
         parse_formats(req.deliver)  # a wrong name fails now, not after the last frame
     preset, _ = load_preset(req.preset) if req.preset else (None, None)
-    overrides = overrides_from(preset, {"render": req.render_overrides, "output": req.output_overrides})
+    overrides = overrides_from(preset, {"render": req.render_overrides, "output": req.output_overrides, **req.scene_overrides})
     loaded = load_scene(req.scene, overrides)
     scene = loaded.scene
     if scene.render.denoise != "off" and not req.check:
@@ -258,6 +260,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         cache=req.cache,
         threads=threads,
         variant=scene.render.variant,
+        fields=req.fields,
     )
 
     _preflight(req, loaded, job, out_dir, frames)

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import AssetError, SceneError
 from ..meshes import load_mesh
-from ..scene.motion_schema import BlendShapes, JointSkin, MorphTargets, Skinning
+from ..scene.motion_schema import BlendShapes, Flock, JointSkin, MorphTargets, Skinning
 from ..scene.schema import Cube, Cylinder, Mesh, Rectangle
 from .keyframes import MODES, VectorTrack, _catmull_rom_tangents
 from .pose import Pose, compose
@@ -68,8 +68,22 @@ def _grid_rect(nu: int, nv: int) -> tuple[np.ndarray, np.ndarray]:
     return uv, np.concatenate((np.stack((a, b, d), 1), np.stack((a, d, c), 1)))
 
 
+def agent_mesh(loaded: "LoadedScene", obj: Any) -> tuple[np.ndarray, np.ndarray]:
+    """One flock agent (agent space, +Z forward): the object's mesh file or its primitive
+    at the coarsest tessellation, times the object's scale."""
+    verts, faces = load_mesh(loaded.asset(obj.file)) if isinstance(obj, Mesh) else primitive_mesh(obj, 1)
+    scale = obj.transform.scale
+    return verts * np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,)), faces
+
+
 def bind_mesh(loaded: "LoadedScene", obj: Any, detail: int = 16) -> tuple[np.ndarray, np.ndarray]:
-    """The undeformed mesh of an object: its .obj/.ply file, or its tessellated primitive."""
+    """The undeformed mesh of an object: its .obj/.ply file, or its tessellated primitive
+    (a flock: `count` copies of its agent mesh, pipeline/dynamics/flock.py)."""
+    if isinstance(getattr(obj, "deform", None), Flock):
+        verts, faces = agent_mesh(loaded, obj)
+        count = obj.deform.count
+        offsets = (np.arange(count) * len(verts))[:, None, None]
+        return np.tile(verts, (count, 1)), (faces[None, :, :] + offsets).reshape(-1, 3)
     if isinstance(obj, Mesh):
         return load_mesh(loaded.asset(obj.file))
     return primitive_mesh(obj, detail)
@@ -221,7 +235,7 @@ def deformed_vertices(loaded: "LoadedScene", t: np.ndarray, world: dict[str, Pos
     out: dict[str, np.ndarray] = {}
     for i, obj in enumerate(loaded.scene.objects):
         deform = getattr(obj, "deform", None)
-        if deform is None:
+        if deform is None or isinstance(deform, Flock):  # flocks: evaluate.py, from the simulation
             continue
         loc = ("objects", i, "deform")
         try:

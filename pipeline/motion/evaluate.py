@@ -80,7 +80,15 @@ def light_name(light: Any, index: int) -> str:
 
 def has_dynamics(loaded: "LoadedScene") -> bool:
     """True when evaluation needs a simulation (dynamics bodies or particle systems)."""
-    return any(o.motion.type == "dynamics" or isinstance(o, Particles) for o in loaded.scene.objects)
+    return any(o.motion.type == "dynamics" or isinstance(o, Particles) or _is_flock(o) or _has_follower(o) for o in loaded.scene.objects)
+
+
+def _has_follower(obj: Any) -> bool:
+    return obj.motion.type == "plan" and obj.motion.follower is not None
+
+
+def _is_flock(obj: Any) -> bool:
+    return getattr(getattr(obj, "deform", None), "type", None) == "flock"
 
 
 # --- local poses --------------------------------------------------------------------------
@@ -210,7 +218,7 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
         raise MotionError("times must be finite")
     count = len(t)
     if has_dynamics(loaded) and simulation is None:
-        bodies = [o.name for o in scene.objects if o.motion.type == "dynamics" or isinstance(o, Particles)]
+        bodies = [o.name for o in scene.objects if o.motion.type == "dynamics" or isinstance(o, Particles) or _is_flock(o) or _has_follower(o)]
         raise SimulationRequiredError(
             f"{loaded.path}: scene has dynamics ({', '.join(bodies)}); run motion.pipeline.dynamics.simulate "
             "first and pass its result as simulation="
@@ -219,6 +227,7 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
 
     index = {o.name: i for i, o in enumerate(scene.objects)}
     world: dict[str, Pose] = {}
+    local_poses: dict[str, Pose] = {}  # parent_from_object, for IK (motion/ik.py)
     for name in evaluation_order({o.name: o.parent for o in scene.objects}):
         i = index[name]
         obj = scene.objects[i]
@@ -228,9 +237,22 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
             pose = sampled[name]
             world[name] = Pose(*(np.asarray(a, dtype=np.float64) for a in pose))
             continue
+        if obj.motion.type == "plan":  # planned path (motion/plan.py); its follower is simulated
+            from . import plan
+
+            if obj.motion.follower is not None:
+                world[name] = plan.follower_pose(loaded, i, simulation.follower(name), t)  # type: ignore[union-attr]
+            else:
+                world[name] = plan.kinematic_pose(loaded, i, t)
+            continue
         local = _local(loaded, ("objects", i), obj.motion, _object_base(obj), t, {})
         pose = Pose(local.translation, local.rotation, local.scale)
+        local_poses[name] = pose
         world[name] = compose(world[obj.parent], pose) if obj.parent is not None else pose
+    if scene.ik:  # after the chains' keyed poses, before their children's world poses are final
+        from .ik import apply_ik
+
+        apply_ik(loaded, t, world, local_poses)
 
     cam = scene.camera
     local = _local(loaded, ("camera",), cam.motion, _camera_base(cam), t, {"fov": 1, "ortho_width": 1})
@@ -265,4 +287,12 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
     from .deform import deformed_vertices
 
     vertices = deformed_vertices(loaded, t, world)
+    for i, obj in enumerate(scene.objects):
+        if _is_flock(obj):  # agents simulated by the dynamics stage (dynamics/flock.py)
+            from ..dynamics.flock import object_vertices
+
+            try:
+                vertices[obj.name] = object_vertices(loaded, obj, simulation.flock(obj.name), t, world[obj.name])  # type: ignore[union-attr]
+            except ValueError as exc:
+                raise SceneError([loaded.source.problem(("objects", i, "deform"), str(exc))]) from None
     return SceneMotion(t, world, camera, camera_scalars, lights, light_scalars, vertices, particles)

@@ -542,7 +542,10 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         spp = int(spp) if spp else int(sampler.sample_count())
         size = film.crop_size()
         width, height = int(size[0]), int(size[1])
-        n_px = width * height
+        # field rendering (telecine/field_render.py): only the rows offset, offset + 2, ...
+        offset, step = FIELD_ROWS if FIELD_ROWS is not None else (0, 1)
+        out_h = (height - offset + step - 1) // step
+        n_px = width * out_h
         per_pass = max(1, min(spp, self.max_lanes // max(n_px, 1)))
         total: list[Any] | None = None
         done, index = 0, 0
@@ -550,7 +553,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             count = min(per_pass, spp - done)
             # pass 0 keeps the frame's seed; later passes derive theirs from it and the pass
             pass_seed = seed if index == 0 else mi.sample_tea_32(int(seed), index)[0]
-            acc, used = self._render_pass(scene, sensor, sampler, pass_seed, count, width, height)
+            acc, used = self._render_pass(scene, sensor, sampler, pass_seed, count, width, height, (offset, step))
             total = acc if total is None else [t + a for t, a in zip(total, acc)]
             dr.eval(total)
             done += used
@@ -565,12 +568,15 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         flat = dr.zeros(mi.Float, n_px * n_ch)
         for c, plane in enumerate(planes):
             dr.scatter(flat, plane, target * n_ch + c)
-        return mi.TensorXf(flat, shape=(height, width, n_ch))
+        return mi.TensorXf(flat, shape=(out_h, width, n_ch))
 
-    def _render_pass(self, scene: mi.Scene, sensor: Any, sampler: Any, seed: Any, spp: int, width: int, height: int) -> tuple[list[Any], int]:
+    def _render_pass(self, scene: mi.Scene, sensor: Any, sampler: Any, seed: Any, spp: int, width: int, height: int, rows: tuple[int, int] = (0, 1)) -> tuple[list[Any], int]:
         """One pass of `spp` samples per pixel: per-pixel filter-weighted sums of every
-        channel and of the weights (unnormalised), and the sample count actually used."""
-        n_px = width * height
+        channel and of the weights (unnormalised), and the sample count actually used.
+        `rows` (offset, step): only image rows offset, offset + step, ... (a field)."""
+        offset, step = rows
+        out_h = (height - offset + step - 1) // step
+        n_px = width * out_h
         sampler.set_sample_count(spp)
         spp = int(sampler.sample_count())  # the sampler may round (multijitter)
         sampler.set_samples_per_wavefront(spp)
@@ -578,7 +584,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
 
         # ray generation in Mitsuba's order of sampler dimensions
         pixel = dr.arange(mi.UInt32, n_px * spp) // spp
-        px = mi.Vector2f(mi.Float(pixel % width), mi.Float(pixel // width))
+        px = mi.Vector2f(mi.Float(pixel % width), mi.Float(offset + step * (pixel // width)))
         film_pos = px + sampler.next_2d()
         time = sensor.shutter_open() + sampler.next_1d() * sensor.shutter_open_time()
         aperture = sampler.next_2d() if sensor.needs_aperture_sample() else mi.Point2f(0.5)
@@ -598,24 +604,26 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         tx, ty = mi.Int32(target % width), mi.Int32(target // width)
         acc = [mi.Float(dr.zeros(mi.Float, n_px)) for _ in range(len(channels) + 1)]
         for oy in range(-reach, reach + 1):
-            sums = self._row_sums(rfilter, channels, film_pos, spp, width, n_px, oy, reach)
+            if oy % step:
+                continue  # a row of the other field: not rendered
+            sums = self._row_sums(rfilter, channels, film_pos, spp, width, n_px, oy, reach, (offset, step))
             dr.eval(sums)
             for ox in range(-reach, reach + 1):
-                sx, sy = tx - ox, ty - oy  # the source pixel whose samples land here
-                ok = (sx >= 0) & (sx < width) & (sy >= 0) & (sy < height)
+                sx, sy = tx - ox, ty - oy // step  # the source pixel whose samples land here
+                ok = (sx >= 0) & (sx < width) & (sy >= 0) & (sy < out_h)
                 src = mi.UInt32(dr.select(ok, sy * width + sx, 0))
                 acc = [a + dr.gather(mi.Float, v, src, ok) for a, v in zip(acc, sums[ox + reach])]
             dr.eval(acc)
         return acc, spp
 
     @staticmethod
-    def _row_sums(rfilter: Any, channels: list[Any], film_pos: Any, spp: int, width: int, n_px: int, oy: int, reach: int) -> list[list[Any]]:
+    def _row_sums(rfilter: Any, channels: list[Any], film_pos: Any, spp: int, width: int, n_px: int, oy: int, reach: int, rows: tuple[int, int] = (0, 1)) -> list[list[Any]]:
         """For every source pixel (one lane each) and each x offset ox in [-reach, reach]:
         the sums over the pixel's spp samples, in sample order, of channel * w and of w,
         where w = f(x) f(y) is the separable filter's weight of the sample for the pixel
         (ox, oy) away. Returns [2 reach + 1][channels + 1] arrays of n_px."""
         source = dr.arange(mi.UInt32, n_px)
-        sx, sy = mi.Float(source % width), mi.Float(source // width)
+        sx, sy = mi.Float(source % width), mi.Float(rows[0] + rows[1] * (source // width))  # frame rows (a field: every other)
         widths = 2 * reach + 1
         zero = [mi.Float(dr.zeros(mi.Float, n_px)) for _ in range(widths * (len(channels) + 1))]
 
@@ -668,6 +676,9 @@ def _spheres(movers: Sequence[mi.Scene]) -> np.ndarray:
         out[k, 3] = np.linalg.norm(hi - lo) / 2 * (1 + 1e-4) + 1e-5
     return out
 
+# (row offset, row step) while a field is rendered (telecine/field_render.py sets it);
+# None: every row
+FIELD_ROWS: tuple[int, int] | None = None
 
 _registered = False
 

@@ -41,6 +41,7 @@ class RenderJob:
     cache: bool = True
     threads: int | None = None
     variant: str = "auto"
+    fields: str | None = None  # tff/bff: each frame is a field, only its rows are drawn
 
     @property
     def key(self) -> str:
@@ -158,7 +159,18 @@ def _render_one(job: RenderJob, fi: FrameInput) -> FrameResult:
     try:
         renderer, loaded, variant = _renderer(job)  # a fresh one every frame without the cache
         extra_setup = time.perf_counter() - t_setup
-        rgba, stats = renderer.render(fi)
+        parity = None
+        if job.fields:  # a field: its own instant and shutter (the timeline), only its rows
+            from ..telecine.field_render import field_rows, parity_of, rendering_field
+
+            parity = parity_of(fi.frame, job.fields)  # type: ignore[arg-type]
+            with rendering_field(parity):
+                rgba, stats = renderer.render(fi)
+            height = loaded.scene.render.resolution[1]
+            rgba = field_rows(rgba, parity, height)
+            renderer.last_aovs = {k: field_rows(v, parity, height) for k, v in renderer.last_aovs.items()}
+        else:
+            rgba, stats = renderer.render(fi)
         aovs = dict(renderer.last_aovs)
         scene = loaded.scene
         # the denoiser: right after the render, on the frame's own buffers (docs/denoise.md)
@@ -187,6 +199,7 @@ def _render_one(job: RenderJob, fi: FrameInput) -> FrameResult:
             "render_seconds": float(stats.render_s),
             "renderer": RENDERER_VERSION,
             **denoise_meta,
+            **({"field": parity, "fieldOrder": job.fields} if parity else {}),
         }
         standard = {
             "capDate": _dt.datetime.now().strftime("%Y:%m:%d %H:%M:%S"),

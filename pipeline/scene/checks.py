@@ -114,6 +114,37 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
     for i, obj in enumerate(scene.objects):
         if obj.motion.type == "dynamics" and obj.parent is not None:
             add(("objects", i, "parent"), "a dynamics body cannot have a parent (it is simulated in world space)")
+    # planned paths are in world space on the floor plane: objects only, no parent
+    for i, obj in enumerate(scene.objects):
+        if obj.motion.type == "plan" and obj.parent is not None:
+            add(("objects", i, "parent"), "an object with a planned path cannot have a parent (the path is in world space)")
+    for loc, owner in [(("camera", "motion"), scene.camera)] + [(("lights", i, "motion"), light) for i, light in enumerate(scene.lights)]:
+        if owner.motion.type == "plan":
+            add((*loc, "type"), "a planned path moves objects only (parent the camera or light to a planned object)")
+    # inverse kinematics: chains of parented objects, targets and poles that are objects
+    # outside the chain's own subtree (they are read before the chain is solved)
+    objects_by_name = {o.name: o for o in scene.objects}
+    for j, ik in enumerate(scene.ik):
+        for k, name in enumerate(ik.chain):
+            if name not in objects_by_name:
+                add(("ik", j, "chain", k), f"unknown object '{name}'" + _suggest(name, list(objects_by_name)))
+            elif k > 0 and objects_by_name[name].parent != ik.chain[k - 1]:
+                add(("ik", j, "chain", k), f"'{name}' must be a child of '{ik.chain[k - 1]}' (a chain is a run of parents and children)")
+            elif objects_by_name[name].motion.type in ("dynamics", "plan"):
+                add(("ik", j, "chain", k), f"'{name}' has {objects_by_name[name].motion.type} motion; IK turns keyed or static joints")
+        for field in ("target", "pole"):
+            name = getattr(ik, field)
+            if name is None:
+                continue
+            if name not in objects_by_name:
+                add(("ik", j, field), f"unknown object '{name}'" + _suggest(name, list(objects_by_name)))
+                continue
+            node = name
+            while node is not None:
+                if node in ik.chain:
+                    add(("ik", j, field), f"'{name}' moves with the chain ('{node}'); a {field} must not depend on the joints it drives")
+                    break
+                node = objects_by_name[node].parent if node in objects_by_name else None
     bodies = {o.name for o in scene.objects if o.motion.type == "dynamics"}
     for j, spring in enumerate(scene.dynamics.springs):
         for end in ("a", "b"):
@@ -152,6 +183,8 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
             for k, key in enumerate(obj.deform.keys):
                 if key.file is not None:
                     check_file(("objects", i, "deform", "keys", k, "file"), key.file, "mesh")
+        if obj.motion.type == "plan" and obj.motion.grid.image is not None:
+            check_file(("objects", i, "motion", "grid", "image"), obj.motion.grid.image, "image")
     for i, light in enumerate(scene.lights):
         if isinstance(light, EnvmapLight):
             check_file(("lights", i, "file"), light.file, "image")

@@ -198,8 +198,144 @@ class ProceduralMotion(Model):
         return self
 
 
+# --- motion planning (pipeline/motion/plan.py; docs/seed-motion.md, "Motion planning") ----
+
+
+class OccupancyGrid(Model):
+    """Where the agent may go, on the floor plane (world X right, Z down the image rows,
+    +Y up): from an `image` (pixels darker than `threshold` are walls; one pixel per cell)
+    or from the scene's own static objects (`from_scene: true`: every static cube,
+    sphere, cylinder or mesh (its bounding box) that reaches into the height band `band`
+    is a wall). Cell (0, 0) has its corner at `origin` (x, z); `size` (x, z metres) is the
+    extent of a scene-projected grid. Outside the grid is wall."""
+
+    image: str | None = None
+    threshold: Annotated[float, Field(gt=0, lt=1)] = 0.5
+    from_scene: bool = False
+    cell: Positive = 0.1  # metres per cell
+    origin: tuple[FiniteFloat, FiniteFloat] = (0.0, 0.0)
+    size: tuple[Positive, Positive] | None = None
+    band: tuple[FiniteFloat, FiniteFloat] = (0.05, 3.0)  # heights (y) that block the agent
+
+    @model_validator(mode="after")
+    def _one_source(self) -> "OccupancyGrid":
+        if (self.image is None) == (not self.from_scene):
+            raise ValueError("a grid needs exactly one of image, from_scene: true")
+        if self.from_scene and self.size is None:
+            raise ValueError("a grid from the scene needs its size (x, z metres)")
+        if self.band[0] >= self.band[1]:
+            raise ValueError(f"band {self.band}: the low height must be below the high one")
+        return self
+
+
+class Follower(Model):
+    """A simulated vehicle that tracks the planned path (the dynamics stage): gravity, a
+    hover force that carries its weight, Rayleigh drag, and a steering force towards where
+    the path will be in `look_ahead` seconds, at most `max_accel`. It must stay within
+    `tolerance` metres of the path (checked; the path keeps that much extra clearance)."""
+
+    mass: Positive = 1.5  # kg
+    cd: NonNegativeFloat = 1.0
+    area: Positive = 0.05  # m^2
+    look_ahead: Annotated[float, Field(gt=0, le=5)] = 0.3  # s
+    max_accel: Positive = 20.0  # m/s^2
+    tolerance: Positive = 0.1  # m
+
+
+class PlanMotion(Model):
+    """A planned path: A* (8-connected, octile heuristic) on the occupancy `grid` from
+    `start` through `waypoints` to `goal` for an agent of `radius`, shortened by line of
+    sight, turned into a centripetal Catmull-Rom root-motion spline travelled with a
+    trapezoidal speed profile (accelerate at `accel` to `speed`, cruise, brake at
+    `decel`), from `start_time` seconds. `facing`: along the tangent, also `bank` into
+    turns, or `none`. With `follower`, a simulated vehicle tracks the path (dynamics)."""
+
+    type: Literal["plan"]
+    grid: OccupancyGrid
+    start: Vec3
+    goal: Vec3
+    waypoints: list[Vec3] = []
+    radius: Positive = 0.3  # m, the agent's own radius
+    margin: NonNegativeFloat | None = None  # m of extra clearance for smoothing (default: one cell)
+    speed: Positive = 1.0  # m/s, cruise
+    accel: Positive = 1.0  # m/s^2
+    decel: Positive | None = None  # m/s^2 (default: accel)
+    start_time: FiniteFloat = 0.0  # s
+    facing: Literal["tangent", "bank", "none"] = "tangent"
+    follower: Follower | None = None
+
+
+# --- inverse kinematics (pipeline/motion/ik.py; docs/seed-motion.md, "Inverse kinematics") -
+
+
+class JointLimit(Model):
+    """Limits of one joint of an `ccd` chain, relative to its keyed local rotation: a hinge
+    (`axis` in the joint's keyed local frame, angle in [min, max] degrees about it, no other
+    rotation) or a ball joint (`cone`: at most that many degrees away, any axis)."""
+
+    joint: str
+    axis: Vec3 | None = None
+    min: Annotated[float, Field(ge=-180, le=180)] = -180.0
+    max: Annotated[float, Field(ge=-180, le=180)] = 180.0
+    cone: Annotated[float, Field(gt=0, le=180)] | None = None
+
+    @model_validator(mode="after")
+    def _kind(self) -> "JointLimit":
+        if (self.axis is None) == (self.cone is None):
+            raise ValueError("a joint limit needs exactly one of axis (a hinge, with min/max) or cone (a ball joint)")
+        if self.axis is not None and sum(c * c for c in self.axis) < 1e-24:
+            raise ValueError("axis must not be the zero vector")
+        if self.min > self.max:
+            raise ValueError(f"min ({self.min}) exceeds max ({self.max})")
+        return self
+
+
+class WeightKey(Model):
+    time: FiniteFloat
+    value: Annotated[float, Field(ge=0, le=1)]
+
+
+class IKConstraint(Model):
+    """Inverse kinematics on a chain of parented objects `chain` (root joint first, each
+    the parent of the next, the last is the end effector): after the chain's keyed pose,
+    the joints turn so the effector reaches the world position of `target` (an object).
+    `two-bone` (three names: e.g. hip, knee, ankle) is the analytic solver, the middle
+    joint bending towards `pole`; `ccd` (cyclic coordinate descent) takes any length and
+    joint `limits`. `weight` (a number or keys over time, 0 = keyed pose, 1 = solved)
+    blends the solved rotations with the keyed ones; `keep_effector_rotation` keeps the
+    effector's keyed world orientation (a foot stays flat)."""
+
+    chain: Annotated[list[str], Field(min_length=2, max_length=32)]
+    target: str
+    solver: Literal["two-bone", "ccd"] = "two-bone"
+    pole: str | None = None
+    weight: Union[Annotated[float, Field(ge=0, le=1)], Annotated[list[WeightKey], Field(min_length=1)]] = 1.0
+    time_unit: Literal["frames", "seconds"] = "frames"
+    keep_effector_rotation: bool = False
+    iterations: Annotated[int, Field(ge=1, le=1000)] = 64
+    tolerance: Positive = 1e-5  # m, ccd stops when every time's effector is this close
+    limits: list[JointLimit] = []
+
+    @model_validator(mode="after")
+    def _shape(self) -> "IKConstraint":
+        if self.solver == "two-bone" and len(self.chain) != 3:
+            raise ValueError(f"a two-bone chain has 3 names (root, middle, effector), got {len(self.chain)}")
+        if self.solver == "two-bone" and self.limits:
+            raise ValueError("joint limits apply to the ccd solver (two-bone is exact: limit it with its pole)")
+        if len(set(self.chain)) != len(self.chain):
+            raise ValueError("a chain names each joint once")
+        if isinstance(self.weight, list):
+            for i in range(1, len(self.weight)):
+                if self.weight[i].time <= self.weight[i - 1].time:
+                    raise ValueError(f"weight key times must increase strictly: weight[{i}].time {self.weight[i].time}")
+        for lim in self.limits:
+            if lim.joint not in self.chain[:-1]:
+                raise ValueError(f"limit on '{lim.joint}', which is not a joint of the chain {self.chain[:-1]}")
+        return self
+
+
 MotionBlock = Annotated[
-    Union[StaticMotion, KeyframeMotion, ProceduralMotion, DynamicsMotion],
+    Union[StaticMotion, KeyframeMotion, ProceduralMotion, DynamicsMotion, PlanMotion],
     Field(discriminator="type"),
 ]
 
@@ -299,4 +435,71 @@ class JointSkin(Model):
     morph: MorphTargets | None = None
 
 
-Deformation = Annotated[Union[BlendShapes, Skinning, MorphTargets, JointSkin], Field(discriminator="type")]
+
+class FlockWeights(Model):
+    """Weights of Reynolds's steering rules (dimensionless; docs/seed-motion.md, "Flocks")."""
+
+    separation: NonNegativeFloat = 1.5
+    alignment: NonNegativeFloat = 1.0
+    cohesion: NonNegativeFloat = 1.0
+    goal: NonNegativeFloat = 0.5
+    avoid: NonNegativeFloat = 3.0
+
+
+class FlockBounds(Model):
+    """An axis-aligned box (world metres) the agents steer back into and never leave."""
+
+    min: Vec3
+    max: Vec3
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "FlockBounds":
+        if any(lo >= hi for lo, hi in zip(self.min, self.max)):
+            raise ValueError(f"bounds min {self.min} must be below max {self.max} on every axis")
+        return self
+
+
+class Flock(Model):
+    """A flock or crowd of `count` agents (boids: separation, alignment, cohesion, goal
+    seeking, obstacle avoidance) simulated by the dynamics stage. Each agent is a copy of
+    the object's own shape (a mesh file, a cube, cylinder or rectangle) turned so its
+    local +Z faces along its velocity, local +Y towards `up`. Agents live in world space;
+    they start in the box `spawn_center` +- `spawn_size` / 2 with speed `speed` in seeded
+    random directions (horizontal ones when `planar`: a crowd on its ground plane)."""
+
+    type: Literal["flock"]
+    count: Annotated[int, Field(ge=1, le=1_000_000)]
+    seed: int = 0
+    spawn_center: Vec3 = (0.0, 0.0, 0.0)
+    spawn_size: tuple[NonNegativeFloat, NonNegativeFloat, NonNegativeFloat] = (1.0, 1.0, 1.0)
+    speed: NonNegativeFloat = 1.0  # m/s, initial
+    min_speed: NonNegativeFloat = 0.2  # m/s
+    max_speed: Positive = 2.0  # m/s
+    max_accel: Positive = 8.0  # m/s^2, bound on the summed steering
+    responsiveness: Positive = 2.0  # 1/s: steering acceleration = responsiveness * weighted sum
+    neighbour_radius: Positive = 1.0  # m: alignment and cohesion see neighbours this close
+    neighbours: Annotated[int, Field(ge=1, le=64)] = 8  # the nearest k within the radius
+    separation: Positive = 0.2  # m: no two agents come closer (hard constraint)
+    separation_range: Positive | None = None  # m: the separation rule acts inside it (default 2 x separation)
+    weights: FlockWeights = FlockWeights()
+    goal: Vec3 | None = None
+    avoid_distance: Positive = 1.0  # m: obstacle avoidance starts this far from a collider
+    look_ahead: NonNegativeFloat = 0.5  # s: obstacles are also tested where the agent will be
+    bounds: FlockBounds | None = None
+    planar: bool = False  # crowds: velocities stay in the plane normal to `up`
+    up: Vec3 = (0.0, 1.0, 0.0)
+    step: Annotated[float, Field(gt=0, le=0.1)] = 1.0 / 120.0  # s, the flock's own fixed step
+    start: FiniteFloat = 0.0  # s: the flock starts moving here
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "Flock":
+        if self.min_speed > self.max_speed:
+            raise ValueError(f"min_speed ({self.min_speed}) exceeds max_speed ({self.max_speed})")
+        if self.separation_range is not None and self.separation_range < self.separation:
+            raise ValueError(f"separation_range ({self.separation_range}) must be at least separation ({self.separation})")
+        if sum(c * c for c in self.up) < 1e-24:
+            raise ValueError("up must not be the zero vector")
+        return self
+
+
+Deformation = Annotated[Union[BlendShapes, Skinning, MorphTargets, JointSkin, Flock], Field(discriminator="type")]

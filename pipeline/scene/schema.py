@@ -15,7 +15,7 @@ from pydantic import Field, field_validator, model_validator
 from ..timeline import Timeline, parse_fps
 from .dynamics_schema import DynamicsSettings, ParticleEmitter
 from .imports.spec import ImportSpec
-from .motion_schema import Deformation, MotionBlock, StaticMotion
+from .motion_schema import Deformation, IKConstraint, MotionBlock, StaticMotion
 from .types import (
     Color,
     FiniteFloat,
@@ -381,6 +381,7 @@ class Scene(Model):
     materials: list[Material] = []
     objects: list[SceneObject] = []
     dynamics: DynamicsSettings = DynamicsSettings()
+    ik: list[IKConstraint] = []  # inverse kinematics on parented chains (motion/ik.py)
     render: RenderSettings = RenderSettings()
     output: OutputSettings = OutputSettings()
 

@@ -1,0 +1,193 @@
+"""Field rendering: `motion render --fields 60i` renders the video's fields directly.
+
+A field is a timeline instant of its own: at 60i the fields are the frames of a
+60000/1001 fields/s timeline, each with the scene's shutter angle of its own field
+duration. The farm renders them like frames (bake, chunks, resume), the renderer draws
+only the field's rows (`rendering_field`, the integrator's FIELD_ROWS), and `weave_fields`
+pairs fields 2k (the field order's first parity) and 2k + 1 into interlaced frame k at
+half the field rate, with the field order and each field's time in the header, and an
+interlaced movie. Compare 3:2 pulldown (telecine_sequence), whose fields repeat 24p film
+frames: a frame there shows at most two film times; here every field has its own.
+
+>>> from fractions import Fraction
+>>> field_range(Fraction(24), 0, 23, FIELD_RATES["60i"])   # one second of 24p
+(0, 59)
+>>> parity_of(0, "tff"), parity_of(1, "tff"), parity_of(0, "bff")
+('top', 'bottom', 'bottom')
+"""
+
+from __future__ import annotations
+
+import math
+from contextlib import contextmanager
+from fractions import Fraction
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+from ..errors import FrameIOError, UsageError
+from .fields import FieldOrder, Parity, check_field_order, first_parity, second_parity
+
+FIELD_RATES: dict[str, Fraction] = {"60i": Fraction(60000, 1001), "50i": Fraction(50)}
+
+
+def field_rate(name: str) -> Fraction:
+    """The field rate of `60i` (60000/1001) or `50i` (50); UsageError otherwise."""
+    if name not in FIELD_RATES:
+        raise UsageError(f"--fields expects one of {', '.join(FIELD_RATES)}, got {name!r}")
+    return FIELD_RATES[name]
+
+
+def field_range(fps: Fraction, first: int, last: int, rate: Fraction) -> tuple[int, int]:
+    """First and last field (an even first, an odd last: whole interlaced frames) covering
+    the scene's frames first..last, i.e. the seconds [first / fps, (last + 1) / fps)."""
+    start = Fraction(first) / fps * rate
+    end = Fraction(last + 1) / fps * rate
+    f0 = math.floor(start)
+    f0 -= f0 % 2
+    f1 = math.ceil(end) - 1
+    if f1 % 2 == 0:
+        f1 += 1
+    return f0, max(f1, f0 + 1)
+
+
+def parity_of(field: int, order: FieldOrder) -> Parity:
+    """Field 2k has the order's first parity, 2k + 1 the second."""
+    return first_parity(order) if field % 2 == 0 else second_parity(order)
+
+
+@contextmanager
+def rendering_field(parity: Parity) -> Iterator[None]:
+    """While inside, the motion_path integrator draws only the rows of `parity` (top:
+    0, 2, 4 ...; bottom: 1, 3, 5 ...) and returns an image of those rows."""
+    from ..render import integrator
+
+    before = integrator.FIELD_ROWS
+    integrator.FIELD_ROWS = (0 if parity == "top" else 1, 2)
+    try:
+        yield
+    finally:
+        integrator.FIELD_ROWS = before
+
+
+def field_rows(image: np.ndarray, parity: Parity, height: int) -> np.ndarray:
+    """The field's rows of a renderer's image: already the field (the integrator drew only
+    its rows) or a full frame (the scalar fallback renders every row: take its rows)."""
+    if image.shape[0] == height:
+        return image[0 if parity == "top" else 1 :: 2]
+    return image
+
+
+def weave_fields(
+    field_dir: str | Path,
+    out_dir: str | Path,
+    name: str,
+    order: str,
+    rate: Fraction,
+    *,
+    movie: bool = True,
+    pixel_type: str = "half",
+    compression: str = "zip",
+) -> list[Path]:
+    """Pair fields 2k and 2k + 1 of `field_dir` into interlaced EXR frames k (numbered
+    field // 2) at rate / 2 in `out_dir`, with `fieldOrder` and each field's time and
+    source in the header; and an interlaced movie `{name}_{rate}i.mov` when asked."""
+    from ..frame_output import read_frame, write_frame
+    from ..timeline import timecode
+    from .fields import weave
+    from .movie import write_movie
+    from .sequence import find_sequences
+
+    fo: FieldOrder = check_field_order(order)
+    field_dir, out_dir = Path(field_dir), Path(out_dir)
+    found = dict(find_sequences(field_dir).get(name, []))
+    if not found:
+        raise FrameIOError(f"{field_dir}: no fields named {name}.NNNN.exr to weave")
+    pairs = sorted({f // 2 for f in found})
+    missing = [f for k in pairs for f in (2 * k, 2 * k + 1) if f not in found]
+    if missing:
+        raise FrameIOError(f"{field_dir}: fields {missing[:8]} are missing; every interlaced frame needs both of its fields")
+    frame_rate = rate / 2
+    drop = frame_rate.denominator == 1001
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written: list[Path] = []
+    woven: list[np.ndarray] = []
+    for k in pairs:
+        first, second = read_frame(found[2 * k]), read_frame(found[2 * k + 1])
+        by_parity = {parity_of(2 * k, fo): first, parity_of(2 * k + 1, fo): second}
+        top, bottom = by_parity["top"], by_parity["bottom"]
+        rgba = weave(top.rgba, bottom.rgba)
+        aovs: dict[str, Any] = {}
+        for layer in top.aovs:
+            aovs[layer] = weave(top.aovs[layer], bottom.aovs[layer])
+        meta = {key: v for key, v in first.meta.items() if key not in ("frame", "time", "shutter_open", "shutter_close", "motion_hash", "field")}
+        meta.update(
+            frame=k,
+            fieldOrder=fo,
+            fieldRendered=True,
+            fieldRate=str(rate),
+            firstFieldSource=2 * k,
+            secondFieldSource=2 * k + 1,
+            firstFieldTime=float(first.meta["time"]),
+            secondFieldTime=float(second.meta["time"]),
+            firstFieldShutter=f"{first.meta['shutter_open']},{first.meta['shutter_close']}",
+            secondFieldShutter=f"{second.meta['shutter_open']},{second.meta['shutter_close']}",
+            time=float(first.meta["time"]),
+        )
+        path = out_dir / f"{name}.{k:04d}.exr"
+        write_frame(path, rgba, meta, fps=frame_rate, timecode=timecode(k, frame_rate, drop_frame=drop),
+                    pixel_type=pixel_type, compression=compression, aovs=aovs or None)  # type: ignore[arg-type]
+        written.append(path)
+        if movie:
+            woven.append(rgba)
+    if movie and woven:
+        h, w = woven[0].shape[:2]
+        if h % 2:
+            raise FrameIOError(f"{written[0]}: odd height {h}; interlaced fields need an even number of rows")
+        label = "60i" if rate == FIELD_RATES["60i"] else "50i" if rate == FIELD_RATES["50i"] else f"{float(rate):g}i"
+        written.append(write_movie(out_dir / f"{name}_{label}.mov", iter(woven), frame_rate, width=w, height=h, field_order=fo))
+    return written
+
+
+def run_field_render(req: Any, fields: str, order: str) -> dict[str, Any]:
+    """`motion render --fields 60i`: render the fields of the scene's time span (or of the
+    interlaced frames `req.frames_spec` names, or the preset's spread of them) into
+    OUT/fields/ through the farm, then weave them into OUT (EXRs and a movie)."""
+    import dataclasses
+
+    from ..farm.frames import parse_frames
+    from ..farm.run import run_render
+    from ..presets import load_preset, overrides_from, spread
+    from ..scene.loader import load_scene
+
+    rate = field_rate(fields)
+    fo = check_field_order(order)
+    for flag, value in (("--deliver", req.deliver), ("--shard", req.shard), ("--motion", req.motion_file)):
+        if value:
+            raise UsageError(f"--fields renders and weaves its own fields; it does not combine with {flag}")
+    preset = load_preset(req.preset)[0] if req.preset else None
+    loaded = load_scene(req.scene, overrides_from(preset, {"render": req.render_overrides}))
+    scene = loaded.scene
+    if scene.render.resolution[1] % 2:
+        raise UsageError(f"--fields: the height {scene.render.resolution[1]} is odd; interlaced frames need an even number of rows")
+    tl = scene.timeline
+    f0, f1 = field_range(tl.rate, tl.first, tl.last, rate)
+    video = list(range(f0 // 2, f1 // 2 + 1))
+    if req.frames_spec:
+        chosen = parse_frames(req.frames_spec, video[0], video[-1])
+    else:
+        chosen = spread(video, preset.frame_count if preset else None)
+    selected = [f for k in chosen for f in (2 * k, 2 * k + 1)]
+    out_dir = Path(req.output_dir or scene.output.directory or Path("out") / loaded.name).resolve()
+    sub = dataclasses.replace(
+        req,
+        output_dir=out_dir / "fields",
+        frames_spec=",".join(str(f) for f in selected),
+        fields=fo,
+        scene_overrides={"timeline": {"fps": str(rate), "first": f0, "last": f1}},
+    )
+    report = run_render(sub)
+    if not req.check:
+        weave_fields(out_dir / "fields", out_dir, loaded.name, fo, rate, pixel_type=scene.output.pixel_type, compression=scene.output.compression)
+    return report
