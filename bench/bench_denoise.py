@@ -25,8 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
-import subprocess
 import sys
 import tempfile
 import time
@@ -35,19 +33,14 @@ from typing import Any
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import cpu_model  # noqa: E402
+
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "bench"))
 sys.path.insert(0, str(REPO / "tests"))
 
 from bench_render import shot, terrain_ply  # noqa: E402
-
-
-def cpu() -> str:
-    try:
-        out = subprocess.run(["lscpu"], capture_output=True, text=True).stdout
-        return next(line.split(":", 1)[1].strip() for line in out.splitlines() if line.startswith("Model name"))
-    except (OSError, StopIteration):
-        return platform.processor() or "unknown"
 
 
 class Shot:
@@ -258,7 +251,7 @@ def main() -> int:
     import mitsuba as mi
 
     mi.set_log_level(mi.LogLevel.Error)  # the multijitter sampler's rounding notes
-    results: dict[str, Any] = {"cpu": cpu(), "note": "a shared machine (other sessions running): figures are noisy; only ratios within this run compare"}
+    results: dict[str, Any] = {"cpu": cpu_model(), "note": "a shared machine (other sessions running): figures are noisy; only ratios within this run compare"}
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         terrain_ply(folder / "terrain.ply")

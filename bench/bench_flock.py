@@ -9,28 +9,19 @@ linearly (n log n for the tree). Prints seconds per step and microseconds per ag
 
 from __future__ import annotations
 
-import platform
-import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import cpu_model  # noqa: E402
 
 from motion.pipeline.dynamics.flock import FlockParams, flock_step, spawn
 from motion.pipeline.scene.motion_schema import Flock
 
 DENSITY = 8.0  # agents per m^3 at the start (mean spacing 0.5 m)
-
-
-def cpu_name() -> str:
-    try:
-        out = subprocess.run(["lscpu"], capture_output=True, text=True, check=False).stdout
-        for line in out.splitlines():
-            if line.startswith("Model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def bench(count: int, steps: int = 20, warm: int = 3) -> float:
@@ -52,7 +43,7 @@ def bench(count: int, steps: int = 20, warm: int = 3) -> float:
 
 
 def main(counts: list[int]) -> None:
-    print(f"CPU: {cpu_name()}; numpy {np.__version__}; one process")
+    print(f"CPU: {cpu_model()}; numpy {np.__version__}; one process")
     base = None
     for n in counts:
         s = bench(n, steps=10 if n >= 100_000 else 20)

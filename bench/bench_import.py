@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import tempfile
 import time
@@ -24,18 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import cpu_model  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
-
-
-def cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def grid(n_tris: int) -> tuple[np.ndarray, np.ndarray]:
@@ -133,7 +125,7 @@ def main() -> None:
             evaluate(loaded, np.array([0.0]))
             t3 = time.perf_counter()
             results[label] = (t1 - t0, t2 - t1, t3 - t2)
-        print(f"CPU: {cpu_name()} (shared machine: figures are noisy)")
+        print(f"CPU: {cpu_model()} (shared machine: figures are noisy)")
         print(f"1) {args.nodes} animated nodes x {args.tris} triangles ({size / 1e6:.1f} MB .glb):")
         for label, (imp, conv, ev) in results.items():
             print(f"   {label}: import {imp:7.3f} s + renderer mesh cache {conv:7.3f} s + motion at frame 0 {ev:6.3f} s = {imp + conv + ev:7.3f} s")

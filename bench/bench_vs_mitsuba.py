@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_lights import cpu_model  # noqa: E402
+from _common import cpu_model  # noqa: E402
 from bench_render import shot, terrain_ply  # noqa: E402
 
 PRESETS = {"ci-smoke": ((64, 36), 4, 3), "preview": ((320, 180), 16, 4), "final": ((1920, 1080), 256, 8)}
@@ -41,7 +41,6 @@ PRESETS = {"ci-smoke": ((64, 36), 4, 3), "preview": ((320, 180), 16, 4), "final"
 
 def particle_twin(renderer: Any, fi: Any, mi: Any) -> dict[str, Any]:
     """The particle systems frozen at the frame's time, as meshes for the static twin."""
-    from motion.pipeline.render.build import DEFAULT_MATERIAL
     from motion.pipeline.render.slices import particle_mesh
 
     out: dict[str, Any] = {}
