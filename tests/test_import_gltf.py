@@ -18,9 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from _support import run_motion
+from _support import assert_card_upright, run_motion
 from motion.pipeline.errors import SceneError
-from motion.pipeline.frame_output import read_frame
 from motion.pipeline.motion.evaluate import evaluate
 from motion.pipeline.scene.loader import load_scene
 
@@ -479,15 +478,7 @@ def test_textured_card_renders_the_right_way_up(tmp_path):
     b.gltf["meshes"].append({"primitives": [{"attributes": {"POSITION": pos, "TEXCOORD_0": uv}, "indices": b.accessor(np.array([0, 1, 2, 0, 2, 3]), dtype="uint16", target="index"), "material": 0}]})
     b.gltf["scenes"][0]["nodes"] = [b.node(name="Card", mesh=0)]
     b.save(tmp_path / "card.glb")
-    (tmp_path / "card.yaml").write_text(
-        "camera: {position: [0, 0, 4], look_at: [0, 0, 0], fov: 40}\nimports: [{file: card.glb}]\n"
-        "lights: [{type: constant, radiance: 1}]\nrender: {resolution: [16, 16], spp: 2}\n"
-    )
-    proc = run_motion("render", str(tmp_path / "card.yaml"), "-o", str(tmp_path / "out"))
-    assert proc.returncode == 0, proc.stderr
-    rgb = read_frame(next((tmp_path / "out").glob("card.*.exr"))).rgba[..., :3]
-    top, bottom = rgb[5, 8], rgb[11, 8]
-    assert top[0] > 5 * top[2] and bottom[2] > 5 * bottom[0], (top, bottom)
+    assert_card_upright(tmp_path, "card.glb")
 
 
 # --- Blender as the authoring side, where bpy installs -------------------------------------

@@ -148,8 +148,7 @@ def test_textured_usd_card_renders_the_right_way_up(tmp_path):
     a card whose image is red above and blue below renders red at the top."""
     from PIL import Image
 
-    from _support import run_motion
-    from motion.pipeline.frame_output import read_frame
+    from _support import assert_card_upright
 
     img = np.zeros((8, 8, 3), np.uint8)
     img[:4], img[4:] = (255, 0, 0), (0, 0, 255)
@@ -171,12 +170,4 @@ def test_textured_usd_card_renders_the_right_way_up(tmp_path):
     mat.CreateSurfaceOutput().ConnectToSource(surface.ConnectableAPI(), "surface")
     UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(mat)
     stage.GetRootLayer().Save()
-    (tmp_path / "card.yaml").write_text(
-        "camera: {position: [0, 0, 4], look_at: [0, 0, 0], fov: 40}\nimports: [{file: card.usda}]\n"
-        "lights: [{type: constant, radiance: 1}]\nrender: {resolution: [16, 16], spp: 2}\n"
-    )
-    proc = run_motion("render", str(tmp_path / "card.yaml"), "-o", str(tmp_path / "out"))
-    assert proc.returncode == 0, proc.stderr
-    rgb = read_frame(next((tmp_path / "out").glob("card.*.exr"))).rgba[..., :3]
-    top, bottom = rgb[5, 8], rgb[11, 8]
-    assert top[0] > 5 * top[2] and bottom[2] > 5 * bottom[0], (top, bottom)
+    assert_card_upright(tmp_path, "card.usda")
