@@ -149,13 +149,17 @@ def try_claim(frame_file: str | Path, who: Claimant, stale_after_s: float) -> tu
 
 def _write_whole(tmp: Path, body: bytes) -> None:
     """The claim's content, complete, under a temporary name (removed if the write fails)."""
-    fd = os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
+    _fill(os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666), tmp, body)
+
+
+def _fill(fd: int, path: Path, body: bytes) -> None:
+    """Write `body` through `fd` (just created for `path`); remove `path` if that fails."""
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(body)
     except BaseException:
         try:
-            tmp.unlink(missing_ok=True)
+            path.unlink(missing_ok=True)
         except OSError:
             pass
         raise
@@ -180,15 +184,7 @@ def _create(tmp: Path, path: Path, body: bytes) -> bool:
         fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
     except FileExistsError:
         return False
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(body)
-    except BaseException:
-        try:
-            path.unlink(missing_ok=True)
-        except OSError:
-            pass
-        raise
+    _fill(fd, path, body)
     return True
 
 
