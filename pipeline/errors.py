@@ -103,3 +103,18 @@ class IncompleteJobError(MotionError):
     """Some frames failed everywhere; the others finished. Exit code 3."""
 
     exit_code = 3
+
+
+# Errors by stage. Each stage adds its own classes below its own heading (one owner per
+# heading keeps parallel work free of merge conflicts); every class derives from one above.
+
+# --- bake and render (data contract, renderer) ---
+
+
+# --- dynamics and shape geometry ---
+
+
+# --- scene, expressions, motion, orchestration ---
+
+
+# --- deliverables, telecine, examples ---
