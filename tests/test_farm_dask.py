@@ -106,3 +106,27 @@ def test_dask_worker_killed_mid_job(cluster, tmp_path) -> None:
     survivor = {r["worker"] for r in rep["frames"] if r["frame"] in retried and r["status"] == "rendered"}
     assert len(survivor) <= 1 and not any(w.endswith(f":{victim.pid}") for w in survivor)
     assert not leftovers(out)
+
+
+def test_dask_progress_is_per_frame(cluster, tmp_path) -> None:
+    """One chunk of 8 frames on the cluster: progress reports frames while the chunk still
+    runs (the worker logs each written frame to the scheduler)."""
+    import threading
+
+    out = tmp_path / "out"
+    proc = start_motion("render", SCENE, "-o", out, "--frames", "0-7", "--scheduler", cluster["address"], "--threads", "1", "--chunk-size", "8", *SLOW)
+    on_disk_at_first_line: list[int] = []
+
+    def read() -> None:
+        for line in proc.stderr:
+            if line.startswith("  farm-tiny: ") and "/8 frames" in line and not on_disk_at_first_line:
+                on_disk_at_first_line.append(len(frames_in(out)))
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    proc.wait(timeout=180)
+    reader.join(10)
+    assert proc.returncode == 0
+    # per chunk, the first line would come when all 8 frames are on disk
+    assert on_disk_at_first_line and on_disk_at_first_line[0] < 8, on_disk_at_first_line
+    assert report(out)["totals"]["rendered"] == 8

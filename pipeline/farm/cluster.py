@@ -6,20 +6,41 @@ knows who runs what and since when, exactly as with local processes. The task is
 `run_chunk`; its first-frame cache lives in the Dask worker process (a module-level cache
 in `render.job`, alive for the worker's lifetime, reused by every chunk that worker gets),
 frames are written by the worker straight into the shared output folder, and only the
-small `ChunkResult` travels back.
+small `ChunkResult` travels back. Progress moves per frame as with local workers: the task
+logs a `FrameWritten` event to the scheduler as each frame is written
+(`Worker.log_event`), and the client's topic subscription hands it to the farm.
 """
 
 from __future__ import annotations
 
 import time
 import uuid
+from collections import deque
 from typing import Any, Sequence
 
 from ..errors import UsageError
 from ..render.frame_renderer import FrameInput
 from ..render.job import RenderJob
-from .executor import Done, Event, Lost
-from .task import TaskContext, run_chunk
+from .executor import Done, Event, FrameWritten, Lost
+from .task import ChunkResult, TaskContext, run_chunk
+
+FRAME_TOPIC = "motion-frame-written"  # the scheduler's event topic for per-frame progress
+
+
+def run_chunk_reporting(chunk_id: int, job: RenderJob, inputs: Sequence[FrameInput], ctx: TaskContext, topic: str) -> ChunkResult:
+    """`run_chunk` on a Dask worker, logging each written frame to `topic` on the
+    scheduler so the farm's progress moves per frame, not per chunk."""
+    from distributed import get_worker
+
+    worker = get_worker()
+
+    def written(frame: int) -> None:
+        try:
+            worker.log_event(topic, {"worker": worker.address, "chunk": chunk_id, "frame": frame})
+        except Exception:  # progress is best effort; the chunk's result carries every frame
+            pass
+
+    return run_chunk(chunk_id, job, inputs, ctx, on_frame=written)
 
 
 class DaskExecutor:
@@ -41,9 +62,20 @@ class DaskExecutor:
             self.client.close()
             raise UsageError(f"--scheduler: no Dask worker joined {self.address} within {wait_workers_s:g}s ({type(exc).__name__})") from None
         self._running: dict[str, tuple[Any, int]] = {}
+        self._written: deque[FrameWritten] = deque()
+        self._topic = f"{FRAME_TOPIC}-{uuid.uuid4().hex[:8]}"  # this run's frames only
+        self.client.subscribe_topic(self._topic, self._on_frame_event)
         self._live: list[str] = []
         self._refreshed = 0.0
         self._refresh(force=True)
+
+    def _on_frame_event(self, event: tuple[float, Any]) -> None:
+        """Called on the client's event loop for each frame a worker logged."""
+        msg = event[1]
+        try:
+            self._written.append(FrameWritten(str(msg["worker"]), int(msg["chunk"]), int(msg["frame"])))
+        except (KeyError, TypeError, ValueError):
+            return
 
     def _refresh(self, force: bool = False) -> None:
         now = time.monotonic()
@@ -62,11 +94,12 @@ class DaskExecutor:
 
     def submit(self, worker: str, chunk_id: int, job: RenderJob, inputs: Sequence[FrameInput], ctx: TaskContext) -> None:
         fut = self.client.submit(
-            run_chunk,
+            run_chunk_reporting,
             chunk_id,
             job,
             list(inputs),
             ctx,
+            self._topic,
             key=f"motion-chunk-{chunk_id}-{uuid.uuid4().hex[:8]}",
             workers=[worker],
             allow_other_workers=False,
@@ -79,15 +112,24 @@ class DaskExecutor:
         from distributed import wait
 
         futs = [f for f, _ in self._running.values()]
-        if futs:
-            try:
-                wait(futs, timeout=timeout, return_when="FIRST_COMPLETED")
-            except Exception:  # a timeout (dask's own TimeoutError type)
-                pass
-        else:
+        if futs and not self._written:
+            # wake on a finished chunk or, in slices, on a frame a worker logged
+            deadline = time.monotonic() + timeout
+            while not self._written:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    break
+                try:
+                    wait(futs, timeout=min(left, 0.1), return_when="FIRST_COMPLETED")
+                    break
+                except Exception:  # a timeout (dask's own TimeoutError type)
+                    continue
+        elif not futs:
             time.sleep(timeout)
         self._refresh()
         events: list[Event] = []
+        while self._written:
+            events.append(self._written.popleft())
         for w, (fut, chunk_id) in list(self._running.items()):
             if fut.status == "finished":
                 del self._running[w]
@@ -129,4 +171,8 @@ class DaskExecutor:
             except Exception:
                 pass
         self._running.clear()
+        try:
+            self.client.unsubscribe_topic(self._topic)
+        except Exception:  # the connection may already be gone
+            pass
         self.client.close()
