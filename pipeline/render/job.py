@@ -22,11 +22,11 @@ from pathlib import Path
 from typing import Any, Sequence
 
 
+from ..bake import BakedFrame, fingerprint
 from ..frame_output import write_frame
 from ..scene.loader import LoadedScene, load_scene
 from ..timeline import timecode
-from .frame_renderer import FrameInput, FrameRenderer, frame_seed
-from .inputs import fingerprint
+from .frame_renderer import FrameRenderer, frame_seed
 
 RENDERER_VERSION = "motion-render-1"
 
@@ -96,7 +96,7 @@ def scene_reference(scene_path: str | Path, frame_path: str | Path) -> str:
     return os.path.relpath(scene, folder).replace(os.sep, "/")
 
 
-def expected_meta(job: RenderJob, fi: FrameInput) -> dict[str, Any]:
+def expected_meta(job: RenderJob, fi: BakedFrame) -> dict[str, Any]:
     """The attributes a complete frame of this job carries (what --resume compares): the
     frame, the settings hash and the hash of this frame's own baked motion."""
     return {"frame": fi.frame, "settings_hash": job.settings_hash, "motion_hash": fingerprint([fi])[:16]}
@@ -145,7 +145,7 @@ def _root_cause(exc: BaseException) -> str:
     return message if inner is exc else f"{type(exc).__name__}: {message}"
 
 
-def render_frames(job: RenderJob, inputs: Sequence[FrameInput]) -> list[FrameResult]:
+def render_frames(job: RenderJob, inputs: Sequence[BakedFrame]) -> list[FrameResult]:
     """Render and write each frame; a frame's failure is reported, not raised, so the
     others of the task still finish."""
     results = []
@@ -154,7 +154,7 @@ def render_frames(job: RenderJob, inputs: Sequence[FrameInput]) -> list[FrameRes
     return results
 
 
-def _render_one(job: RenderJob, fi: FrameInput) -> FrameResult:
+def _render_one(job: RenderJob, fi: BakedFrame) -> FrameResult:
     t_setup = time.perf_counter()
     try:
         renderer, loaded, variant = _renderer(job)  # a fresh one every frame without the cache
