@@ -27,7 +27,7 @@ from .task import ChunkResult, TaskContext, run_chunk
 FRAME_TOPIC = "motion-frame-written"  # the scheduler's event topic for per-frame progress
 
 
-def run_chunk_reporting(chunk_id: int, job: RenderJob, inputs: Sequence[FrameInput], ctx: TaskContext, topic: str) -> ChunkResult:
+def run_chunk_reporting(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext, topic: str) -> ChunkResult:
     """`run_chunk` on a Dask worker, logging each written frame to `topic` on the
     scheduler so the farm's progress moves per frame, not per chunk."""
     from distributed import get_worker
