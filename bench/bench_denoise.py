@@ -48,7 +48,7 @@ class Shot:
 
     def __init__(self, path: Path, **render: Any) -> None:
         from motion.pipeline.render.frame_renderer import FrameRenderer
-        from motion.pipeline.render.inputs import evaluate_frames
+        from motion.pipeline.bake import evaluate_frames
         from motion.pipeline.scene import load_scene
 
         import gc

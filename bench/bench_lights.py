@@ -62,8 +62,8 @@ def load(folder: Path, text: str, name: str) -> Any:
 def warm_frames(loaded: Any, frames: list[int]) -> tuple[list[np.ndarray], list[float]]:
     """Frames rendered by one worker-style renderer: images and render seconds (the first
     frame, cold, is rendered and dropped)."""
-    from motion.pipeline.render.frame_renderer import FrameRenderer
-    from motion.pipeline.render.inputs import evaluate_frames
+    from motion.pipeline.render.frame_renderer import FrameRenderer, stack_frame
+    from motion.pipeline.bake import evaluate_frames
 
     gc.collect()
     renderer = FrameRenderer(loaded)
@@ -159,8 +159,8 @@ def examples(spp: int) -> list[dict[str, Any]]:
     """Each example at a third of its shot, ours vs `path` on the same records."""
     import mitsuba as mi
 
-    from motion.pipeline.render.frame_renderer import FrameRenderer
-    from motion.pipeline.render.inputs import evaluate_frames
+    from motion.pipeline.render.frame_renderer import FrameRenderer, stack_frame
+    from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.scene import load_scene
 
     rows = []
@@ -174,7 +174,7 @@ def examples(spp: int) -> list[dict[str, Any]]:
         (fi,) = evaluate_frames(loaded, [frame])
         ours, _ = renderer.render(fi)
         up = renderer.last_aovs["N"][..., 1] > 0.9
-        ref = np.array(mi.render(renderer._full_scene(fi, None), seed=7, spp=spp))[..., :3]
+        ref = np.array(mi.render(renderer._full_scene(stack_frame(fi), None), seed=7, spp=spp))[..., :3]
         o_mean, o_contrast = ground_stats(ours[..., :3], up)
         r_mean, r_contrast = ground_stats(ref, up)
         rows.append({"scene": path.stem, "frame": frame, "ground_px": int(up.sum()), "ours_mean": o_mean, "path_mean": r_mean, "ours_contrast": o_contrast, "path_contrast": r_contrast})

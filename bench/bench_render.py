@@ -94,7 +94,7 @@ def cache_figures(folder: Path, frames: int) -> dict[str, float]:
     import mitsuba as mi
 
     from motion.pipeline.render.frame_renderer import FrameRenderer
-    from motion.pipeline.render.inputs import evaluate_frames
+    from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.scene import load_scene
 
     loaded = load_scene(shot(folder, movers=4))
@@ -123,7 +123,7 @@ t0 = time.perf_counter()
 from motion.pipeline import variant
 variant.activate("auto", quiet=True)
 from motion.pipeline.render.frame_renderer import FrameRenderer
-from motion.pipeline.render.inputs import evaluate_frames
+from motion.pipeline.bake import evaluate_frames
 from motion.pipeline.scene import load_scene
 loaded = load_scene(sys.argv[1])
 inputs = evaluate_frames(loaded, [0, 1, 2])
@@ -176,7 +176,7 @@ def static_twin(folder: Path, moving: Path, fi: object) -> Path:
         obj = dict(obj)
         name = obj["name"]
         if obj.get("shape") == "particles":
-            positions, alive = fi.particles[name]
+            positions, alive = fi.at_frame.particles[name].positions, fi.at_frame.particles[name].alive
             verts, faces = particle_mesh(positions[0], alive[0], obj["radius"], int(alive[0].sum()))
             ply = folder / f"frozen-{name}.ply"
             with open(ply, "wb") as f:
@@ -188,7 +188,7 @@ def static_twin(folder: Path, moving: Path, fi: object) -> Path:
             objects.append({"name": name, "shape": "mesh", "file": ply.name, "material": obj["material"]})
             continue
         if "motion" in obj:
-            t = fi.objects[name][0][0]
+            t = fi.at_frame.objects[name].translation[0]
             obj.pop("motion")
             obj["transform"] = {"translate": [float(x) for x in t]}
         objects.append(obj)
@@ -203,7 +203,7 @@ def _warm_time(path: Path, frames: list[int]) -> tuple[float, object]:
     import gc
 
     from motion.pipeline.render.frame_renderer import FrameRenderer
-    from motion.pipeline.render.inputs import evaluate_frames
+    from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.scene import load_scene
 
     gc.collect()
@@ -236,7 +236,7 @@ def blur_error(folder: Path) -> dict[str, float]:
     import test_render_blur as T
 
     from motion.pipeline.render.frame_renderer import FrameRenderer
-    from motion.pipeline.render.inputs import evaluate_frames
+    from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.scene import load_scene
 
     expected = T._trapezoid(-1.0, 0.0)
@@ -268,7 +268,7 @@ import json, sys, psutil
 from motion.pipeline import variant
 variant.activate("auto", quiet=True)
 from motion.pipeline.render.frame_renderer import FrameRenderer
-from motion.pipeline.render.inputs import evaluate_frames
+from motion.pipeline.bake import evaluate_frames
 from motion.pipeline.scene import load_scene
 loaded = load_scene(sys.argv[1])
 frames = int(sys.argv[2])

@@ -45,9 +45,9 @@ def particle_twin(renderer: Any, fi: Any, mi: Any) -> dict[str, Any]:
 
     out: dict[str, Any] = {}
     for group in renderer._groups:
-        if group.kind != "particles" or group.name not in fi.particles:
+        if group.kind != "particles" or group.name not in fi.at_frame.particles:
             continue
-        positions, alive = fi.particles[group.name]
+        positions, alive = fi.at_frame.particles[group.name].positions, fi.at_frame.particles[group.name].alive
         verts, faces = particle_mesh(positions[0], alive[0], group.radius, positions.shape[1])
         mesh = mi.Mesh(group.name, len(verts), len(faces))
         params = mi.traverse(mesh)
@@ -60,7 +60,9 @@ def particle_twin(renderer: Any, fi: Any, mi: Any) -> dict[str, Any]:
 
 def twin(renderer: Any, fi: Any, mi: Any) -> Any:
     """Mitsuba's `path` on the frame's static twin (`_full_scene` records + particles)."""
-    d = renderer._full_scene_dict(fi, None)
+    from motion.pipeline.render.frame_renderer import stack_frame
+
+    d = renderer._full_scene_dict(stack_frame(fi), None)
     d.update(particle_twin(renderer, fi, mi))
     return mi.load_dict(d)
 
@@ -82,7 +84,7 @@ def case(folder: Path, preset: str, movers: int, particles: int, frames: int, bl
     import mitsuba as mi
 
     from motion.pipeline.render.frame_renderer import FrameRenderer
-    from motion.pipeline.render.inputs import evaluate_frames
+    from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.scene import load_scene
 
     res, spp, depth = PRESETS[preset]

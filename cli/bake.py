@@ -10,7 +10,7 @@ import click
 @click.command("bake")
 @click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False, path_type=Path),
-              help="FILE.json (rigid transforms and scalars) or FILE.npz (also vertices and particles).")
+              help="FILE.json (rigid transforms and scalars) or FILE.npz (also vertices and particles across the shutter).")
 @click.option("--frames", help="Frames as for `motion render`: 0-119, 0-119x2, 1,5,9 or mixes (default: the scene's timeline).")
 @click.option("--preset", help="Bake with a render preset applied (its shutter_samples), to match a render that uses it.")
 def bake(scene: Path, output: Path, frames: str | None, preset: str | None) -> None:

@@ -111,6 +111,14 @@ class IncompleteJobError(MotionError):
 # --- bake and render (data contract, renderer) ---
 
 
+class BakeFileError(MotionError):
+    """A baked-motion file cannot be written or read back (path, format, layout, values)."""
+
+
+class FrameNotBakedError(MotionError):
+    """A frame was asked of a bake that does not hold it."""
+
+
 # --- dynamics and shape geometry ---
 
 

@@ -1,5 +1,5 @@
 """Render helpers for tests: a scene from YAML text, rendered in this process through the
-real pipeline (bake -> FrameInput -> FrameRenderer)."""
+real pipeline (bake -> BakedFrame -> FrameRenderer)."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def render(loaded: Any, frames: list[int], mode: str | None = None, renderer: An
     """Render `frames` with one (first-frame cached) renderer; returns images, stats, renderer."""
     activate()
     from motion.pipeline.render.frame_renderer import FrameRenderer
-    from motion.pipeline.render.inputs import evaluate_frames
+    from motion.pipeline.bake import evaluate_frames
 
     if renderer is None:
         # like a farm worker between jobs: free earlier scenes first. drjit traces virtual

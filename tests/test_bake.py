@@ -5,13 +5,17 @@ from __future__ import annotations
 import json
 import subprocess
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
 
-from motion.pipeline.bake import BakeFileError, bake, read_baked, write_baked
+from motion.pipeline.bake import BakeFileError, FrameNotBakedError, bake, read_baked, write_baked
 from motion.pipeline.motion import Pose, evaluate
 from motion.pipeline.scene import load_scene
+
+if TYPE_CHECKING:
+    from motion.pipeline.bake import BakedFrame
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = ROOT / "scenes"
@@ -29,10 +33,10 @@ def test_frames_shutters_and_samples() -> None:
     assert f.sample_times[0] == f.shutter[0] and f.sample_times[-1] == f.shutter[1]
     direct = evaluate(loaded, f.sample_times)
     for name, pose in direct.objects.items():
-        for a, b in zip(f.motion.objects[name], pose):
+        for a, b in zip(f.across_shutter.objects[name], pose):
             np.testing.assert_allclose(a, b, atol=1e-12)
     np.testing.assert_allclose(f.at_frame.objects["hips"].translation, [[0.6, 0.95, 0.0]], atol=1e-12)
-    with pytest.raises(KeyError):
+    with pytest.raises(FrameNotBakedError, match="frame 5 is not in this bake"):
         baked.frame(5)
 
 
@@ -57,15 +61,16 @@ def test_bake_cli_frames_and_preset(tmp_path: Path) -> None:
 def test_npz_and_json_layouts(tmp_path: Path) -> None:
     loaded = load_scene(SCENES / "spinning-top.yaml")
     baked = bake(loaded, [0, 1, 2])
-    npz = read_baked(write_baked(baked, tmp_path / "m.npz"))
-    arrays = npz["arrays"]
+    with np.load(write_baked(baked, tmp_path / "m.npz")) as data:
+        arrays = {k: data[k] for k in data.files}
+    npz = json.loads(str(arrays["meta"]))
     assert npz["samples_per_frame"] == 9 and npz["fps"] == "24"
     assert arrays["frames"].tolist() == [0, 1, 2]
     assert arrays["samples/objects/top/rotation"].shape == (3, 9, 4)
     assert arrays["at_frame/objects/top/rotation"].shape == (3, 4)
     assert arrays["samples/camera_scalars/fov"].shape == (3, 9)
-    np.testing.assert_array_equal(arrays["samples/objects/fin_a/rotation"][1], baked.frames[1].motion.objects["fin_a"].rotation)
-    doc = read_baked(write_baked(baked, tmp_path / "m.json"))
+    np.testing.assert_array_equal(arrays["samples/objects/fin_a/rotation"][1], baked.frames[1].across_shutter.objects["fin_a"].rotation)
+    doc = json.loads(write_baked(baked, tmp_path / "m.json").read_text())
     frame = doc["frames"][2]
     assert frame["frame"] == 2 and len(frame["sample_times"]) == 9
     np.testing.assert_allclose(frame["samples"]["objects"]["top"]["rotation"], arrays["samples/objects/top/rotation"][2])
@@ -97,7 +102,7 @@ def test_bake_simulates_dynamics_when_no_simulation_given(monkeypatch: pytest.Mo
     assert len(calls) == 1
     t_start, t_end = calls[0]
     assert t_start == pytest.approx(-1 / 96) and t_end == pytest.approx(95 / 24 + 1 / 96)
-    np.testing.assert_allclose(baked.frame(95).motion.objects["ball_lo"].translation[:, 0], baked.frame(95).sample_times)
+    np.testing.assert_allclose(baked.frame(95).across_shutter.objects["ball_lo"].translation[:, 0], baked.frame(95).sample_times)
 
 
 def test_cli_bake_walk_cycle(tmp_path: Path) -> None:
@@ -110,3 +115,131 @@ def test_cli_bake_walk_cycle(tmp_path: Path) -> None:
     assert doc["frames"][24]["at_frame"]["objects"]["hips"]["translation"] == pytest.approx([1.2, 0.95, 0.0])
     bad = subprocess.run([str(MOTION), "bake", str(SCENES / "walk-cycle.yaml"), "-o", str(out), "--frames", "x"], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "--frames" in bad.stderr and "Traceback" not in bad.stderr
+
+
+# --- the contract: one reader, one fingerprint ---------------------------------------------
+
+
+def _every_kind_frame(seed: int = 0) -> "BakedFrame":
+    """A BakedFrame (N = 3) with every kind of animated value: an object, the camera with
+    fov and ortho_width, a light with a colour and a scalar channel, a deforming mesh's
+    vertices and a particle system."""
+    from motion.pipeline.bake import BakedFrame
+    from motion.pipeline.dynamics.particles import ParticleSamples
+    from motion.pipeline.motion import SceneMotion
+
+    rng = np.random.default_rng(seed)
+
+    def motion(times: np.ndarray) -> SceneMotion:
+        t = len(times)
+
+        def pose() -> Pose:
+            q = rng.normal(size=(t, 4))
+            return Pose(rng.normal(size=(t, 3)), q / np.linalg.norm(q, axis=1, keepdims=True), rng.uniform(0.5, 2, (t, 3)))
+
+        return SceneMotion(
+            times=times,
+            objects={"box": pose()},
+            camera=pose(),
+            camera_scalars={"fov": rng.uniform(20, 60, t), "ortho_width": rng.uniform(1, 3, t)},
+            lights={"key": pose()},
+            light_scalars={"key": {"intensity": rng.uniform(0, 9, (t, 3)), "scale": rng.uniform(0, 1, t)}},
+            vertices={"cloth": rng.normal(size=(t, 4, 3))},
+            particles={"spray": ParticleSamples(ids=np.arange(5), positions=rng.normal(size=(t, 5, 3)), alive=rng.uniform(size=(t, 5)) > 0.5)},
+        )
+
+    samples = np.array([0.49, 0.5, 0.51])
+    return BakedFrame(frame=12, time=0.5, shutter=(0.49, 0.51), sample_times=samples, at_frame=motion(np.array([0.5])), across_shutter=motion(samples))
+
+
+def test_fingerprint_changes_with_any_animated_value() -> None:
+    """Property: changing any single number anywhere in a baked frame (every leaf the
+    generic walk finds: objects, camera, fov, ortho_width, lights, light scalars,
+    vertices, particles, times) changes the fingerprint."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from motion.pipeline.bake import fingerprint, leaves
+
+    frame = _every_kind_frame()
+    base = fingerprint([frame])
+    keys = [k for k, _ in leaves(frame)]
+    for kind in ("objects/box", "/camera/", "camera_scalars/fov", "camera_scalars/ortho_width", "lights/key", "light_scalars/key/intensity",
+                 "light_scalars/key/scale", "vertices/cloth", "particles/spray/positions", "particles/spray/alive"):
+        assert any(kind in k for k in keys), kind
+    assert fingerprint([_every_kind_frame()]) == base  # stable
+
+    def arrays(value: object) -> list[np.ndarray]:
+        """The record's own mutable arrays, in the walk's order."""
+        import dataclasses
+
+        if dataclasses.is_dataclass(value):
+            return [a for f in dataclasses.fields(value) for a in arrays(getattr(value, f.name))]
+        if isinstance(value, dict):
+            return [a for k in sorted(value) for a in arrays(value[k])]
+        if isinstance(value, tuple):
+            return [a for v in value for a in arrays(v)]
+        return [value] if isinstance(value, np.ndarray) else []
+
+    @settings(max_examples=200, deadline=None, derandomize=True)
+    @given(st.data())
+    def check(data: st.DataObject) -> None:
+        f = _every_kind_frame()
+        leaf = data.draw(st.sampled_from(arrays(f)))
+        i = data.draw(st.integers(0, leaf.size - 1))
+        flat = leaf.reshape(-1)
+        old = flat[i]
+        if leaf.dtype == bool:
+            flat[i] = not old
+        else:
+            flat[i] = old + data.draw(st.sampled_from([1, -3] if leaf.dtype.kind in "iu" else [1e-9, -0.5, 3.0]))
+        assert fingerprint([f]) != base
+
+    check()
+    # the scalar fields outside the arrays too
+    import dataclasses
+
+    for change in ({"frame": 13}, {"time": 0.51}, {"shutter": (0.49, 0.52)}):
+        assert fingerprint([dataclasses.replace(frame, **change)]) != base
+
+
+def test_read_baked_returns_the_records_that_were_written(tmp_path: Path) -> None:
+    """JSON and NPZ read back into BakedMotion; a rigid scene's frames fingerprint as the
+    bake's (what `--resume --motion` relies on); NPZ brings vertices across the shutter."""
+    from motion.pipeline.bake import fingerprint
+
+    baked = bake(load_scene(SCENES / "spinning-top.yaml"), [0, 5])
+    for ext in ("json", "npz"):
+        back = read_baked(write_baked(baked, tmp_path / f"m.{ext}"))
+        assert (back.scene, back.fps, back.shutter_angle, back.shutter_position) == (baked.scene, baked.fps, baked.shutter_angle, baked.shutter_position)
+        assert [f.frame for f in back.frames] == [0, 5] and back.samples_per_frame == 9
+        assert fingerprint(back.frames) == fingerprint(baked.frames), ext
+    flock = load_scene(SCENES / "flock.yaml", {"render": {"shutter_samples": 3}})
+    fb = bake(flock, [2])
+    back = read_baked(write_baked(fb, tmp_path / "f.npz")).frame(2)
+    assert list(back.across_shutter.vertices) == ["darts"]
+    np.testing.assert_array_equal(back.across_shutter.vertices["darts"], fb.frame(2).across_shutter.vertices["darts"])
+    assert back.at_frame.vertices == {}  # not in the file (docs/bake-format.md)
+
+
+def test_read_baked_refuses_a_broken_frame(tmp_path: Path) -> None:
+    baked = bake(load_scene(SCENES / "spinning-top.yaml"), [0, 1])
+    doc = json.loads(write_baked(baked, tmp_path / "m.json").read_text())
+    doc["frames"][1]["samples"]["lights"] = {"light0": {"translation": [[0, 0, 0]] * 9, "rotation": [[0, 0, 0, 0]] * 9, "scale": [[1, 1, 1]] * 9}}
+    (tmp_path / "m.json").write_text(json.dumps(doc))
+    with pytest.raises(BakeFileError, match=r"m.json: frame 1: light 'light0': rotation is not a unit quaternion"):
+        read_baked(tmp_path / "m.json")
+    doc["frames"][1]["samples"] = {}
+    (tmp_path / "m.json").write_text(json.dumps(doc))
+    with pytest.raises(BakeFileError, match="frame 1 is malformed"):
+        read_baked(tmp_path / "m.json")
+
+
+def test_farm_motion_file_refuses_nonrigid_scenes_and_says_why(tmp_path: Path) -> None:
+    from motion.pipeline.errors import UsageError
+    from motion.pipeline.farm.motion_source import file_inputs
+
+    flock = load_scene(SCENES / "flock.yaml", {"render": {"shutter_samples": 3}})
+    path = write_baked(bake(flock, [2]), tmp_path / "f.npz")
+    with pytest.raises(UsageError, match="frame-time geometry a bake file does not carry"):
+        file_inputs(flock, path, [2])

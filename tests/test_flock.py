@@ -45,7 +45,7 @@ def test_agents_face_along_their_velocity(tmp_path: Path) -> None:
     loaded = load_scene(path)
     baked = bake(loaded, [12])
     frame = baked.frames[0]
-    verts = frame.motion.vertices["birds"]  # [N, count * 24, 3] (a cube at detail 1: 24 vertices)
+    verts = frame.across_shutter.vertices["birds"]  # [N, count * 24, 3] (a cube at detail 1: 24 vertices)
     assert verts.shape == (9, 40 * 24, 3)
     x, v = simulate(loaded, 1.0).flock("birds").at(frame.sample_times)
     agents = verts.reshape(9, 40, 24, 3)

@@ -21,7 +21,7 @@ import json, sys
 from motion.pipeline import variant
 variant.activate("auto", quiet=True)
 from motion.pipeline.scene import load_scene
-from motion.pipeline.render.inputs import evaluate_frames
+from motion.pipeline.bake import evaluate_frames
 from motion.pipeline.render.frame_renderer import FrameRenderer
 import numpy as np
 loaded = load_scene(sys.argv[1], {"render": {"resolution": [48, 32], "spp": 4, "max_depth": 3, "shutter_samples": 5}})
@@ -95,7 +95,7 @@ render: {resolution: [32, 24], spp: 2, max_depth: 3, seed: 7, seed_policy: %s}
 @pytest.mark.parametrize("policy", ["per-frame", "fixed"])
 def test_seed_policy(tmp_path: Path, policy: str) -> None:
     """Through the worker's task path (render_frames), as the farm renders."""
-    from motion.pipeline.render.inputs import evaluate_frames
+    from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.render.job import RenderJob, render_frames, scene_hashes
 
     loaded = load(tmp_path, STILL % policy)

@@ -65,8 +65,8 @@ def test_agrees_with_mitsuba_path(tmp_path: Path, moving: bool) -> None:
     activate()
     import mitsuba as mi
 
-    from motion.pipeline.render.frame_renderer import FrameRenderer
-    from motion.pipeline.render.inputs import evaluate_frames
+    from motion.pipeline.render.frame_renderer import FrameRenderer, stack_frame
+    from motion.pipeline.bake import evaluate_frames
 
     loaded = load(tmp_path, _scene(tmp_path, moving))
     (fi,) = evaluate_frames(loaded, [0])
@@ -74,7 +74,7 @@ def test_agrees_with_mitsuba_path(tmp_path: Path, moving: bool) -> None:
     if moving:
         assert set(renderer.mover_names) == {"a", "b", "c", "d", "e"}
     ours = np.stack([renderer.render(fi)[0][..., :3] for _ in range(1)])[0]
-    reference = renderer._full_scene(fi, None)  # the same records, Mitsuba's `path`
+    reference = renderer._full_scene(stack_frame(fi), None)  # the same records, Mitsuba's `path`
     ref_a = np.array(mi.render(reference, seed=11, spp=SPP))[..., :3]
     ref_b = np.array(mi.render(reference, seed=12, spp=SPP))[..., :3]
     assert np.isfinite(ours).all()
@@ -284,7 +284,7 @@ def test_light_moving_within_the_shutter_is_placed_at_each_paths_time(tmp_path: 
     import mitsuba as mi
 
     from _render_support import render
-    from motion.pipeline.render.inputs import evaluate_frames
+    from motion.pipeline.bake import evaluate_frames
 
     if kind == "point":  # x from -3 to 3 over frames 0..2: 1.5 m during frame 1's shutter
         lights = "  - {type: point, position: [0, 2, 0], intensity: 10, " + _KEYED % ("translate", "[-3, 2, 0]", "[3, 2, 0]") + "}"

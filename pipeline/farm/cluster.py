@@ -19,7 +19,7 @@ from collections import deque
 from typing import Any, Sequence
 
 from ..errors import UsageError
-from ..render.frame_renderer import FrameInput
+from ..bake import BakedFrame
 from ..render.job import RenderJob
 from .executor import Done, Event, FrameWritten, Lost
 from .task import ChunkResult, TaskContext, run_chunk
@@ -27,7 +27,7 @@ from .task import ChunkResult, TaskContext, run_chunk
 FRAME_TOPIC = "motion-frame-written"  # the scheduler's event topic for per-frame progress
 
 
-def run_chunk_reporting(chunk_id: int, job: RenderJob, inputs: Sequence[FrameInput], ctx: TaskContext, topic: str) -> ChunkResult:
+def run_chunk_reporting(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext, topic: str) -> ChunkResult:
     """`run_chunk` on a Dask worker, logging each written frame to `topic` on the
     scheduler so the farm's progress moves per frame, not per chunk."""
     from distributed import get_worker
@@ -92,7 +92,7 @@ class DaskExecutor:
     def can_grow(self) -> bool:
         return True  # workers may join the cluster at any time
 
-    def submit(self, worker: str, chunk_id: int, job: RenderJob, inputs: Sequence[FrameInput], ctx: TaskContext) -> None:
+    def submit(self, worker: str, chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext) -> None:
         fut = self.client.submit(
             run_chunk_reporting,
             chunk_id,

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol, Sequence, Union
 
-from ..render.frame_renderer import FrameInput
+from ..bake import BakedFrame
 from ..render.job import RenderJob
 from .task import ChunkResult, TaskContext
 
@@ -53,7 +53,7 @@ class Executor(Protocol):
     def live_workers(self) -> list[str]:
         """Every worker alive (idle or busy)."""
 
-    def submit(self, worker: str, chunk_id: int, job: RenderJob, inputs: Sequence[FrameInput], ctx: TaskContext) -> None:
+    def submit(self, worker: str, chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext) -> None:
         """Start a chunk on an idle worker."""
 
     def poll(self, timeout: float) -> list[Event]:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
 from typing import Any, Sequence
 
-from ..render.frame_renderer import FrameInput
+from ..bake import BakedFrame
 from ..render.job import RenderJob
 from .executor import Done, Event, FrameWritten, Lost
 from .task import TaskContext, run_chunk
@@ -108,7 +108,7 @@ class LocalExecutor:
     def can_grow(self) -> bool:
         return self._respawns_left > 0
 
-    def submit(self, worker: str, chunk_id: int, job: RenderJob, inputs: Sequence[FrameInput], ctx: TaskContext) -> None:
+    def submit(self, worker: str, chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext) -> None:
         w = self._workers[worker]
         w.chunk = chunk_id
         try:

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from ..frame_output import is_complete
-from ..render.frame_renderer import FrameInput
+from ..bake import BakedFrame
 from ..render.job import FrameResult, RenderJob, expected_meta
 from .claims import claim_path, is_stale, read_claim, release, remove_partials
 from .config import FarmConfig
@@ -69,7 +69,7 @@ class Scheduler:
         self,
         executor: Executor,
         job: RenderJob,
-        inputs: dict[int, FrameInput],
+        inputs: dict[int, BakedFrame],
         ctx: TaskContext,
         config: FarmConfig,
         notify: Notify | None = None,

@@ -10,7 +10,7 @@ from typing import Callable, Sequence
 
 from ..errors import DiskFaultError
 from ..frame_output import is_complete
-from ..render.frame_renderer import FrameInput
+from ..bake import BakedFrame
 from ..render.job import FrameResult, RenderJob, expected_meta, render_frames, worker_id
 from .claims import Claimant, release, remove_partials, try_claim
 
@@ -39,7 +39,7 @@ class ChunkResult:
     disk_fault: str | None = None  # the disk refused a write: the chunk stopped there
 
 
-def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[FrameInput], ctx: TaskContext, on_frame: Callable[[int], None] | None = None) -> ChunkResult:
+def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext, on_frame: Callable[[int], None] | None = None) -> ChunkResult:
     """Render one chunk in this worker process (local or Dask). `on_frame(frame)` is
     called as each frame is written (the local executor tells the farm at once, so
     progress moves per frame, not per chunk)."""

@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from ..bake import BakedFrame
 from ..motion.pose import quat_mul, quat_rotate, slerp
 from ..scene.loader import LoadedScene
 from ..scene.schema import Empty, Particles
@@ -33,13 +34,15 @@ from .build import (
 
 
 @dataclass(frozen=True)
-class FrameInput:
-    """What a worker needs to render one frame: poses at the frame time (index 0) and at
-    the N baked samples across the shutter (indices 1..N), from the baked motion."""
+class StackedFrame:
+    """The renderer's own view of one `BakedFrame`, built by `stack_frame` alone: every
+    track stacked as [frame time, N shutter samples], row 0 at the frame time and rows
+    1..N across the shutter (`samples` = N)."""
 
     frame: int
     time: float
     shutter: tuple[float, float]
+    samples: int
     objects: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]  # name -> (t [1+N,3], q [1+N,4], s [1+N,3])
     camera: tuple[np.ndarray, np.ndarray]  # (t [1+N,3], q [1+N,4])
     fov: np.ndarray  # [1+N]
@@ -48,6 +51,34 @@ class FrameInput:
     vertices: dict[str, np.ndarray] = field(default_factory=dict)  # deforming meshes [1+N, V, 3], object space
     ortho_width: np.ndarray | None = None  # [1+N], orthographic cameras
     particles: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)  # (positions [1+N, n, 3], alive [1+N, n])
+
+
+def stack_frame(frame: BakedFrame) -> StackedFrame:
+    """`frame.at_frame` followed by `frame.across_shutter`, track by track."""
+    at, across = frame.at_frame, frame.across_shutter
+
+    def pose(p: Any, q: Any) -> tuple[np.ndarray, ...]:
+        return tuple(np.concatenate([x, y]) for x, y in zip(p, q))
+
+    fov = np.concatenate([at.camera_scalars["fov"], across.camera_scalars["fov"]])
+    ortho = np.concatenate([at.camera_scalars["ortho_width"], across.camera_scalars["ortho_width"]]) if "ortho_width" in at.camera_scalars else None
+    return StackedFrame(
+        frame=frame.frame,
+        time=float(frame.time),
+        shutter=(float(frame.shutter[0]), float(frame.shutter[1])),
+        samples=len(across.times),
+        objects={n: pose(p, across.objects[n]) for n, p in at.objects.items()},  # type: ignore[misc]
+        camera=pose(at.camera, across.camera)[:2],  # type: ignore[arg-type]
+        fov=np.asarray(fov, dtype=float),
+        ortho_width=None if ortho is None else np.asarray(ortho, dtype=float),
+        lights={n: pose(p, across.lights[n]) for n, p in at.lights.items()},  # type: ignore[misc]
+        light_scalars={n: {c: np.concatenate([v, across.light_scalars[n][c]]) for c, v in d.items()} for n, d in at.light_scalars.items()},
+        vertices={n: np.concatenate([v, across.vertices[n]]) for n, v in at.vertices.items()},
+        particles={
+            n: (np.concatenate([p.positions, across.particles[n].positions]), np.concatenate([p.alive, across.particles[n].alive]))
+            for n, p in at.particles.items()
+        },
+    )
 
 
 @dataclass
@@ -140,7 +171,7 @@ class FrameRenderer:
 
     # --- build (cold) -----------------------------------------------------------------
 
-    def _build(self, fi: FrameInput) -> None:
+    def _build(self, fi: StackedFrame) -> None:
         mi = self._mi
         scene = self.loaded.scene
         materials = {m.name: material_dict(m, self.loaded) for m in scene.materials}
@@ -180,7 +211,7 @@ class FrameRenderer:
             self._mover_scale[name] = np.array(s[0])
             self._mover_params[name] = mi.traverse(movers[-1])
         self._movers = movers
-        self._scene.integrator().set_movers(movers, len(fi.fov) - 1)
+        self._scene.integrator().set_movers(movers, fi.samples)
         self._scene.integrator().set_lights([(light.type, mi.load_dict(unit_light_dict(light))) for _, light in self.moving_lights])
         w, h = self.settings.resolution
         if scene.camera.type == "orthographic":
@@ -194,7 +225,7 @@ class FrameRenderer:
         # first warm frame replays the cold frame's kernels instead of compiling new ones
         self._update(fi)
 
-    def _add_shapes(self, d: dict[str, Any], objects: Any, fi: FrameInput, materials: dict[str, Any], u: float | None = None) -> None:
+    def _add_shapes(self, d: dict[str, Any], objects: Any, fi: StackedFrame, materials: dict[str, Any], u: float | None = None) -> None:
         """The visible `objects`' shapes at the frame time (u None) or at shutter fraction u."""
         for obj in objects:
             if not obj.visible:
@@ -204,7 +235,7 @@ class FrameRenderer:
             for k, shape in enumerate(object_shapes(obj, self.loaded, trs_matrix(ot, oq, s[0]), materials)):
                 d[f"{obj.name}__{k}"] = shape
 
-    def _add_lights(self, d: dict[str, Any], fi: FrameInput, u: float | None = None, skip: set[int] = set()) -> None:
+    def _add_lights(self, d: dict[str, Any], fi: StackedFrame, u: float | None = None, skip: set[int] = set()) -> None:
         """Every light (but those in `skip`) at the frame's time (u None) or at shutter
         fraction u, placed by its baked world_from_light frame."""
         for i, light in enumerate(self.loaded.scene.lights):
@@ -219,7 +250,7 @@ class FrameRenderer:
             scalars = {k: _first(v) for k, v in fi.light_scalars.get(key, {}).items()}
             d[key.replace(".", "_")] = light_dict(light, self.loaded, m, scalars)
 
-    def _build_group(self, name: str, fi: FrameInput, materials: dict[str, Any]) -> Any:
+    def _build_group(self, name: str, fi: StackedFrame, materials: dict[str, Any]) -> Any:
         from .build import DEFAULT_MATERIAL
         from .slices import build_group
 
@@ -250,15 +281,15 @@ class FrameRenderer:
             self.last_aovs[layer] = image[..., index[0]] if len(index) == 1 and "." not in names[index[0] - 4] else image[..., index]
         return image[..., :4]
 
-    def _slice_count(self, fi: FrameInput) -> int:
-        return max(1, min(self.settings.time_slices, len(fi.fov) - 1))
+    def _slice_count(self, fi: StackedFrame) -> int:
+        return max(1, min(self.settings.time_slices, fi.samples))
 
-    def _update_groups(self, fi: FrameInput, mode: str, u_fixed: float | None) -> None:
+    def _update_groups(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> None:
         """Each slice's geometry at its time: slice s of S holds the baked sample nearest
         u = s / (S - 1) (all at one instant for `off` and for one sub-frame)."""
         from .slices import particle_mesh, update_group
 
-        n = len(fi.fov) - 1
+        n = fi.samples
         count = self._slice_count(fi)
         if mode == "off":
             index = [0] * count
@@ -284,7 +315,7 @@ class FrameRenderer:
                     per_slice.append(quat_rotate(q[i], local[i] * s[i]) + t[i])
             update_group(self._mi, g, per_slice)
 
-    def _grow(self, group: Any, needed: int, fi: FrameInput) -> None:
+    def _grow(self, group: Any, needed: int, fi: StackedFrame) -> None:
         from .slices import build_group
 
         k = self._groups.index(group)
@@ -295,7 +326,7 @@ class FrameRenderer:
 
     # --- per frame (warm) ---------------------------------------------------------------
 
-    def _update(self, fi: FrameInput) -> tuple[str, ...]:
+    def _update(self, fi: StackedFrame) -> tuple[str, ...]:
         """Per-frame parameter changes: the sensor only (moving lights are per frame too).
         Returns the keys changed; shapes of the static set never appear here, so its BVH
         is never rebuilt."""
@@ -316,7 +347,7 @@ class FrameRenderer:
         changed += self._update_mover_scales(fi)
         return tuple(changed)
 
-    def _update_lights(self, fi: FrameInput) -> list[str]:
+    def _update_lights(self, fi: StackedFrame) -> list[str]:
         """Animated lights at the frame's time: build the light as it is now and copy its
         parameters into the scene (opaque, so new values replay the same kernels)."""
         dr, mi = self._dr, self._mi
@@ -338,7 +369,7 @@ class FrameRenderer:
                     keys.append(target)
         return keys
 
-    def _update_mover_scales(self, fi: FrameInput) -> list[str]:
+    def _update_mover_scales(self, fi: StackedFrame) -> list[str]:
         """A mover's scale is applied in its rest frame, per frame (not per sample): only
         that mover's small BVH is rebuilt, and only when its scale changed."""
         keys: list[str] = []
@@ -356,8 +387,8 @@ class FrameRenderer:
             self._mover_scale[name] = s
         return keys
 
-    def _integrator_frame(self, fi: FrameInput, mode: str, u_fixed: float | None = None) -> None:
-        n = len(fi.fov) - 1
+    def _integrator_frame(self, fi: StackedFrame, mode: str, u_fixed: float | None = None) -> None:
+        n = fi.samples
         m = len(self.mover_names)
         mt = np.zeros((m, n, 3))
         mq = np.zeros((m, n, 4))
@@ -386,11 +417,11 @@ class FrameRenderer:
         if self._groups:
             self._update_groups(fi, mode, u_fixed)
 
-    def _moving_light_frame(self, fi: FrameInput, mode: str, u_fixed: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _moving_light_frame(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The moving lights' world_from_light across the shutter ([L, N, 3], [L, N, 4],
         as the movers': all at the frame time for `off`, all at u for one sub-frame) and
         their colours at the frame's time ([L, 3])."""
-        n = len(fi.fov) - 1
+        n = fi.samples
         count = len(self.moving_lights)
         lt, lq, rgb = np.zeros((count, n, 3)), np.zeros((count, n, 4)), np.zeros((count, 3))
         for k, (i, light) in enumerate(self.moving_lights):
@@ -406,12 +437,12 @@ class FrameRenderer:
             rgb[k] = np.asarray(value[0] if value is not None else getattr(light, LIGHT_CHANNEL[light.type]), dtype=float)
         return lt, lq, rgb
 
-    def _full_scene(self, fi: FrameInput, u: float | None) -> Any:
+    def _full_scene(self, fi: StackedFrame, u: float | None) -> Any:
         """The whole scene at one instant (u = shutter fraction, None = the frame time),
         with Mitsuba's `path` integrator: the scalar fallback and its sub-frames."""
         return self._mi.load_dict(self._full_scene_dict(fi, u))
 
-    def _full_scene_dict(self, fi: FrameInput, u: float | None) -> dict[str, Any]:
+    def _full_scene_dict(self, fi: StackedFrame, u: float | None) -> dict[str, Any]:
         """The Mitsuba dictionary of `_full_scene` (rigid objects and lights; particle
         systems and deforming meshes are the renderer's own geometry and are not in it)."""
         scene = self.loaded.scene
@@ -427,7 +458,7 @@ class FrameRenderer:
         self._add_lights(d, fi, u)
         return d
 
-    def _render_scalar(self, fi: FrameInput, mode: str, seed: int) -> Any:
+    def _render_scalar(self, fi: StackedFrame, mode: str, seed: int) -> Any:
         mi = self._mi
         if mode == "off":
             return mi.render(self._full_scene(fi, None), seed=seed, spp=self.spp)
@@ -439,8 +470,9 @@ class FrameRenderer:
             acc = img if acc is None else acc + img
         return acc / k
 
-    def render(self, fi: FrameInput, mode: str | None = None) -> tuple[np.ndarray, FrameStats]:
-        """Render one frame; returns RGBA float32 [H, W, 4] and its stats."""
+    def render(self, frame: BakedFrame, mode: str | None = None) -> tuple[np.ndarray, FrameStats]:
+        """Render one baked frame; returns RGBA float32 [H, W, 4] and its stats."""
+        fi = stack_frame(frame)
         from . import assets
 
         dr, mi = self._dr, self._mi
@@ -508,7 +540,7 @@ class FrameRenderer:
         )
 
 
-def _ortho(fi: FrameInput) -> float | None:
+def _ortho(fi: StackedFrame) -> float | None:
     """The orthographic width at the frame's time, if the camera is orthographic."""
     return None if fi.ortho_width is None else float(fi.ortho_width[0])
 

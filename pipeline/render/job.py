@@ -22,17 +22,20 @@ from pathlib import Path
 from typing import Any, Sequence
 
 
+from ..bake import BakedFrame, fingerprint
 from ..frame_output import write_frame
 from ..scene.loader import LoadedScene, load_scene
 from ..timeline import timecode
-from .frame_renderer import FrameInput, FrameRenderer, frame_seed
-from .inputs import fingerprint
+from .frame_renderer import FrameRenderer, frame_seed
 
 RENDERER_VERSION = "motion-render-1"
 
 
 @dataclass(frozen=True)
 class RenderJob:
+    """One render as every worker sees it: the scene file, the merged overrides, the
+    output folder, the hashes `--resume` compares and the worker settings."""
+
     scene_path: str
     overrides: dict[str, Any]
     output_dir: str
@@ -45,11 +48,14 @@ class RenderJob:
 
     @property
     def key(self) -> str:
+        """What a worker's cached renderer is keyed on (settings, threads, variant)."""
         return f"{self.settings_hash}:{self.threads}:{self.variant}"
 
 
 @dataclass
 class FrameResult:
+    """What a worker reports for one frame: where it went, how long it took, or why it failed."""
+
     frame: int
     path: str
     ok: bool
@@ -66,6 +72,7 @@ class FrameResult:
     disk_fault: bool = False  # the error is the disk refusing the write (docs/farm.md)
 
     def to_dict(self) -> dict[str, Any]:
+        """Plain data for the report."""
         return asdict(self)
 
 
@@ -79,6 +86,7 @@ def scene_hashes(loaded: LoadedScene) -> tuple[str, str]:
 
 
 def frame_path(job: RenderJob, loaded: LoadedScene, frame: int) -> Path:
+    """Where frame `frame` of this job is written."""
     return Path(job.output_dir) / loaded.scene.output.frame_name(loaded.name, frame)
 
 
@@ -96,9 +104,10 @@ def scene_reference(scene_path: str | Path, frame_path: str | Path) -> str:
     return os.path.relpath(scene, folder).replace(os.sep, "/")
 
 
-def expected_meta(job: RenderJob, fi: FrameInput) -> dict[str, Any]:
+def expected_meta(job: RenderJob, fi: BakedFrame) -> dict[str, Any]:
     """The attributes a complete frame of this job carries (what --resume compares): the
-    frame, the settings hash and the hash of this frame's own baked motion."""
+    frame, the settings hash and the hash of this frame's own baked motion (`fingerprint`,
+    every animated value)."""
     return {"frame": fi.frame, "settings_hash": job.settings_hash, "motion_hash": fingerprint([fi])[:16]}
 
 
@@ -110,6 +119,7 @@ _WORKER: dict[str, Any] = {}
 
 
 def worker_id() -> str:
+    """This worker process as host:pid."""
     return f"{socket.gethostname()}:{os.getpid()}"
 
 
@@ -145,7 +155,7 @@ def _root_cause(exc: BaseException) -> str:
     return message if inner is exc else f"{type(exc).__name__}: {message}"
 
 
-def render_frames(job: RenderJob, inputs: Sequence[FrameInput]) -> list[FrameResult]:
+def render_frames(job: RenderJob, inputs: Sequence[BakedFrame]) -> list[FrameResult]:
     """Render and write each frame; a frame's failure is reported, not raised, so the
     others of the task still finish."""
     results = []
@@ -154,7 +164,7 @@ def render_frames(job: RenderJob, inputs: Sequence[FrameInput]) -> list[FrameRes
     return results
 
 
-def _render_one(job: RenderJob, fi: FrameInput) -> FrameResult:
+def _render_one(job: RenderJob, fi: BakedFrame) -> FrameResult:
     t_setup = time.perf_counter()
     try:
         renderer, loaded, variant = _renderer(job)  # a fresh one every frame without the cache

@@ -1,0 +1,44 @@
+"""Bake: the evaluated motion of each frame, at its time and across its shutter, and the
+data contract from bake to worker (docs/bake-format.md).
+
+- `records`: `BakedFrame` (what a worker renders: `at_frame` and `across_shutter`
+  SceneMotions, named) and `BakedMotion` (a bake).
+- `timing`: each frame's sample times and the one simulation time range.
+- `evaluate`: `bake(loaded, frames)` and `evaluate_frames`.
+- `files`: `write_baked` and `read_baked`, the one reader of bake files.
+- `checks`: finite values, unit rotations, the particle budget.
+- `fingerprint`: one digest over every animated value (the `--resume` motion hash).
+"""
+
+from __future__ import annotations
+
+from ..errors import BakeFileError, FrameNotBakedError
+from .checks import check_motion, motion_problems, pose_problem, scalar_problem
+from .evaluate import bake, evaluate_frames
+from .files import FORMAT, VERSION, read_baked, write_baked
+from .fingerprint import fingerprint, leaves
+from .records import BakedFrame, BakedMotion, summary
+from .timing import frame_sample_times, simulate_for, simulation_range
+
+__all__ = [
+    "FORMAT",
+    "VERSION",
+    "BakeFileError",
+    "BakedFrame",
+    "BakedMotion",
+    "FrameNotBakedError",
+    "bake",
+    "check_motion",
+    "evaluate_frames",
+    "fingerprint",
+    "frame_sample_times",
+    "leaves",
+    "motion_problems",
+    "pose_problem",
+    "read_baked",
+    "scalar_problem",
+    "simulate_for",
+    "simulation_range",
+    "summary",
+    "write_baked",
+]

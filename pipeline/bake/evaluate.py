@@ -1,0 +1,64 @@
+"""`bake(loaded, frames)`: every frame's time and its N shutter sample times evaluated in
+one vectorised call, checked, and sliced into one `BakedFrame` per frame."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, Sequence
+
+import numpy as np
+
+from ..errors import UsageError
+from .checks import check_budget, check_motion
+from .records import BakedFrame, BakedMotion
+from .timing import frame_sample_times, simulate_for
+
+if TYPE_CHECKING:
+    from ..scene.loader import LoadedScene
+
+
+def bake(loaded: "LoadedScene", frames: Sequence[int], simulation: Any | None = None) -> BakedMotion:
+    """Evaluate `frames` (each at its time and at N times across its shutter).
+
+    If the scene has dynamics and no `simulation` is given, it is simulated here, once,
+    over `simulation_range` (the whole timeline, whatever the selection)."""
+    from ..motion import evaluate, has_dynamics
+
+    frames = [int(f) for f in frames]
+    if not frames:
+        raise UsageError("nothing to bake: the frame list is empty")
+    scene = loaded.scene
+    check_budget(loaded, len(frames))
+    n = scene.render.shutter_samples
+    exact = [frame_sample_times(loaded, f) for f in frames]
+    frame_times = np.array([float(t) for t, _, _ in exact])
+    sample_times = np.array([[float(s) for s in samples] for _, _, samples in exact])
+    everything = np.concatenate([frame_times, sample_times.ravel()])
+    if simulation is None and has_dynamics(loaded):
+        simulation = simulate_for(loaded, frames)
+    with np.errstate(over="ignore", invalid="ignore"):  # an overflow is reported by check_motion
+        motion = evaluate(loaded, everything, simulation)
+    check_motion(loaded, motion)
+    count = len(frames)
+    baked = []
+    for k, (f, (_, (t_open, t_close), _)) in enumerate(zip(frames, exact)):
+        start = count + k * n
+        baked.append(
+            BakedFrame(
+                frame=f,
+                time=float(frame_times[k]),
+                shutter=(float(t_open), float(t_close)),
+                sample_times=sample_times[k],
+                at_frame=motion.take(slice(k, k + 1)),
+                across_shutter=motion.take(slice(start, start + n)),
+            )
+        )
+    shutter = scene.camera.shutter
+    return BakedMotion(loaded.name, str(scene.timeline.rate), float(shutter.angle), shutter.position, baked)
+
+
+def evaluate_frames(loaded: "LoadedScene", frames: Sequence[int], simulation: Any = None) -> list[BakedFrame]:
+    """The `BakedFrame`s of `frames` (simulating once here if the scene has dynamics and
+    no `simulation` is given): what a worker renders. An empty selection gives []."""
+    if not frames:
+        return []
+    return bake(loaded, frames, simulation).frames

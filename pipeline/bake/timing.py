@@ -1,0 +1,52 @@
+"""When a frame is sampled (its time, shutter and the N sample times) and the one time
+range the scene's dynamics are simulated over. The bake and the farm both use these, so
+every shard and every frame selection simulates the same range."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+from typing import TYPE_CHECKING, Any, Sequence
+
+if TYPE_CHECKING:
+    from ..scene.loader import LoadedScene
+
+
+def frame_sample_times(loaded: "LoadedScene", frame: int) -> tuple[Fraction, tuple[Fraction, Fraction], list[Fraction]]:
+    """Exact frame time, shutter interval and the `render.shutter_samples` times across it."""
+    scene = loaded.scene
+    timeline = scene.timeline.timeline()
+    shutter = scene.camera.shutter
+    t_open, t_close = timeline.shutter(frame, Fraction(shutter.angle), shutter.position)
+    n = scene.render.shutter_samples
+    samples = [t_open + (t_close - t_open) * k / (n - 1) for k in range(n)]
+    return timeline.seconds(frame), (t_open, t_close), samples
+
+
+def simulation_range(loaded: "LoadedScene", frames: Sequence[int] = ()) -> tuple[float, float]:
+    """The time range (s) the scene's dynamics are simulated over: the whole timeline,
+    from min(0, the first frame's shutter open) to the last frame's shutter close, never
+    the selection. A frame's motion then does not depend on which other frames were
+    selected (the fixed step grid starts at the same time and no run is cut short next to
+    it; emitters spawn the same particles). Frames outside the timeline (the API allows
+    them) widen the range."""
+    timeline = loaded.scene.timeline.timeline()
+    ends = [timeline.first, timeline.last] + ([min(frames), max(frames)] if len(frames) else [])
+    lo, hi = min(ends), max(ends)
+    (t_lo, (open_lo, _), _), (t_hi, (_, close_hi), _) = frame_sample_times(loaded, lo), frame_sample_times(loaded, hi)
+    return min(0.0, float(min(t_lo, open_lo))), float(max(t_hi, close_hi))
+
+
+def simulate_for(loaded: "LoadedScene", frames: Sequence[int] = (), on_progress: Any = None) -> Any | None:
+    """The scene's dynamics simulated over `simulation_range` (None without dynamics).
+    What `bake` runs when it is given no simulation, and what the farm runs once before
+    sharding. `on_progress(t, t_start, t_end)` is called as the simulation advances."""
+    from ..motion import has_dynamics
+
+    if not has_dynamics(loaded):
+        return None
+    from ..dynamics import simulate
+
+    t_start, t_end = simulation_range(loaded, frames)
+    if on_progress is None:
+        return simulate(loaded, t_end=t_end, t_start=t_start)
+    return simulate(loaded, t_end=t_end, t_start=t_start, on_progress=on_progress)
