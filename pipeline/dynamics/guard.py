@@ -47,9 +47,11 @@ class Guard:
         self.e_in += joules
 
     def add_work(self, joules: float) -> None:
+        """Work done on the group by wind and force fields over a step (only gains count)."""
         self.w_ext += max(0.0, joules)
 
     def bound(self) -> float:
+        """The energy (J) past which the run is a blow-up (module docstring)."""
         return self.e_in + self.w_ext + (self.limit - 1.0) * max(abs(self.e_in), self.e_floor)
 
     def check(self, t: float, step: int, h: float, X: np.ndarray, per_body: np.ndarray, total: float, positions: np.ndarray) -> None:

@@ -21,30 +21,48 @@ from typing import Protocol
 
 import numpy as np
 
+from ..errors import UnknownIntegratorError
+
 
 class StepSystem(Protocol):
+    """What an integrator advances: D(t, X) for the step at hand (step.StepDynamics), the
+    position-like part of D, the index `split` between position- and velocity-like
+    entries of X, and the projection back onto the state manifold."""
+
     split: int
 
-    def derivative(self, t: float, X: np.ndarray) -> np.ndarray: ...
+    def derivative(self, t: float, X: np.ndarray) -> np.ndarray:
+        """D(t, X)."""
+        ...
 
-    def position_rate(self, t: float, X: np.ndarray) -> np.ndarray: ...
+    def position_rate(self, t: float, X: np.ndarray) -> np.ndarray:
+        """The position-like part of D(t, X)."""
+        ...
 
-    def normalize(self, X: np.ndarray) -> np.ndarray: ...
+    def normalize(self, X: np.ndarray) -> np.ndarray:
+        """X projected back onto the state manifold (unit quaternions)."""
+        ...
 
 
 @dataclass(frozen=True)
 class StepResult:
+    """One step's outcome: the new state, the step taken (s) and the step proposed next (s)."""
+
     X: np.ndarray
     h_taken: float
     h_next: float
 
 
 class Integrator:
+    """A time integrator: `step` advances X' = D(t, X) by (at most) h; `adaptive` ones may
+    take less and propose the next step."""
+
     name = ""
     order = 0
     adaptive = False
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
+        """Advance X at time t by one step of h."""
         raise NotImplementedError
 
 
@@ -54,6 +72,7 @@ class ExplicitEuler(Integrator):
     name, order = "euler", 1
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
+        """One explicit Euler step."""
         return StepResult(system.normalize(X + h * system.derivative(t, X)), h, h)
 
 
@@ -64,6 +83,7 @@ class SemiImplicitEuler(Integrator):
     name, order = "semi-implicit-euler", 1
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
+        """Velocities first, then positions with the new velocities."""
         k = system.split
         out = X.copy()
         out[k:] += h * system.derivative(t, X)[k:]
@@ -77,6 +97,7 @@ class Midpoint(Integrator):
     name, order = "midpoint", 2
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
+        """One midpoint step."""
         k1 = system.derivative(t, X)
         k2 = system.derivative(t + 0.5 * h, X + 0.5 * h * k1)
         return StepResult(system.normalize(X + h * k2), h, h)
@@ -88,6 +109,7 @@ class Heun(Integrator):
     name, order = "heun", 2
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
+        """One Heun step."""
         k1 = system.derivative(t, X)
         k2 = system.derivative(t + h, X + h * k1)
         return StepResult(system.normalize(X + 0.5 * h * (k1 + k2)), h, h)
@@ -99,6 +121,7 @@ class RK4(Integrator):
     name, order = "rk4", 4
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
+        """One classic RK4 step."""
         k1 = system.derivative(t, X)
         k2 = system.derivative(t + 0.5 * h, X + 0.5 * h * k1)
         k3 = system.derivative(t + 0.5 * h, X + 0.5 * h * k2)
@@ -133,6 +156,7 @@ class DormandPrince45(Integrator):
         self.rtol, self.atol, self.h_min = rtol, atol, h_min
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
+        """Try h, shrinking it until the error estimate is within tolerance."""
         k1 = system.derivative(t, X)
         while True:
             ks = [k1]
@@ -163,4 +187,4 @@ def make_integrator(name: str, rtol: float = 1e-6, atol: float = 1e-9) -> Integr
     try:
         return INTEGRATORS[name]()
     except KeyError:
-        raise ValueError(f"unknown integrator {name!r}; expected one of: {', '.join(INTEGRATORS)}") from None
+        raise UnknownIntegratorError(f"unknown integrator {name!r}; expected one of: {', '.join(INTEGRATORS)}") from None
