@@ -1,6 +1,6 @@
 """Shape geometry: everything the pipeline knows about a scene `shape`, one entry each.
 
-A scene object's `shape` (sphere, cube, cylinder ...) is read by three stages:
+A scene object's `shape` (sphere, cube, cylinder, capsule ...) is read by three stages:
 the renderer (Mitsuba primitives), the dynamics (mass properties, a bounding sphere, a
 true-shape contact form, a static collider) and deformation and planning (a tessellated
 mesh, an inside test). Each shape answers all of them here, in its own `ShapeGeometry`
@@ -12,7 +12,7 @@ Conventions. Every function takes the scene record (duck-typed: this module sits
 the scene stage and reads only the record's fields) in OBJECT space, before the object's
 transform; `measure` alone also takes the transform's scale (a 3-vector), because mass
 properties are of the scaled body. Sizes are metres, masses kilograms. Axes: cylinders
-along +Y, centred; rectangles and disks in XY with normal +Z; Mitsuba's
+and capsules along +Y, centred; rectangles and disks in XY with normal +Z; Mitsuba's
 unit primitives are sphere (radius 1), cube ([-1, 1]^3), rectangle and disk ([-1, 1]^2,
 unit radius, in XY) and the open cylinder along +Z from z = 0 to 1.
 """
@@ -117,8 +117,8 @@ def principal_inertia(shape: str, mass: float, dims: dict[str, float]) -> np.nda
 
 def tessellate(obj: Any, detail: int = 16) -> Mesh:
     """Object-space vertices and triangles of a primitive shape (cube: 6 grids of detail^2
-    quads; cylinder: open side, detail rings x 2*detail segments; rectangle: an XY grid).
-    Raises ShapeNotTessellatedError for
+    quads; cylinder: open side, detail rings x 2*detail segments; rectangle: an XY grid;
+    capsule: 2*(detail+1) rings x 2*detail segments). Raises ShapeNotTessellatedError for
     shapes with no tessellation (sphere, disk, empty, particles) and for mesh files."""
     entry = shape_geometry(obj.shape)
     if entry.tessellate is None:
@@ -300,6 +300,60 @@ _register(ShapeGeometry(
     tessellate=_cylinder_mesh,
     inside=lambda o, p: (p[..., 0] ** 2 + p[..., 2] ** 2 <= o.radius**2) & (np.abs(p[..., 1]) <= o.height / 2),
     contact=lambda d: (CYLINDER, np.array([d["radius"], d["height"] / 2, d["radius"]])),
+))
+
+
+def _capsule_measure(o: Any, s: np.ndarray, mesh: Mesh | None) -> Measure:
+    r, h = o.radius * float(max(s[0], s[2])), o.height * s[1]
+    return Measure({"radius": r, "height": h}, h / 2 + r, math.pi * r * r * h + 4.0 / 3.0 * math.pi * r**3)
+
+
+def _capsule_inertia(m: float, d: dict[str, float]) -> np.ndarray:
+    """A solid cylinder (radius r, length h, along +Y) capped by two hemispheres, mass
+    shared by volume (m_c cylinder, m_s both caps). Iyy = m_c r^2/2 + 2/5 m_s r^2;
+    Ixx = Izz = m_c (r^2/4 + h^2/12) + m_s (2/5 r^2 + h^2/4 + 3 h r / 8) (each cap:
+    83/320 m r^2 about its centre of mass, 3 r / 8 from its flat face, moved by
+    parallel axes to the capsule's centre)."""
+    r, h = d["radius"], d["height"]
+    v_c, v_s = math.pi * r * r * h, 4.0 / 3.0 * math.pi * r**3
+    m_c = m * v_c / (v_c + v_s)
+    m_s = m - m_c
+    side = m_c * (r * r / 4 + h * h / 12) + m_s * (0.4 * r * r + h * h / 4 + 3 * h * r / 8)
+    return np.array([side, 0.5 * m_c * r * r + 0.4 * m_s * r * r, side])
+
+
+def _capsule_mesh(o: Any, detail: int) -> Mesh:
+    # profile from the bottom pole to the top pole: a quarter circle under y = -h/2, one
+    # over y = +h/2; revolved about +Y with the cylinder's orientation
+    r, h = o.radius, o.height
+    phi = np.linspace(0.0, math.pi / 2, detail + 1)
+    ring_r = np.concatenate((np.sin(phi), np.cos(phi))) * r
+    ring_y = np.concatenate((-h / 2 - r * np.cos(phi), h / 2 + r * np.sin(phi)))
+    rings = len(ring_r)
+    uv, tri = grid_rect(2 * detail, rings - 1)
+    theta = 2 * np.pi * uv[:, 0]
+    row = np.rint(uv[:, 1] * (rings - 1)).astype(int)
+    return np.column_stack((ring_r[row] * np.cos(theta), ring_y[row], -ring_r[row] * np.sin(theta))), tri
+
+
+def _capsule_inside(o: Any, p: np.ndarray) -> np.ndarray:
+    # within `radius` of the axis segment from y = -h/2 to h/2
+    y = np.clip(p[..., 1], -o.height / 2, o.height / 2)
+    return p[..., 0] ** 2 + (p[..., 1] - y) ** 2 + p[..., 2] ** 2 <= o.radius**2
+
+
+_register(ShapeGeometry(
+    "capsule",
+    measure=_capsule_measure,
+    inertia=_capsule_inertia,
+    primitives=lambda o: [
+        _open_cylinder(o.radius, o.height),
+        Primitive("sphere", _translate_y(o.height / 2) @ scale_matrix(o.radius, o.radius, o.radius)),
+        Primitive("sphere", _translate_y(-o.height / 2) @ scale_matrix(o.radius, o.radius, o.radius)),
+    ],
+    tessellate=_capsule_mesh,
+    inside=_capsule_inside,
+    collider=lambda o: ColliderForm("mesh"),
 ))
 
 

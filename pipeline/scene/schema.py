@@ -296,6 +296,16 @@ class Cylinder(_Object):
     height: Positive = 1.0
 
 
+class Capsule(_Object):
+    """A capsule along the object's +Y axis, centred at the origin: a cylinder of `radius`
+    and `height` (between the centres of its two hemispherical caps) closed by the caps;
+    its whole length is height + 2 radius."""
+
+    shape: Literal["capsule"]
+    radius: Positive = 0.5
+    height: Positive = 1.0
+
+
 class Mesh(_Object):
     """A triangle mesh from an .obj or .ply file, path relative to the scene file."""
 
@@ -327,7 +337,7 @@ class Particles(_Object):
 
 
 SceneObject = Annotated[
-    Union[Sphere, Cube, Rectangle, Disk, Cylinder, Mesh, Empty, Particles],
+    Union[Sphere, Cube, Rectangle, Disk, Cylinder, Capsule, Mesh, Empty, Particles],
     Field(discriminator="shape"),
 ]
 
@@ -412,6 +422,7 @@ class Scene(Model):
 
 __all__ = [
     "Camera",
+    "Capsule",
     "Collider",
     "ConstantLight",
     "Cube",
