@@ -134,6 +134,18 @@ class ShapeNotTessellatedError(ShapeGeometryError):
     """A shape that has no tessellated mesh was asked for one (deformation, flocks)."""
 
 
+class NotAMeshError(ShapeGeometryError):
+    """Morph targets or a joint skin on an object that is not a mesh file."""
+
+
+class GridTooLargeError(MotionError):
+    """A planning occupancy grid (from an image or the scene) with more cells than allowed."""
+
+
+class FlockTooLargeError(SimulationError):
+    """A flock whose rendered vertices (agents x agent vertices) exceed the budget."""
+
+
 class UnknownIntegratorError(SimulationError):
     """A dynamics integrator name that is not one of dynamics/integrators.py INTEGRATORS."""
 

@@ -25,7 +25,7 @@ from typing import Any, Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..errors import SceneError, ShapeGeometryError, SimulationError
+from ..errors import FlockTooLargeError, SceneError, ShapeGeometryError, SimulationError
 from ..geometry import shape_geometry, tessellate
 from ..meshes import load_mesh
 from .collisions import BoxCollider, Collider, PlaneCollider, SphereCollider
@@ -396,7 +396,7 @@ def object_vertices(loaded: Any, obj: Any, track: FlockTrack, times: np.ndarray,
 
     agent, _ = agent_mesh(loaded, obj)
     if obj.deform.count * len(agent) > MAX_INSTANCE_VERTICES:
-        raise ValueError(f"{obj.deform.count} agents x {len(agent)} vertices is more than {MAX_INSTANCE_VERTICES} vertices; use fewer agents or a simpler agent mesh")
+        raise FlockTooLargeError(f"{obj.deform.count} agents x {len(agent)} vertices is more than {MAX_INSTANCE_VERTICES} vertices; use fewer agents or a simpler agent mesh")
     up = np.asarray(obj.deform.up, dtype=np.float64)
     verts = instance_vertices(track, times, agent, up / np.linalg.norm(up))
     t, q, s = (np.asarray(a, dtype=np.float64) for a in world)

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..dynamics.flock import agent_mesh
-from ..errors import AssetError, SceneError, ShapeGeometryError
+from ..errors import AssetError, NotAMeshError, SceneError, ShapeGeometryError
 from ..geometry import tessellate
 from ..meshes import load_mesh
 from ..scene.motion_schema import BlendShapes, Flock, JointSkin, MorphTargets, Skinning
@@ -225,7 +225,7 @@ def _cached_mesh(path: "Any", faces: bool = True) -> tuple[np.ndarray, np.ndarra
 
 def _file_mesh(loaded: "LoadedScene", obj: Any) -> tuple[np.ndarray, np.ndarray]:
     if not isinstance(obj, Mesh):
-        raise ValueError("morph targets and joint skins deform a mesh object (shape: mesh)")
+        raise NotAMeshError("morph targets and joint skins deform a mesh object (shape: mesh)")
     return _cached_mesh(loaded.asset(obj.file))
 
 

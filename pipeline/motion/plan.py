@@ -34,7 +34,7 @@ from scipy.interpolate import CubicHermiteSpline
 from scipy.ndimage import binary_dilation
 from scipy.spatial.transform import Rotation
 
-from ..errors import SceneError
+from ..errors import GridTooLargeError, SceneError
 from ..geometry import shape_geometry
 from .pose import Pose, quat_mul
 from .rotation import parent_from_object, transform_quat
@@ -123,7 +123,7 @@ def grid_from_image(path: Path, cell: float, origin: Sequence[float], threshold:
 
     with Image.open(path) as img:
         if img.width * img.height > MAX_CELLS:
-            raise ValueError(f"{path.name}: {img.width} x {img.height} pixels is more than {MAX_CELLS} cells")
+            raise GridTooLargeError(f"{path.name}: {img.width} x {img.height} pixels is more than {MAX_CELLS} cells")
         grey = np.asarray(img.convert("L"), dtype=np.float64) / 255.0
     return Grid(grey < threshold, float(cell), np.asarray(origin, dtype=np.float64))
 
@@ -156,7 +156,7 @@ def grid_from_scene(loaded: "LoadedScene", skip: str, cell: float, origin: Seque
 
     cols, rows = int(math.ceil(size[0] / cell)), int(math.ceil(size[1] / cell))
     if rows * cols > MAX_CELLS:
-        raise ValueError(f"a {size[0]} x {size[1]} m grid of {cell} m cells has {rows * cols} cells (limit {MAX_CELLS})")
+        raise GridTooLargeError(f"a {size[0]} x {size[1]} m grid of {cell} m cells has {rows * cols} cells (limit {MAX_CELLS})")
     wall = np.zeros((rows, cols), dtype=bool)
     sub = (np.arange(3) + 0.5) / 3.0
     heights = np.linspace(band[0], band[1], 5)
@@ -527,7 +527,7 @@ def plan_for(loaded: "LoadedScene", index: int) -> Path:
                           spec.decel if spec.decel is not None else spec.accel, spec.start_time, spec.facing)
     except _Located as exc:
         raise SceneError([loaded.source.problem((*loc, *exc.loc), f"{obj.name}: {exc}")]) from None
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, GridTooLargeError) as exc:
         raise SceneError([loaded.source.problem((*loc, "grid"), f"{obj.name}: {exc}")]) from None
     if len(_PLANS) > 32:
         _PLANS.clear()
