@@ -17,7 +17,7 @@ actually taken and the step it proposes next (fixed-step methods: the same h).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Callable, Protocol
 
 import numpy as np
 
@@ -60,6 +60,10 @@ class Integrator:
     name = ""
     order = 0
     adaptive = False
+    # Under a constant acceleration a (D's velocity part independent of the state), k
+    # steps of h from (x0, v0) give v_k = v0 + k h a and x_k = x0 + k h v0 + c(k) h^2 a;
+    # `ballistic(k)` is that c(k) (None: no closed form used). step.coast relies on it.
+    ballistic: "Callable[[np.ndarray], np.ndarray] | None" = None
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
         """Advance X at time t by one step of h."""
@@ -70,6 +74,7 @@ class ExplicitEuler(Integrator):
     """X_{n+1} = X_n + h D(t_n, X_n). Error O(h) globally; energy grows on oscillators."""
 
     name, order = "euler", 1
+    ballistic = staticmethod(lambda k: k * (k - 1) / 2.0)  # x moves with the old v
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
         """One explicit Euler step."""
@@ -81,12 +86,14 @@ class SemiImplicitEuler(Integrator):
     symplectic: energy of a conservative system stays bounded (no drift)."""
 
     name, order = "semi-implicit-euler", 1
+    ballistic = staticmethod(lambda k: k * (k + 1) / 2.0)  # x moves with the new v
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
         """Velocities first, then positions with the new velocities."""
         k = system.split
         out = X.copy()
-        out[k:] += h * system.derivative(t, X)[k:]
+        velocity_rate = getattr(system, "velocity_rate", None)  # only D[k:] is needed
+        out[k:] += h * (velocity_rate(t, X) if velocity_rate is not None else system.derivative(t, X)[k:])
         out[:k] += h * system.position_rate(t + h, out)
         return StepResult(system.normalize(out), h, h)
 
@@ -95,6 +102,7 @@ class Midpoint(Integrator):
     """RK2 midpoint: X_{n+1} = X_n + h D(t + h/2, X_n + h/2 D(t, X_n))."""
 
     name, order = "midpoint", 2
+    ballistic = staticmethod(lambda k: k * k / 2.0)  # exact for a constant acceleration
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
         """One midpoint step."""
@@ -107,6 +115,7 @@ class Heun(Integrator):
     """Heun: predictor X* = X + h k1, X_{n+1} = X + h/2 (k1 + D(t + h, X*))."""
 
     name, order = "heun", 2
+    ballistic = staticmethod(lambda k: k * k / 2.0)
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
         """One Heun step."""
@@ -119,6 +128,7 @@ class RK4(Integrator):
     """Classic Runge-Kutta: weights 1/6, 1/3, 1/3, 1/6 on the four stage slopes."""
 
     name, order = "rk4", 4
+    ballistic = staticmethod(lambda k: k * k / 2.0)
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
         """One classic RK4 step."""

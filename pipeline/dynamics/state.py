@@ -168,6 +168,17 @@ class System:
             total += forces.newtonian_gravity(x, p.mass, *env.newtonian)
         return total
 
+    def constant_acceleration(self) -> np.ndarray | None:
+        """Each body's acceleration [n, 3] (m/s^2) when D's velocity part does not depend on
+        the state or the time (uniform gravity only: no drag, fluids, fields, springs or
+        Newtonian gravity), else None. Pinned and inactive bodies are not masked here."""
+        env = self.env
+        if self._air_drag or env.fluids or env.force_field is not None or env.wind is not None:
+            return None
+        if (env.springs is not None and env.springs.count) or (env.newtonian is not None and self.n > 1):
+            return None
+        return self._gravity * self.props.inv_mass[:, None]
+
     def moving(self) -> np.ndarray:
         """active and not pinned (cached until `active` is set again; do not modify)."""
         if self._moving is None:
@@ -199,12 +210,32 @@ class System:
             out[where] = (rate if everyone else np.where(move[:, None], rate, 0.0)).ravel()
         return out
 
+    def velocity_rate(self, t: float, X: np.ndarray, dt: float) -> np.ndarray:
+        """The velocity-like part of D (accelerations, angular accelerations): D[split:]
+        without the position-like rates (semi-implicit Euler uses only this part)."""
+        s = self.unpack(X)
+        move = self.moving()
+        acc = self.forces(t, s.x, s.v, dt)
+        acc *= self.props.inv_mass[:, None]
+        everyone = bool(move.all())
+        if not everyone:
+            acc = np.where(move[:, None], acc, 0.0)
+        if not self.rotating:
+            return acc.ravel()
+        n = self.n
+        out = np.zeros(6 * n)
+        out[: 3 * n] = acc.ravel()
+        if s.w.any():
+            alpha = angular_acceleration(s.q, s.w, self.props.inertia, self.props.inv_inertia, np.zeros_like(s.w))
+            out[3 * n :] = (alpha if everyone else np.where(move[:, None], alpha, 0.0)).ravel()
+        return out
+
     def position_rate(self, t: float, X: np.ndarray) -> np.ndarray:
         """The position-like part of D (velocities and quaternion rates): no forces needed."""
         s = self.unpack(X)
         move = self.moving()[:, None]
         if not self.rotating:
-            return np.where(move, s.v, 0.0).ravel()
+            return s.v.ravel() if move.all() else np.where(move, s.v, 0.0).ravel()
         if not s.w.any():  # no spin: dq/dt = 0 exactly
             out = np.zeros(self.split)
             out[: 3 * self.n] = np.where(move, s.v, 0.0).ravel()
@@ -219,7 +250,7 @@ class System:
         Newtonian gravity are shared between bodies."""
         s = self.unpack(X)
         p, env = self.props, self.env
-        move = self.active & (p.inv_mass > 0)
+        move = self.moving()
         kinetic = 0.5 * p.mass * np.einsum("ij,ij->i", s.v, s.v)
         if self.rotating and s.w.any() and self._isotropic:  # |R^T w| = |w|
             kinetic = kinetic + 0.5 * p.inertia[:, 0] * np.einsum("ij,ij->i", s.w, s.w)

@@ -7,6 +7,10 @@ Each step of a group runs, in order:
   collide    -> swept contacts against colliders and between bodies, impulses (collisions.py)
   guard      -> finiteness and energy bound (guard.py)
   record     -> the state at t + dt (every step, or every k-th for big particle systems)
+When nothing in a body group can change its acceleration (uniform gravity only, nothing
+spinning, no body starting) the `coast` stage replaces the next steps, up to the first one
+with a possible contact, by the integrator's closed form under a constant acceleration,
+computed for all of them at once (see `coast`).
 The step size reaches the forces (drag and friction never reverse a velocity within a
 step) through the context: the integrator advances a `StepDynamics`, the system's
 D(t, X) bound to the step's dt, never through state kept on the system.
@@ -21,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from . import forces
-from .collisions import Collider, ContactBodies, resolve_pairs, resolve_static
+from .collisions import Collider, ContactBodies, _sweep_spheres, resolve_pairs, resolve_static
 from .guard import Guard
 from .integrators import Integrator
 from .rigid import inverse_inertia_world
@@ -58,6 +62,10 @@ class StepDynamics:
     def derivative(self, t: float, X: np.ndarray) -> np.ndarray:
         """D(t, X) with this step's dt."""
         return self.system.derivative(t, X, self.dt)
+
+    def velocity_rate(self, t: float, X: np.ndarray) -> np.ndarray:
+        """The velocity-like part of D with this step's dt."""
+        return self.system.velocity_rate(t, X, self.dt)
 
     def position_rate(self, t: float, X: np.ndarray) -> np.ndarray:
         """The position-like part of D (no forces, no dt)."""
@@ -244,6 +252,22 @@ class Recorder:
             self.ke_each.append(energy[0])
             self.pe_each.append(energy[1])
 
+    def record_many(self, t: np.ndarray, x: np.ndarray, v: np.ndarray, q: np.ndarray | None, kinetic: np.ndarray, potential: np.ndarray) -> None:
+        """Keep K states at once (coast: no contacts; per-body energies [K, n], no shared
+        terms): times [K], x and v [K, n, 3], one orientation [n, 4] for all."""
+        K = len(t)
+        self.t.extend(t.tolist())
+        self.x.extend(x.astype(self.group.record_dtype))
+        self.v.extend(v.astype(self.group.record_dtype))
+        if q is not None:
+            self.q.extend(np.broadcast_to(q, (K,) + q.shape))
+        self.c.extend(np.zeros((K, x.shape[1]), dtype=bool))
+        self.ke.extend(kinetic.sum(axis=1).tolist())
+        self.pe.extend(potential.sum(axis=1).tolist())
+        if self.each:
+            self.ke_each.extend(kinetic)
+            self.pe_each.extend(potential)
+
     def track(self) -> Track:
         """Everything recorded, as one Track."""
         return Track(
@@ -260,6 +284,86 @@ class Recorder:
         )
 
 
+COAST_STEPS = 512  # steps one coast batch looks ahead at most
+
+
+def coast(group: Group, integrator: Integrator, ctx: StepContext, t0: float, t1: float, step: float, guard: Guard, recorder: "Recorder") -> int:
+    """Stage coast: advance a body group by the steps ahead in which nothing can happen
+    but free flight, all at once; returns how many (0: take the next step normally).
+
+    It applies when D's velocity part is a constant acceleration a (System.
+    constant_acceleration: uniform gravity only) and nothing spins (w = 0, and nothing
+    in D makes it spin), for a fixed-step integrator, on whole steps of the fixed grid
+    t0 + k step, before the next body's start time. Then k steps of the integrator from
+    (x, v) are exactly v_k = v + k h a and x_k = x + k h v + c(k) h^2 a, with the
+    integrator's c(k) (Integrator.ballistic: k^2/2 for midpoint, Heun and RK4; k(k-1)/2
+    for explicit Euler; k(k+1)/2 for semi-implicit Euler); orientations stay. The
+    trajectory of COAST_STEPS steps is swept against every collider and between body
+    pairs (the bounding spheres, as the collide stage's broad phase); the steps before
+    the first with a possible contact, and with a finite state within the guard's energy
+    bound, are recorded. The same arithmetic in a different order: positions differ from
+    stepping by rounding only (1e-16 relative per step, not accumulated)."""
+    system = group.system
+    c = integrator.ballistic
+    if c is None or integrator.adaptive or group.record_stride != 1 or not system.props.names:
+        return 0
+    a = system.constant_acceleration()
+    s = system.unpack(group.X)
+    if a is None or (system.rotating and s.w.any()):
+        return 0
+    p = system.props
+    index = ctx.index + np.arange(1, COAST_STEPS + 1)
+    t_end = t0 + index * step  # where each step ends, on the grid
+    starts = np.concatenate(([ctx.t], t_end[:-1]))
+    ok = (t1 - starts >= step) & (starts < t1 - 1e-9 * max(1.0, abs(t1)))
+    later = p.start[p.start > ctx.t + 1e-12]
+    if later.size:
+        ok &= starts + 1e-12 < later.min()  # the active set stays as it is
+    K = int(np.argmin(ok)) if not ok.all() else ok.size
+    if K == 0:
+        return 0
+    n = system.n
+    move = system.moving()
+    acc = np.where(move[:, None], a, 0.0)
+    k = np.arange(K + 1, dtype=np.float64)[:, None, None]
+    xs = s.x[None] + (k * step) * np.where(move[:, None], s.v, 0.0)[None] + (c(k) * step * step) * acc[None]
+    vs = s.v[None] + (k * step) * acc[None]
+    # the first step with a possible contact ends the coast before it
+    x0, x1 = xs[:-1].reshape(-1, 3), xs[1:].reshape(-1, 3)
+    moving = np.tile(move, K)
+    first = K
+    for col in group.colliders:
+        hit = col.sweep(x0, x1, np.tile(p.radius, K)).hit & moving
+        if hit.any():
+            first = min(first, int(np.argmax(hit)) // n)
+    i, j = group.pairs
+    if i.size:
+        inv = np.where(move, p.inv_mass, 0.0)
+        rel = xs[:, i] - xs[:, j]
+        hit = _sweep_spheres(rel[:-1].reshape(-1, 3), rel[1:].reshape(-1, 3), np.tile(p.radius[i] + p.radius[j], K)).hit
+        hit &= np.tile(inv[i] + inv[j] > 0, K)
+        if hit.any():
+            first = min(first, int(np.argmax(hit)) // i.size)
+    # energies of each state (no spin: kinetic 1/2 m v^2; gravity only: no shared terms)
+    kinetic = np.where(move, 0.5 * p.mass * np.einsum("kij,kij->ki", vs[1:], vs[1:]), 0.0)
+    potential = np.where(move, -p.mass * ((xs[1:] - system.x_ref) @ system.env.gravity), 0.0)
+    total = kinetic.sum(axis=1) + potential.sum(axis=1)
+    bad = ~(np.isfinite(total) & np.isfinite(xs[1:]).all(axis=(1, 2)) & (total <= guard.bound()))
+    if bad.any():
+        first = min(first, int(np.argmax(bad)))
+    if first == 0:
+        return 0
+    K = first
+    if group.shapes is not None and ((group.shapes.shaped() & move).any() or i.size):
+        for _ in range(min(K, 2)):  # what K contact-free collide stages leave of the warm start
+            group.shapes.begin_step()
+    q = s.q.copy() if system.rotating else None
+    w = s.w.copy() if system.rotating else None
+    recorder.record_many(t_end[:K], xs[1 : K + 1], vs[1 : K + 1], q, kinetic[:K], potential[:K])
+    group.X = system.pack(xs[K], vs[K], q, w)
+    return K
+
+
 def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: float, iterations: int, guard: Guard,
               on_progress: Callable[[float, float, float], None] | None = None) -> Track:
     """Advance a group from t0 to t1 through the named stages; returns its Track.
@@ -274,10 +378,22 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
     recorder.record(t0, group.X, pending, energy)
     t, index, h_next = t0, 0, step
     end = t1 - 1e-9 * max(1.0, abs(t1))
+    wait = skip = 0  # after a coast that could not start, the next tries come later and later
     while t < end:
         h = min(h_next, step, t1 - t)
         ctx = StepContext(t, h, 1.0 / h, index)
         activate(group, ctx, guard)
+        if skip:
+            skip -= 1
+        else:
+            done = coast(group, integrator, ctx, t0, t1, step, guard, recorder)
+            if done:
+                wait = 0
+                if on_progress is not None and (index + done) // 64 > index // 64:
+                    on_progress(t0 + (index + done) * step, t0, t1)
+                t, index = t0 + (index + done) * step, index + done
+                continue
+            wait = skip = min(2 * wait + 1, 64)
         X = group.X
         X1, ctx, h_next = integrate(group, integrator, ctx, t0, step)
         contact, found = collide(group, X, X1, ctx, iterations, g_mag)
