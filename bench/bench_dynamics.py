@@ -19,7 +19,8 @@ from motion.pipeline.dynamics.collisions import PlaneCollider
 from motion.pipeline.dynamics.guard import Guard
 from motion.pipeline.dynamics.integrators import make_integrator
 from motion.pipeline.dynamics.particles import Spawns
-from motion.pipeline.dynamics.simulation import particle_group, run_group
+from motion.pipeline.dynamics.step import StepDynamics, run_group
+from motion.pipeline.dynamics.world import particle_group
 from motion.pipeline.dynamics.state import BodyProps, Environment, System
 
 G = np.array([0.0, -9.81, 0.0])
@@ -54,11 +55,11 @@ def run_ours(n: int, integrator: str, steps: int, h: float, plane: bool) -> tupl
 
 def run_scipy(n: int, steps: int, h: float, method: str) -> tuple[float, float, int]:
     system, spawns = particle_system(n)
-    system.h = h
     system.active = np.ones(n, dtype=bool)
+    dynamics = StepDynamics(system, h)
     X0 = system.pack(spawns.position, spawns.velocity)
     start = time.perf_counter()
-    sol = solve_ivp(system.derivative, (0.0, steps * h), X0, method=method, t_eval=np.arange(1, steps + 1) * h, rtol=1e-6, atol=1e-9)
+    sol = solve_ivp(dynamics.derivative, (0.0, steps * h), X0, method=method, t_eval=np.arange(1, steps + 1) * h, rtol=1e-6, atol=1e-9)
     elapsed = time.perf_counter() - start
     return n * steps / elapsed, elapsed, int(sol.nfev)
 

@@ -122,6 +122,39 @@ class FrameNotBakedError(MotionError):
 # --- dynamics and shape geometry ---
 
 
+class ShapeGeometryError(MotionError):
+    """A shape cannot give what a stage asked of it (a mesh, mass properties)."""
+
+
+class UnknownShapeError(ShapeGeometryError):
+    """A shape name with no entry in pipeline/geometry.py SHAPES."""
+
+
+class ShapeNotTessellatedError(ShapeGeometryError):
+    """A shape that has no tessellated mesh was asked for one (deformation, flocks)."""
+
+
+class NotAMeshError(ShapeGeometryError):
+    """Morph targets or a joint skin on an object that is not a mesh file."""
+
+
+class GridTooLargeError(MotionError):
+    """A planning occupancy grid (from an image or the scene) with more cells than allowed."""
+
+
+class FlockTooLargeError(SimulationError):
+    """A flock whose rendered vertices (agents x agent vertices) exceed the budget."""
+
+
+class UnknownIntegratorError(SimulationError):
+    """A dynamics integrator name that is not one of dynamics/integrators.py INTEGRATORS."""
+
+
+class NoSuchTrackError(SimulationError):
+    """A simulation was asked for a body group, particle system, flock or follower it did
+    not simulate."""
+
+
 # --- scene, expressions, motion, orchestration ---
 
 

@@ -164,3 +164,34 @@ def test_cannonball_scene_through_evaluate():
     got = evaluate(loaded, t, simulation=sim).objects["ball"].translation
     expect = np.array([0.0, 3.0, 0.0]) + np.outer(t, [367.69553, 367.69553, 0.0]) + 0.5 * np.outer(t * t, [0.0, -G, 0.0])
     np.testing.assert_allclose(got, expect, atol=1e-6)
+
+
+class Falling:
+    """x'' = a (constant), X = (x, v) in 3-D: what step.coast replaces by a closed form."""
+
+    split = 3
+    a = np.array([0.3, -9.81, 1.7])
+
+    def derivative(self, t, X):
+        return np.concatenate((X[3:], self.a))
+
+    def position_rate(self, t, X):
+        return X[3:].copy()
+
+    def normalize(self, X):
+        return X
+
+
+@pytest.mark.parametrize("name", ["euler", "semi-implicit-euler", "midpoint", "heun", "rk4"])
+def test_ballistic_closed_form_is_the_integrators_own_result(name):
+    # the coast stage's x_k = x0 + k h v0 + c(k) h^2 a, v_k = v0 + k h a must be what k
+    # steps of the integrator give (rounding aside), for every fixed-step integrator
+    integ = make_integrator(name)
+    system, h = Falling(), 1 / 96
+    X = np.array([0.0, 3.0, -1.0, 367.7, 367.7, 2.0])
+    x0, v0 = X[:3].copy(), X[3:].copy()
+    for k in range(1, 401):
+        X = integ.step(system, 0.0, X, h).X
+        closed_x = x0 + k * h * v0 + integ.ballistic(float(k)) * h * h * system.a
+        np.testing.assert_allclose(X[:3], closed_x, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(X[3:], v0 + k * h * system.a, rtol=1e-12, atol=1e-12)

@@ -49,6 +49,8 @@ _MESH_CHUNK = 2_000_000  # bodies x triangles tested at once
 
 @dataclass
 class Hits:
+    """Swept contacts of n bodies against one collider over a step."""
+
     hit: np.ndarray  # [n] bool
     s: np.ndarray  # [n] time of impact in [0, 1] (fraction of the step)
     normal: np.ndarray  # [n, 3] unit, from the surface towards the body
@@ -69,6 +71,8 @@ class Collider:
     static_friction: float
 
     def sweep(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
+        """Bodies of radius r [n] whose centres move x0 -> x1 ([n, 3]) over the step,
+        against this surface: who hits it, when, the normal and the start penetration."""
         raise NotImplementedError
 
 
@@ -110,10 +114,13 @@ class PlaneCollider(Collider):
 
 @dataclass
 class SphereCollider(Collider):
+    """A solid sphere of `radius` (m) about `center`."""
+
     center: np.ndarray = field(default_factory=lambda: np.zeros(3))
     radius: float = 1.0
 
     def sweep(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
+        """Segments against the sphere grown by r (a quadratic in the step fraction)."""
         return _sweep_spheres(x0 - self.center, x1 - self.center, self.radius + r)
 
 
@@ -150,6 +157,7 @@ class BoxCollider(Collider):
     half: np.ndarray = field(default_factory=lambda: np.full(3, 0.5))
 
     def sweep(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
+        """Segments against the box grown by r (slab test in the box frame)."""
         # slab test in the box frame against the box grown by r (corners square, not rounded)
         p0 = (x0 - self.center) @ self.rotation
         p1 = (x1 - self.center) @ self.rotation
@@ -204,6 +212,7 @@ class MeshCollider(Collider):
         self._dots = (d00, d01, d11, d00 * d11 - d01 * d01)
 
     def sweep(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
+        """Segments against every triangle's face grown by r; the earliest hit counts."""
         out = _no_hits(len(x0))
         m = len(self.triangles)
         if m == 0 or len(x0) == 0:

@@ -25,7 +25,9 @@ from typing import Any, Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..errors import SimulationError
+from ..errors import FlockTooLargeError, SceneError, ShapeGeometryError, SimulationError
+from ..geometry import shape_geometry, tessellate
+from ..meshes import load_mesh
 from .collisions import BoxCollider, Collider, PlaneCollider, SphereCollider
 
 RECORD_BUDGET = 256 * 2**20  # bytes of recorded agent states per flock
@@ -366,16 +368,20 @@ def instance_vertices(track: FlockTrack, times: np.ndarray, agent: np.ndarray, u
     return verts.reshape(len(x), -1, 3)
 
 
+def agent_mesh(loaded: Any, obj: Any) -> tuple[np.ndarray, np.ndarray]:
+    """One flock agent (agent space, +Z forward): the object's mesh file or its primitive
+    at the coarsest tessellation (geometry.py), times the object's scale."""
+    verts, faces = load_mesh(loaded.asset(obj.file)) if shape_geometry(obj.shape).file_mesh else tessellate(obj, 1)
+    return verts * np.asarray(obj.transform.scale, dtype=np.float64), faces
+
+
 def check_instance_budget(loaded: Any, index: int) -> None:
     """A located error, before any simulation, when the flock's rendered vertices (agents x
     agent vertices) exceed MAX_INSTANCE_VERTICES or its agent shape cannot be instanced."""
-    from ..errors import SceneError
-    from ..motion.deform import agent_mesh
-
     obj = loaded.scene.objects[index]
     try:
         agent, _ = agent_mesh(loaded, obj)
-    except ValueError as exc:
+    except ShapeGeometryError as exc:
         raise SceneError([loaded.source.problem(("objects", index, "deform"), str(exc))]) from None
     if obj.deform.count * len(agent) > MAX_INSTANCE_VERTICES:
         raise SceneError([loaded.source.problem(("objects", index, "deform", "count"),
@@ -386,12 +392,11 @@ def object_vertices(loaded: Any, obj: Any, track: FlockTrack, times: np.ndarray,
     """Object-space vertices [T, n * V, 3] of a flock object: the agents' world vertices
     mapped through the inverse of the object's own world pose (the renderer maps them
     back), so the object's transform does not move the agents; its scale sizes the agent."""
-    from ..motion.deform import agent_mesh
     from ..motion.pose import quat_conj, quat_rotate
 
     agent, _ = agent_mesh(loaded, obj)
     if obj.deform.count * len(agent) > MAX_INSTANCE_VERTICES:
-        raise ValueError(f"{obj.deform.count} agents x {len(agent)} vertices is more than {MAX_INSTANCE_VERTICES} vertices; use fewer agents or a simpler agent mesh")
+        raise FlockTooLargeError(f"{obj.deform.count} agents x {len(agent)} vertices is more than {MAX_INSTANCE_VERTICES} vertices; use fewer agents or a simpler agent mesh")
     up = np.asarray(obj.deform.up, dtype=np.float64)
     verts = instance_vertices(track, times, agent, up / np.linalg.norm(up))
     t, q, s = (np.asarray(a, dtype=np.float64) for a in world)

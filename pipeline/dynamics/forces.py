@@ -72,6 +72,7 @@ class SpringSet:
 
     @property
     def count(self) -> int:
+        """Number of springs."""
         return int(self.a.size)
 
 

@@ -47,15 +47,17 @@ class Guard:
         self.e_in += joules
 
     def add_work(self, joules: float) -> None:
+        """Work done on the group by wind and force fields over a step (only gains count)."""
         self.w_ext += max(0.0, joules)
 
     def bound(self) -> float:
+        """The energy (J) past which the run is a blow-up (module docstring)."""
         return self.e_in + self.w_ext + (self.limit - 1.0) * max(abs(self.e_in), self.e_floor)
 
     def check(self, t: float, step: int, h: float, X: np.ndarray, per_body: np.ndarray, total: float, positions: np.ndarray) -> None:
         """per_body: each body's energy (to name the culprit); positions [n, 3]."""
-        bad = ~np.isfinite(positions).all(axis=1)
-        if bad.any() or not np.isfinite(X).all() or not math.isfinite(total):
+        if not (np.isfinite(X).all() and math.isfinite(total)):  # (positions are part of X)
+            bad = ~np.isfinite(positions).all(axis=1)
             culprit = self._name(int(np.argmax(bad)) if bad.any() else int(np.argmax(~np.isfinite(per_body)) if (~np.isfinite(per_body)).any() else 0))
             raise SimulationError(self._message(culprit, t, step, h, "its state became non-finite (NaN or inf)"))
         bound = self.bound()

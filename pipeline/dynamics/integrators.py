@@ -17,34 +17,56 @@ actually taken and the step it proposes next (fixed-step methods: the same h).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Callable, Protocol
 
 import numpy as np
 
+from ..errors import UnknownIntegratorError
+
 
 class StepSystem(Protocol):
+    """What an integrator advances: D(t, X) for the step at hand (step.StepDynamics), the
+    position-like part of D, the index `split` between position- and velocity-like
+    entries of X, and the projection back onto the state manifold."""
+
     split: int
 
-    def derivative(self, t: float, X: np.ndarray) -> np.ndarray: ...
+    def derivative(self, t: float, X: np.ndarray) -> np.ndarray:
+        """D(t, X)."""
+        ...
 
-    def position_rate(self, t: float, X: np.ndarray) -> np.ndarray: ...
+    def position_rate(self, t: float, X: np.ndarray) -> np.ndarray:
+        """The position-like part of D(t, X)."""
+        ...
 
-    def normalize(self, X: np.ndarray) -> np.ndarray: ...
+    def normalize(self, X: np.ndarray) -> np.ndarray:
+        """X projected back onto the state manifold (unit quaternions)."""
+        ...
 
 
 @dataclass(frozen=True)
 class StepResult:
+    """One step's outcome: the new state, the step taken (s) and the step proposed next (s)."""
+
     X: np.ndarray
     h_taken: float
     h_next: float
 
 
 class Integrator:
+    """A time integrator: `step` advances X' = D(t, X) by (at most) h; `adaptive` ones may
+    take less and propose the next step."""
+
     name = ""
     order = 0
     adaptive = False
+    # Under a constant acceleration a (D's velocity part independent of the state), k
+    # steps of h from (x0, v0) give v_k = v0 + k h a and x_k = x0 + k h v0 + c(k) h^2 a;
+    # `ballistic(k)` is that c(k) (None: no closed form used). step.coast relies on it.
+    ballistic: "Callable[[np.ndarray], np.ndarray] | None" = None
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
+        """Advance X at time t by one step of h."""
         raise NotImplementedError
 
 
@@ -52,8 +74,10 @@ class ExplicitEuler(Integrator):
     """X_{n+1} = X_n + h D(t_n, X_n). Error O(h) globally; energy grows on oscillators."""
 
     name, order = "euler", 1
+    ballistic = staticmethod(lambda k: k * (k - 1) / 2.0)  # x moves with the old v
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
+        """One explicit Euler step."""
         return StepResult(system.normalize(X + h * system.derivative(t, X)), h, h)
 
 
@@ -62,11 +86,14 @@ class SemiImplicitEuler(Integrator):
     symplectic: energy of a conservative system stays bounded (no drift)."""
 
     name, order = "semi-implicit-euler", 1
+    ballistic = staticmethod(lambda k: k * (k + 1) / 2.0)  # x moves with the new v
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
+        """Velocities first, then positions with the new velocities."""
         k = system.split
         out = X.copy()
-        out[k:] += h * system.derivative(t, X)[k:]
+        velocity_rate = getattr(system, "velocity_rate", None)  # only D[k:] is needed
+        out[k:] += h * (velocity_rate(t, X) if velocity_rate is not None else system.derivative(t, X)[k:])
         out[:k] += h * system.position_rate(t + h, out)
         return StepResult(system.normalize(out), h, h)
 
@@ -75,8 +102,10 @@ class Midpoint(Integrator):
     """RK2 midpoint: X_{n+1} = X_n + h D(t + h/2, X_n + h/2 D(t, X_n))."""
 
     name, order = "midpoint", 2
+    ballistic = staticmethod(lambda k: k * k / 2.0)  # exact for a constant acceleration
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
+        """One midpoint step."""
         k1 = system.derivative(t, X)
         k2 = system.derivative(t + 0.5 * h, X + 0.5 * h * k1)
         return StepResult(system.normalize(X + h * k2), h, h)
@@ -86,8 +115,10 @@ class Heun(Integrator):
     """Heun: predictor X* = X + h k1, X_{n+1} = X + h/2 (k1 + D(t + h, X*))."""
 
     name, order = "heun", 2
+    ballistic = staticmethod(lambda k: k * k / 2.0)
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
+        """One Heun step."""
         k1 = system.derivative(t, X)
         k2 = system.derivative(t + h, X + h * k1)
         return StepResult(system.normalize(X + 0.5 * h * (k1 + k2)), h, h)
@@ -97,8 +128,10 @@ class RK4(Integrator):
     """Classic Runge-Kutta: weights 1/6, 1/3, 1/3, 1/6 on the four stage slopes."""
 
     name, order = "rk4", 4
+    ballistic = staticmethod(lambda k: k * k / 2.0)
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
+        """One classic RK4 step."""
         k1 = system.derivative(t, X)
         k2 = system.derivative(t + 0.5 * h, X + 0.5 * h * k1)
         k3 = system.derivative(t + 0.5 * h, X + 0.5 * h * k2)
@@ -133,6 +166,7 @@ class DormandPrince45(Integrator):
         self.rtol, self.atol, self.h_min = rtol, atol, h_min
 
     def step(self, system: StepSystem, t: float, X: np.ndarray, h: float) -> StepResult:
+        """Try h, shrinking it until the error estimate is within tolerance."""
         k1 = system.derivative(t, X)
         while True:
             ks = [k1]
@@ -163,4 +197,4 @@ def make_integrator(name: str, rtol: float = 1e-6, atol: float = 1e-9) -> Integr
     try:
         return INTEGRATORS[name]()
     except KeyError:
-        raise ValueError(f"unknown integrator {name!r}; expected one of: {', '.join(INTEGRATORS)}") from None
+        raise UnknownIntegratorError(f"unknown integrator {name!r}; expected one of: {', '.join(INTEGRATORS)}") from None

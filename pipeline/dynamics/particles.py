@@ -40,6 +40,7 @@ class Spawns:
 
     @property
     def count(self) -> int:
+        """Number of particles."""
         return int(self.birth.size)
 
 

@@ -1,5 +1,6 @@
-"""Rigid-body kinematics: quaternions (w, x, y, z), inertia tensors from shape and mass,
-the orientation rate and gyroscopic term of D(t, X), and slerp for sampling.
+"""Rigid-body kinematics: quaternions (w, x, y, z), world inertia tensors from the
+principal moments (which pipeline/geometry.py gives per shape), the orientation rate and
+the gyroscopic term of D(t, X).
 
 All functions are vectorised over a leading body axis; nothing loops over bodies."""
 
@@ -31,35 +32,7 @@ def quat_rate(q: np.ndarray, omega: np.ndarray) -> np.ndarray:
 
 
 
-# --- inertia ------------------------------------------------------------------------------
-
-
-def principal_inertia(shape: str, mass: float, dims: dict[str, float]) -> np.ndarray:
-    """Principal moments (Ixx, Iyy, Izz) in kg m^2 about the object's own axes.
-
-    sphere 2/5 m r^2; box m/12 (b^2 + c^2) ...; cylinder along +Y: Iyy = m r^2 / 2,
-    Ixx = Izz = m (3 r^2 + h^2) / 12; thin rectangle in XY: m/12 (h^2, w^2, w^2 + h^2);
-    disk in XY: m r^2 (1/4, 1/4, 1/2); a mesh uses the solid box of its bounds."""
-    m = mass
-    if shape == "sphere":
-        i = 0.4 * m * dims["radius"] ** 2
-        return np.array([i, i, i])
-    if shape in ("cube", "mesh"):
-        a, b, c = dims["sx"], dims["sy"], dims["sz"]
-        return m / 12.0 * np.array([b * b + c * c, a * a + c * c, a * a + b * b])
-    if shape == "cylinder":
-        r, h = dims["radius"], dims["height"]
-        side = m * (3 * r * r + h * h) / 12.0
-        return np.array([side, 0.5 * m * r * r, side])
-    if shape == "rectangle":
-        w, h = dims["width"], dims["height"]
-        return m / 12.0 * np.array([h * h, w * w, w * w + h * h])
-    if shape == "disk":
-        r = dims["radius"]
-        return m * r * r * np.array([0.25, 0.25, 0.5])
-    # a point-like thing (empty): a small solid sphere of 5 cm keeps I invertible
-    i = 0.4 * m * 0.05**2
-    return np.array([i, i, i])
+# --- inertia (principal moments per shape: pipeline/geometry.py) ------------------------
 
 
 def isotropic(moments: np.ndarray) -> bool:

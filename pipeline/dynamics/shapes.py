@@ -60,18 +60,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..geometry import BOX, CYLINDER
 from ..motion.pose import quat_mul, quat_normalize, quat_to_matrix
 from .forces import cross
 from .collisions import TOL, BoxCollider, Collider, ContactBodies, PlaneCollider, SphereCollider
 
-BOX, CYLINDER = 1, 2
 RIM_SAMPLES = 8
 _POINT_IDS = 64  # candidate points per body and collider (at most 28 used)
 
 
 @dataclass
 class ShapeSet:
-    """Per body: kind (0: bounding sphere, 1: box, 2: cylinder) and half extents [n, 3]
+    """Per body: kind (geometry.py BOUND 0: bounding sphere, BOX 1, CYLINDER 2) and half extents [n, 3]
     in the body frame (box: half sizes; cylinder along +Y: (r, h/2, r)), scale applied."""
 
     kind: np.ndarray
@@ -84,6 +84,7 @@ class ShapeSet:
     lams: list[np.ndarray] = field(default_factory=list)
 
     def shaped(self) -> np.ndarray:
+        """Bodies that collide with their true shape (not their bounding sphere)."""
         return self.kind > 0
 
     def begin_step(self) -> None:

@@ -42,6 +42,7 @@ class BodyProps:
 
     @property
     def count(self) -> int:
+        """Number of bodies."""
         return int(self.mass.size)
 
     def take(self, index: np.ndarray) -> "BodyProps":
@@ -82,8 +83,9 @@ class State:
 class System:
     """A group of bodies under one Environment: the D(t, X) an integrator advances.
 
-    `h` is the step context's dt (drag and friction use it so they never reverse a
-    velocity); `active` marks bodies that move this step (started, alive, not pinned)."""
+    D takes the step's dt (drag uses it so it never reverses a velocity within a step;
+    step.StepDynamics binds it per step); `active` marks bodies that move this step
+    (started, alive, not pinned)."""
 
     def __init__(self, props: BodyProps, env: Environment, rotating: bool) -> None:
         self.props = props
@@ -92,7 +94,6 @@ class System:
         self.n = props.count
         self.split = self.n * (7 if rotating else 3)
         self.size = self.n * (13 if rotating else 6)
-        self.h = 0.0
         self.active = np.ones(self.n, dtype=bool)
         # constant for the run (props and environment do not change): computed once
         self._gravity = forces.gravity(props.mass, env.gravity)
@@ -112,18 +113,21 @@ class System:
 
     @active.setter
     def active(self, value: np.ndarray) -> None:
+        """Set by the activate stage each step."""
         self._active = value
         self._moving: np.ndarray | None = None
 
     # --- layout ---------------------------------------------------------------------------
 
     def unpack(self, X: np.ndarray) -> State:
+        """Views of x, v (and q, w for rigid groups) into the flat state X."""
         n = self.n
         if self.rotating:
             return State(X[: 3 * n].reshape(n, 3), X[7 * n : 10 * n].reshape(n, 3), X[3 * n : 7 * n].reshape(n, 4), X[10 * n :].reshape(n, 3))
         return State(X[: 3 * n].reshape(n, 3), X[3 * n :].reshape(n, 3), None, None)
 
     def pack(self, x: np.ndarray, v: np.ndarray, q: np.ndarray | None = None, w: np.ndarray | None = None) -> np.ndarray:
+        """One flat float64 state vector from its parts (see the module docstring)."""
         parts = [x, q, v, w] if self.rotating else [x, v]
         return np.concatenate([np.asarray(p, dtype=np.float64).ravel() for p in parts])
 
@@ -140,9 +144,10 @@ class System:
 
     # --- forces and D ---------------------------------------------------------------------
 
-    def forces(self, t: float, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Total force on each body (N): gravity, field, drag (air with wind, water),
-        buoyancy, springs, Newtonian gravity."""
+    def forces(self, t: float, x: np.ndarray, v: np.ndarray, dt: float) -> np.ndarray:
+        """Total force on each body (N): gravity, field, drag (air with wind, water; capped
+        so it does not reverse a velocity within a step of `dt` s), buoyancy, springs,
+        Newtonian gravity."""
         p, env = self.props, self.env
         total = self._gravity.copy()
         if env.force_field is not None:
@@ -153,15 +158,26 @@ class System:
             total += f_b
             submerged = np.maximum(submerged, frac)
             # water drag on the wetted part of the reference area (the fluid is at rest)
-            total += forces.drag(v, p.mass, fluid.density, np.full(self.n, fluid.cd), p.area * frac, np.zeros(self.n), self.h)
+            total += forces.drag(v, p.mass, fluid.density, np.full(self.n, fluid.cd), p.area * frac, np.zeros(self.n), dt)
         if self._air_drag:
             v_rel = v - forces.wind_velocity(env.wind, t, x) if env.wind is not None else v
-            total += forces.drag(v_rel, p.mass, env.air_density, p.cd, p.area * (1.0 - submerged), p.linear, self.h)
+            total += forces.drag(v_rel, p.mass, env.air_density, p.cd, p.area * (1.0 - submerged), p.linear, dt)
         if env.springs is not None and env.springs.count:
             total += forces.springs(x, v, env.springs)
         if env.newtonian is not None and self.n > 1:
             total += forces.newtonian_gravity(x, p.mass, *env.newtonian)
         return total
+
+    def constant_acceleration(self) -> np.ndarray | None:
+        """Each body's acceleration [n, 3] (m/s^2) when D's velocity part does not depend on
+        the state or the time (uniform gravity only: no drag, fluids, fields, springs or
+        Newtonian gravity), else None. Pinned and inactive bodies are not masked here."""
+        env = self.env
+        if self._air_drag or env.fluids or env.force_field is not None or env.wind is not None:
+            return None
+        if (env.springs is not None and env.springs.count) or (env.newtonian is not None and self.n > 1):
+            return None
+        return self._gravity * self.props.inv_mass[:, None]
 
     def moving(self) -> np.ndarray:
         """active and not pinned (cached until `active` is set again; do not modify)."""
@@ -169,8 +185,8 @@ class System:
             self._moving = self._active & self._free
         return self._moving
 
-    def derivative(self, t: float, X: np.ndarray) -> np.ndarray:
-        """D(t, X): the whole system's rate of change, one vectorised pass.
+    def derivative(self, t: float, X: np.ndarray, dt: float) -> np.ndarray:
+        """D(t, X) for a step of `dt` s: the whole system's rate of change, one vectorised pass.
 
         Small systems are dominated by the cost of each numpy call, not by arithmetic, so
         two exact shortcuts skip calls: every body moving (no masking) and no body spinning
@@ -178,7 +194,7 @@ class System:
         s = self.unpack(X)
         move = self.moving()
         everyone = bool(move.all())
-        acc = self.forces(t, s.x, s.v)
+        acc = self.forces(t, s.x, s.v, dt)
         acc *= self.props.inv_mass[:, None]
         out = np.zeros(X.shape)
         n = self.n
@@ -194,12 +210,32 @@ class System:
             out[where] = (rate if everyone else np.where(move[:, None], rate, 0.0)).ravel()
         return out
 
+    def velocity_rate(self, t: float, X: np.ndarray, dt: float) -> np.ndarray:
+        """The velocity-like part of D (accelerations, angular accelerations): D[split:]
+        without the position-like rates (semi-implicit Euler uses only this part)."""
+        s = self.unpack(X)
+        move = self.moving()
+        acc = self.forces(t, s.x, s.v, dt)
+        acc *= self.props.inv_mass[:, None]
+        everyone = bool(move.all())
+        if not everyone:
+            acc = np.where(move[:, None], acc, 0.0)
+        if not self.rotating:
+            return acc.ravel()
+        n = self.n
+        out = np.zeros(6 * n)
+        out[: 3 * n] = acc.ravel()
+        if s.w.any():
+            alpha = angular_acceleration(s.q, s.w, self.props.inertia, self.props.inv_inertia, np.zeros_like(s.w))
+            out[3 * n :] = (alpha if everyone else np.where(move[:, None], alpha, 0.0)).ravel()
+        return out
+
     def position_rate(self, t: float, X: np.ndarray) -> np.ndarray:
         """The position-like part of D (velocities and quaternion rates): no forces needed."""
         s = self.unpack(X)
         move = self.moving()[:, None]
         if not self.rotating:
-            return np.where(move, s.v, 0.0).ravel()
+            return s.v.ravel() if move.all() else np.where(move, s.v, 0.0).ravel()
         if not s.w.any():  # no spin: dq/dt = 0 exactly
             out = np.zeros(self.split)
             out[: 3 * self.n] = np.where(move, s.v, 0.0).ravel()
@@ -214,7 +250,7 @@ class System:
         Newtonian gravity are shared between bodies."""
         s = self.unpack(X)
         p, env = self.props, self.env
-        move = self.active & (p.inv_mass > 0)
+        move = self.moving()
         kinetic = 0.5 * p.mass * np.einsum("ij,ij->i", s.v, s.v)
         if self.rotating and s.w.any() and self._isotropic:  # |R^T w| = |w|
             kinetic = kinetic + 0.5 * p.inertia[:, 0] * np.einsum("ij,ij->i", s.w, s.w)

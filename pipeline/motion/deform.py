@@ -1,9 +1,9 @@
 """Deformation: blend shapes (vertex animation between key meshes) and linear blend
 skinning (bones as a frame tree), giving object-space vertices [T, V, 3].
 
-Bind meshes: a `mesh` object's .obj/.ply vertices in file order (pipeline/meshes.py); primitive cubes, cylinders
-and rectangles are tessellated by `primitive_mesh` (the renderer uses the same function,
-so vertex order matches). Validation with located errors happens here, at evaluation.
+Bind meshes: a `mesh` object's .obj/.ply vertices in file order (pipeline/meshes.py); primitive
+shapes are tessellated by their entry in pipeline/geometry.py (`tessellate`; the renderer
+draws deforming objects from the same bind mesh, so vertex order matches). Validation with located errors happens here, at evaluation.
 """
 
 from __future__ import annotations
@@ -12,10 +12,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..errors import AssetError, SceneError
+from ..dynamics.flock import agent_mesh
+from ..errors import AssetError, NotAMeshError, SceneError, ShapeGeometryError
+from ..geometry import tessellate
 from ..meshes import load_mesh
 from ..scene.motion_schema import BlendShapes, Flock, JointSkin, MorphTargets, Skinning
-from ..scene.schema import Cube, Cylinder, Mesh, Rectangle
+from ..scene.schema import Mesh
 from .keyframes import MODES, VectorTrack, _catmull_rom_tangents
 from .pose import Pose, compose
 
@@ -23,57 +25,6 @@ if TYPE_CHECKING:
     from ..scene.loader import LoadedScene, Loc
 
 MAX_INFLUENCES = 4
-
-
-def primitive_mesh(obj: Any, detail: int = 16) -> tuple[np.ndarray, np.ndarray]:
-    """Object-space vertices and triangles of a cube (6 grids of detail^2 quads), a
-    cylinder (open side, detail rings x 2*detail segments, along +Y, centred) or a
-    rectangle (XY grid). Raises ValueError for other shapes."""
-    if isinstance(obj, Mesh):
-        raise ValueError("meshes come from their file")
-    uv, tri = _grid_rect(detail, detail)
-    if isinstance(obj, Rectangle):
-        verts = np.column_stack(((uv[:, 0] - 0.5) * obj.width, (uv[:, 1] - 0.5) * obj.height, np.zeros(len(uv))))
-        return verts, tri
-    if isinstance(obj, Cube):
-        size = np.broadcast_to(np.asarray(obj.size, dtype=np.float64), (3,))
-        faces_v, faces_t = [], []
-        # each face: a grid in the plane of two axes at +-0.5 along the third
-        for axis in range(3):
-            for sign in (-1.0, 1.0):
-                a, b = [k for k in range(3) if k != axis]
-                p = np.zeros((len(uv), 3))
-                p[:, axis] = 0.5 * sign
-                p[:, a], p[:, b] = uv[:, 0] - 0.5, uv[:, 1] - 0.5
-                t = tri if sign > 0 else tri[:, ::-1]
-                faces_t.append(t + sum(len(f) for f in faces_v))
-                faces_v.append(p * size)
-        return np.concatenate(faces_v), np.concatenate(faces_t)
-    if isinstance(obj, Cylinder):
-        segments = 2 * detail
-        uv, tri = _grid_rect(segments, detail)
-        theta = 2 * np.pi * uv[:, 0]
-        verts = np.column_stack((obj.radius * np.cos(theta), (uv[:, 1] - 0.5) * obj.height, -obj.radius * np.sin(theta)))
-        return verts, tri
-    raise ValueError(f"deformation of a {getattr(obj, 'shape', type(obj).__name__)} is not supported; use a mesh, cube, cylinder or rectangle")
-
-
-def _grid_rect(nu: int, nv: int) -> tuple[np.ndarray, np.ndarray]:
-    """An (nu+1) x (nv+1) grid on [0, 1]^2: uv [(nu+1)(nv+1), 2] and triangles [2 nu nv, 3]."""
-    u, v = np.meshgrid(np.linspace(0, 1, nu + 1), np.linspace(0, 1, nv + 1), indexing="xy")
-    uv = np.stack((u.ravel(), v.ravel()), axis=1)
-    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="xy")
-    a = (j * (nu + 1) + i).ravel()
-    b, c, d = a + 1, a + nu + 1, a + nu + 2
-    return uv, np.concatenate((np.stack((a, b, d), 1), np.stack((a, d, c), 1)))
-
-
-def agent_mesh(loaded: "LoadedScene", obj: Any) -> tuple[np.ndarray, np.ndarray]:
-    """One flock agent (agent space, +Z forward): the object's mesh file or its primitive
-    at the coarsest tessellation, times the object's scale."""
-    verts, faces = load_mesh(loaded.asset(obj.file)) if isinstance(obj, Mesh) else primitive_mesh(obj, 1)
-    scale = obj.transform.scale
-    return verts * np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,)), faces
 
 
 def bind_mesh(loaded: "LoadedScene", obj: Any, detail: int = 16) -> tuple[np.ndarray, np.ndarray]:
@@ -86,7 +37,7 @@ def bind_mesh(loaded: "LoadedScene", obj: Any, detail: int = 16) -> tuple[np.nda
         return np.tile(verts, (count, 1)), (faces[None, :, :] + offsets).reshape(-1, 3)
     if isinstance(obj, Mesh):
         return load_mesh(loaded.asset(obj.file))
-    return primitive_mesh(obj, detail)
+    return tessellate(obj, detail)
 
 
 # --- blend shapes -------------------------------------------------------------------------
@@ -221,6 +172,7 @@ def _matrices(stacked: Pose) -> np.ndarray:
 
 
 def skinning(loaded: "LoadedScene", loc: "Loc", skin: Skinning, vertices: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Linear blend skinning of the bind `vertices` [V, 3] by the skin's bones -> [T, V, 3]."""
     names, posed, bind = bone_poses(loaded, loc, skin, t)
     idx, w = skin_weights(loaded, loc, skin, vertices, bind)
     # M_b(t) = object_from_bone(t) * bone_from_object(bind)
@@ -249,7 +201,7 @@ def deformed_vertices(loaded: "LoadedScene", t: np.ndarray, world: dict[str, Pos
             else:
                 vertices, _ = bind_mesh(loaded, obj, deform.detail)
                 out[obj.name] = skinning(loaded, loc, deform, vertices, t)
-        except (ValueError, OSError) as exc:
+        except (ValueError, OSError, ShapeGeometryError) as exc:
             raise SceneError([loaded.source.problem(loc, str(exc))]) from None
     return out
 
@@ -273,7 +225,7 @@ def _cached_mesh(path: "Any", faces: bool = True) -> tuple[np.ndarray, np.ndarra
 
 def _file_mesh(loaded: "LoadedScene", obj: Any) -> tuple[np.ndarray, np.ndarray]:
     if not isinstance(obj, Mesh):
-        raise ValueError("morph targets and joint skins deform a mesh object (shape: mesh)")
+        raise NotAMeshError("morph targets and joint skins deform a mesh object (shape: mesh)")
     return _cached_mesh(loaded.asset(obj.file))
 
 

@@ -16,8 +16,8 @@ Stages, once per planned object (cached by scene, object and block):
   profile   -> trapezoidal speed profile over the arc length (accelerate, cruise, brake)
   pose      -> position p(s(t)); facing along the tangent, banking by the lateral
                acceleration (roll = atan(a_lat / g)) when asked
-The follower (a simulated vehicle tracking this reference) runs in the dynamics stage:
-`simulate_follower` here, called from dynamics/simulation.py.
+The follower (a simulated vehicle tracking this reference) runs in the dynamics stage
+(dynamics/follower.py); `follower_pose` here poses the object it carries.
 """
 
 from __future__ import annotations
@@ -32,12 +32,12 @@ from typing import TYPE_CHECKING, Any, Sequence
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 from scipy.ndimage import binary_dilation
-from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
-from ..errors import SceneError
+from ..errors import GridTooLargeError, SceneError
+from ..geometry import shape_geometry
 from .pose import Pose, quat_mul
-from .rotation import transform_quat
+from .rotation import parent_from_object, transform_quat
 
 if TYPE_CHECKING:
     from ..scene.loader import LoadedScene
@@ -123,7 +123,7 @@ def grid_from_image(path: Path, cell: float, origin: Sequence[float], threshold:
 
     with Image.open(path) as img:
         if img.width * img.height > MAX_CELLS:
-            raise ValueError(f"{path.name}: {img.width} x {img.height} pixels is more than {MAX_CELLS} cells")
+            raise GridTooLargeError(f"{path.name}: {img.width} x {img.height} pixels is more than {MAX_CELLS} cells")
         grey = np.asarray(img.convert("L"), dtype=np.float64) / 255.0
     return Grid(grey < threshold, float(cell), np.asarray(origin, dtype=np.float64))
 
@@ -131,8 +131,6 @@ def grid_from_image(path: Path, cell: float, origin: Sequence[float], threshold:
 def _static_world(loaded: "LoadedScene", skip: str) -> list[tuple[Any, np.ndarray]]:
     """(object, world_from_object 4x4) of every object that does not move (through its
     parents), except `skip`."""
-    from ..dynamics.simulation import world_from_object
-
     objects = {o.name: o for o in loaded.scene.objects}
     out = []
     for obj in loaded.scene.objects:
@@ -143,7 +141,7 @@ def _static_world(loaded: "LoadedScene", skip: str) -> list[tuple[Any, np.ndarra
             if node.motion.type != "static":
                 still = False
                 break
-            m = world_from_object(node.transform) @ m
+            m = parent_from_object(node.transform) @ m
             node = objects.get(node.parent) if node.parent is not None else None
         if still:
             out.append((obj, m))
@@ -151,23 +149,24 @@ def _static_world(loaded: "LoadedScene", skip: str) -> list[tuple[Any, np.ndarra
 
 
 def grid_from_scene(loaded: "LoadedScene", skip: str, cell: float, origin: Sequence[float], size: Sequence[float], band: Sequence[float]) -> Grid:
-    """Walls: cells where a static cube, sphere, cylinder or mesh bounding box reaches
-    into the height band, tested at 3 x 3 points per cell and 5 heights."""
+    """Walls: cells where a static solid shape (geometry.py `inside`: cube, sphere,
+    cylinder ...) or a mesh's bounding box reaches into the height band, tested
+    at 3 x 3 points per cell and 5 heights."""
     from ..meshes import load_mesh
 
     cols, rows = int(math.ceil(size[0] / cell)), int(math.ceil(size[1] / cell))
     if rows * cols > MAX_CELLS:
-        raise ValueError(f"a {size[0]} x {size[1]} m grid of {cell} m cells has {rows * cols} cells (limit {MAX_CELLS})")
+        raise GridTooLargeError(f"a {size[0]} x {size[1]} m grid of {cell} m cells has {rows * cols} cells (limit {MAX_CELLS})")
     wall = np.zeros((rows, cols), dtype=bool)
     sub = (np.arange(3) + 0.5) / 3.0
     heights = np.linspace(band[0], band[1], 5)
     rr, cc = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
     for obj, m in _static_world(loaded, skip):
-        shape = obj.shape
-        if shape not in ("cube", "sphere", "cylinder", "mesh"):
-            continue
+        entry = shape_geometry(obj.shape)
+        if entry.inside is None and not entry.file_mesh:
+            continue  # not solid (a rectangle, a disk, an empty)
         inv = np.linalg.inv(m)
-        if shape == "mesh":
+        if entry.file_mesh:
             verts = load_mesh(loaded.asset(obj.file))[0]
             lo, hi = verts.min(axis=0), verts.max(axis=0)
         for su in sub:
@@ -177,15 +176,10 @@ def grid_from_scene(loaded: "LoadedScene", skip: str, cell: float, origin: Seque
                 for y in heights:
                     p = np.stack((x, np.full_like(x, y), z, np.ones_like(x)), axis=-1) @ inv.T
                     p = p[..., :3]
-                    if shape == "cube":
-                        half = np.broadcast_to(np.asarray(obj.size, dtype=np.float64), (3,)) / 2
-                        inside = np.all(np.abs(p) <= half, axis=-1)
-                    elif shape == "sphere":
-                        inside = np.einsum("...i,...i->...", p, p) <= obj.radius**2
-                    elif shape == "cylinder":
-                        inside = (p[..., 0] ** 2 + p[..., 2] ** 2 <= obj.radius**2) & (np.abs(p[..., 1]) <= obj.height / 2)
-                    else:
+                    if entry.file_mesh:  # a mesh file: its bounding box
                         inside = np.all((p >= lo) & (p <= hi), axis=-1)
+                    else:
+                        inside = entry.inside(obj, p)  # type: ignore[misc]
                     wall |= inside
     return Grid(wall, float(cell), np.asarray(origin, dtype=np.float64))
 
@@ -330,6 +324,7 @@ class Path:
 
     @property
     def length(self) -> float:
+        """Arc length of the smoothed path (m)."""
         return float(self.table_s[-1])
 
     def profile(self) -> tuple[float, float, float, float]:
@@ -343,6 +338,7 @@ class Path:
 
     @property
     def duration(self) -> float:
+        """Seconds from the start to the stop (accelerate + cruise + brake)."""
         _, t_a, t_c, t_b = self.profile()
         return t_a + t_c + t_b
 
@@ -397,6 +393,7 @@ class Path:
         return np.where((tau <= 0) | (tau >= t_a + t_c + t_b), 0.0, np.maximum(out, 0.0))
 
     def position(self, t: np.ndarray) -> np.ndarray:
+        """Position [T, 3] on the path at times t (s)."""
         return self.at_arc(self.arc(t))
 
     def tangent(self, t: np.ndarray) -> np.ndarray:
@@ -530,7 +527,7 @@ def plan_for(loaded: "LoadedScene", index: int) -> Path:
                           spec.decel if spec.decel is not None else spec.accel, spec.start_time, spec.facing)
     except _Located as exc:
         raise SceneError([loaded.source.problem((*loc, *exc.loc), f"{obj.name}: {exc}")]) from None
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, GridTooLargeError) as exc:
         raise SceneError([loaded.source.problem((*loc, "grid"), f"{obj.name}: {exc}")]) from None
     if len(_PLANS) > 32:
         _PLANS.clear()
@@ -576,97 +573,17 @@ def _pose(obj: Any, path: Path, t: np.ndarray, x: np.ndarray, forward: np.ndarra
     else:
         g = float(np.linalg.norm(loaded.scene.dynamics.gravity)) or 9.81
         q = quat_mul(facing_quat(forward, lateral, g), own)
-    scale = np.broadcast_to(np.asarray(obj.transform.scale, dtype=np.float64), (3,))
-    return Pose(x, q, np.broadcast_to(scale, (len(t), 3)).copy())
+    return Pose(x, q, np.broadcast_to(np.asarray(obj.transform.scale, dtype=np.float64), (len(t), 3)).copy())
 
 
-# --- the follower (run by the dynamics stage) ---------------------------------------------
+# --- the follower's pose (simulated by the dynamics stage, dynamics/follower.py) ----------
 
 
-@dataclass
-class FollowerTrack:
-    """Recorded follower states: times [K], x, v, a [K, 3]; `deviation` [K] its distance
-    from the path (m)."""
-
-    times: np.ndarray
-    x: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    deviation: np.ndarray
-
-    def at(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """x (cubic Hermite with the recorded velocities), v and a (linear) at `times`."""
-        t = np.clip(np.asarray(times, dtype=np.float64), self.times[0], self.times[-1])
-        if len(self.times) == 1:
-            return (np.broadcast_to(arr[0], (len(t), 3)).copy() for arr in (self.x, self.v, self.a))  # type: ignore[return-value]
-        k = np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.times) - 2)
-        h = (self.times[k + 1] - self.times[k])[:, None]
-        s = ((t - self.times[k]) / h[:, 0])[:, None]
-        s2, s3 = s * s, s * s * s
-        x = (2 * s3 - 3 * s2 + 1) * self.x[k] + (s3 - 2 * s2 + s) * h * self.v[k] + (-2 * s3 + 3 * s2) * self.x[k + 1] + (s3 - s2) * h * self.v[k + 1]
-        v = (1 - s) * self.v[k] + s * self.v[k + 1]
-        a = (1 - s) * self.a[k] + s * self.a[k + 1]
-        return x, v, a
-
-
-def simulate_follower(loaded: "LoadedScene", index: int, t_start: float, t_end: float) -> FollowerTrack:
-    """Simulate object `index`'s follower from t_start to t_end at the scene's dynamics step:
-    m a = m g + hover (-m g) + drag (-1/2 rho Cd A |v| v) + steering, where steering is the
-    constant acceleration that brings the predicted position x + v tau onto the path's
-    position at t + tau: a_s = 2 (p(t + tau) - x - v tau) / tau^2, at most max_accel
-    (linearised: a PD law with kp = 2 / tau^2, kd = 2 / tau, damping ratio 1/sqrt 2, plus
-    the path's own acceleration as feed-forward). Semi-implicit Euler. A located error if
-    it strays more than `tolerance` from the path."""
-    from ..dynamics.forces import drag
-
-    obj = loaded.scene.objects[index]
-    spec = obj.motion.follower
-    path = plan_for(loaded, index)
-    d = loaded.scene.dynamics
-    dt = float(d.step)
-    steps = max(1, int(math.ceil((t_end - t_start) / dt - 1e-9)))
-    if steps > 5_000_000:
-        raise SceneError([loaded.source.problem(("objects", index, "motion", "follower"), f"{obj.name}: {steps} steps to t = {t_end} s is too many")])
-    times = t_start + dt * np.arange(steps + 1)
-    tau = spec.look_ahead
-    target = path.position(times + tau)  # where the path will be, one look-ahead later
-    g = np.asarray(d.gravity, dtype=np.float64)
-    m = spec.mass
-    x = path.position(np.array([t_start]))[0]
-    h0 = 1e-3
-    v = (path.position(np.array([t_start + h0])) - path.position(np.array([t_start - h0])))[0] / (2 * h0)
-    xs, vs, accs = np.empty((steps + 1, 3)), np.empty((steps + 1, 3)), np.empty((steps + 1, 3))
-    mass = np.array([m])
-    for k in range(steps + 1):
-        steer = 2.0 * (target[k] - x - v * tau) / (tau * tau)
-        norm = math.sqrt(float(steer @ steer))
-        if norm > spec.max_accel:
-            steer *= spec.max_accel / norm
-        f_drag = drag(v[None], mass, d.air_density, np.array([spec.cd]), np.array([spec.area]), np.zeros(1), dt)[0]
-        a = g + (-g) + f_drag / m + steer  # gravity, hover (carries the weight), drag, steering
-        xs[k], vs[k], accs[k] = x, v, a
-        if k == steps:
-            break
-        v = v + a * dt
-        x = x + v * dt
-    if not np.isfinite(xs).all():
-        raise SceneError([loaded.source.problem(("objects", index, "motion", "follower"), f"{obj.name}: the follower's state is not finite")])
-    # deviation: distance to the nearest dense path sample (an upper bound of the distance
-    # to the path, off by at most half the sample spacing)
-    dense = path.samples()
-    dev, _ = cKDTree(dense).query(xs)
-    worst = int(np.argmax(dev))
-    if dev[worst] > spec.tolerance:
-        raise SceneError([loaded.source.problem(("objects", index, "motion", "follower", "tolerance"),
-                         f"{obj.name}: the follower strays {dev[worst]:.3g} m from the planned path at t = {times[worst]:.3f} s "
-                         f"(tolerance {spec.tolerance} m): lower the speed or accel, or raise max_accel or the tolerance")])
-    return FollowerTrack(times, xs, vs, accs, dev)
-
-
-def follower_pose(loaded: "LoadedScene", index: int, track: FollowerTrack, t: np.ndarray) -> Pose:
-    """world_from_object of a planned object carried by its simulated follower: facing
-    along its own velocity (the path's tangent when nearly still), banking by its own
-    lateral acceleration."""
+def follower_pose(loaded: "LoadedScene", index: int, track: Any, t: np.ndarray) -> Pose:
+    """world_from_object of a planned object carried by its simulated follower (`track`:
+    dynamics/follower.py FollowerTrack, whose `at(t)` gives x, v, a): facing along its
+    own velocity (the path's tangent when nearly still), banking by its own lateral
+    acceleration."""
     path = plan_for(loaded, index)
     obj = loaded.scene.objects[index]
     x, v, a = track.at(t)

@@ -12,8 +12,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation as R
 
 from ..scene.motion_schema import Key
-from ..scene.types import AxisAngleRotation, EulerRotation, QuaternionRotation
-from .pose import quat_log, quat_mul, quat_conj, quat_normalize
+from ..scene.types import AxisAngleRotation, EulerRotation, QuaternionRotation, Transform
+from .pose import quat_log, quat_mul, quat_conj, quat_normalize, quat_to_matrix
 
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 
@@ -39,6 +39,15 @@ def transform_quat(rotation: EulerRotation | AxisAngleRotation | QuaternionRotat
     if isinstance(rotation, AxisAngleRotation):
         return axis_angle_quat(rotation.axis, rotation.angle)
     return quat_normalize(np.asarray(rotation.quaternion, dtype=np.float64))
+
+
+def parent_from_object(transform: Transform) -> np.ndarray:
+    """4x4 T(translate) R(rotate) S(scale) of a scene `transform:`: the object's frame in
+    its parent's (the world's, for an object without a parent)."""
+    m = np.eye(4)
+    m[:3, :3] = quat_to_matrix(transform_quat(transform.rotate)) * np.asarray(transform.scale, dtype=np.float64)[None, :]
+    m[:3, 3] = transform.translate
+    return m
 
 
 def key_quat(key: Key) -> np.ndarray:

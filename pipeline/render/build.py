@@ -12,27 +12,20 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from ..errors import RendererError
+from ..geometry import scale_matrix, shape_geometry
 from ..motion.pose import quat_normalize, quat_to_matrix
 from ..scene.loader import LoadedScene
 from ..scene.schema import (
     Camera,
     Conductor,
     ConstantLight,
-    Cube,
-    Cylinder,
     Dielectric,
     Diffuse,
     DirectionalLight,
-    Disk,
-    Empty,
     EnvmapLight,
-    Mesh,
-    Particles,
     Plastic,
     PointLight,
     Principled,
-    Rectangle,
-    Sphere,
     SpotLight,
 )
 from ..scene.types import Texture
@@ -84,6 +77,7 @@ def color(value: Any, loaded: LoadedScene) -> Any:
 
 
 def spectrum(value: Any) -> Any:
+    """A spectrum field (emission, tint, light colour): grey float or RGB triple."""
     if isinstance(value, (tuple, list)):
         return {"type": "rgb", "value": [float(v) for v in value]}
     return float(value)
@@ -148,6 +142,7 @@ def _principled(m: Principled, loaded: LoadedScene) -> Dict:
 
 
 def material_dict(m: Any, loaded: LoadedScene) -> Dict:
+    """The Mitsuba BSDF of a scene material (two-sided when asked)."""
     d = MATERIALS[m.type](m, loaded)
     if m.two_sided:
         d = {"type": "twosided", "material": d}
@@ -159,89 +154,28 @@ DEFAULT_MATERIAL: Dict = {"type": "diffuse", "reflectance": 0.5}
 
 # --- shapes -------------------------------------------------------------------------------
 
-# Each builder returns the Mitsuba shapes of one object, in OBJECT space (to_world = the
-# object's geometry-from-unit-primitive transform); the caller pre-multiplies the pose.
-ShapeBuilder = Callable[[Any, LoadedScene], list[tuple[Dict, np.ndarray]]]
-SHAPES: dict[str, ShapeBuilder] = {}
+# Every shape's Mitsuba primitives come from its geometry entry (pipeline/geometry.py), in
+# OBJECT space (to_world = the object's geometry-from-unit-primitive transform); the caller
+# pre-multiplies the pose. A mesh file is drawn from its (converted) file; particles are
+# geometry built per frame by the renderer.
 
 
-def _shape(kind: str) -> Callable[[ShapeBuilder], ShapeBuilder]:
-    def register(fn: ShapeBuilder) -> ShapeBuilder:
-        SHAPES[kind] = fn
-        return fn
+def shape_primitives(obj: Any, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
+    """(Mitsuba shape dictionary, object_from_prim 4x4) of each primitive of one object."""
+    entry = shape_geometry(obj.shape)
+    if entry.file_mesh:
+        from .assets import mesh_file
 
-    return register
-
-
-def _scale(sx: float, sy: float, sz: float) -> np.ndarray:
-    return np.diag([sx, sy, sz, 1.0])
-
-
-@_shape("sphere")
-def _sphere(o: Sphere, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
-    return [({"type": "sphere"}, _scale(o.radius, o.radius, o.radius))]
-
-
-@_shape("cube")
-def _cube(o: Cube, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
-    # Mitsuba's cube spans [-1, 1]^3
-    s = o.size if isinstance(o.size, tuple) else (o.size,) * 3
-    return [({"type": "cube"}, _scale(s[0] / 2, s[1] / 2, s[2] / 2))]
-
-
-@_shape("rectangle")
-def _rectangle(o: Rectangle, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
-    # Mitsuba's rectangle spans [-1, 1]^2 in XY, normal +Z
-    return [({"type": "rectangle"}, _scale(o.width / 2, o.height / 2, 1.0))]
-
-
-@_shape("disk")
-def _disk(o: Disk, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
-    return [({"type": "disk"}, _scale(o.radius, o.radius, 1.0))]
-
-
-@_shape("cylinder")
-def _cylinder(o: Cylinder, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
-    # Mitsuba's cylinder is open, along +Z from z=0 to z=1: rotate +Z onto +Y, centre it,
-    # and close it with two disks (top facing +Y, bottom facing -Y).
-    r, h = o.radius, o.height
-    z_to_y = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], float)  # rot -90 about x
-    body = np.eye(4)
-    body[1, 3] = -h / 2
-    body = body @ z_to_y @ _scale(r, r, h)
-    top = np.eye(4)
-    top[1, 3] = h / 2
-    top = top @ z_to_y @ _scale(r, r, 1.0)
-    y_down = np.array([[1, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]], float)  # rot +90 about x
-    bottom = np.eye(4)
-    bottom[1, 3] = -h / 2
-    bottom = bottom @ y_down @ _scale(r, r, 1.0)
-    return [({"type": "cylinder"}, body), ({"type": "disk"}, top), ({"type": "disk"}, bottom)]
-
-
-@_shape("mesh")
-def _mesh(o: Mesh, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
-    from .assets import mesh_file
-
-    path = mesh_file(loaded.asset(o.file))
-    kind = "ply" if path.suffix.lower() == ".ply" else "obj"
-    return [({"type": kind, "filename": str(path), "face_normals": o.face_normals}, np.eye(4))]
-
-
-@_shape("empty")
-def _empty(o: Empty, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
-    return []
-
-
-@_shape("particles")
-def _particles(o: Particles, loaded: LoadedScene) -> list[tuple[Dict, np.ndarray]]:
-    return []  # particles are geometry built per frame by the renderer (render/particles.py)
+        path = mesh_file(loaded.asset(obj.file))
+        kind = "ply" if path.suffix.lower() == ".ply" else "obj"
+        return [({"type": kind, "filename": str(path), "face_normals": obj.face_normals}, np.eye(4))]
+    return [({"type": p.plugin}, p.object_from_prim) for p in entry.primitives(obj)]  # type: ignore[misc]
 
 
 def object_shapes(obj: Any, loaded: LoadedScene, world_from_object: np.ndarray, materials: dict[str, Dict]) -> list[Dict]:
     """The Mitsuba shape dictionaries of one object at one pose."""
     out = []
-    for d, object_from_prim in SHAPES[obj.shape](obj, loaded):
+    for d, object_from_prim in shape_primitives(obj, loaded):
         d = dict(d)
         d["to_world"] = _xf(world_from_object @ object_from_prim)
         d["bsdf"] = materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
@@ -350,7 +284,7 @@ def sensor_dict(
     else:
         # Mitsuba's orthographic camera sees camera-space x in [-1, 1]: scale by width / 2.
         half = float(ortho_width if ortho_width is not None else camera.ortho_width) / 2
-        d["to_world"] = _xf(world_from_camera @ _scale(half, half, 1.0))
+        d["to_world"] = _xf(world_from_camera @ scale_matrix(half, half, 1.0))
     return d
 
 

@@ -23,6 +23,10 @@ class Drag(Model):
 
 
 class DynamicsMotion(Model):
+    """`motion: {type: dynamics}`: the object is a simulated body (rigid, or a particle
+    that does not rotate) with its mass, initial velocities, contact material and drag;
+    `pinned` holds it still with infinite mass; `start` holds it until then."""
+
     type: Literal["dynamics"]
     body: Literal["particle", "rigid"] = "rigid"
     mass: Positive = 1.0  # kg
@@ -64,6 +68,10 @@ class NewtonianGravity(Model):
 
 
 class DynamicsSettings(Model):
+    """The scene-wide `dynamics:` block: integrator and fixed step (rk45 adapts within it,
+    to rtol/atol), gravity, air, wind and force fields, Newtonian gravity, fluids,
+    springs, contact iterations and the blow-up guard (docs/dynamics.md)."""
+
     integrator: Integrator = "rk4"
     step: Annotated[float, Field(gt=0, le=1)] = 1.0 / 480.0  # seconds
     rtol: Positive = 1e-6  # rk45

@@ -22,6 +22,7 @@ from .types import (
     Model,
     NonNegative,
     Positive,
+    Size3,
     Texture,
     Transform,
     Vec3,
@@ -34,6 +35,8 @@ Name = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_.\-]*$", max_length=1
 
 
 class TimelineSpec(Model):
+    """Frame rate (an integer, a decimal or a ratio such as 30000/1001) and frame range."""
+
     fps: Union[int, float, str] = 24
     first: int = 0
     last: int = 0
@@ -51,9 +54,11 @@ class TimelineSpec(Model):
 
     @property
     def rate(self) -> Fraction:
+        """The frame rate, exact."""
         return parse_fps(self.fps)
 
     def timeline(self) -> Timeline:
+        """The Timeline of this block (frame <-> seconds, shutter intervals)."""
         return Timeline(fps=self.rate, first=self.first, last=self.last)
 
 
@@ -68,6 +73,9 @@ class Shutter(Model):
 
 
 class Camera(Model):
+    """The shot's camera: placed by position/look_at/up or by a transform, with a field of
+    view (degrees, along fov_axis) or an orthographic width, clip planes and a shutter."""
+
     type: Literal["perspective", "orthographic"] = "perspective"
     position: Vec3 | None = None
     look_at: Vec3 | None = None
@@ -167,11 +175,15 @@ class _Material(Model):
 
 
 class Diffuse(_Material):
+    """Lambertian reflection of `color` (a grey, an RGB triple or a texture)."""
+
     type: Literal["diffuse"]
     color: ColorOrTexture = 0.5
 
 
 class Plastic(_Material):
+    """A diffuse base under a smooth or rough dielectric coating of index `ior`."""
+
     type: Literal["plastic"]
     color: ColorOrTexture = 0.5
     roughness: Annotated[float, Field(ge=0, le=1)] = 0.0  # 0: smooth coating
@@ -193,6 +205,8 @@ class Conductor(_Material):
 
 
 class Dielectric(_Material):
+    """Glass-like: reflects and refracts with index `ior`; smooth or rough."""
+
     type: Literal["dielectric"]
     ior: Annotated[float, Field(gt=1, le=4)] = 1.5
     roughness: Annotated[float, Field(ge=0, le=1)] = 0.0
@@ -200,6 +214,8 @@ class Dielectric(_Material):
 
 
 class Principled(_Material):
+    """Disney-style principled BSDF: base colour, metallic, roughness, specular, clearcoat."""
+
     type: Literal["principled"]
     color: ColorOrTexture = 0.5
     metallic: Union[Annotated[float, Field(ge=0, le=1)], Texture] = 0.0  # a texture: grey, raw
@@ -244,6 +260,8 @@ class _Object(Model):
 
 
 class Sphere(_Object):
+    """A sphere of `radius` (metres) centred at the object's origin."""
+
     shape: Literal["sphere"]
     radius: Positive = 1.0
 
@@ -252,7 +270,7 @@ class Cube(_Object):
     """An axis-aligned box of side `size` (metres), centred at the origin before transform."""
 
     shape: Literal["cube"]
-    size: Union[Positive, tuple[Positive, Positive, Positive]] = 1.0
+    size: Size3 = (1.0, 1.0, 1.0)
 
 
 class Rectangle(_Object):
@@ -275,6 +293,16 @@ class Cylinder(_Object):
 
     shape: Literal["cylinder"]
     radius: Positive = 1.0
+    height: Positive = 1.0
+
+
+class Capsule(_Object):
+    """A capsule along the object's +Y axis, centred at the origin: a cylinder of `radius`
+    and `height` (between the centres of its two hemispherical caps) closed by the caps;
+    its whole length is height + 2 radius."""
+
+    shape: Literal["capsule"]
+    radius: Positive = 0.5
     height: Positive = 1.0
 
 
@@ -309,7 +337,7 @@ class Particles(_Object):
 
 
 SceneObject = Annotated[
-    Union[Sphere, Cube, Rectangle, Disk, Cylinder, Mesh, Empty, Particles],
+    Union[Sphere, Cube, Rectangle, Disk, Cylinder, Capsule, Mesh, Empty, Particles],
     Field(discriminator="shape"),
 ]
 
@@ -318,6 +346,9 @@ SceneObject = Annotated[
 
 
 class RenderSettings(Model):
+    """How frames are rendered: resolution, samples, integrator and depth, motion blur,
+    seeds, Mitsuba variant, filter, denoising."""
+
     resolution: tuple[Annotated[int, Field(ge=1, le=16384)], Annotated[int, Field(ge=1, le=16384)]] = (640, 360)
     spp: Annotated[int, Field(ge=1, le=1 << 20)] = 64
     integrator: Literal["path", "direct"] = "path"
@@ -350,6 +381,9 @@ class RenderSettings(Model):
 
 
 class OutputSettings(Model):
+    """Where and how frames are written: folder, file name pattern, EXR pixel type and
+    compression, extra passes (AOVs), metadata."""
+
     directory: str | None = None  # default: out/<scene name>; `-o DIR` overrides
     filename: Annotated[str, Field(pattern=r"#+")] = "{name}.####.exr"
     pixel_type: Literal["half", "float"] = "half"
@@ -388,6 +422,7 @@ class Scene(Model):
 
 __all__ = [
     "Camera",
+    "Capsule",
     "Collider",
     "ConstantLight",
     "Cube",

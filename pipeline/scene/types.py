@@ -9,12 +9,21 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Discriminator, Field, Tag, model_validator
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+
+
+def _triple(value: float | tuple[float, float, float]) -> tuple[float, float, float]:
+    """One number means the same on all three axes."""
+    return (value, value, value) if isinstance(value, (int, float)) else tuple(value)  # type: ignore[return-value]
+
+
+# A size or scale: one positive number or one per axis; read back always as (x, y, z).
+Size3 = Annotated[Union[Positive, tuple[Positive, Positive, Positive]], AfterValidator(_triple)]
 # A colour is RGB in linear units, or one grey value.
 Color = Union[tuple[NonNegative, NonNegative, NonNegative], NonNegative]
 
@@ -89,7 +98,7 @@ class Transform(Model):
 
     translate: Vec3 = (0.0, 0.0, 0.0)
     rotate: Rotation | None = None
-    scale: Union[Positive, tuple[Positive, Positive, Positive]] = 1.0
+    scale: Size3 = (1.0, 1.0, 1.0)
 
 
 class Texture(Model):

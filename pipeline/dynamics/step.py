@@ -1,0 +1,412 @@
+"""One simulation step as named stages over one `StepContext`, and the run of a group.
+
+Each step of a group runs, in order:
+  activate   -> which bodies move this step (started, born and not dead, not pinned);
+                bodies that join bring their energy into the guard's budget
+  integrate  -> the scene's integrator advances D(t, X) by dt (rk45 may take a smaller dt)
+  collide    -> swept contacts against colliders and between bodies, impulses (collisions.py)
+  guard      -> finiteness and energy bound (guard.py)
+  record     -> the state at t + dt (every step, or every k-th for big particle systems)
+When nothing in a body group can change its acceleration (uniform gravity only, nothing
+spinning, no body starting) the `coast` stage replaces the next steps, up to the first one
+with a possible contact, by the integrator's closed form under a constant acceleration,
+computed for all of them at once (see `coast`).
+The step size reaches the forces (drag and friction never reverse a velocity within a
+step) through the context: the integrator advances a `StepDynamics`, the system's
+D(t, X) bound to the step's dt, never through state kept on the system.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from . import forces
+from .collisions import Collider, ContactBodies, _sweep_spheres, resolve_pairs, resolve_static
+from .guard import Guard
+from .integrators import Integrator
+from .rigid import inverse_inertia_world
+from .shapes import ShapeSet, find_contacts, resolve_shaped, true_shape_collider
+from .state import System
+from .track import Track
+
+
+@dataclass(frozen=True)
+class StepContext:
+    """One step: it starts at `t` (s) and lasts `dt` (s; once integrated, the step the
+    integrator took), `inv_dt` = 1/dt, `index` counts steps from 0, and `t_next` is the
+    time the step ends (exact on the fixed grid t0 + (index + 1) step; nan before the
+    integrate stage decided it)."""
+
+    t: float
+    dt: float
+    inv_dt: float
+    index: int
+    t_next: float = math.nan
+
+
+class StepDynamics:
+    """A system's D(t, X) bound to one step's dt: what an integrator advances (see
+    integrators.StepSystem). Drag and friction read the step size from here."""
+
+    __slots__ = ("system", "dt", "split")
+
+    def __init__(self, system: System, dt: float) -> None:
+        self.system = system
+        self.dt = dt
+        self.split = system.split
+
+    def derivative(self, t: float, X: np.ndarray) -> np.ndarray:
+        """D(t, X) with this step's dt."""
+        return self.system.derivative(t, X, self.dt)
+
+    def velocity_rate(self, t: float, X: np.ndarray) -> np.ndarray:
+        """The velocity-like part of D with this step's dt."""
+        return self.system.velocity_rate(t, X, self.dt)
+
+    def position_rate(self, t: float, X: np.ndarray) -> np.ndarray:
+        """The position-like part of D (no forces, no dt)."""
+        return self.system.position_rate(t, X)
+
+    def normalize(self, X: np.ndarray) -> np.ndarray:
+        """Back onto the state manifold (unit quaternions)."""
+        return self.system.normalize(X)
+
+
+@dataclass
+class Group:
+    """One simulated group: its system, state X, colliders, body pairs and activate hook."""
+
+    system: System
+    X: np.ndarray
+    colliders: list[Collider]
+    pairs: tuple[np.ndarray, np.ndarray]
+    activate: Callable[["Group", StepContext], None]
+    record_stride: int = 1
+    record_dtype: type = np.float64
+    shapes: ShapeSet | None = None  # true-shape boxes and cylinders (shapes.py)
+
+
+def bodies_activate(group: Group, ctx: StepContext) -> None:
+    """The activate hook of rigid bodies: a body moves from its `start` time on."""
+    group.system.active = group.system.props.start <= ctx.t + 1e-12
+
+
+def activate(group: Group, ctx: StepContext, guard: Guard) -> None:
+    """Stage activate: the group's hook marks the bodies that move this step; the energy
+    of those that join now (bodies that start, particles born) enters the guard's budget."""
+    system = group.system
+    before = system.moving()
+    group.activate(group, ctx)
+    joined = system.moving() & ~before
+    if joined.any():
+        kin, pot, _ = system.energy(group.X)
+        guard.add_energy(float((kin + pot)[joined].sum()))
+
+
+def integrate(group: Group, integrator: Integrator, ctx: StepContext, t0: float, step: float) -> tuple[np.ndarray, StepContext, float]:
+    """Stage integrate: advance the group's state by ctx.dt. Returns the new state, the
+    context of the step actually taken (its dt, and t_next on the fixed grid t0 +
+    (index + 1) step when the whole step was taken by a fixed-step method) and the step
+    the integrator proposes next."""
+    result = integrator.step(StepDynamics(group.system, ctx.dt), ctx.t, group.X, ctx.dt)
+    h = result.h_taken
+    on_grid = not integrator.adaptive and h == step
+    t_next = t0 + (ctx.index + 1) * step if on_grid else ctx.t + h
+    return result.X, StepContext(ctx.t, h, 1.0 / h, ctx.index, t_next), result.h_next
+
+
+def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iterations: int, g_mag: float) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Stage collide: swept contacts of the step X0 -> X1 against the colliders and between
+    bodies, resolved by impulses in place on X1 (collisions.py, shapes.py). Returns the
+    per-body contact mask and the impacts ([k, 7] rows, see Track.impacts)."""
+    system = group.system
+    s0, s1 = system.unpack(X0), system.unpack(X1)
+    moving = system.moving()
+    contact = np.zeros(system.n, dtype=bool)
+    impacts: list[np.ndarray] = []
+    if not group.colliders and group.pairs[0].size == 0:
+        return contact, impacts
+    p = system.props
+    shaped = group.shapes.shaped() & moving if group.shapes is not None else np.zeros(system.n, dtype=bool)
+    # the first pass's sphere sweeps, done before anything else: most steps of a small
+    # system touch nothing, and then nothing more needs computing
+    first_hits = []
+    for col in group.colliders:
+        hits = col.sweep(s0.x, s1.x, p.radius)
+        hits.hit &= moving
+        if true_shape_collider(col):
+            hits.hit &= ~shaped  # boxes and cylinders: their true shape, below
+        first_hits.append(hits)
+    if not shaped.any() and group.pairs[0].size == 0 and not any(h.hit.any() for h in first_hits):
+        return contact, impacts
+    inv_mass = np.where(moving, p.inv_mass, 0.0)
+    inv_I = None
+    if system.rotating:
+        inv_I = inverse_inertia_world(s1.q, np.where(moving[:, None], p.inv_inertia, 0.0))
+    bodies = ContactBodies(s0.x, s0.v, s1.x, s1.v, s1.w, inv_I, p.radius, inv_mass, p.restitution, p.friction, p.static_friction)
+    v_rest = max(2.0 * g_mag * ctx.dt, 1e-6)
+    shaped_idx = np.flatnonzero(shaped)
+    if group.shapes is not None:
+        group.shapes.begin_step()
+    seen = None  # shaped bodies' end positions after their last contact pass
+    for iteration in range(iterations):
+        found = False
+        fresh = iteration == 0  # the first pass's sweeps are still valid (nothing moved since)
+        if shaped_idx.size and group.colliders:
+            # after the first pass only bodies that something else moved can have new contacts
+            check = shaped_idx if seen is None else shaped_idx[np.any(s1.x[shaped_idx] != seen, axis=1)]
+            cs = find_contacts(bodies, group.shapes, check, s0.q, s1.q, group.colliders) if check.size else None
+            seen = s1.x[shaped_idx].copy()
+            if cs is not None:
+                found, fresh = True, False
+                contact[cs.body] = True
+                out = resolve_shaped(bodies, cs, group.shapes, s1.q, ctx.dt, v_rest, 4 * iterations)
+                if out.shape[1]:
+                    impacts.append(np.stack((ctx.t + out[3] * ctx.dt, out[0], out[1], out[2], *out[4:7]), axis=1))
+        for ci, col in enumerate(group.colliders):
+            if fresh:
+                hits = first_hits[ci]
+            else:
+                hits = col.sweep(s0.x, s1.x, p.radius)
+                hits.hit &= moving
+                if true_shape_collider(col):
+                    hits.hit &= ~shaped  # boxes and cylinders: their true shape, above
+            if not hits.hit.any():
+                continue
+            found, fresh = True, False
+            contact |= hits.hit
+            out = resolve_static(bodies, hits, col, ctx.dt, v_rest)
+            if out.shape[1]:
+                impacts.append(np.stack((ctx.t + out[2] * ctx.dt, out[0], out[1], np.full(out.shape[1], float(ci)), *out[3:6]), axis=1))
+        if group.pairs[0].size:
+            out = resolve_pairs(bodies, group.pairs, ctx.dt, v_rest)
+            if out.shape[1]:
+                found = True
+                contact[out[0].astype(int)] = True
+                contact[out[1].astype(int)] = True
+                impacts.append(np.stack((np.full(out.shape[1], ctx.t + ctx.dt), out[0], out[2], -1.0 - out[1], *out[3:6]), axis=1))
+        if not found:
+            break
+    return contact, impacts
+
+
+def guard_step(group: Group, guard: Guard, X1: np.ndarray, ctx: StepContext) -> tuple[np.ndarray, np.ndarray, float]:
+    """Stage guard: the positive work of wind and force fields over the step enters the
+    budget, then the state at ctx.t_next must be finite and within the energy bound
+    (guard.py). Returns the energies of X1 (kinetic [n], potential [n], shared)."""
+    system = group.system
+    env, p = system.env, system.props
+    if env.wind is not None or env.force_field is not None:
+        s1 = system.unpack(X1)
+        f_ext = forces.field_force(p.mass, env.force_field, ctx.t_next, s1.x)
+        if env.wind is not None:
+            u = forces.wind_velocity(env.wind, ctx.t_next, s1.x)
+            f_ext = f_ext + forces.drag(s1.v - u, p.mass, env.air_density, p.cd, p.area, p.linear, ctx.dt) - forces.drag(
+                s1.v, p.mass, env.air_density, p.cd, p.area, p.linear, ctx.dt
+            )
+        moving = system.moving()
+        guard.add_work(ctx.dt * float(np.einsum("ij,ij->", f_ext[moving], s1.v[moving])))
+    energy = system.energy(X1)
+    per_body = energy[0] + energy[1]
+    s1 = system.unpack(X1)
+    guard.check(ctx.t_next, ctx.index + 1, ctx.dt, X1, per_body, float(per_body.sum() + energy[2]), s1.x)
+    return energy
+
+
+class Recorder:
+    """Stage record: keeps the group's states (in its record dtype) and energies; `track()`
+    returns them as a Track."""
+
+    def __init__(self, group: Group) -> None:
+        self.group = group
+        self.each = bool(group.system.props.names)  # bodies: a few, named; energies kept per body (plots)
+        self.t: list[float] = []
+        self.x: list[np.ndarray] = []
+        self.v: list[np.ndarray] = []
+        self.q: list[np.ndarray] = []
+        self.c: list[np.ndarray] = []
+        self.ke: list[float] = []
+        self.pe: list[float] = []
+        self.ke_each: list[np.ndarray] = []
+        self.pe_each: list[np.ndarray] = []
+        self.impacts: list[np.ndarray] = []
+
+    def record(self, t: float, X: np.ndarray, contact: np.ndarray, energy: tuple[np.ndarray, np.ndarray, float]) -> None:
+        """Keep the state X at time t, whether a contact happened since the last record,
+        and its energies (kinetic [n], potential [n], shared)."""
+        system, dtype = self.group.system, self.group.record_dtype
+        s = system.unpack(X)
+        self.t.append(t)
+        self.x.append(s.x.astype(dtype))
+        self.v.append(s.v.astype(dtype))
+        if system.rotating:
+            self.q.append(s.q.copy())
+        self.c.append(contact.copy())
+        self.ke.append(float(energy[0].sum()))
+        self.pe.append(float(energy[1].sum() + energy[2]))
+        if self.each:
+            self.ke_each.append(energy[0])
+            self.pe_each.append(energy[1])
+
+    def record_many(self, t: np.ndarray, x: np.ndarray, v: np.ndarray, q: np.ndarray | None, kinetic: np.ndarray, potential: np.ndarray) -> None:
+        """Keep K states at once (coast: no contacts; per-body energies [K, n], no shared
+        terms): times [K], x and v [K, n, 3], one orientation [n, 4] for all."""
+        K = len(t)
+        self.t.extend(t.tolist())
+        self.x.extend(x.astype(self.group.record_dtype))
+        self.v.extend(v.astype(self.group.record_dtype))
+        if q is not None:
+            self.q.extend(np.broadcast_to(q, (K,) + q.shape))
+        self.c.extend(np.zeros((K, x.shape[1]), dtype=bool))
+        self.ke.extend(kinetic.sum(axis=1).tolist())
+        self.pe.extend(potential.sum(axis=1).tolist())
+        if self.each:
+            self.ke_each.extend(kinetic)
+            self.pe_each.extend(potential)
+
+    def track(self) -> Track:
+        """Everything recorded, as one Track."""
+        return Track(
+            times=np.asarray(self.t),
+            x=np.stack(self.x),
+            v=np.stack(self.v),
+            q=np.stack(self.q) if self.q else None,
+            contact=np.stack(self.c),
+            kinetic=np.asarray(self.ke),
+            potential=np.asarray(self.pe),
+            impacts=np.concatenate(self.impacts) if self.impacts else np.zeros((0, 7)),
+            kinetic_each=np.stack(self.ke_each) if self.each else None,
+            potential_each=np.stack(self.pe_each) if self.each else None,
+        )
+
+
+COAST_STEPS = 512  # steps one coast batch looks ahead at most
+
+
+def coast(group: Group, integrator: Integrator, ctx: StepContext, t0: float, t1: float, step: float, guard: Guard, recorder: "Recorder") -> int:
+    """Stage coast: advance a body group by the steps ahead in which nothing can happen
+    but free flight, all at once; returns how many (0: take the next step normally).
+
+    It applies when D's velocity part is a constant acceleration a (System.
+    constant_acceleration: uniform gravity only) and nothing spins (w = 0, and nothing
+    in D makes it spin), for a fixed-step integrator, on whole steps of the fixed grid
+    t0 + k step, before the next body's start time. Then k steps of the integrator from
+    (x, v) are exactly v_k = v + k h a and x_k = x + k h v + c(k) h^2 a, with the
+    integrator's c(k) (Integrator.ballistic: k^2/2 for midpoint, Heun and RK4; k(k-1)/2
+    for explicit Euler; k(k+1)/2 for semi-implicit Euler); orientations stay. The
+    trajectory of COAST_STEPS steps is swept against every collider and between body
+    pairs (the bounding spheres, as the collide stage's broad phase); the steps before
+    the first with a possible contact, and with a finite state within the guard's energy
+    bound, are recorded. The same arithmetic in a different order: positions differ from
+    stepping by rounding only (1e-16 relative per step, not accumulated)."""
+    system = group.system
+    c = integrator.ballistic
+    if c is None or integrator.adaptive or group.record_stride != 1 or not system.props.names:
+        return 0
+    a = system.constant_acceleration()
+    s = system.unpack(group.X)
+    if a is None or (system.rotating and s.w.any()):
+        return 0
+    p = system.props
+    index = ctx.index + np.arange(1, COAST_STEPS + 1)
+    t_end = t0 + index * step  # where each step ends, on the grid
+    starts = np.concatenate(([ctx.t], t_end[:-1]))
+    ok = (t1 - starts >= step) & (starts < t1 - 1e-9 * max(1.0, abs(t1)))
+    later = p.start[p.start > ctx.t + 1e-12]
+    if later.size:
+        ok &= starts + 1e-12 < later.min()  # the active set stays as it is
+    K = int(np.argmin(ok)) if not ok.all() else ok.size
+    if K == 0:
+        return 0
+    n = system.n
+    move = system.moving()
+    acc = np.where(move[:, None], a, 0.0)
+    k = np.arange(K + 1, dtype=np.float64)[:, None, None]
+    xs = s.x[None] + (k * step) * np.where(move[:, None], s.v, 0.0)[None] + (c(k) * step * step) * acc[None]
+    vs = s.v[None] + (k * step) * acc[None]
+    # the first step with a possible contact ends the coast before it
+    x0, x1 = xs[:-1].reshape(-1, 3), xs[1:].reshape(-1, 3)
+    moving = np.tile(move, K)
+    first = K
+    for col in group.colliders:
+        hit = col.sweep(x0, x1, np.tile(p.radius, K)).hit & moving
+        if hit.any():
+            first = min(first, int(np.argmax(hit)) // n)
+    i, j = group.pairs
+    if i.size:
+        inv = np.where(move, p.inv_mass, 0.0)
+        rel = xs[:, i] - xs[:, j]
+        hit = _sweep_spheres(rel[:-1].reshape(-1, 3), rel[1:].reshape(-1, 3), np.tile(p.radius[i] + p.radius[j], K)).hit
+        hit &= np.tile(inv[i] + inv[j] > 0, K)
+        if hit.any():
+            first = min(first, int(np.argmax(hit)) // i.size)
+    # energies of each state (no spin: kinetic 1/2 m v^2; gravity only: no shared terms)
+    kinetic = np.where(move, 0.5 * p.mass * np.einsum("kij,kij->ki", vs[1:], vs[1:]), 0.0)
+    potential = np.where(move, -p.mass * ((xs[1:] - system.x_ref) @ system.env.gravity), 0.0)
+    total = kinetic.sum(axis=1) + potential.sum(axis=1)
+    bad = ~(np.isfinite(total) & np.isfinite(xs[1:]).all(axis=(1, 2)) & (total <= guard.bound()))
+    if bad.any():
+        first = min(first, int(np.argmax(bad)))
+    if first == 0:
+        return 0
+    K = first
+    if group.shapes is not None and ((group.shapes.shaped() & move).any() or i.size):
+        for _ in range(min(K, 2)):  # what K contact-free collide stages leave of the warm start
+            group.shapes.begin_step()
+    q = s.q.copy() if system.rotating else None
+    w = s.w.copy() if system.rotating else None
+    recorder.record_many(t_end[:K], xs[1 : K + 1], vs[1 : K + 1], q, kinetic[:K], potential[:K])
+    group.X = system.pack(xs[K], vs[K], q, w)
+    return K
+
+
+def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: float, iterations: int, guard: Guard,
+              on_progress: Callable[[float, float, float], None] | None = None) -> Track:
+    """Advance a group from t0 to t1 through the named stages; returns its Track.
+    `on_progress(t, t0, t1)` is called every 64 steps and at the end."""
+    system = group.system
+    g_mag = float(np.linalg.norm(system.env.gravity))
+    recorder = Recorder(group)
+    pending = np.zeros(system.n, dtype=bool)  # contacts since the last record
+    group.activate(group, StepContext(t0, 0.0, math.inf, 0))
+    energy = system.energy(group.X)
+    guard.e_in = float(energy[0].sum() + energy[1].sum() + energy[2])
+    recorder.record(t0, group.X, pending, energy)
+    t, index, h_next = t0, 0, step
+    end = t1 - 1e-9 * max(1.0, abs(t1))
+    wait = skip = 0  # after a coast that could not start, the next tries come later and later
+    while t < end:
+        h = min(h_next, step, t1 - t)
+        ctx = StepContext(t, h, 1.0 / h, index)
+        activate(group, ctx, guard)
+        if skip:
+            skip -= 1
+        else:
+            done = coast(group, integrator, ctx, t0, t1, step, guard, recorder)
+            if done:
+                wait = 0
+                if on_progress is not None and (index + done) // 64 > index // 64:
+                    on_progress(t0 + (index + done) * step, t0, t1)
+                t, index = t0 + (index + done) * step, index + done
+                continue
+            wait = skip = min(2 * wait + 1, 64)
+        X = group.X
+        X1, ctx, h_next = integrate(group, integrator, ctx, t0, step)
+        contact, found = collide(group, X, X1, ctx, iterations, g_mag)
+        recorder.impacts.extend(found)
+        pending |= contact
+        energy = guard_step(group, guard, X1, ctx)
+        group.X = X1
+        t, index = ctx.t_next, index + 1
+        if index % group.record_stride == 0 or t >= end:
+            recorder.record(t, X1, pending, energy)
+            pending[:] = False
+        if on_progress is not None and index % 64 == 0:
+            on_progress(t, t0, t1)
+    if on_progress is not None:
+        on_progress(t, t0, t1)
+    return recorder.track()

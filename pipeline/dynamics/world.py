@@ -1,0 +1,245 @@
+"""The scene -> world arrays of the simulation: static colliders, the rigid-body group
+(mass properties from pipeline/geometry.py), the environment's forces, particle groups.
+
+Everything here is built once before the first step and is constant during the run
+(a body's state lives in its group's flat state vector, state.py)."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..errors import SceneError
+from ..geometry import BOUND, SHAPES, shape_geometry
+from ..motion.rotation import parent_from_object
+from ..motion.rotation import transform_quat as quat_from_rotation
+from . import forces
+from .collisions import BoxCollider, Collider, MeshCollider, PlaneCollider, SphereCollider
+from .particles import Spawns, ballistic
+from .shapes import ShapeSet
+from .state import BodyProps, Environment, System
+from .step import Group, StepContext, bodies_activate
+
+if TYPE_CHECKING:
+    from ..geometry import Measure
+    from ..scene import LoadedScene
+
+RECORD_BUDGET = 256 * 2**20  # bytes of recorded particle states per system
+COLLIDER_DETAIL = 16  # tessellation of primitive shapes that collide as a mesh (geometry.py)
+
+
+def static_matrix(loaded: "LoadedScene", index: int, what: str) -> np.ndarray:
+    """world_from_object of a static object (through static parents); a located error
+    naming `what` it is when it or a parent moves."""
+    objects = {o.name: (i, o) for i, o in enumerate(loaded.scene.objects)}
+    i, obj = index, loaded.scene.objects[index]
+    m = np.eye(4)
+    while True:
+        if obj.motion.type != "static":
+            raise SceneError([loaded.source.problem(("objects", i, "motion"), f"{what} must not move: '{obj.name}' has {obj.motion.type} motion (moving colliders and emitters are not simulated)")])
+        m = parent_from_object(obj.transform) @ m
+        if obj.parent is None:
+            return m
+        i, obj = objects[obj.parent]
+
+
+def _file_mesh(loaded: "LoadedScene", obj: object) -> tuple[np.ndarray, np.ndarray]:
+    from ..meshes import load_mesh
+
+    return load_mesh(loaded.asset(obj.file))  # type: ignore[attr-defined]
+
+
+def build_colliders(loaded: "LoadedScene") -> list[Collider]:
+    """The static colliders of the scene (objects with `collider:` and no dynamics), in
+    world space, each as its shape's collider form (geometry.py)."""
+    out: list[Collider] = []
+    for i, obj in enumerate(loaded.scene.objects):
+        c = obj.collider
+        if c is None or obj.motion.type == "dynamics":
+            continue
+        m = static_matrix(loaded, i, "a collider")
+        entry = shape_geometry(obj.shape)
+        if entry.collider is None:
+            can = [n for n, e in SHAPES.items() if e.collider is not None]
+            raise SceneError([loaded.source.problem(("objects", i, "collider"), f"a {obj.shape} cannot be a collider (use {', '.join(can[:-1])} or {can[-1]})")])
+        form = entry.collider(obj)
+        cols = m[:3, :3]
+        norms = np.linalg.norm(cols, axis=0)
+        rot = cols / norms[None, :]
+        origin = m[:3, 3].copy()
+        base = dict(name=obj.name, restitution=c.restitution, friction=c.friction, static_friction=c.static_friction if c.static_friction is not None else c.friction)
+        if form.kind in ("plane", "disk"):
+            normal = np.cross(cols[:, 0], cols[:, 1])
+            normal /= np.linalg.norm(normal)
+            if form.kind == "plane":
+                out.append(PlaneCollider(**base, point=origin, normal=normal, u=rot[:, 0], v=rot[:, 1], half_u=form.half[0] * norms[0], half_v=form.half[1] * norms[1]))
+            else:
+                out.append(PlaneCollider(**base, point=origin, normal=normal, u=rot[:, 0], v=rot[:, 1], disk_radius=form.radius * float(norms[:2].max())))
+        elif form.kind == "box":
+            out.append(BoxCollider(**base, center=origin, rotation=rot, half=form.half * norms))
+        elif form.kind == "sphere":
+            out.append(SphereCollider(**base, center=origin, radius=form.radius * float(norms.max())))
+        else:  # mesh: the file's, or the primitive's tessellation
+            verts, tris = _file_mesh(loaded, obj) if entry.file_mesh else entry.tessellate(obj, COLLIDER_DETAIL)  # type: ignore[misc]
+            world = verts @ cols.T + origin
+            out.append(MeshCollider(**base, triangles=world[tris]))
+    return out
+
+
+def body_measure(loaded: "LoadedScene", obj: object) -> "Measure":
+    """Mass-property inputs of a body's shape with its scale applied (geometry.py)."""
+    entry = shape_geometry(obj.shape)  # type: ignore[attr-defined]
+    mesh = _file_mesh(loaded, obj) if entry.file_mesh else None
+    return entry.measure(obj, np.asarray(obj.transform.scale, dtype=np.float64), mesh)  # type: ignore[attr-defined]
+
+
+def build_environment(loaded: "LoadedScene", names: list[str], x: np.ndarray | None = None) -> Environment:
+    """The scene-wide forces of a group. Springs join the bodies `names` (their positions
+    `x` [n, 3] give the rest length of springs that do not state one); a group without
+    names (particles) has none."""
+    d = loaded.scene.dynamics
+    from ..motion.expr import parse_expression
+
+    def parse(texts: tuple[str, str, str] | None) -> tuple[object, object, object] | None:
+        if texts is None:
+            return None
+        return tuple(parse_expression(t, ("t", "x", "y", "z")) for t in texts)  # type: ignore[return-value]
+
+    springs = None
+    if d.springs and names and x is not None:
+        index = {n: i for i, n in enumerate(names)}
+        a = np.array([index[s.a] for s in d.springs])
+        b = np.array([index[s.b] for s in d.springs])
+        given = np.array([np.nan if s.rest_length is None else s.rest_length for s in d.springs])
+        initial = np.linalg.norm(x[b] - x[a], axis=1)
+        springs = forces.SpringSet(
+            a=a,
+            b=b,
+            stiffness=np.array([s.stiffness for s in d.springs]),
+            damping=np.array([s.damping for s in d.springs]),
+            rest=np.where(np.isnan(given), initial, given),
+        )
+    return Environment(
+        gravity=np.asarray(d.gravity, dtype=np.float64),
+        air_density=d.air_density,
+        wind=parse(d.wind),
+        force_field=parse(d.force_field),
+        fluids=[forces.HalfSpaceFluid(f.level, f.density, f.drag_cd) for f in d.fluids],
+        springs=springs,
+        newtonian=None if d.newtonian_gravity is None else (d.newtonian_gravity.G, d.newtonian_gravity.softening),
+    )
+
+
+def build_bodies(loaded: "LoadedScene", t_start: float) -> tuple[Group, list[np.ndarray]] | None:
+    """The group of dynamics bodies (None if the scene has none) and their scales."""
+    objs = [o for o in loaded.scene.objects if o.motion.type == "dynamics"]
+    if not objs:
+        return None
+    n = len(objs)
+    names = [o.name for o in objs]
+    cols: dict[str, list[float] | list[np.ndarray]] = {k: [] for k in ("mass", "inv_mass", "radius", "radius_eq", "area", "cd", "linear", "restitution", "friction", "static_friction", "start", "inertia", "inv_inertia")}
+    x, v, q, w, scales = [], [], [], [], []
+    kind, half = np.full(n, BOUND, dtype=np.int64), np.zeros((n, 3))
+    for k_obj, o in enumerate(objs):
+        m = o.motion
+        entry = shape_geometry(o.shape)
+        meas = body_measure(loaded, o)
+        r_eq = (3.0 * max(meas.volume, 1e-12) / (4.0 * math.pi)) ** (1.0 / 3.0)
+        inertia = entry.inertia(m.mass, meas.dims)
+        rigid = m.body == "rigid" and not m.pinned
+        if entry.contact is not None:
+            kind[k_obj], half[k_obj] = entry.contact(meas.dims)
+        vals = dict(
+            mass=m.mass,
+            inv_mass=0.0 if m.pinned else 1.0 / m.mass,
+            radius=meas.bound,
+            radius_eq=r_eq,
+            area=(m.drag.area if m.drag and m.drag.area else math.pi * (meas.section if meas.section is not None else r_eq) ** 2),
+            cd=m.drag.cd if m.drag else 0.0,
+            linear=m.drag.linear if m.drag else 0.0,
+            restitution=m.restitution,
+            friction=m.friction,
+            static_friction=m.static_friction if m.static_friction is not None else m.friction,
+            start=m.start,
+            inertia=inertia,
+            inv_inertia=1.0 / inertia if rigid else np.zeros(3),
+        )
+        for k, val in vals.items():
+            cols[k].append(val)  # type: ignore[arg-type]
+        x.append(o.transform.translate)
+        q.append(quat_from_rotation(o.transform.rotate))
+        v.append((0.0, 0.0, 0.0) if m.pinned else m.velocity)
+        w.append(np.radians(m.angular_velocity) if rigid else np.zeros(3))
+        scales.append(np.asarray(o.transform.scale, dtype=np.float64))
+    props = BodyProps(names=names, **{k: np.asarray(val, dtype=np.float64) for k, val in cols.items()})
+    x_arr = np.asarray(x, dtype=np.float64)
+    env = build_environment(loaded, names, x_arr)
+    system = System(props, env, rotating=True)
+    system.x_ref = x_arr.copy()
+    X = system.pack(x_arr, np.asarray(v, dtype=np.float64), np.asarray(q), np.asarray(w, dtype=np.float64))
+    pairs = np.triu_indices(n, 1)
+    group = Group(system, X, build_colliders(loaded), (pairs[0], pairs[1]), bodies_activate, shapes=ShapeSet(kind, half))
+    return group, scales
+
+
+def emitter_group(loaded: "LoadedScene", index: int, spawns: Spawns, colliders: list[Collider], t_start: float, t_end: float, step: float) -> Group:
+    """The particle group of the particle object `index`, whose emitter drew `spawns`."""
+    obj = loaded.scene.objects[index]
+    e = obj.emitter
+    n = spawns.count
+    radius = obj.radius * float(np.asarray(obj.transform.scale, dtype=np.float64).max())
+    area = e.drag.area if e.drag and e.drag.area else math.pi * radius * radius
+    props = BodyProps(
+        names=[],
+        mass=np.full(n, e.mass),
+        inv_mass=np.full(n, 1.0 / e.mass),
+        radius=np.full(n, radius),
+        radius_eq=np.full(n, radius),
+        area=np.full(n, area),
+        cd=np.full(n, e.drag.cd if e.drag else 0.0),
+        linear=np.full(n, e.drag.linear if e.drag else 0.0),
+        restitution=np.full(n, e.restitution),
+        friction=np.full(n, e.friction),
+        static_friction=np.full(n, e.friction),
+        start=spawns.birth,
+        inertia=np.zeros((n, 3)),
+        inv_inertia=np.zeros((n, 3)),
+    )
+    env = build_environment(loaded, [])
+    system = System(props, env, rotating=False)
+    return particle_group(system, spawns, colliders, t_start, t_end, step)
+
+
+def particle_group(system: System, spawns: Spawns, colliders: list[Collider], t_start: float, t_end: float, step: float) -> Group:
+    """A particle group: unborn particles ride their backward ballistic path, are born at
+    the first step boundary after their birth time, die (freeze) at birth + lifetime."""
+    g = system.env.gravity
+    n = spawns.count
+    born = np.zeros(n, dtype=bool)
+    x, v = ballistic(spawns, np.arange(n), t_start, g)
+    system.x_ref = spawns.position.copy()
+    X = system.pack(x, v)
+
+    def activate_particles(group: Group, ctx: StepContext) -> None:
+        # newly born: onto their path at t; still unborn: at t + dt, where the record of
+        # this step will see them (they do not move during the step)
+        s = system.unpack(group.X)
+        unborn = np.flatnonzero(~born)
+        if unborn.size:
+            newly = unborn[spawns.birth[unborn] <= ctx.t + 1e-12]
+            waiting = unborn[spawns.birth[unborn] > ctx.t + 1e-12]
+            if waiting.size:
+                s.x[waiting], s.v[waiting] = ballistic(spawns, waiting, ctx.t + ctx.dt, g)
+            if newly.size:
+                s.x[newly], s.v[newly] = ballistic(spawns, newly, ctx.t, g)
+                born[newly] = True
+        system.active = born & (spawns.death > ctx.t)
+
+    # keep records within the memory budget: x, v (float32) and a contact flag per record
+    steps = max(1, int(math.ceil((t_end - t_start) / step)))
+    per_record = max(1, n) * (3 * 4 * 2 + 1)
+    stride = max(1, int(math.ceil(steps * per_record / RECORD_BUDGET)))
+    system.active = np.zeros(n, dtype=bool)
+    return Group(system, X, colliders, (np.zeros(0, int), np.zeros(0, int)), activate_particles, record_stride=stride, record_dtype=np.float32)
