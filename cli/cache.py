@@ -11,7 +11,7 @@ def _folders() -> dict[str, Path]:
     import os
 
     from motion.pipeline.render.assets import assets_dir
-    from motion.pipeline.variant import cache_root
+    from motion.pipeline.cache import cache_root
 
     return {
         "assets": assets_dir(),

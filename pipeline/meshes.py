@@ -36,7 +36,7 @@ def load_mesh(path: Path, faces: bool = True) -> tuple[np.ndarray, np.ndarray]:
     is unreadable, malformed, truncated, or has non-finite vertices or bad indices.
     `faces=False` accepts positions only (morph targets, blend-shape keys: their topology
     is the base mesh's)."""
-    from .scene.loader import read_bounded
+    from .limits import read_bounded
 
     path = Path(path)
     try:

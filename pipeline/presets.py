@@ -17,7 +17,8 @@ from typing import Any
 from pydantic import Field, ValidationError
 
 from .errors import Problem, SceneError, UsageError
-from .scene.loader import parse_yaml, problems_from_validation, read_yaml_file
+from .scene.problems import problems_from_validation
+from .scene.source import parse_yaml, read_yaml_file
 from .scene.types import Model
 
 

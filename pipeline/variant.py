@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+from .cache import cache_root
 from .errors import RendererError
 
 VariantName = Literal["auto", "llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb"]
@@ -44,15 +45,6 @@ v = float(np.asarray(img).mean())
 assert np.isfinite(v) and v > 0, v
 print("ok")
 """
-
-
-def cache_root() -> Path:
-    """Root of motion's on-disk caches: $MOTION_CACHE_DIR, else $XDG_CACHE_HOME/motion."""
-    env = os.environ.get("MOTION_CACHE_DIR")
-    if env:
-        return Path(env).expanduser()
-    xdg = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(xdg) / "motion"
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ Contract (docs/architecture.md): `evaluate(loaded, times, simulation=None) -> Sc
 """
 
 from .evaluate import SceneMotion, SimulationRequiredError, evaluate, has_dynamics
-from .expr import ExpressionError, parse_expression
+from ..expr import ExpressionError, parse_expression
 from .pose import Pose
 
 __all__ = [

@@ -12,7 +12,7 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from ..scene.motion_schema import Ballistic, Generator, Noise, Orbit, Oscillate, ProceduralMotion, Turntable
-from .expr import parse_expression
+from ..expr import parse_expression
 from .pose import quat_exp, quat_mul
 from .rotation import euler_quat
 

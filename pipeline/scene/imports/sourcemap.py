@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ...errors import Problem
-from ..loader import Loc, SourceMap, yaml_path
-from . import Origin
+from ..source import Loc, SourceMap, yaml_path
+from .records import Origin
 
 
 @dataclass(frozen=True)

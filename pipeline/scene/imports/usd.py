@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from . import Expansion, ImportFileError, Origin, SpecError
+from .records import Expansion, ImportFileError, Origin, SpecError
 from .cache import cached, file_digest, write_ply
 from .gltf import _Names, sanitize
 

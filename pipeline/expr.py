@@ -17,7 +17,7 @@ Grammar (docs/expressions.md):
 >>> parse_expression("__import__('os')", ("t",))
 Traceback (most recent call last):
 ...
-motion.pipeline.motion.expr.ExpressionError: expression "__import__('os')": '__import__' is not an allowed function (allowed: abs, clamp, cos, exp, floor, log, max, min, pow, sin, sqrt, tan) (column 1)
+motion.pipeline.expr.ExpressionError: expression "__import__('os')": '__import__' is not an allowed function (allowed: abs, clamp, cos, exp, floor, log, max, min, pow, sin, sqrt, tan) (column 1)
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from ..errors import MotionError
+from .errors import MotionError
 
 MAX_LENGTH = 1000  # characters of source text
 MAX_DEPTH = 100  # nesting depth of the tree (a + b + c ... nests to the left)
