@@ -19,7 +19,7 @@ from ...errors import Problem, SceneError
 from .records import Expansion, ImportFileError, Origin, SpecError
 
 if TYPE_CHECKING:
-    from ..source import Loc, SourceMap
+    from ..source import SourceMap
 
 __all__ = ["ImportFileError", "SpecError", "Origin", "Expansion", "expand_imports"]
 
