@@ -14,3 +14,8 @@ def cache_root() -> Path:
         return Path(env).expanduser()
     xdg = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
     return Path(xdg) / "motion"
+
+
+def kernels_dir() -> Path:
+    """drjit's kernel cache: $DRJIT_CACHE_DIR, else kernels/ under the cache root."""
+    return Path(os.environ.get("DRJIT_CACHE_DIR", str(cache_root() / "kernels")))

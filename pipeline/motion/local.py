@@ -9,10 +9,10 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
-from ..errors import SceneError
+from ..errors import ExpressionValueError, SceneError, TrackError
 from ..scene.motion_schema import KeyframeMotion, ProceduralMotion
-from .keyframes import RotationTrack, TrackError, VectorTrack
-from .procedural import ExpressionValueError, apply_layers, procedural_layers, procedural_scalars
+from .keyframes import RotationTrack, VectorTrack
+from .procedural import apply_layers, procedural_layers, procedural_scalars
 from .rotation import transform_quat
 
 if TYPE_CHECKING:

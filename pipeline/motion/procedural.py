@@ -11,8 +11,9 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from ..scene.motion_schema import Ballistic, Generator, Noise, Orbit, Oscillate, ProceduralMotion, Turntable
+from ..errors import ExpressionValueError, RotationValueError
 from ..expr import parse_expression
+from ..scene.motion_schema import Ballistic, Generator, Noise, Orbit, Oscillate, ProceduralMotion, Turntable
 from .pose import quat_exp, quat_mul
 from .rotation import euler_quat
 
@@ -23,19 +24,11 @@ class Layer(NamedTuple):
     scale: np.ndarray  # [T, 3] multiplied
 
 
-class ExpressionValueError(ValueError):
-    """An expression gave a non-finite value; `loc` is below the procedural block."""
-
-    def __init__(self, loc: tuple[str | int, ...], message: str) -> None:
-        super().__init__(message)
-        self.loc = loc
-
-
 def _unit(v) -> np.ndarray:  # type: ignore[no-untyped-def]
     a = np.asarray(v, dtype=np.float64)
     n = np.linalg.norm(a)
     if n < 1e-12:
-        raise ValueError("axis/direction must not be the zero vector")
+        raise RotationValueError("axis/direction must not be the zero vector")
     return a / n
 
 
@@ -163,7 +156,7 @@ def procedural_layers(motion: ProceduralMotion, t: np.ndarray) -> list[Layer]:
     for i, g in enumerate(motion.generators):
         try:
             layers.append(generator_layer(g, t))
-        except ValueError as exc:
+        except (RotationValueError, ValueError) as exc:  # ValueError: numpy's, for a value it cannot use
             raise ExpressionValueError(("generators", i), str(exc)) from None
     ch = motion.channels
     if ch is not None:
