@@ -111,21 +111,29 @@ class ExpressionError(MotionError, ValueError):
 
 @dataclass(frozen=True)
 class Num:
+    """A number literal (constants such as pi are folded into one)."""
+
     value: float
 
 
 @dataclass(frozen=True)
 class Var:
+    """A variable bound at evaluation (t; x, y, z for force fields)."""
+
     name: str
 
 
 @dataclass(frozen=True)
 class Neg:
+    """Unary minus."""
+
     operand: "Node"
 
 
 @dataclass(frozen=True)
 class BinOp:
+    """A binary operator: + - * / % ** (^ is **)."""
+
     op: str
     left: "Node"
     right: "Node"
@@ -133,6 +141,8 @@ class BinOp:
 
 @dataclass(frozen=True)
 class Call:
+    """A call of an allowed function (sin, clamp, ...) with its checked number of arguments."""
+
     func: str
     args: tuple["Node", ...]
 

@@ -23,6 +23,8 @@ from .scene.types import Model
 
 
 class Preset(Model):
+    """A render preset (configs/NAME.yaml): render and output settings merged over the scene, and how many frames to spread over the timeline."""
+
     description: str = ""
     frame_count: int | None = Field(default=None, ge=1)
     render: dict[str, Any] = {}
@@ -30,6 +32,7 @@ class Preset(Model):
 
 
 def preset_names() -> list[str]:
+    """The built-in presets (configs/*.yaml, not farm.yaml)."""
     folder = resources.files("motion.configs")
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml") and p.name != "farm.yaml")
 

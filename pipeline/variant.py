@@ -49,6 +49,8 @@ print("ok")
 
 @dataclass(frozen=True)
 class VariantChoice:
+    """The Mitsuba variant chosen, the libLLVM it uses, why, and whether it is a fallback."""
+
     variant: str
     llvm_path: str | None
     reason: str
@@ -260,6 +262,7 @@ def info() -> dict[str, object]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """`python -m motion.pipeline.variant --check-llvm`: exit 0 when a working LLVM is found."""
     args = sys.argv[1:] if argv is None else argv
     if args == ["--check-llvm"]:
         lib = find_llvm(use_cache=False)

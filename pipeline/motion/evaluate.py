@@ -73,6 +73,7 @@ def _take_particles(samples: Any, index: slice | np.ndarray) -> Any:
 
 
 def light_name(light: Any, index: int) -> str:
+    """A light's name in `SceneMotion.lights`: its own, else `light<index>`."""
     return light.name if light.name is not None else f"light{index}"
 
 

@@ -174,6 +174,9 @@ class RotationTrack:
 
     @classmethod
     def compile(cls, channel: Channel, mode: str, extrapolation: str, seconds: float) -> "RotationTrack":
+        """The track of a `rotate` channel: keys as unit quaternions, per-segment modes, the
+        angular velocities of its splines; `seconds` converts key times to seconds. TrackError
+        (located below the channel) for keys that cannot be compiled."""
         keys = channel.keys
         n = len(keys)
         times = np.array([k.time for k in keys], dtype=np.float64) * seconds

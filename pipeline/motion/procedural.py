@@ -19,6 +19,8 @@ from .rotation import euler_quat
 
 
 class Layer(NamedTuple):
+    """One generator's contribution to a local transform, at T times."""
+
     translation: np.ndarray  # [T, 3] added
     rotation: np.ndarray  # [T, 4] multiplied on the left
     scale: np.ndarray  # [T, 3] multiplied
@@ -44,6 +46,7 @@ def _spin(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
 
 
 def ballistic(g: Ballistic, t: np.ndarray) -> Layer:
+    """x(t) = x0 + v0 (t - t0) + a (t - t0)^2 / 2."""
     out = _identity(len(t))
     dt = (t - g.t0)[:, None]
     # x(t) = x0 + v0 dt + a dt^2 / 2
@@ -59,6 +62,8 @@ def orbit_basis(axis: np.ndarray) -> np.ndarray:
 
 
 def orbit(g: Orbit, t: np.ndarray) -> Layer:
+    """A circle of `radius` about `center` in the plane normal to `axis` (period, phase);
+    with face_center the object turns with the orbit, keeping one side to the centre."""
     out = _identity(len(t))
     axis = _unit(g.axis)
     # theta = phase + 2 pi t / period, counter-clockwise about the axis (right hand)
@@ -74,6 +79,7 @@ def orbit(g: Orbit, t: np.ndarray) -> Layer:
 
 
 def oscillate(g: Oscillate, t: np.ndarray) -> Layer:
+    """A sine wave on translate (along direction), rotate (about direction, degrees) or scale (1 + wave, weighted per axis)."""
     out = _identity(len(t))
     wave = g.amplitude * np.sin(2.0 * np.pi * g.frequency * t + np.radians(g.phase))
     if g.channel == "translate":
@@ -86,6 +92,7 @@ def oscillate(g: Oscillate, t: np.ndarray) -> Layer:
 
 
 def turntable(g: Turntable, t: np.ndarray) -> Layer:
+    """A steady spin about `axis`: phase + rate * t degrees."""
     out = _identity(len(t))
     out.rotation[:] = _spin(_unit(g.axis), np.radians(g.phase + g.rate * t))
     return out
@@ -119,6 +126,7 @@ def value_noise(seed: int, stream: int, x: np.ndarray) -> np.ndarray:
 
 
 def noise(g: Noise, t: np.ndarray) -> Layer:
+    """Smooth deterministic jitter (seeded value noise) of translation and rotation."""
     out = _identity(len(t))
     x = t * g.frequency
     for k in range(3):
@@ -178,6 +186,7 @@ def procedural_layers(motion: ProceduralMotion, t: np.ndarray) -> list[Layer]:
 
 
 def procedural_scalars(motion: ProceduralMotion, t: np.ndarray) -> dict[str, np.ndarray]:
+    """The scalar channels' expressions (fov, intensity ...) evaluated at t."""
     return {name: _expr(text, t, ("scalars", name)) for name, text in motion.scalars.items()}
 
 

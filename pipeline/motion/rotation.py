@@ -25,6 +25,7 @@ def euler_quat(angles_deg, order: str = "xyz") -> np.ndarray:  # type: ignore[no
 
 
 def axis_angle_quat(axis, angle_deg: float) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """The unit quaternion (w, x, y, z) of a rotation by `angle_deg` degrees about `axis`."""
     a = np.asarray(axis, dtype=np.float64)
     a = a / np.linalg.norm(a)
     half = np.radians(angle_deg) / 2.0

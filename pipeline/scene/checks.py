@@ -325,6 +325,7 @@ def bake_budget_problems(scene: Scene, source: "SourceMap", frames: int) -> list
 
 
 def check_channels(loc: "Loc", motion: object, owner: str, add) -> None:  # type: ignore[no-untyped-def]
+    """Channel names and key values of one motion block for its owner (camera, object, a kind of light); problems go to `add(loc, message)`."""
     allowed = (*TRANSFORM_CHANNELS, *SCALAR_CHANNELS[owner])
     if isinstance(motion, KeyframeMotion):
         for name, channel in motion.channels.items():

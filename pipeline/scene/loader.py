@@ -35,13 +35,16 @@ class LoadedScene:
 
     @property
     def name(self) -> str:
+        """The scene's name, else the file's stem."""
         return self.scene.name or self.path.stem
 
     @property
     def base_dir(self) -> Path:
+        """The folder relative asset paths start from."""
         return self.path.parent
 
     def asset(self, relative: str) -> Path:
+        """The absolute path of an asset named relative to the scene file."""
         return (self.base_dir / relative).resolve()
 
 

@@ -173,6 +173,7 @@ class SourceMap:
         return SourceMap(self.file, {loc[n:]: pos for loc, pos in self.positions.items() if loc[:n] == prefix})
 
     def problem(self, loc: Loc, message: str, key: bool = False) -> Problem:
+        """A Problem located at `loc` (its key when `key`), or at its nearest ancestor in the file."""
         line, col = self.locate(loc, key=key)
         return Problem(self.file, line, col, yaml_path(loc), message)
 
