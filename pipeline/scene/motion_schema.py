@@ -75,7 +75,8 @@ class Key(Model):
 
 
 class Channel(Model):
-    """One animated channel: its keys (sorted by time) and optional interpolation / extrapolation overriding the block's."""
+    """One animated channel: its keys (times strictly increasing) and an interpolation and
+    extrapolation of its own, overriding the block's."""
 
     keys: Annotated[list[Key], Field(min_length=1)]
     interpolation: Interpolation | None = None
@@ -298,7 +299,7 @@ class JointLimit(Model):
 
 
 class WeightKey(Model):
-    """A key of an IK constraint's weight: time (s) and weight in [0, 1]."""
+    """A key of an IK constraint's weight: its time and the weight in [0, 1]."""
 
     time: FiniteFloat
     value: Annotated[float, Field(ge=0, le=1)]
