@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from ..bake import BakedFrame
 from ..errors import UsageError
 from ..render.job import RenderJob
 from .config import FarmConfig
@@ -49,7 +50,7 @@ def scheduler_target(spec: str) -> dict[str, str]:
 def run_chunks(
     chunk_list: list[list[int]],
     job: RenderJob,
-    by_frame: dict[int, Any],  # the worker input of each frame
+    by_frame: dict[int, BakedFrame],
     ctx: TaskContext,
     cfg: FarmConfig,
     progress: Progress,

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
+from ..bake import BakedFrame
 from ..errors import IncompleteJobError, UsageError
 from ..farm.claims import new_run_id
 from ..farm.config import FarmConfig, load_farm_config
@@ -154,7 +155,7 @@ def warn_variant(req: RenderRequest, loaded: LoadedScene) -> None:
         variant_mod.warn_fallback(choice)
 
 
-def motion_inputs(req: RenderRequest, loaded: LoadedScene, sel: Selection) -> list[Any]:
+def motion_inputs(req: RenderRequest, loaded: LoadedScene, sel: Selection) -> list[BakedFrame]:
     """The worker input of every frame of this shard: simulated over the whole selection
     and baked for the shard here, or read from the --motion file."""
     from ..farm.motion_source import baked_inputs, file_inputs, simulation_for
@@ -170,7 +171,7 @@ def motion_inputs(req: RenderRequest, loaded: LoadedScene, sel: Selection) -> li
     return inputs
 
 
-def complete_frames(req: RenderRequest, job: RenderJob, out_dir: Path, frames: list[int], paths: dict[int, str], by_frame: dict[int, Any]) -> list[int]:
+def complete_frames(req: RenderRequest, job: RenderJob, out_dir: Path, frames: list[int], paths: dict[int, str], by_frame: dict[int, BakedFrame]) -> list[int]:
     """The frames --resume keeps: complete and made from this scene, motion and settings.
     Existing frames with neither --resume nor --overwrite are a UsageError."""
     resume = req.resume and not req.overwrite
