@@ -28,7 +28,7 @@ def main(resolution: tuple[int, int] = (320, 180), spp: int = 16, frames: int = 
     from motion.pipeline.render.frame_renderer import FrameRenderer
     from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.scene import load_scene
-    from motion.pipeline.telecine.field_render import rendering_field
+    from motion.pipeline.render.fields import rendering_field
 
     loaded = load_scene(REPO / "scenes" / "stairs-walk.yaml", {"render": {"resolution": list(resolution), "spp": spp}})
     inputs = evaluate_frames(loaded, list(range(20, 20 + frames)))

@@ -8,15 +8,10 @@ import click
 
 
 def _folders() -> dict[str, Path]:
-    import os
-
+    from motion.pipeline.cache import kernels_dir
     from motion.pipeline.render.assets import assets_dir
-    from motion.pipeline.variant import cache_root
 
-    return {
-        "assets": assets_dir(),
-        "kernels": Path(os.environ.get("DRJIT_CACHE_DIR", str(cache_root() / "kernels"))),
-    }
+    return {"assets": assets_dir(), "kernels": kernels_dir()}
 
 
 @click.group("cache")

@@ -73,6 +73,7 @@ _register()
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The `motion` console entry point: runs the CLI and exits with its code (returns it when `argv` is given)."""
     code = _run(argv)
     if argv is None:
         sys.exit(code)

@@ -96,7 +96,7 @@ def render(
 ) -> None:
     """Render SCENE's frames to OpenEXR files."""
     from motion.pipeline.errors import IncompleteJobError
-    from motion.pipeline.farm.run import RenderRequest, plan_text, run_render
+    from motion.pipeline.shot import RenderRequest, plan_text, run_render
 
     request = RenderRequest(
         scene=scene,
@@ -131,7 +131,7 @@ def render(
         dry_run=dry_run,
     )
     if fields:
-        from motion.pipeline.telecine.field_render import run_field_render
+        from motion.pipeline.shot import run_field_render
 
         if dry_run or as_json:
             raise click.UsageError("--fields does not combine with --dry-run or --json")

@@ -2,35 +2,14 @@
 
 from __future__ import annotations
 
-import sys
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Iterator
 
 import click
 
 from motion.pipeline.errors import UsageError
+from motion.pipeline.progress import count_bar
 
 CODEC_NAMES = ["prores", "prores4444", "h264"]
-
-
-@contextmanager
-def _progress(label: str) -> Iterator[Callable[[int, int], None] | None]:
-    """A rich progress bar on a terminal (stderr); nothing when output is redirected."""
-    if not sys.stderr.isatty():
-        yield None
-        return
-    from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                  console=Console(stderr=True), transient=True) as bar:
-        task = bar.add_task(label, total=None)
-
-        def update(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total or None)
-
-        yield update
 
 
 @click.command("telecine")
@@ -79,7 +58,7 @@ def telecine(in_dir: Path, out_dir: Path, pattern: str | None, field_order: str 
         ViewTransform(exposure, ocio_config, ocio_display, ocio_view, ocio_colorspace)
     elif ocio_config is not None or ocio_display or ocio_view or ocio_colorspace:
         raise UsageError("--ocio applies to the movie; give --movie FILE")
-    with _progress("telecine" if not inverse else "inverse telecine") as progress:
+    with count_bar("telecine" if not inverse else "inverse telecine") as progress:
         if inverse:
             if drop_frame:
                 raise UsageError("--drop-frame applies to telecine, not --inverse")
@@ -97,7 +76,7 @@ def telecine(in_dir: Path, out_dir: Path, pattern: str | None, field_order: str 
     if movie is not None:
         from motion.pipeline.telecine.movie import sequence_movie
 
-        with _progress("movie") as progress:
+        with count_bar("movie") as progress:
             path = sequence_movie(result.out_dir, movie, rate=result.rate, codec=codec, exposure=exposure,
                                   ocio_config=ocio_config, ocio_display=ocio_display, ocio_view=ocio_view,
                                   ocio_colorspace=ocio_colorspace, prefix=result.paths[0].name.rsplit(".", 2)[0], progress=progress)

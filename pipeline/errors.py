@@ -158,4 +158,34 @@ class NoSuchTrackError(SimulationError):
 # --- scene, expressions, motion, orchestration ---
 
 
+class MeshFormatError(AssetError):
+    """A mesh file is malformed: what is wrong and where (line or element). `load_mesh`
+    reports it as an AssetError naming the file."""
+
+
+class TrackError(MotionError, ValueError):
+    """A keyframe channel's keys cannot be compiled; `loc` is the path below the channel.
+    The motion stage reports it as a SceneError located at that key. Still a ValueError
+    too, as it always was: a caller of the track compiler may catch it as one."""
+
+    def __init__(self, loc: tuple[str | int, ...], message: str) -> None:
+        super().__init__(message)
+        self.loc = loc
+
+
+class ExpressionValueError(MotionError):
+    """A procedural expression or generator gave a value that cannot be used (not finite,
+    a zero axis); `loc` is below the procedural block. Reported as a located SceneError."""
+
+    def __init__(self, loc: tuple[str | int, ...], message: str) -> None:
+        super().__init__(message)
+        self.loc = loc
+
+
+class RotationValueError(MotionError):
+    """A rotation given as data cannot be made a unit quaternion: a zero quaternion, a zero
+    axis, a value that is not Euler angles, turns on a segment with no axis. The keyframe
+    and procedural stages report it located (TrackError, ExpressionValueError)."""
+
+
 # --- deliverables, telecine, examples ---

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import AssetError, InputFileError
+from .errors import AssetError, InputFileError, MeshFormatError
 
 MAX_MESH_BYTES = 2 * 1024**3  # one mesh file
 MAX_POLYGON = 256  # vertices of one face
@@ -27,16 +27,12 @@ _PLY_TYPES = {"char": "i1", "uchar": "u1", "short": "i2", "ushort": "u2", "int":
               "int8": "i1", "uint8": "u1", "int16": "i2", "uint16": "u2", "int32": "i4", "uint32": "u4", "float32": "f4", "float64": "f8"}
 
 
-class MeshFormatError(ValueError):
-    """What is wrong with a mesh file, and where (line or element)."""
-
-
 def load_mesh(path: Path, faces: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """(vertices, triangles) of an .obj or .ply file; AssetError with the reason if the file
     is unreadable, malformed, truncated, or has non-finite vertices or bad indices.
     `faces=False` accepts positions only (morph targets, blend-shape keys: their topology
     is the base mesh's)."""
-    from .scene.loader import read_bounded
+    from .limits import read_bounded
 
     path = Path(path)
     try:

@@ -17,11 +17,14 @@ from typing import Any
 from pydantic import Field, ValidationError
 
 from .errors import Problem, SceneError, UsageError
-from .scene.loader import parse_yaml, problems_from_validation, read_yaml_file
+from .scene.problems import problems_from_validation
+from .scene.source import parse_yaml, read_yaml_file
 from .scene.types import Model
 
 
 class Preset(Model):
+    """A render preset (configs/NAME.yaml): render and output settings merged over the scene, and how many frames to spread over the timeline."""
+
     description: str = ""
     frame_count: int | None = Field(default=None, ge=1)
     render: dict[str, Any] = {}
@@ -29,6 +32,7 @@ class Preset(Model):
 
 
 def preset_names() -> list[str]:
+    """The built-in presets (configs/*.yaml, not farm.yaml)."""
     folder = resources.files("motion.configs")
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml") and p.name != "farm.yaml")
 

@@ -76,10 +76,12 @@ class Timeline:
 
     @property
     def frames(self) -> range:
+        """The frame numbers first..last."""
         return range(self.first, self.last + 1)
 
     @property
     def frame_duration(self) -> Fraction:
+        """Seconds per frame, exact (1 / fps)."""
         return 1 / self.fps
 
     def seconds(self, frame: int | Fraction) -> Fraction:

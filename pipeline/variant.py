@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+from .cache import cache_root
 from .errors import RendererError
 
 VariantName = Literal["auto", "llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb"]
@@ -46,17 +47,10 @@ print("ok")
 """
 
 
-def cache_root() -> Path:
-    """Root of motion's on-disk caches: $MOTION_CACHE_DIR, else $XDG_CACHE_HOME/motion."""
-    env = os.environ.get("MOTION_CACHE_DIR")
-    if env:
-        return Path(env).expanduser()
-    xdg = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(xdg) / "motion"
-
-
 @dataclass(frozen=True)
 class VariantChoice:
+    """The Mitsuba variant chosen, the libLLVM it uses, why, and whether it is a fallback."""
+
     variant: str
     llvm_path: str | None
     reason: str
@@ -268,6 +262,7 @@ def info() -> dict[str, object]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """`python -m motion.pipeline.variant --check-llvm`: exit 0 when a working LLVM is found."""
     args = sys.argv[1:] if argv is None else argv
     if args == ["--check-llvm"]:
         lib = find_llvm(use_cache=False)

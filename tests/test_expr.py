@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from motion.pipeline.errors import MotionError
-from motion.pipeline.motion.expr import MAX_LENGTH, ExpressionError, parse_expression
+from motion.pipeline.expr import MAX_LENGTH, ExpressionError, parse_expression
 
 
 def ev(text: str, **values: object) -> np.ndarray:

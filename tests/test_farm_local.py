@@ -126,7 +126,7 @@ def test_two_renders_into_one_folder_never_render_a_frame_twice(tmp_path) -> Non
 def test_main_process_never_imports_drjit(tmp_path) -> None:
     code = (
         "import sys; from pathlib import Path\n"
-        "from motion.pipeline.farm import RenderRequest, run_render\n"
+        "from motion.pipeline.shot import RenderRequest, run_render\n"
         f"rep = run_render(RenderRequest(scene=Path({str(SCENE)!r}), output_dir=Path({str(tmp_path)!r}), frames_spec='0-3', "
         "workers=2, render_overrides={'resolution': (16, 12), 'spp': 1}, progress=False))\n"
         "assert rep['totals']['rendered'] == 4, rep['totals']\n"

@@ -1,4 +1,4 @@
-"""Field rendering (`motion render --fields 60i`, telecine/field_render.py): every field
+"""Field rendering (`motion render --fields 60i`, shot/fields.py): every field
 is rendered at its own instant with its own shutter and only its own rows, then woven into
 interlaced frames (EXR with the field order and times, an interlaced movie)."""
 
@@ -15,7 +15,8 @@ import yaml
 from _support import run_motion
 from motion.pipeline.frame_output import read_frame
 from motion.pipeline.telecine.cadence import parse_cadence, plan
-from motion.pipeline.telecine.field_render import field_range, parity_of
+from motion.pipeline.render.fields import parity_of
+from motion.pipeline.telecine.interlace import field_range
 
 SPEED = 3.0  # m/s downwards
 Y0 = 0.45  # m, the bar's centre at t = 0 (0.3 m tall)

@@ -140,7 +140,7 @@ def read_document(path: str | Path) -> dict[str, Any]:
     declared no larger than MAX_BAKE_ARRAY_BYTES in all before any is decompressed, and
     no pickled objects."""
     from ..errors import InputFileError
-    from ..scene.loader import open_bounded
+    from ..limits import open_bounded
 
     path = Path(path)
     try:

@@ -100,7 +100,7 @@ def build_environment(loaded: "LoadedScene", names: list[str], x: np.ndarray | N
     `x` [n, 3] give the rest length of springs that do not state one); a group without
     names (particles) has none."""
     d = loaded.scene.dynamics
-    from ..motion.expr import parse_expression
+    from ..expr import parse_expression
 
     def parse(texts: tuple[str, str, str] | None) -> tuple[object, object, object] | None:
         if texts is None:

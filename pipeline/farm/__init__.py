@@ -1,8 +1,8 @@
 """Farm stage: frames -> chunks -> workers (local processes or a Dask cluster), with
 retries, exclusion of failing workers, timeouts, claims, resume, progress and a report
-(docs/farm.md)."""
+(docs/farm.md). What a render runs, and in which order, is the shot stage's
+(motion.pipeline.shot)."""
 
 from .frames import chunks, default_chunk_size, parse_frames, parse_shard, shard
-from .run import RenderRequest, run_render
 
-__all__ = ["RenderRequest", "chunks", "default_chunk_size", "parse_frames", "parse_shard", "run_render", "shard"]
+__all__ = ["chunks", "default_chunk_size", "parse_frames", "parse_shard", "shard"]

@@ -50,6 +50,7 @@ class Claimant:
 
     @classmethod
     def here(cls, run_id: str) -> "Claimant":
+        """The claimant of this process (its host and pid) for run `run_id`."""
         return cls(run_id=run_id, host=socket.gethostname(), pid=os.getpid())
 
 
@@ -59,6 +60,7 @@ def new_run_id() -> str:
 
 
 def claim_path(frame_file: str | Path) -> Path:
+    """Where the claim of a frame file lives (in a `.motion-claims/` folder beside it)."""
     frame_file = Path(frame_file)
     return frame_file.parent / CLAIM_DIR / (frame_file.name + ".claim")
 
@@ -203,6 +205,7 @@ def release(frame_file: str | Path, run_id: str) -> bool:
 
 
 def release_all(frame_files: list[str], run_id: str) -> None:
+    """Release this run's claims on every frame file given (others' claims are left)."""
     for f in frame_files:
         release(f, run_id)
 

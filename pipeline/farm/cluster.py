@@ -84,15 +84,19 @@ class DaskExecutor:
             self._refreshed = now
 
     def live_workers(self) -> list[str]:
+        """The cluster's workers as last seen."""
         return list(self._live)
 
     def idle_workers(self) -> list[str]:
+        """Live workers without a chunk of ours."""
         return [w for w in self._live if w not in self._running]
 
     def can_grow(self) -> bool:
+        """Always: workers may join a Dask cluster at any time."""
         return True  # workers may join the cluster at any time
 
     def submit(self, worker: str, chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext) -> None:
+        """Run one chunk on `worker` (pinned there, no work stealing)."""
         fut = self.client.submit(
             run_chunk_reporting,
             chunk_id,
@@ -109,6 +113,7 @@ class DaskExecutor:
         self._running[worker] = (fut, chunk_id)
 
     def poll(self, timeout: float) -> list[Event]:
+        """Wait up to `timeout` s; the chunks finished or failed since, and workers that joined or left."""
         from distributed import wait
 
         futs = [f for f, _ in self._running.values()]
@@ -149,6 +154,7 @@ class DaskExecutor:
         return events
 
     def stop_worker(self, worker: str, reason: str) -> None:
+        """Cancel the worker's chunk; on a timeout restart its process (a running task cannot be cancelled)."""
         entry = self._running.pop(worker, None)
         if entry is not None:
             entry[0].cancel()
@@ -161,6 +167,7 @@ class DaskExecutor:
             self._refresh(force=True)
 
     def close(self, interrupted: bool = False) -> None:
+        """Cancel what is still running (restarting busy workers when interrupted) and close the client."""
         for fut, _ in self._running.values():
             fut.cancel()
         if interrupted and self._running:

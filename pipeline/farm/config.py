@@ -27,6 +27,7 @@ class FarmConfig:
 
     @property
     def stale_after_s(self) -> float:
+        """Seconds after which another job's claim counts as abandoned (claim_stale_s, else the task timeout)."""
         return self.claim_stale_s if self.claim_stale_s is not None else self.task_timeout_s
 
     def with_overrides(self, **flags: Any) -> "FarmConfig":

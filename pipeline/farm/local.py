@@ -97,18 +97,23 @@ class LocalExecutor:
 
     @property
     def pids(self) -> list[int]:
+        """Process ids of the live workers."""
         return [w.process.pid for w in self._workers.values()]
 
     def idle_workers(self) -> list[str]:
+        """Workers without a chunk."""
         return [n for n, w in self._workers.items() if w.chunk is None]
 
     def live_workers(self) -> list[str]:
+        """Every live worker, busy or idle."""
         return list(self._workers)
 
     def can_grow(self) -> bool:
+        """Whether a dead worker may still be replaced (respawns left)."""
         return self._respawns_left > 0
 
     def submit(self, worker: str, chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext) -> None:
+        """Send one chunk to `worker`; a dead pipe is reported by the next poll."""
         w = self._workers[worker]
         w.chunk = chunk_id
         try:
@@ -117,6 +122,7 @@ class LocalExecutor:
             pass  # the sentinel reports the death on the next poll
 
     def poll(self, timeout: float) -> list[Event]:
+        """Wait up to `timeout` s; the results, failures and worker deaths since."""
         by_handle: dict[Any, _Worker] = {}
         for w in self._workers.values():
             by_handle[w.conn] = w
@@ -158,6 +164,7 @@ class LocalExecutor:
             pass
 
     def stop_worker(self, worker: str, reason: str) -> None:
+        """Kill the worker (a timeout or exclusion) and respawn one in its place while respawns are left."""
         w = self._workers.get(worker)
         if w is None:
             return
@@ -169,6 +176,8 @@ class LocalExecutor:
             self._spawn()
 
     def close(self, interrupted: bool = False) -> None:
+        """Stop every worker: busy ones (or all when interrupted) are terminated, idle ones
+        asked to exit; any still alive after 3 s are killed."""
         workers = list(self._workers.values())
         for w in workers:
             if interrupted or w.chunk is not None:

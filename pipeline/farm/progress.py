@@ -37,11 +37,13 @@ class Progress:
     # frames rendered in this run, per minute
     @property
     def rate_fpm(self) -> float:
+        """Frames rendered in this run per minute (frames already complete do not count)."""
         dt = time.monotonic() - self.t0
         return 60.0 * (self.done - self.already) / dt if dt > 0 else 0.0
 
     @property
     def eta_s(self) -> float | None:
+        """Seconds until every frame is done at the current rate; None before the first frame."""
         rate = self.rate_fpm / 60.0
         left = self.total - self.done - self.failed
         return left / rate if rate > 0 else None

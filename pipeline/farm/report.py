@@ -36,6 +36,8 @@ def build_report(
     interrupted: bool,
     motion_file: str | None,
 ) -> dict[str, Any]:
+    """The run's report (render-report.json): scene, selection, executor, timings, totals,
+    per-frame and per-worker results, failures and frames not rendered."""
     rows: list[dict[str, Any]] = []
     for f in skipped:
         rows.append({"frame": f, "status": "skipped", "reason": "complete on disk (resume)"})

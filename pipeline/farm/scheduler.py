@@ -30,6 +30,8 @@ from .task import TaskContext
 
 @dataclass
 class Chunk:
+    """A task: contiguous frames run together on one worker, its attempt count and the workers it failed on."""
+
     id: int
     frames: list[int]
     attempt: int = 0
@@ -49,6 +51,8 @@ class FrameRecord:
 
 @dataclass
 class WorkerRecord:
+    """What one worker did in this run: frames, chunks, failures, exclusion, cold and warm timings."""
+
     name: str
     frames: int = 0
     chunks: int = 0
@@ -137,6 +141,8 @@ class Scheduler:
 
     # --- the loop ---------------------------------------------------------------------
     def run(self, chunks: list[list[int]]) -> None:
+        """Run every chunk to the end: submit to idle workers, collect results, retry failures
+        elsewhere, exclude failing workers, time out stuck chunks, wait on frames another job holds."""
         for frames in chunks:
             for f in frames:
                 self.frames[f] = FrameRecord(f)

@@ -4,8 +4,8 @@
 Contract (docs/architecture.md): `evaluate(loaded, times, simulation=None) -> SceneMotion`.
 """
 
+from ..expr import ExpressionError, parse_expression
 from .evaluate import SceneMotion, SimulationRequiredError, evaluate, has_dynamics
-from .expr import ExpressionError, parse_expression
 from .pose import Pose
 
 __all__ = [

@@ -10,12 +10,11 @@ the tree's order. Every step is vectorised over the T times.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import MotionError, SceneError
-from ..scene.motion_schema import KeyframeMotion, ProceduralMotion
 from ..scene.schema import (
     Camera,
     ConstantLight,
@@ -26,13 +25,12 @@ from ..scene.schema import (
     SpotLight,
 )
 from .graph import evaluation_order
-from .keyframes import RotationTrack, TrackError, VectorTrack
+from .local import broadcast, local_pose, object_base, vec3
 from .pose import Pose, compose
-from .procedural import ExpressionValueError, apply_layers, procedural_layers, procedural_scalars
-from .rotation import direction_quat, look_at_quat, transform_quat
+from .rotation import direction_quat, look_at_quat
 
 if TYPE_CHECKING:
-    from ..scene.loader import LoadedScene, Loc
+    from ..scene.loader import LoadedScene
 
 
 class SimulationRequiredError(MotionError):
@@ -75,6 +73,7 @@ def _take_particles(samples: Any, index: slice | np.ndarray) -> Any:
 
 
 def light_name(light: Any, index: int) -> str:
+    """A light's name in `SceneMotion.lights`: its own, else `light<index>`."""
     return light.name if light.name is not None else f"light{index}"
 
 
@@ -94,80 +93,9 @@ def _is_flock(obj: Any) -> bool:
 # --- local poses --------------------------------------------------------------------------
 
 
-def _broadcast(value: np.ndarray, count: int) -> np.ndarray:
-    return np.broadcast_to(value, (count, value.shape[-1])).copy()
-
-
-def _scale3(scale: float | tuple[float, float, float]) -> np.ndarray:
-    return np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,)).copy()
-
-
-@dataclass
-class _Local:
-    translation: np.ndarray
-    rotation: np.ndarray
-    scale: np.ndarray
-    scalars: dict[str, np.ndarray]
-
-
-def _local(
-    loaded: "LoadedScene",
-    loc: "Loc",
-    motion: Any,
-    base: tuple[np.ndarray, np.ndarray, np.ndarray],
-    t: np.ndarray,
-    scalar_dims: Mapping[str, int],
-) -> _Local:
-    """parent_from_thing at times t from its base transform and motion block."""
-    count = len(t)
-    translation, rotation, scale = (_broadcast(b, count) for b in base)
-    scalars: dict[str, np.ndarray] = {}
-    mloc = (*loc, "motion")
-    try:
-        if isinstance(motion, KeyframeMotion):
-            seconds = 1.0 if motion.time_unit == "seconds" else float(1 / loaded.scene.timeline.rate)
-            for name, channel in motion.channels.items():
-                cloc = (*mloc, "channels", name)
-                try:
-                    if name == "rotate":
-                        rotation = RotationTrack.compile(channel, motion.interpolation, motion.extrapolation, seconds)(t)
-                    elif name == "translate":
-                        translation = VectorTrack.compile(channel, motion.interpolation, motion.extrapolation, seconds, 3)(t)
-                    elif name == "scale" and "scale" not in scalar_dims:
-                        scale = _vector_or_uniform(channel, motion, seconds, t)
-                    else:
-                        dim = scalar_dims.get(name, 1)
-                        if dim == 3:
-                            scalars[name] = _vector_or_uniform(channel, motion, seconds, t)
-                        else:
-                            scalars[name] = VectorTrack.compile(channel, motion.interpolation, motion.extrapolation, seconds, 1)(t)[:, 0]
-                except TrackError as exc:
-                    raise SceneError([loaded.source.problem((*cloc, *exc.loc), str(exc))]) from None
-        elif isinstance(motion, ProceduralMotion):
-            translation, rotation, scale = apply_layers(translation, rotation, scale, procedural_layers(motion, t))
-            for name, values in procedural_scalars(motion, t).items():
-                scalars[name] = values[:, None].repeat(3, axis=1) if scalar_dims.get(name, 1) == 3 else values
-    except ExpressionValueError as exc:
-        raise SceneError([loaded.source.problem((*mloc, *exc.loc), str(exc))]) from None
-    return _Local(translation, rotation, scale, scalars)
-
-
-def _vector_or_uniform(channel: Any, motion: KeyframeMotion, seconds: float, t: np.ndarray) -> np.ndarray:
-    """A channel keyed with either one number (uniform) or three per key -> [T, 3]."""
-    uniform = all(not isinstance(k.value, tuple) for k in channel.keys)
-    dim = 1 if uniform else 3
-    values = VectorTrack.compile(channel, motion.interpolation, motion.extrapolation, seconds, dim)(t)
-    return np.repeat(values, 3, axis=1) if uniform else values
-
-
-def _object_base(obj: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    tr = obj.transform
-    return np.asarray(tr.translate, dtype=np.float64), transform_quat(tr.rotate), _scale3(tr.scale)
-
-
 def _camera_base(cam: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if cam.transform is not None:
-        return _object_base(cam)
+        return object_base(cam)
     if cam.position is not None and cam.look_at is not None:
         return np.asarray(cam.position, dtype=np.float64), look_at_quat(cam.position, cam.look_at, cam.up), np.ones(3)
     return np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.ones(3)
@@ -186,18 +114,18 @@ def _light_base(light: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if isinstance(light, DirectionalLight):
         return np.zeros(3), direction_quat(light.direction), np.ones(3)
     if isinstance(light, EnvmapLight) and light.transform is not None:
-        return _object_base(light)
+        return object_base(light)
     return np.zeros(3), identity, np.ones(3)
 
 
 def _light_scalar_bases(light: Any) -> dict[str, np.ndarray]:
     """The light's own (unkeyed) scalars: colours as [3], the envmap's scale as [1]."""
     if isinstance(light, (PointLight, SpotLight)):
-        return {"intensity": _scale3(light.intensity)}
+        return {"intensity": vec3(light.intensity)}
     if isinstance(light, ConstantLight):
-        return {"radiance": _scale3(light.radiance)}
+        return {"radiance": vec3(light.radiance)}
     if isinstance(light, DirectionalLight):
-        return {"irradiance": _scale3(light.irradiance)}
+        return {"irradiance": vec3(light.irradiance)}
     if isinstance(light, EnvmapLight):
         return {"scale": np.array([light.scale])}
     return {}
@@ -245,7 +173,7 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
             else:
                 world[name] = plan.kinematic_pose(loaded, i, t)
             continue
-        local = _local(loaded, ("objects", i), obj.motion, _object_base(obj), t, {})
+        local = local_pose(loaded, ("objects", i), obj.motion, object_base(obj), t, {})
         pose = Pose(local.translation, local.rotation, local.scale)
         local_poses[name] = pose
         world[name] = compose(world[obj.parent], pose) if obj.parent is not None else pose
@@ -255,7 +183,7 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
         apply_ik(loaded, t, world, local_poses)
 
     cam = scene.camera
-    local = _local(loaded, ("camera",), cam.motion, _camera_base(cam), t, {"fov": 1, "ortho_width": 1})
+    local = local_pose(loaded, ("camera",), cam.motion, _camera_base(cam), t, {"fov": 1, "ortho_width": 1})
     camera = Pose(local.translation, local.rotation, local.scale)
     if cam.parent is not None:
         camera = compose(world[cam.parent], camera)
@@ -271,11 +199,11 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
         dims = {name: (1 if name == "scale" else 3) for name in ("intensity", "radiance", "irradiance")}
         if isinstance(light, EnvmapLight):
             dims["scale"] = 1
-        local = _local(loaded, ("lights", i), light.motion, _light_base(light), t, dims)
+        local = local_pose(loaded, ("lights", i), light.motion, _light_base(light), t, dims)
         pose = Pose(local.translation, local.rotation, local.scale)
         name = light_name(light, i)
         lights[name] = compose(world[light.parent], pose) if light.parent is not None else pose
-        scalars = {k: (np.full(count, v[0]) if v.shape == (1,) else _broadcast(v, count)) for k, v in bases.items()}
+        scalars = {k: (np.full(count, v[0]) if v.shape == (1,) else broadcast(v, count)) for k, v in bases.items()}
         scalars.update(local.scalars)
         light_scalars[name] = scalars
 

@@ -19,20 +19,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import RotationValueError, TrackError
 from ..scene.motion_schema import Channel, Key
 from .pose import quat_conj, quat_exp, quat_log, quat_mul, quat_normalize, quat_rotate
 from .rotation import key_axis, key_quat, segment_rotvecs, unwrap_near
 
 HOLD, NEAREST, LINEAR, CATMULL_ROM, BEZIER, HERMITE = range(6)
 MODES = {"hold": HOLD, "nearest": NEAREST, "linear": LINEAR, "catmull-rom": CATMULL_ROM, "bezier": BEZIER, "hermite": HERMITE}
-
-
-class TrackError(ValueError):
-    """A channel's keys cannot be compiled; `loc` is the path below the channel."""
-
-    def __init__(self, loc: tuple[str | int, ...], message: str) -> None:
-        super().__init__(message)
-        self.loc = loc
 
 
 def _hermite(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -181,6 +174,9 @@ class RotationTrack:
 
     @classmethod
     def compile(cls, channel: Channel, mode: str, extrapolation: str, seconds: float) -> "RotationTrack":
+        """The track of a `rotate` channel: keys as unit quaternions, per-segment modes, the
+        angular velocities of its splines; `seconds` converts key times to seconds. TrackError
+        (located below the channel) for keys that cannot be compiled."""
         keys = channel.keys
         n = len(keys)
         times = np.array([k.time for k in keys], dtype=np.float64) * seconds
@@ -188,7 +184,7 @@ class RotationTrack:
         for i, k in enumerate(keys):
             try:
                 quats[i] = key_quat(k)
-            except ValueError as exc:
+            except (RotationValueError, ValueError) as exc:  # ValueError: scipy's, for a malformed value
                 raise TrackError(("keys", i), str(exc)) from None
         base = MODES[channel.interpolation or mode]
         modes = np.array([MODES[k.interpolation] if k.interpolation else base for k in keys[:-1]], dtype=np.int8)
@@ -199,7 +195,7 @@ class RotationTrack:
         turns = np.array([k.turns for k in keys])
         try:
             arcs = segment_rotvecs(quats, turns, [key_axis(k) for k in keys])
-        except ValueError as exc:
+        except (RotationValueError, ValueError) as exc:
             raise TrackError(("keys",), str(exc)) from None
         h = np.diff(times)
         # body-frame angular velocity at each key (rad/s): the Catmull-Rom tangent on the

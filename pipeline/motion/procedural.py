@@ -11,31 +11,26 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from ..errors import ExpressionValueError, RotationValueError
+from ..expr import parse_expression
 from ..scene.motion_schema import Ballistic, Generator, Noise, Orbit, Oscillate, ProceduralMotion, Turntable
-from .expr import parse_expression
 from .pose import quat_exp, quat_mul
 from .rotation import euler_quat
 
 
 class Layer(NamedTuple):
+    """One generator's contribution to a local transform, at T times."""
+
     translation: np.ndarray  # [T, 3] added
     rotation: np.ndarray  # [T, 4] multiplied on the left
     scale: np.ndarray  # [T, 3] multiplied
-
-
-class ExpressionValueError(ValueError):
-    """An expression gave a non-finite value; `loc` is below the procedural block."""
-
-    def __init__(self, loc: tuple[str | int, ...], message: str) -> None:
-        super().__init__(message)
-        self.loc = loc
 
 
 def _unit(v) -> np.ndarray:  # type: ignore[no-untyped-def]
     a = np.asarray(v, dtype=np.float64)
     n = np.linalg.norm(a)
     if n < 1e-12:
-        raise ValueError("axis/direction must not be the zero vector")
+        raise RotationValueError("axis/direction must not be the zero vector")
     return a / n
 
 
@@ -51,6 +46,7 @@ def _spin(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
 
 
 def ballistic(g: Ballistic, t: np.ndarray) -> Layer:
+    """x(t) = x0 + v0 (t - t0) + a (t - t0)^2 / 2."""
     out = _identity(len(t))
     dt = (t - g.t0)[:, None]
     # x(t) = x0 + v0 dt + a dt^2 / 2
@@ -66,6 +62,8 @@ def orbit_basis(axis: np.ndarray) -> np.ndarray:
 
 
 def orbit(g: Orbit, t: np.ndarray) -> Layer:
+    """A circle of `radius` about `center` in the plane normal to `axis` (period, phase);
+    with face_center the object turns with the orbit, keeping one side to the centre."""
     out = _identity(len(t))
     axis = _unit(g.axis)
     # theta = phase + 2 pi t / period, counter-clockwise about the axis (right hand)
@@ -81,6 +79,7 @@ def orbit(g: Orbit, t: np.ndarray) -> Layer:
 
 
 def oscillate(g: Oscillate, t: np.ndarray) -> Layer:
+    """A sine wave on translate (along direction), rotate (about direction, degrees) or scale (1 + wave, weighted per axis)."""
     out = _identity(len(t))
     wave = g.amplitude * np.sin(2.0 * np.pi * g.frequency * t + np.radians(g.phase))
     if g.channel == "translate":
@@ -93,6 +92,7 @@ def oscillate(g: Oscillate, t: np.ndarray) -> Layer:
 
 
 def turntable(g: Turntable, t: np.ndarray) -> Layer:
+    """A steady spin about `axis`: phase + rate * t degrees."""
     out = _identity(len(t))
     out.rotation[:] = _spin(_unit(g.axis), np.radians(g.phase + g.rate * t))
     return out
@@ -126,6 +126,7 @@ def value_noise(seed: int, stream: int, x: np.ndarray) -> np.ndarray:
 
 
 def noise(g: Noise, t: np.ndarray) -> Layer:
+    """Smooth deterministic jitter (seeded value noise) of translation and rotation."""
     out = _identity(len(t))
     x = t * g.frequency
     for k in range(3):
@@ -163,7 +164,7 @@ def procedural_layers(motion: ProceduralMotion, t: np.ndarray) -> list[Layer]:
     for i, g in enumerate(motion.generators):
         try:
             layers.append(generator_layer(g, t))
-        except ValueError as exc:
+        except (RotationValueError, ValueError) as exc:  # ValueError: numpy's, for a value it cannot use
             raise ExpressionValueError(("generators", i), str(exc)) from None
     ch = motion.channels
     if ch is not None:
@@ -185,6 +186,7 @@ def procedural_layers(motion: ProceduralMotion, t: np.ndarray) -> list[Layer]:
 
 
 def procedural_scalars(motion: ProceduralMotion, t: np.ndarray) -> dict[str, np.ndarray]:
+    """The scalar channels' expressions (fov, intensity ...) evaluated at t."""
     return {name: _expr(text, t, ("scalars", name)) for name, text in motion.scalars.items()}
 
 

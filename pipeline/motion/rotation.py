@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation as R
 
+from ..errors import RotationValueError
 from ..scene.motion_schema import Key
 from ..scene.types import AxisAngleRotation, EulerRotation, QuaternionRotation, Transform
 from .pose import quat_log, quat_mul, quat_conj, quat_normalize, quat_to_matrix
@@ -24,6 +25,7 @@ def euler_quat(angles_deg, order: str = "xyz") -> np.ndarray:  # type: ignore[no
 
 
 def axis_angle_quat(axis, angle_deg: float) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """The unit quaternion (w, x, y, z) of a rotation by `angle_deg` degrees about `axis`."""
     a = np.asarray(axis, dtype=np.float64)
     a = a / np.linalg.norm(a)
     half = np.radians(angle_deg) / 2.0
@@ -57,17 +59,17 @@ def key_quat(key: Key) -> np.ndarray:
         q = np.asarray(key.quaternion, dtype=np.float64)
         norm = np.linalg.norm(q)
         if norm < 1e-12:
-            raise ValueError("quaternion must not be zero")
+            raise RotationValueError("quaternion must not be zero")
         return q / norm
     if key.axis is not None and key.angle is not None:
         if np.linalg.norm(key.axis) < 1e-12:
-            raise ValueError("axis must not be the zero vector")
+            raise RotationValueError("axis must not be the zero vector")
         return axis_angle_quat(key.axis, key.angle)
     if key.euler is not None:
         return euler_quat(key.euler, key.order)
     if isinstance(key.value, tuple):
         return euler_quat(key.value, "xyz")
-    raise ValueError("a rotation key's value is Euler angles [x, y, z] in degrees")
+    raise RotationValueError("a rotation key's value is Euler angles [x, y, z] in degrees")
 
 
 def key_axis(key: Key) -> np.ndarray | None:
@@ -92,7 +94,7 @@ def segment_rotvecs(quats: np.ndarray, turns: np.ndarray, axes: list[np.ndarray 
     """Body-frame rotation vectors w_i of the segments, q_{i+1} = q_i exp(w_i).
 
     Each is the shortest arc (|w_i| <= pi) plus `turns[i+1]` whole turns about its axis;
-    a zero-length arc takes the axis from key i+1 (`axes[i+1]`). Raises ValueError
+    a zero-length arc takes the axis from key i+1 (`axes[i+1]`). Raises RotationValueError
     (with the key index) when turns are asked on a segment with no axis."""
     rel = quat_mul(quat_conj(quats[:-1]), quats[1:])
     w = quat_log(rel)
@@ -104,7 +106,7 @@ def segment_rotvecs(quats: np.ndarray, turns: np.ndarray, axes: list[np.ndarray 
             # the key's axis is in the parent frame; at a zero arc q_i = q_{i+1}, so map it into the body frame
             axis = R.from_quat(quats[i], scalar_first=True).inv().apply(axes[i + 1])
         else:
-            raise ValueError(f"keys[{i + 1}]: turns on a segment with no rotation needs an axis: give the key as axis + angle")
+            raise RotationValueError(f"keys[{i + 1}]: turns on a segment with no rotation needs an axis: give the key as axis + angle")
         w[i] = w[i] + 2.0 * np.pi * turns[i + 1] * axis
     return w
 

@@ -171,7 +171,7 @@ def _render_one(job: RenderJob, fi: BakedFrame) -> FrameResult:
         extra_setup = time.perf_counter() - t_setup
         parity = None
         if job.fields:  # a field: its own instant and shutter (the timeline), only its rows
-            from ..telecine.field_render import field_rows, parity_of, rendering_field
+            from .fields import field_rows, parity_of, rendering_field
 
             parity = parity_of(fi.frame, job.fields)  # type: ignore[arg-type]
             with rendering_field(parity):

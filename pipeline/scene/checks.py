@@ -14,9 +14,11 @@ from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING
 
 from ..errors import AssetError, Problem
+from ..expr import ExpressionError, parse_expression
 from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
 from .motion_schema import BlendShapes, KeyframeMotion, ProceduralMotion, TRANSFORM_CHANNELS
 from .schema import EnvmapLight, Mesh, Particles, Scene, Texture
+from .source import yaml_path
 
 # Budgets (docs/scene-format.md, "Limits"), checked over the whole timeline before any work.
 MAX_SIMULATION_STEPS = 10_000_000  # fixed steps of the dynamics stage (5.8 h of shot at 1/480 s)
@@ -25,7 +27,7 @@ MAX_PARTICLE_STEPS = 1_000_000_000  # particles x simulation steps (minutes of s
 MAX_PARTICLE_SAMPLES = 100_000_000  # particles x baked sample times held by one bake (2.4 GB)
 
 if TYPE_CHECKING:
-    from .loader import Loc, SourceMap
+    from .source import Loc, SourceMap
 
 # Scalar channels each kind of owner may animate besides translate/rotate/scale.
 SCALAR_CHANNELS = {
@@ -67,7 +69,7 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
             if name is None:
                 continue
             if name in names:
-                add((kind, i, "name"), f"duplicate name '{name}' (first used at {_path(names[name])})")
+                add((kind, i, "name"), f"duplicate name '{name}' (first used at {yaml_path(names[name])})")
             else:
                 names[name] = (kind, i, "name")
     materials: dict[str, int] = {}
@@ -170,7 +172,7 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
 
                 load_mesh((base_dir / rel).resolve())
             else:
-                from ..render.assets import check_image
+                from ..images import check_image
 
                 check_image((base_dir / rel).resolve())
         except AssetError as exc:
@@ -323,6 +325,7 @@ def bake_budget_problems(scene: Scene, source: "SourceMap", frames: int) -> list
 
 
 def check_channels(loc: "Loc", motion: object, owner: str, add) -> None:  # type: ignore[no-untyped-def]
+    """Channel names and key values of one motion block for its owner (camera, object, a kind of light); problems go to `add(loc, message)`."""
     allowed = (*TRANSFORM_CHANNELS, *SCALAR_CHANNELS[owner])
     if isinstance(motion, KeyframeMotion):
         for name, channel in motion.channels.items():
@@ -351,10 +354,6 @@ def check_channels(loc: "Loc", motion: object, owner: str, add) -> None:  # type
 
 def expression_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
     """Expressions are parsed (never executed) here, so a bad one fails before the job."""
-    try:
-        from ..motion.expr import ExpressionError, parse_expression
-    except ImportError:  # the expression evaluator is part of the motion stage
-        return []
     problems: list[Problem] = []
 
     def check(loc: "Loc", text: str, variables: tuple[str, ...]) -> None:
@@ -385,8 +384,3 @@ def expression_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
             check(("dynamics", field, j), text, ("t", "x", "y", "z"))
     return problems
 
-
-def _path(loc: "Loc") -> str:
-    from .loader import yaml_path
-
-    return yaml_path(loc)

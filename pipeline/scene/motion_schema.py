@@ -75,6 +75,9 @@ class Key(Model):
 
 
 class Channel(Model):
+    """One animated channel: its keys (times strictly increasing) and an interpolation and
+    extrapolation of its own, overriding the block's."""
+
     keys: Annotated[list[Key], Field(min_length=1)]
     interpolation: Interpolation | None = None
     extrapolation: Extrapolation | None = None
@@ -97,10 +100,15 @@ TRANSFORM_CHANNELS = ("translate", "rotate", "scale")
 
 
 class StaticMotion(Model):
+    """No motion: the thing keeps its `transform:`."""
+
     type: Literal["static"] = "static"
 
 
 class KeyframeMotion(Model):
+    """Keyframed channels (translate, rotate, scale and the owner's scalar channels); key
+    times in frames or seconds."""
+
     type: Literal["keyframes"]
     time_unit: Literal["frames", "seconds"] = "frames"
     interpolation: Interpolation = "linear"
@@ -291,6 +299,8 @@ class JointLimit(Model):
 
 
 class WeightKey(Model):
+    """A key of an IK constraint's weight: its time and the weight in [0, 1]."""
+
     time: FiniteFloat
     value: Annotated[float, Field(ge=0, le=1)]
 

@@ -67,6 +67,7 @@ class Cadence:
 
     @property
     def fields_per_cycle(self) -> int:
+        """Fields in one cycle of the cadence (10 for 3:2)."""
         return sum(self.counts)
 
     @property
@@ -80,6 +81,7 @@ class Cadence:
         return "".join(str(c) for c in self.counts)
 
     def fields_of(self, frame_index: int) -> int:
+        """How many fields film frame `frame_index` gives."""
         return self.counts[frame_index % len(self.counts)]
 
 
@@ -137,21 +139,26 @@ class VideoFrame:
 
     @property
     def top(self) -> int:
+        """The film frame of the top field."""
         return self.first if self.order == "tff" else self.second
 
     @property
     def bottom(self) -> int:
+        """The film frame of the bottom field."""
         return self.second if self.order == "tff" else self.first
 
     def source(self, parity: Parity) -> int:
+        """The film frame of the field of `parity`."""
         return self.top if parity == "top" else self.bottom
 
     @property
     def first_parity(self) -> Parity:
+        """The parity of the temporally first field."""
         return first_parity(self.order)
 
     @property
     def second_parity(self) -> Parity:
+        """The parity of the temporally second field."""
         return second_parity(self.order)
 
 

@@ -45,6 +45,7 @@ class Sequence:
 
     @property
     def first(self) -> int:
+        """The first frame number."""
         return self.numbers[0]
 
     @property
@@ -57,6 +58,7 @@ class Sequence:
         return read_frame(self.paths[index])
 
     def frames(self) -> Iterator[Frame]:
+        """Every frame read in order (pixels, layers and metadata)."""
         for path in self.paths:
             yield read_frame(path)
 

@@ -12,53 +12,16 @@ at the asset file and node (or prim), or at the override in the scene file that 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ...errors import Problem, SceneError
+from .records import Expansion, ImportFileError, Origin, SpecError
 
 if TYPE_CHECKING:
-    from ..loader import Loc, SourceMap
+    from ..source import SourceMap
 
 __all__ = ["ImportFileError", "SpecError", "Origin", "Expansion", "expand_imports"]
-
-
-class ImportFileError(SceneError):
-    """An imported asset file is unreadable, malformed or uses what we do not support;
-    names the file and the node / mesh / accessor (glTF) or prim (USD)."""
-
-    def __init__(self, file: str, where: str, message: str) -> None:
-        super().__init__([Problem(file, None, None, where, message)])
-
-
-class SpecError(ValueError):
-    """A problem with the scene file's import entry itself: its `field` names what."""
-
-    def __init__(self, field: str, message: str) -> None:
-        super().__init__(message)
-        self.field = field
-
-
-@dataclass(frozen=True)
-class Origin:
-    """Where an expanded record came from: the asset `file` and `where` in it, and the
-    keys that came from the scene file instead (key -> its YAML location)."""
-
-    file: str
-    where: str
-    yaml_keys: dict[str, "Loc"] = field(default_factory=dict)
-    default: "Loc | None" = None  # a record made by the scene file itself (an import's root)
-
-
-@dataclass
-class Expansion:
-    """What one reader produced: records as YAML-like dicts, each with its origin."""
-
-    objects: list[tuple[dict[str, Any], Origin]] = field(default_factory=list)
-    materials: list[tuple[dict[str, Any], Origin]] = field(default_factory=list)
-    lights: list[tuple[dict[str, Any], Origin]] = field(default_factory=list)
-    cameras: list[tuple[str, dict[str, Any], Origin]] = field(default_factory=list)  # (node name, record, origin)
 
 
 # Keys an override may not change: they say what the record is.
@@ -74,7 +37,7 @@ def expand_imports(data: dict[str, Any], source: "SourceMap", base_dir: Path) ->
         return data, source
     from pydantic import ValidationError
 
-    from ..loader import problems_from_validation
+    from ..problems import problems_from_validation
     from .spec import ImportList
 
     try:

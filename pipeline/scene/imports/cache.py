@@ -15,7 +15,7 @@ from typing import Callable
 
 import numpy as np
 
-from ...variant import cache_root
+from ...cache import cache_root
 
 CONVERSION_VERSION = "import-v1"
 _lock = threading.Lock()

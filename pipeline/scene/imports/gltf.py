@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from . import Expansion, ImportFileError, Origin, SpecError
+from .records import Expansion, ImportFileError, Origin, SpecError
 from .cache import cached, file_digest, write_atomic, write_ply
 
 COMPONENTS = {5120: np.dtype("<i1"), 5121: np.dtype("<u1"), 5122: np.dtype("<i2"), 5123: np.dtype("<u2"), 5125: np.dtype("<u4"), 5126: np.dtype("<f4")}
@@ -99,6 +99,7 @@ class GltfReader:
     # --- errors and raw data ------------------------------------------------------------
 
     def fail(self, where: str, message: str) -> "None":
+        """Raise ImportFileError at `where` in the file."""
         raise ImportFileError(self.shown, where, message)
 
     def _check_glb(self, raw: bytes) -> None:
@@ -121,6 +122,7 @@ class GltfReader:
             offset += 8 + chunk_len
 
     def buffer(self, i: int) -> bytes:
+        """The bytes of buffer `i` (the GLB chunk, a data URI or a file beside the glTF), read once."""
         if i in self._buffers:
             return self._buffers[i]
         buffers = self.gltf.buffers or []
@@ -208,6 +210,7 @@ class GltfReader:
     # --- the node tree ------------------------------------------------------------------
 
     def expand(self) -> Expansion:
+        """The records of the import: objects (meshes, skins, morph targets, animation), materials, lights and cameras."""
         g, spec = self.gltf, self.spec
         nodes = g.nodes or []
         scenes = g.scenes or []

@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from ...errors import Problem
-from ..loader import Loc, SourceMap, yaml_path
-from . import Origin
+from ..source import Loc, SourceMap, yaml_path
+from .records import Origin
 
 
 @dataclass(frozen=True)
@@ -18,6 +18,8 @@ class ImportedSourceMap(SourceMap):
     camera_origin: Origin | None = None
 
     def problem(self, loc: Loc, message: str, key: bool = False) -> Problem:
+        """A problem at `loc`: in the asset file and node when the record was imported, at the
+        scene-file key when that key set the value."""
         origin, rest = None, ()
         if len(loc) >= 2 and (loc[0], loc[1]) in self.origins:
             origin, rest = self.origins[(loc[0], loc[1])], tuple(loc[2:])

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from . import Expansion, ImportFileError, Origin, SpecError
+from .records import Expansion, ImportFileError, Origin, SpecError
 from .cache import cached, file_digest, write_ply
 from .gltf import _Names, sanitize
 
@@ -57,6 +57,8 @@ def _matrix(gf: Any) -> np.ndarray:
 
 
 class UsdReader:
+    """Reads one USD stage into scene records (docs/imports.md)."""
+
     def __init__(self, path: Path, shown: str, spec: Any, index: int) -> None:
         from pxr import Tf, Usd
 
@@ -75,9 +77,11 @@ class UsdReader:
         self.at = "<stage>"  # the prim being read: the location of an unforeseen problem
 
     def seconds(self, code: float) -> float:
+        """Scene seconds of a USD time code (timeCodesPerSecond, plus the import's time_offset)."""
         return code / self.tcps + self.spec.time_offset
 
     def expand(self) -> Expansion:
+        """The records of the import: prims as objects (meshes, xforms), materials, lights and cameras."""
         from pxr import Usd, UsdGeom, UsdLux
 
         spec = self.spec

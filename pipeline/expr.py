@@ -17,7 +17,7 @@ Grammar (docs/expressions.md):
 >>> parse_expression("__import__('os')", ("t",))
 Traceback (most recent call last):
 ...
-motion.pipeline.motion.expr.ExpressionError: expression "__import__('os')": '__import__' is not an allowed function (allowed: abs, clamp, cos, exp, floor, log, max, min, pow, sin, sqrt, tan) (column 1)
+motion.pipeline.expr.ExpressionError: expression "__import__('os')": '__import__' is not an allowed function (allowed: abs, clamp, cos, exp, floor, log, max, min, pow, sin, sqrt, tan) (column 1)
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from ..errors import MotionError
+from .errors import MotionError
 
 MAX_LENGTH = 1000  # characters of source text
 MAX_DEPTH = 100  # nesting depth of the tree (a + b + c ... nests to the left)
@@ -111,21 +111,29 @@ class ExpressionError(MotionError, ValueError):
 
 @dataclass(frozen=True)
 class Num:
+    """A number literal (constants such as pi are folded into one)."""
+
     value: float
 
 
 @dataclass(frozen=True)
 class Var:
+    """A variable bound at evaluation (t; x, y, z for force fields)."""
+
     name: str
 
 
 @dataclass(frozen=True)
 class Neg:
+    """Unary minus."""
+
     operand: "Node"
 
 
 @dataclass(frozen=True)
 class BinOp:
+    """A binary operator: + - * / % ** (^ is **)."""
+
     op: str
     left: "Node"
     right: "Node"
@@ -133,6 +141,8 @@ class BinOp:
 
 @dataclass(frozen=True)
 class Call:
+    """A call of an allowed function (sin, clamp, ...) with its checked number of arguments."""
+
     func: str
     args: tuple["Node", ...]
 

@@ -1,33 +1,31 @@
-"""Field rendering: `motion render --fields 60i` renders the video's fields directly.
+"""Interlaced frames from rendered fields (`motion render --fields 60i`, shot/fields.py).
 
 A field is a timeline instant of its own: at 60i the fields are the frames of a
 60000/1001 fields/s timeline, each with the scene's shutter angle of its own field
-duration. The farm renders them like frames (bake, chunks, resume), the renderer draws
-only the field's rows (`rendering_field`, the integrator's FIELD_ROWS), and `weave_fields`
-pairs fields 2k (the field order's first parity) and 2k + 1 into interlaced frame k at
-half the field rate, with the field order and each field's time in the header, and an
-interlaced movie. Compare 3:2 pulldown (telecine_sequence), whose fields repeat 24p film
-frames: a frame there shows at most two film times; here every field has its own.
+duration. `field_range` says which fields cover a shot's frames; the renderer draws only a
+field's rows (render/fields.py); `weave_fields` pairs fields 2k (the field order's first
+parity) and 2k + 1 into interlaced frame k at half the field rate, with the field order
+and each field's time in the header, and an interlaced movie. Compare 3:2 pulldown
+(telecine_sequence), whose fields repeat 24p film frames: a frame there shows at most two
+film times; here every field has its own.
 
 >>> from fractions import Fraction
 >>> field_range(Fraction(24), 0, 23, FIELD_RATES["60i"])   # one second of 24p
 (0, 59)
->>> parity_of(0, "tff"), parity_of(1, "tff"), parity_of(0, "bff")
-('top', 'bottom', 'bottom')
 """
 
 from __future__ import annotations
 
 import math
-from contextlib import contextmanager
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 
 from ..errors import FrameIOError, UsageError
-from .fields import FieldOrder, Parity, check_field_order, first_parity, second_parity
+from ..render.fields import parity_of
+from .fields import FieldOrder, check_field_order
 
 FIELD_RATES: dict[str, Fraction] = {"60i": Fraction(60000, 1001), "50i": Fraction(50)}
 
@@ -50,33 +48,6 @@ def field_range(fps: Fraction, first: int, last: int, rate: Fraction) -> tuple[i
     if f1 % 2 == 0:
         f1 += 1
     return f0, max(f1, f0 + 1)
-
-
-def parity_of(field: int, order: FieldOrder) -> Parity:
-    """Field 2k has the order's first parity, 2k + 1 the second."""
-    return first_parity(order) if field % 2 == 0 else second_parity(order)
-
-
-@contextmanager
-def rendering_field(parity: Parity) -> Iterator[None]:
-    """While inside, the motion_path integrator draws only the rows of `parity` (top:
-    0, 2, 4 ...; bottom: 1, 3, 5 ...) and returns an image of those rows."""
-    from ..render import integrator
-
-    before = integrator.FIELD_ROWS
-    integrator.FIELD_ROWS = (0 if parity == "top" else 1, 2)
-    try:
-        yield
-    finally:
-        integrator.FIELD_ROWS = before
-
-
-def field_rows(image: np.ndarray, parity: Parity, height: int) -> np.ndarray:
-    """The field's rows of a renderer's image: already the field (the integrator drew only
-    its rows) or a full frame (the scalar fallback renders every row: take its rows)."""
-    if image.shape[0] == height:
-        return image[0 if parity == "top" else 1 :: 2]
-    return image
 
 
 def weave_fields(
@@ -148,46 +119,3 @@ def weave_fields(
         label = "60i" if rate == FIELD_RATES["60i"] else "50i" if rate == FIELD_RATES["50i"] else f"{float(rate):g}i"
         written.append(write_movie(out_dir / f"{name}_{label}.mov", iter(woven), frame_rate, width=w, height=h, field_order=fo))
     return written
-
-
-def run_field_render(req: Any, fields: str, order: str) -> dict[str, Any]:
-    """`motion render --fields 60i`: render the fields of the scene's time span (or of the
-    interlaced frames `req.frames_spec` names, or the preset's spread of them) into
-    OUT/fields/ through the farm, then weave them into OUT (EXRs and a movie)."""
-    import dataclasses
-
-    from ..farm.frames import parse_frames
-    from ..farm.run import run_render
-    from ..presets import load_preset, overrides_from, spread
-    from ..scene.loader import load_scene
-
-    rate = field_rate(fields)
-    fo = check_field_order(order)
-    for flag, value in (("--deliver", req.deliver), ("--shard", req.shard), ("--motion", req.motion_file)):
-        if value:
-            raise UsageError(f"--fields renders and weaves its own fields; it does not combine with {flag}")
-    preset = load_preset(req.preset)[0] if req.preset else None
-    loaded = load_scene(req.scene, overrides_from(preset, {"render": req.render_overrides}))
-    scene = loaded.scene
-    if scene.render.resolution[1] % 2:
-        raise UsageError(f"--fields: the height {scene.render.resolution[1]} is odd; interlaced frames need an even number of rows")
-    tl = scene.timeline
-    f0, f1 = field_range(tl.rate, tl.first, tl.last, rate)
-    video = list(range(f0 // 2, f1 // 2 + 1))
-    if req.frames_spec:
-        chosen = parse_frames(req.frames_spec, video[0], video[-1])
-    else:
-        chosen = spread(video, preset.frame_count if preset else None)
-    selected = [f for k in chosen for f in (2 * k, 2 * k + 1)]
-    out_dir = Path(req.output_dir or scene.output.directory or Path("out") / loaded.name).resolve()
-    sub = dataclasses.replace(
-        req,
-        output_dir=out_dir / "fields",
-        frames_spec=",".join(str(f) for f in selected),
-        fields=fo,
-        scene_overrides={"timeline": {"fps": str(rate), "first": f0, "last": f1}},
-    )
-    report = run_render(sub)
-    if not req.check:
-        weave_fields(out_dir / "fields", out_dir, loaded.name, fo, rate, pixel_type=scene.output.pixel_type, compression=scene.output.compression)
-    return report

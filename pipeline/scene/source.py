@@ -1,0 +1,225 @@
+"""Source positions: a YAML document parsed safely with the line and column of every value.
+
+`parse_yaml` returns the data and its `SourceMap`; `SourceMap.problem(loc, message)` makes a
+`Problem` located at `loc` (or its nearest ancestor written in the file); `yaml_path` spells a
+location as a user reads it. Scene and preset loading, the semantic checks and the imports
+all locate their problems through this module.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable, Union
+
+import yaml
+
+from ..errors import InputFileError, Problem, SceneError
+from ..limits import read_bounded
+
+Loc = tuple[Union[str, int], ...]
+
+# --- limits on what an input file can make us allocate (docs/scene-format.md, "Limits") ---
+
+MAX_YAML_BYTES = 16 * 1024**2  # a scene or preset file
+MAX_DEPTH = 64  # nesting of mappings and sequences
+MAX_ALIAS_NODES = 100_000  # nodes aliases may add beyond those written in the file
+MAX_INT_CHARS = 32  # characters of one integer literal (int64 needs 19 digits)
+
+
+def read_yaml_file(path: str | Path, what: str) -> str:
+    """A scene or preset file's text, bounded (MAX_YAML_BYTES); SceneError if unreadable."""
+    file = str(path)
+    try:
+        data = read_bounded(path, MAX_YAML_BYTES, what)
+        return data.decode("utf-8")
+    except InputFileError as exc:
+        raise SceneError([Problem(file, None, None, "", exc.reason)]) from None
+    except UnicodeDecodeError as exc:
+        raise SceneError([Problem(file, None, None, "", f"cannot read {what}: not UTF-8 text ({exc.reason} at byte {exc.start})")]) from None
+
+
+# --- YAML with positions ------------------------------------------------------------------
+
+
+class _Loader(yaml.SafeLoader):
+    """SafeLoader that also rejects duplicate keys (a silent overwrite hides mistakes),
+    bounds nesting depth and integer literals, and records where aliases are used."""
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self._depth = 0
+        self.alias_marks: list[yaml.Mark] = []
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node:  # type: ignore[override]
+        if self.check_event(yaml.AliasEvent):
+            self.alias_marks.append(self.peek_event().start_mark)
+        self._depth += 1
+        try:
+            if self._depth > MAX_DEPTH:
+                raise yaml.composer.ComposerError(
+                    None, None, f"nesting deeper than {MAX_DEPTH} levels (the limit)", self.peek_event().start_mark
+                )
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+
+def _construct_int(loader: _Loader, node: yaml.ScalarNode) -> int:
+    if len(str(node.value)) > MAX_INT_CHARS:
+        raise yaml.constructor.ConstructorError(
+            None, None, f"integer literal of {len(str(node.value))} characters (the limit is {MAX_INT_CHARS})", node.start_mark
+        )
+    return yaml.SafeLoader.construct_yaml_int(loader, node)
+
+
+_Loader.add_constructor("tag:yaml.org,2002:int", _construct_int)
+
+
+def _expanded_size(root: yaml.Node) -> tuple[int, int, yaml.Node | None]:
+    """(nodes written, nodes after expanding every alias, a node that contains itself).
+
+    Iterative, memoised per node: aliases share node objects, so the document is a graph
+    whose expansion can be exponential (or, with a recursive anchor, infinite)."""
+    size: dict[int, int] = {}
+    on_path: set[int] = set()
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, done = stack.pop()
+        key = id(node)
+        if done:
+            on_path.discard(key)
+            total = 1
+            for child in _children(node):
+                total += size[id(child)]
+            size[key] = total
+            continue
+        if key in size:
+            continue
+        if key in on_path:
+            return len(size), -1, node
+        on_path.add(key)
+        stack.append((node, True))
+        for child in _children(node):
+            if id(child) in on_path:
+                return len(size), -1, child
+            if id(child) not in size:
+                stack.append((child, False))
+    return len(size), size[id(root)], None
+
+
+def _children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.MappingNode):
+        return [n for pair in node.value for n in pair]
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    return []
+
+
+def _construct_mapping(loader: _Loader, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
+    seen: dict[Any, yaml.Node] = {}
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=True)
+        try:
+            hash(key)
+        except TypeError:
+            raise yaml.constructor.ConstructorError(
+                None, None, "a mapping key must be a plain scalar", key_node.start_mark
+            ) from None
+        if key in seen:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"duplicate key {key!r} (first at line {seen[key].start_mark.line + 1})", key_node.start_mark
+            )
+        seen[key] = key_node
+    return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
+
+
+_Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+
+def _positions(node: yaml.Node, loc: Loc, out: dict[Loc, tuple[int, int]]) -> None:
+    """Record (line, column), 1-based, of every node, keyed by its path from the root."""
+    out[loc] = (node.start_mark.line + 1, node.start_mark.column + 1)
+    if isinstance(node, yaml.MappingNode):
+        for key_node, value_node in node.value:
+            key = key_node.value
+            out[(*loc, key, "__key__")] = (key_node.start_mark.line + 1, key_node.start_mark.column + 1)
+            _positions(value_node, (*loc, key), out)
+    elif isinstance(node, yaml.SequenceNode):
+        for i, item in enumerate(node.value):
+            _positions(item, (*loc, i), out)
+
+
+@dataclass(frozen=True)
+class SourceMap:
+    """Where each value of a YAML document sits in its file."""
+
+    file: str
+    positions: dict[Loc, tuple[int, int]]
+
+    def locate(self, loc: Loc, key: bool = False) -> tuple[int | None, int | None]:
+        """Position of `loc`, or of its nearest ancestor present in the file."""
+        if key and (*loc, "__key__") in self.positions:
+            return self.positions[(*loc, "__key__")]
+        for n in range(len(loc), -1, -1):
+            pos = self.positions.get(tuple(loc[:n]))
+            if pos is not None:
+                return pos
+        return (None, None)
+
+    def sub(self, prefix: Loc) -> "SourceMap":
+        """The positions of the part of the document under `prefix`, relative to it."""
+        n = len(prefix)
+        return SourceMap(self.file, {loc[n:]: pos for loc, pos in self.positions.items() if loc[:n] == prefix})
+
+    def problem(self, loc: Loc, message: str, key: bool = False) -> Problem:
+        """A Problem located at `loc` (its key when `key`), or at its nearest ancestor in the file."""
+        line, col = self.locate(loc, key=key)
+        return Problem(self.file, line, col, yaml_path(loc), message)
+
+
+def yaml_path(loc: Iterable[str | int]) -> str:
+    """('objects', 2, 'motion', 'keys', 1, 'time') -> 'objects[2].motion.keys[1].time'."""
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + str(part)
+    return out
+
+
+def parse_yaml(text: str, file: str) -> tuple[Any, SourceMap]:
+    """Parse one YAML document safely; returns the data and its source map."""
+    try:
+        loader = _Loader(text)
+        try:
+            node = loader.get_single_node()
+            if node is None:
+                return None, SourceMap(file, {})
+            written, expanded, cyclic = _expanded_size(node)
+            if cyclic is not None or expanded - written > MAX_ALIAS_NODES:
+                mark = loader.alias_marks[0] if loader.alias_marks else node.start_mark
+                why = (
+                    "a recursive alias (an anchor used inside itself)"
+                    if cyclic is not None
+                    else f"aliases expand the document to {expanded} nodes from {written} written (at most {MAX_ALIAS_NODES} more are allowed)"
+                )
+                raise SceneError([Problem(file, mark.line + 1, mark.column + 1, "", f"invalid YAML: {why}")])
+            data = loader.construct_document(node)
+        finally:
+            loader.dispose()
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        msg = " ".join(" ".join(str(p).split()) for p in (exc.context, exc.problem) if p)
+        if "could not determine a constructor" in msg:
+            msg = f"tag not allowed (scene files are plain YAML): {exc.problem}"
+        line = mark.line + 1 if mark else None
+        col = mark.column + 1 if mark else None
+        raise SceneError([Problem(file, line, col, "", f"invalid YAML: {msg}")]) from None
+    except yaml.YAMLError as exc:
+        raise SceneError([Problem(file, None, None, "", "invalid YAML: " + " ".join(str(exc).split()))]) from None
+    positions: dict[Loc, tuple[int, int]] = {}
+    _positions(node, (), positions)
+    return data, SourceMap(file, positions)
+

@@ -1,0 +1,309 @@
+"""One `motion render`, as named steps: load the scene with its preset and flags, select
+frames (and the shard), size the job, check before any work, bake the motion once here,
+skip complete frames, run the chunks on the farm, write `render-report.json`, then the
+temporal pass and the deliverables.
+
+drjit is never imported in this process: workers are spawned (or are Dask workers) and
+import it themselves.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+from ..bake import BakedFrame
+from ..errors import IncompleteJobError, UsageError
+from ..farm.claims import new_run_id
+from ..farm.config import FarmConfig, load_farm_config
+from ..farm.frames import chunks as make_chunks
+from ..farm.frames import default_chunk_size, format_frames, parse_frames, parse_shard, shard
+from ..farm.progress import Progress
+from ..farm.report import build_report, check_writable, write_report, write_report_somewhere
+from ..farm.run import MAX_RETRIES, MAX_THREADS, MAX_WORKERS, default_workers, run_chunks
+from ..farm.scheduler import Scheduler
+from ..farm.task import TaskContext
+from ..frame_output import is_complete
+from ..presets import Preset, load_preset, overrides_from, spread
+from ..render.job import RenderJob, expected_meta, frame_path, scene_hashes
+from ..scene.loader import LoadedScene, load_scene
+from .deliver import check_deliver, deliver_and_record
+from .plan import check_only, plan
+from .request import RenderRequest
+
+
+@dataclass(frozen=True)
+class Selection:
+    """The frames of a render: the selection (--frames or the preset's spread of the
+    timeline), the shard asked for, and this shard's part of the selection."""
+
+    selected: list[int]
+    shard_spec: tuple[int, int] | None
+    frames: list[int]
+
+
+# --- the steps, in the order run_render takes them -----------------------------------------
+
+
+def check_request(req: RenderRequest) -> None:
+    """Flags that contradict each other, refused before anything is read."""
+    if req.workers is not None and req.workers < 1:
+        raise UsageError(f"--workers must be at least 1, got {req.workers}")
+    if req.workers is not None and req.scheduler:
+        raise UsageError("--workers is for the local executor; a Dask cluster (--scheduler) sizes itself")
+    if req.deliver and req.shard:
+        raise UsageError("--deliver needs every frame: assemble after all shards (docs/ci-sharding.md)")
+    if req.deliver:
+        from ..telecine.deliver import parse_formats
+
+        parse_formats(req.deliver)  # a wrong name fails now, not after the last frame
+
+
+def load_shot(req: RenderRequest) -> tuple[Preset | None, dict[str, Any], LoadedScene]:
+    """The preset, the overrides it and the flags make, and the scene loaded with them."""
+    preset, _ = load_preset(req.preset) if req.preset else (None, None)
+    overrides = overrides_from(preset, {"render": req.render_overrides, "output": req.output_overrides, **req.scene_overrides})
+    return preset, overrides, load_scene(req.scene, overrides)
+
+
+def check_denoiser(req: RenderRequest, loaded: LoadedScene) -> None:
+    """A missing or broken OIDN: one line, before any frame (not for --check)."""
+    if loaded.scene.render.denoise != "off" and not req.check:
+        from ..render.denoise import check_available
+
+        check_available()
+
+
+def select_frames(req: RenderRequest, loaded: LoadedScene, preset: Preset | None) -> Selection:
+    """The selection (--frames, else the preset's spread of the timeline), then this shard of it."""
+    scene = loaded.scene
+    timeline_frames = list(scene.timeline.timeline().frames)
+    if req.frames_spec:
+        selected = parse_frames(req.frames_spec, scene.timeline.first, scene.timeline.last)
+    else:
+        selected = spread(timeline_frames, preset.frame_count if preset else None)
+    shard_spec = parse_shard(req.shard) if req.shard else None
+    frames = shard(selected, *shard_spec) if shard_spec else selected
+    return Selection(selected, shard_spec, frames)
+
+
+def output_folder(req: RenderRequest, loaded: LoadedScene) -> Path:
+    """-o, else the scene's output.directory, else out/<scene name>."""
+    return Path(req.output_dir or loaded.scene.output.directory or Path("out") / loaded.name).resolve()
+
+
+def make_job(req: RenderRequest, loaded: LoadedScene, overrides: dict[str, Any], out_dir: Path, frames: list[int]) -> tuple[RenderJob, int, int | None]:
+    """The job every worker runs (scene, settings and their hashes) and its size: local
+    worker processes and drjit threads per worker."""
+    scene_hash, settings_hash = scene_hashes(loaded)
+    workers = 1 if req.scheduler else (req.workers or default_workers(len(frames)))
+    if req.scheduler:
+        threads = req.threads  # None: each Dask worker uses its machine's cores
+    else:
+        from ..farm.local import threads_per_worker
+
+        threads = req.threads or threads_per_worker(workers)
+    job = RenderJob(
+        scene_path=str(loaded.path),
+        overrides=overrides,
+        output_dir=str(out_dir),
+        scene_hash=scene_hash,
+        settings_hash=settings_hash,
+        cache=req.cache,
+        threads=threads,
+        variant=loaded.scene.render.variant,
+        fields=req.fields,
+    )
+    return job, workers, threads
+
+
+def preflight(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: Path, frames: list[int]) -> None:
+    """Before any work: frames land inside the output folder, the bake fits its budget,
+    and the output folder and the report's folder can be written (docs/farm.md)."""
+    from ..errors import OutputConfinementError, SceneError
+    from ..frame_output import inside
+    from ..scene.checks import bake_budget_problems
+
+    for flag, value, limit in (("--workers", req.workers, MAX_WORKERS), ("--threads", req.threads, MAX_THREADS), ("--retries", req.retries, MAX_RETRIES)):
+        if value is not None and value > limit:
+            raise UsageError(f"{flag} {value}: the limit is {limit}")
+    if frames and not inside(out_dir, frame_path(job, loaded, frames[0])):
+        raise OutputConfinementError(f"frame {frames[0]} would be written to {frame_path(job, loaded, frames[0])}, outside the output folder {out_dir}")
+    if not req.motion_file:
+        problems = bake_budget_problems(loaded.scene, loaded.source, len(frames))
+        if problems:
+            raise SceneError(problems)
+    if req.check or req.dry_run:
+        return  # --check and --dry-run write nothing
+    check_writable(out_dir, "output folder")
+    if req.report is not None:
+        check_writable(Path(req.report).resolve().parent, f"--report {req.report}: folder")
+
+
+def warn_variant(req: RenderRequest, loaded: LoadedScene) -> None:
+    """The local workers will make the same variant choice (a cached probe): warn here,
+    once, rather than once per worker. Probing runs in subprocesses: no drjit import here."""
+    if req.scheduler:
+        return
+    from .. import variant as variant_mod
+
+    choice = variant_mod.choose(loaded.scene.render.variant)
+    if choice.fallback:
+        variant_mod.warn_fallback(choice)
+
+
+def motion_inputs(req: RenderRequest, loaded: LoadedScene, sel: Selection) -> list[BakedFrame]:
+    """The worker input of every frame of this shard: simulated over the whole selection
+    and baked for the shard here, or read from the --motion file."""
+    from ..farm.motion_source import baked_inputs, file_inputs, simulation_for
+
+    if req.motion_file:
+        return file_inputs(loaded, req.motion_file, sel.frames)
+    from ..farm.progress import BakeProgress
+
+    with BakeProgress(live=req.progress) as shown:
+        simulation = simulation_for(loaded, sel.selected, on_progress=shown.simulated)
+        inputs = baked_inputs(loaded, sel.frames, simulation)
+        shown.baked(len(sel.frames))
+    return inputs
+
+
+def complete_frames(req: RenderRequest, job: RenderJob, out_dir: Path, frames: list[int], paths: dict[int, str], by_frame: dict[int, BakedFrame]) -> list[int]:
+    """The frames --resume keeps: complete and made from this scene, motion and settings.
+    Existing frames with neither --resume nor --overwrite are a UsageError."""
+    resume = req.resume and not req.overwrite
+    existing = [f for f in frames if os.path.exists(paths[f])]
+    if not req.resume and not req.overwrite and existing:
+        raise UsageError(f"{out_dir}: frames {format_frames(existing)} exist; pass --resume to keep complete ones or --overwrite to re-render them")
+    return [f for f in frames if resume and f in existing and is_complete(paths[f], expected_meta(job, by_frame[f]))]
+
+
+def summary_line(label: str, totals: dict[str, Any], report_path: Path | None) -> str:
+    """The run's one-line summary; interrupted frames are "not rendered", never failed."""
+    not_rendered = f", {totals['not_rendered']} not rendered (interrupted)" if totals.get("not_rendered") else ""
+    return (
+        f"motion: {label}: {totals['rendered']} rendered, {totals['skipped']} skipped, {totals['done_elsewhere']} by another job, "
+        f"{totals['failed']} failed{not_rendered} in {totals['wall_s']:.1f}s ({totals['frames_per_minute']:.1f} frames/min); report {report_path}"
+    )
+
+
+def stop_on_disk_fault(sched: Scheduler | None, report: dict[str, Any], report_path: Path | None, report_fault: str | None) -> None:
+    """A disk fault ends the job with one line and exit 4: what the disk refused, how many
+    frames were kept, where the report went."""
+    from ..errors import DiskFaultError
+
+    fault = sched.disk_fault if sched is not None else None
+    if fault is None and report_fault is None:
+        return
+    totals = report["totals"]
+    where = f"report {report_path}" if report_path is not None else "no report could be written anywhere"
+    if report_fault is not None and report_path is not None:
+        where += f" (its own place refused it: {report_fault})"
+    head = fault or report_fault
+    raise DiskFaultError(f"{head}; {totals['rendered'] + totals['skipped']} of {totals['frames']} frames complete and kept, {totals['failed'] + totals.get('not_rendered', 0)} not rendered; {where}")
+
+
+def raise_failures(report: dict[str, Any], frames: list[int]) -> None:
+    """Frames that failed everywhere: IncompleteJobError (exit 3) listing each, carrying
+    the report (for `motion render --json`)."""
+    failed = report["failed"]
+    if failed:
+        listing = "\n".join(f"frame {f['frame']}: {f['error']} (attempts {f['attempts']})" for f in failed)
+        err = IncompleteJobError(f"{len(failed)} of {len(frames)} frames failed everywhere; the others finished:\n{listing}")
+        err.report = report  # type: ignore[attr-defined]  # (for `motion render --json`)
+        raise err
+
+
+def finish(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: Path, frames: list[int], workers: int,
+           report: dict[str, Any], report_path: Path | None, say: Callable[[str], None]) -> None:
+    """After every frame: the temporal pass (render.temporal != off) and the deliverables
+    (--deliver), each recorded in the report."""
+    if loaded.scene.render.temporal != "off":
+        from ..render.temporal import temporal_pass
+
+        report["temporal"] = temporal_pass(loaded, job, out_dir, frames, workers=workers, log=say)
+        if report_path is not None:
+            write_report(report, report_path)
+    if req.deliver:
+        report["deliverables"] = deliver_and_record(req, out_dir, report, report_path, say)
+
+
+# --- the whole render ----------------------------------------------------------------------
+
+
+def run_render(req: RenderRequest) -> dict[str, Any]:
+    """Render the request; returns the report. Raises IncompleteJobError (exit 3) if any
+    frame failed everywhere, KeyboardInterrupt after a clean stop on Ctrl-C."""
+    t_start = time.perf_counter()
+    cfg: FarmConfig = load_farm_config().with_overrides(retries=req.retries, task_timeout_s=req.task_timeout_s, chunk_size=req.chunk_size)
+    check_request(req)
+    preset, overrides, loaded = load_shot(req)
+    check_denoiser(req, loaded)
+    sel = select_frames(req, loaded, preset)
+    frames = sel.frames
+    out_dir = output_folder(req, loaded)
+    if req.deliver:
+        check_deliver(req, loaded, frames, out_dir, create=not req.dry_run)  # every check that can fail, before the first task
+    job, workers, threads = make_job(req, loaded, overrides, out_dir, frames)
+    preflight(req, loaded, job, out_dir, frames)
+    warn_variant(req, loaded)
+
+    t0 = time.perf_counter()
+    inputs = motion_inputs(req, loaded, sel)
+    bake_s = time.perf_counter() - t0
+    by_frame = {fi.frame: fi for fi in inputs}
+    paths = {f: str(frame_path(job, loaded, f)) for f in frames}
+
+    skipped = complete_frames(req, job, out_dir, frames, paths, by_frame)
+    todo = [f for f in frames if f not in set(skipped)]
+    if req.check:
+        return check_only(loaded.name, out_dir, frames, todo, paths)
+    chunk_size = cfg.chunk_size or default_chunk_size(len(todo), workers if not req.scheduler else 2)
+    chunk_list = make_chunks(todo, chunk_size)
+    shard_spec = sel.shard_spec
+    default_name = f"render-report.shard-{shard_spec[0]}-of-{shard_spec[1]}.json" if shard_spec else "render-report.json"
+    if req.dry_run:
+        return plan(req, loaded, out_dir, sel.selected, frames, shard_spec, skipped, chunk_list, chunk_size, workers, threads, paths,
+                    Path(req.report or out_dir / default_name))
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    run_id = new_run_id()
+    ctx = TaskContext(run_id=run_id, paths=paths, resume=req.resume and not req.overwrite, stale_after_s=cfg.stale_after_s)
+    label = f"{loaded.name}" + (f" shard {shard_spec[0]}/{shard_spec[1]}" if shard_spec else "")
+    progress = Progress(total=len(frames), already=len(skipped), label=label, live=req.progress)
+    progress.log(
+        f"motion: {label}: {len(frames)} frames ({format_frames(frames) or 'none'}) -> {out_dir}; "
+        f"{len(skipped)} already complete, {len(todo)} to render in {len(chunk_list)} chunks of <= {chunk_size}"
+    )
+    t_farm = time.perf_counter()
+    sched, interrupted = run_chunks(chunk_list, job, by_frame, ctx, cfg, progress, scheduler=req.scheduler, workers=workers, threads=threads)
+    farm_s = time.perf_counter() - t_farm
+
+    report = build_report(
+        loaded=loaded,
+        job=job,
+        out_dir=out_dir,
+        frames=frames,
+        selected=sel.selected,
+        shard_spec=shard_spec,
+        skipped=skipped,
+        sched=sched,
+        cfg=cfg,
+        executor_info={"kind": "dask" if req.scheduler else "local", "workers": workers if not req.scheduler else None, "threads": threads, "scheduler": req.scheduler, "chunk_size": chunk_size, "chunks": len(chunk_list)},
+        timings={"bake_s": bake_s, "farm_s": farm_s, "wall_s": time.perf_counter() - t_start},
+        run_id=run_id,
+        interrupted=interrupted,
+        motion_file=str(req.motion_file) if req.motion_file else None,
+    )
+    report["report"] = str(req.report or out_dir / default_name)
+    report_path, report_fault = write_report_somewhere(report, req.report or out_dir / default_name, run_id)
+    progress.log(summary_line(label, report["totals"], report_path))
+    stop_on_disk_fault(sched, report, report_path, report_fault)
+    if interrupted:
+        raise KeyboardInterrupt
+    raise_failures(report, frames)
+    finish(req, loaded, job, out_dir, frames, workers, report, report_path, progress.log)
+    return report

@@ -1,0 +1,38 @@
+"""What `motion render` was asked to do: one `RenderRequest` (the command line as data)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+
+@dataclass
+class RenderRequest:
+    """Everything `motion render` was asked to do (flags left None use the defaults)."""
+
+    scene: Path
+    output_dir: Path | None = None
+    frames_spec: str | None = None
+    preset: str | None = None
+    render_overrides: dict[str, Any] = field(default_factory=dict)
+    output_overrides: dict[str, Any] = field(default_factory=dict)  # e.g. aovs (--aov)
+    cache: bool = True
+    deliver: str | None = None
+    deliver_view: dict[str, Any] = field(default_factory=dict)  # exposure / OCIO for the deliverables
+    resume: bool = True
+    overwrite: bool = False
+    shard: str | None = None
+    workers: int | None = None
+    scheduler: str | None = None
+    threads: int | None = None
+    chunk_size: int | None = None
+    retries: int | None = None
+    task_timeout_s: float | None = None
+    motion_file: Path | None = None
+    report: Path | None = None
+    progress: bool | None = None  # None: a live bar only on a terminal
+    check: bool = False  # only verify every selected frame is complete; render nothing
+    dry_run: bool = False  # only say what would be done (the plan); write nothing
+    fields: str | None = None  # field order (tff/bff): the frames are fields, drawn row by parity (shot/fields.py)
+    scene_overrides: dict[str, Any] = field(default_factory=dict)  # further sections merged over the scene (the field timeline)
