@@ -52,6 +52,7 @@ class SceneError(MotionError):
         line: int | None = None,
         column: int | None = None,
     ) -> "SceneError":
+        """One located problem as an error (the common case outside schema validation)."""
         return cls([Problem(str(file), line, column, yaml_path, message)])
 
 
