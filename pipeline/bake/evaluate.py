@@ -10,7 +10,7 @@ import numpy as np
 from ..errors import UsageError
 from .checks import check_budget, check_motion
 from .records import BakedFrame, BakedMotion
-from .timing import frame_sample_times, simulate_for
+from .timing import sample_seconds, simulate_for
 
 if TYPE_CHECKING:
     from ..scene.loader import LoadedScene
@@ -29,9 +29,7 @@ def bake(loaded: "LoadedScene", frames: Sequence[int], simulation: Any | None = 
     scene = loaded.scene
     check_budget(loaded, len(frames))
     n = scene.render.shutter_samples
-    exact = [frame_sample_times(loaded, f) for f in frames]
-    frame_times = np.array([float(t) for t, _, _ in exact])
-    sample_times = np.array([[float(s) for s in samples] for _, _, samples in exact])
+    frame_times, shutters, sample_times = sample_seconds(loaded, frames)
     everything = np.concatenate([frame_times, sample_times.ravel()])
     if simulation is None and has_dynamics(loaded):
         simulation = simulate_for(loaded, frames)
@@ -40,13 +38,13 @@ def bake(loaded: "LoadedScene", frames: Sequence[int], simulation: Any | None = 
     check_motion(loaded, motion)
     count = len(frames)
     baked = []
-    for k, (f, (_, (t_open, t_close), _)) in enumerate(zip(frames, exact)):
+    for k, f in enumerate(frames):
         start = count + k * n
         baked.append(
             BakedFrame(
                 frame=f,
                 time=float(frame_times[k]),
-                shutter=(float(t_open), float(t_close)),
+                shutter=(float(shutters[k, 0]), float(shutters[k, 1])),
                 sample_times=sample_times[k],
                 at_frame=motion.take(slice(k, k + 1)),
                 across_shutter=motion.take(slice(start, start + n)),
