@@ -4,8 +4,9 @@
 
 Writes, deterministically (fixed seeds):
 
-- ``sky.exr``: a 1024x512 lat-long HDR sky in Mitsuba's envmap convention as rendered (+Y
-  up, v = acos(d.y) / pi; u = 0 looks along +Z, u = 1/4 along -X, u = 1/2 along -Z). A clear afternoon
+- ``sky.exr``: a 1024x512 lat-long HDR sky in Mitsuba's envmap convention (+Y up; the
+  direction d sits at u = atan2(d.x, -d.z) / 2 pi, v = acos(d.y) / pi: u = 0 looks along -Z,
+  u = 1/4 along +X). A clear afternoon
   sky: a saturated zenith fading to a pale horizon haze, a forward-scattering glow around the
   sun (a Henyey-Greenstein lobe) and the sun's disk, a few soft clouds, and below the horizon
   a dim haze that the showcase ground meets at the horizon. The sun's energy is carried by a
@@ -69,8 +70,8 @@ def sky(width: int = 1024, height: int = 512) -> np.ndarray:
     u = (np.arange(width) + 0.5) / width
     theta = v[:, None] * np.pi
     phi = u[None, :] * 2 * np.pi
-    d = np.stack(np.broadcast_arrays(-np.sin(phi) * np.sin(theta), np.cos(theta) + 0 * phi,
-                                     np.cos(phi) * np.sin(theta)), axis=-1)
+    d = np.stack(np.broadcast_arrays(np.sin(phi) * np.sin(theta), np.cos(theta) + 0 * phi,
+                                     -np.cos(phi) * np.sin(theta)), axis=-1)
     up = d[..., 1]
     s = sun_direction()
     cos_g = np.clip(d @ s, -1.0, 1.0)
