@@ -4,7 +4,10 @@
 
 Writes, deterministically (fixed seeds):
 
-- ``sky.exr``: a 1024x512 lat-long HDR sky in Mitsuba's envmap convention (+Y up; the
+- ``sky.hdr``: a 1024x512 lat-long HDR sky (Radiance RGBE, not OpenEXR: Mitsuba reads an EXR
+  through OpenEXR tasks on drjit's thread pool, and a farm worker with one drjit thread,
+  which is 2 workers on 2 cores, has no pool thread to run them and hangs; RGBE is read
+  on the calling thread) in Mitsuba's envmap convention (+Y up; the
   direction d sits at u = atan2(d.x, -d.z) / 2 pi, v = acos(d.y) / pi: u = 0 looks along -Z,
   u = 1/4 along +X). A clear afternoon
   sky: a saturated zenith fading to a pale horizon haze, a forward-scattering glow around the
@@ -165,24 +168,24 @@ def stone(n: int = 1024, cells: int = 6) -> np.ndarray:
     return slab * edge + mortar * (1 - edge)
 
 
-def write_exr(path: Path, rgb: np.ndarray) -> None:
-    """A half-float RGB EXR, ZIP-compressed."""
-    import OpenEXR
+def write_hdr(path: Path, rgb: np.ndarray) -> None:
+    """A Radiance RGBE (.hdr) image, written by Mitsuba's own Bitmap writer."""
+    import mitsuba as mi
 
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    OpenEXR.File(header, {"RGB": rgb.astype(np.float16)}).write(str(path))
+    mi.set_variant("scalar_rgb")
+    mi.Bitmap(np.ascontiguousarray(rgb, dtype=np.float32)).write(str(path))
 
 
 def main(argv: list[str]) -> int:
     """Write every asset into the folder given (default scenes/assets)."""
     out = Path(argv[1]) if len(argv) > 1 else Path(__file__).resolve().parents[1] / "scenes" / "assets"
     out.mkdir(parents=True, exist_ok=True)
-    write_exr(out / "sky.exr", sky())
+    write_hdr(out / "sky.hdr", sky())
     _save_jpg(out / "grass.jpg", grass())
     _save_jpg(out / "water.jpg", water())
     _save_jpg(out / "stone.jpg", stone())
     s = sun_direction()
-    print(f"wrote sky.exr grass.jpg water.jpg stone.jpg to {out}")
+    print(f"wrote sky.hdr grass.jpg water.jpg stone.jpg to {out}")
     print(f"sun: directional light direction [{-s[0]:.4f}, {-s[1]:.4f}, {-s[2]:.4f}]")
     return 0
 

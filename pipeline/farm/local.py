@@ -4,7 +4,7 @@ Workers are started with the 'spawn' context (never fork: drjit must not be inhe
 half-initialised) and each keeps its own first-frame cache in its process. Each worker has
 its own pipe, so the scheduler knows which chunk each one runs; a worker's death is seen
 through its process sentinel. drjit threads are divided among the workers
-(max(2, cores // N) each), so N workers oversubscribe the cores only where cores // N < 2.
+(max(1, cores // N) each) so N workers never oversubscribe the cores.
 """
 
 from __future__ import annotations
@@ -24,18 +24,11 @@ from .executor import Done, Event, FrameWritten, Lost
 from .task import TaskContext, run_chunk
 
 
-# drjit's thread count counts the calling thread: 1 leaves its pool with no worker thread.
-# Mitsuba reads EXR files (an envmap, an EXR texture) through OpenEXR tasks that it hands to
-# that pool with drjit.do_async and then waits for on a semaphore, so with 1 thread nobody
-# runs them and the worker hangs in FrameRenderer._build (futex wait, no progress).
-MIN_THREADS = 2
-
-
 def threads_per_worker(workers: int, cores: int | None = None) -> int:
-    """drjit threads for each of `workers` processes: max(2, cores // workers) (see MIN_THREADS)."""
+    """drjit threads for each of `workers` processes: max(1, cores // workers)."""
     if cores is None:
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return max(MIN_THREADS, cores // max(1, workers))
+    return max(1, cores // max(1, workers))
 
 
 def _on_term(signum: int, frame: Any) -> None:
