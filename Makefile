@@ -1,11 +1,16 @@
 # The two entry points of the README. Both run tools/setup.sh first (idempotent).
-.PHONY: setup render render-cannonball-full render-example test bench
+.PHONY: setup render render-cannonball-full render-example showcase-sheets test bench
 
 setup:
 	@bash tools/setup.sh
 
+# the showcase shot (3 s, 72 frames at 480x270, denoised) with 24p and 60i movies and a
+# contact sheet; about 3 minutes on 2 cores (docs/showcase.md)
 render: setup
-	.venv/bin/motion render scenes/cannonball.yaml -o out/cannonball $(ARGS)
+	.venv/bin/motion render scenes/cannonball-splash.yaml -o out/cannonball-splash --deliver 24p,60i,contact $(ARGS)
+	@echo "frames:        out/cannonball-splash/cannonball-splash.####.exr"
+	@echo "movies:        out/cannonball-splash/deliver/cannonball-splash_24p.mov, cannonball-splash_60i.mov"
+	@echo "contact sheet: out/cannonball-splash/deliver/cannonball-splash_contact.png"
 
 # the whole 75-second cannonball flight (1,800 frames), by name
 render-cannonball-full: setup
@@ -22,3 +27,8 @@ bench: setup
 render-example: setup
 	.venv/bin/python tools/make_walker.py scenes/assets/walker.glb
 	.venv/bin/motion render scenes/walker.yaml -o out/walker $(ARGS)
+
+# Contact sheets of every example for docs/showcase/ (docs/showcase.md), rendered by the
+# pipeline: a few frames of each scene, small, then `motion contact-sheet`.
+showcase-sheets: setup
+	.venv/bin/python tools/showcase_sheets.py $(ARGS)
