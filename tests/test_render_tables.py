@@ -57,3 +57,23 @@ def test_a_frame_of_the_wrong_shape_is_a_frame_data_error() -> None:
     with pytest.raises(FrameDataError, match="'camera_t' has shape \\(2, 3\\), expected \\(3, 3\\)") as caught:
         integrator.set_frame(good[0], good[1], np.zeros((2, 3)), *good[3:])
     assert isinstance(caught.value, RendererError)
+
+
+@pytest.mark.render
+def test_fewer_than_one_sample_per_pixel_is_a_sample_count_error() -> None:
+    from _render_support import activate
+
+    activate()
+    import mitsuba as mi
+
+    from motion.pipeline.errors import SampleCountError
+    from motion.pipeline.render.integrator import register
+
+    register()
+    scene = mi.load_dict({"type": "scene", "integrator": {"type": "motion_path"}, "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 4, "height": 4}}})
+    scene.integrator().set_movers([], 2)
+    scene.integrator().set_frame(np.zeros((0, 2, 3)), np.zeros((0, 2, 4)), np.zeros((2, 3)), np.tile([1.0, 0, 0, 0], (2, 1)), np.zeros(3))
+    with pytest.raises(SampleCountError, match="at least 1 sample per pixel, got -1"):
+        scene.integrator().render(scene, spp=-1)
+    image = np.array(scene.integrator().render(scene, spp=1))  # one is enough
+    assert image.shape == (4, 4, 4)
