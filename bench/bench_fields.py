@@ -1,7 +1,7 @@
 """Field rendering cost (not a timed test): `python bench/bench_fields.py [WxH] [spp]`.
 
 One process renders frames of scenes/stairs-walk.yaml progressively and the same frames
-as single fields (the integrator's FIELD_ROWS: only every other row), alternating, after
+as single fields (the film's FIELD_ROWS: only every other row), alternating, after
 a warm-up of each kind (kernels compiled). A 60i field should cost about half a
 progressive frame: half the pixels, the same scene. Prints the median seconds of each and
 the ratio, with the CPU model.

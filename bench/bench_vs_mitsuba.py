@@ -60,7 +60,7 @@ def particle_twin(renderer: Any, fi: Any, mi: Any) -> dict[str, Any]:
 
 def twin(renderer: Any, fi: Any, mi: Any) -> Any:
     """Mitsuba's `path` on the frame's static twin (`_full_scene` records + particles)."""
-    from motion.pipeline.render.frame_renderer import stack_frame
+    from motion.pipeline.render.stacked import stack_frame
 
     d = renderer._full_scene_dict(stack_frame(fi), None)
     d.update(particle_twin(renderer, fi, mi))

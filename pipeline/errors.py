@@ -120,6 +120,15 @@ class FrameNotBakedError(MotionError):
     """A frame was asked of a bake that does not hold it."""
 
 
+class FrameDataError(RendererError):
+    """The per-frame poses given to the integrator do not have the shapes of its job
+    (movers, lights or shutter samples other than those it was built for)."""
+
+
+class SampleCountError(RendererError):
+    """The film was asked for fewer than one sample per pixel."""
+
+
 # --- dynamics and shape geometry ---
 
 

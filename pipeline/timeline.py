@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import Literal
+from typing import Literal, Sequence
 
 ShutterPosition = Literal["start", "center", "end"]
 
@@ -141,3 +141,27 @@ def timecode(frame: int, fps: Fraction, drop_frame: bool = False) -> str:
     hh = frame // (nominal * 3600) % 24
     sep = ";" if drop_frame else ":"
     return f"{hh:02d}:{mm:02d}:{ss:02d}{sep}{ff:02d}"
+
+
+def format_frames(frames: Sequence[int]) -> str:
+    """Compact text in the `--frames` grammar: [1,2,3,7] -> '1-3,7'; [0,2,4,6] -> '0-6x2'.
+
+    >>> format_frames([0, 2, 4, 6, 9, 10])
+    '0-6x2,9,10'
+    """
+    fs = sorted(set(frames))
+    parts: list[str] = []
+    i = 0
+    while i < len(fs):
+        j = i
+        if i + 1 < len(fs):
+            step = fs[i + 1] - fs[i]
+            while j + 1 < len(fs) and fs[j + 1] - fs[j] == step:
+                j += 1
+        if j - i >= 2:
+            parts.append(f"{fs[i]}-{fs[j]}" + (f"x{step}" if step != 1 else ""))
+            i = j + 1
+        else:
+            parts.append(str(fs[i]))
+            i += 1
+    return ",".join(parts)

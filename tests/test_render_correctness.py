@@ -65,7 +65,8 @@ def test_agrees_with_mitsuba_path(tmp_path: Path, moving: bool) -> None:
     activate()
     import mitsuba as mi
 
-    from motion.pipeline.render.frame_renderer import FrameRenderer, stack_frame
+    from motion.pipeline.render.frame_renderer import FrameRenderer
+    from motion.pipeline.render.stacked import stack_frame
     from motion.pipeline.bake import evaluate_frames
 
     loaded = load(tmp_path, _scene(tmp_path, moving))

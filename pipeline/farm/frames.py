@@ -17,7 +17,7 @@ import re
 from typing import Sequence
 
 from ..errors import UsageError
-from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
+from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES, format_frames  # noqa: F401  (format_frames: re-exported for farm)
 
 _PART = re.compile(r"^(-?\d+)(?:-(-?\d+)(?:x(\d+))?)?$")
 
@@ -66,30 +66,6 @@ def parse_frames(spec: str, first: int | None = None, last: int | None = None) -
     for r in parts:
         frames.update(r)
     return sorted(frames)
-
-
-def format_frames(frames: Sequence[int]) -> str:
-    """Compact text in the `--frames` grammar: [1,2,3,7] -> '1-3,7'; [0,2,4,6] -> '0-6x2'.
-
-    >>> format_frames([0, 2, 4, 6, 9, 10])
-    '0-6x2,9,10'
-    """
-    fs = sorted(set(frames))
-    parts: list[str] = []
-    i = 0
-    while i < len(fs):
-        j = i
-        if i + 1 < len(fs):
-            step = fs[i + 1] - fs[i]
-            while j + 1 < len(fs) and fs[j + 1] - fs[j] == step:
-                j += 1
-        if j - i >= 2:
-            parts.append(f"{fs[i]}-{fs[j]}" + (f"x{step}" if step != 1 else ""))
-            i = j + 1
-        else:
-            parts.append(str(fs[i]))
-            i += 1
-    return ",".join(parts)
 
 
 def parse_shard(spec: str) -> tuple[int, int]:

@@ -27,10 +27,11 @@ from typing import Any, Mapping
 import numpy as np
 
 from ..errors import RendererError
+from .aovs import layer
 
 PACKAGE = "mitsuba-oidn"  # the PyPI name
 MODULE = "mitsuba_oidn"  # its import name
-GUIDES = ("albedo", "normal")  # integrator AOVs the denoiser reads
+GUIDES = ("albedo", "normal")  # integrator AOVs the denoiser reads (names of the AOV table, aovs.py)
 NOISY_LAYER = "noisy"  # the EXR layer that keeps the undenoised beauty (RGBA)
 
 
@@ -62,7 +63,8 @@ import json, numpy as np, mitsuba_oidn as oidn
 dev = oidn.Device(oidn.DeviceType.CPU)
 img = np.full((8, 8, 3), 0.5, np.float32)
 out = oidn.denoise(img, img, img * 0 + np.float32([0, 0, 1]), hdr=True, device=dev)
-assert out.shape == (8, 8, 3) and np.isfinite(out).all()
+if out.shape != (8, 8, 3) or not np.isfinite(out).all():
+    raise SystemExit(f"the probe's denoised image is wrong: shape {out.shape}")
 print(json.dumps({"version": oidn.__version__, "oidn": oidn.oidn_version(), "device": str(dev.type).split(".")[-1]}))
 """
 
@@ -175,18 +177,19 @@ def denoiser() -> Denoiser:
 def denoise_frame(rgba: np.ndarray, aovs: Mapping[str, np.ndarray], color: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
     """The worker step: denoise a rendered frame with its albedo and normal guides.
 
-    rgba: the noisy beauty [H, W, 4]; aovs: the frame's layers (`albedo`, `N` are used when
-    present); color: what to denoise instead of rgba's RGB (the temporal mode's blend).
+    rgba: the noisy beauty [H, W, 4]; aovs: the frame's layers (the albedo and normal
+    layers, `albedo` and `N`, are used when present); color: what to denoise instead of
+    rgba's RGB (the temporal mode's blend).
     Returns (denoised RGBA with the noisy alpha, layers + `noisy`, header attributes)."""
     d = denoiser()
-    albedo, normal = aovs.get("albedo"), aovs.get("N")
+    albedo, normal = aovs.get(layer("albedo")), aovs.get(layer("normal"))
     t0 = time.perf_counter()
     rgb = d(rgba[..., :3] if color is None else color, albedo, normal)
     seconds = time.perf_counter() - t0
     out = np.concatenate([rgb, rgba[..., 3:4].astype(np.float32)], axis=2)
     layers = dict(aovs)
     layers[NOISY_LAYER] = np.asarray(rgba, dtype=np.float32)
-    used = [name for name, g in (("albedo", albedo), ("N", normal)) if g is not None]
+    used = [layer(name) for name, g in (("albedo", albedo), ("normal", normal)) if g is not None]
     meta = {
         "denoise": "oidn",
         "denoiser": describe(d.version),

@@ -1,6 +1,6 @@
 """Rendering one field (`motion render --fields`): field 2k has the field order's first
 parity, 2k + 1 the second; while a field renders, the motion_path integrator draws only
-its rows (the integrator's FIELD_ROWS), and the field's rows are what is written.
+its rows (the film's FIELD_ROWS, render/film.py), and the field's rows are what is written.
 
 >>> parity_of(0, "tff"), parity_of(1, "tff"), parity_of(0, "bff")
 ('top', 'bottom', 'bottom')
@@ -27,14 +27,14 @@ def parity_of(field: int, order: str) -> Parity:
 def rendering_field(parity: Parity) -> Iterator[None]:
     """While inside, the motion_path integrator draws only the rows of `parity` (top:
     0, 2, 4 ...; bottom: 1, 3, 5 ...) and returns an image of those rows."""
-    from . import integrator
+    from . import film
 
-    before = integrator.FIELD_ROWS
-    integrator.FIELD_ROWS = (0 if parity == "top" else 1, 2)
+    before = film.FIELD_ROWS
+    film.FIELD_ROWS = (0 if parity == "top" else 1, 2)
     try:
         yield
     finally:
-        integrator.FIELD_ROWS = before
+        film.FIELD_ROWS = before
 
 
 def field_rows(image: np.ndarray, parity: Parity, height: int) -> np.ndarray:

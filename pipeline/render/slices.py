@@ -15,9 +15,16 @@ unborn particle collapses to a point, which no ray can hit.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
+
+from ..motion.pose import quat_rotate
+from ..scene.loader import LoadedScene
+from ..scene.schema import Particles
+
+if TYPE_CHECKING:
+    from .stacked import StackedFrame
 
 # unit octahedron: particles are a pixel or two wide at typical resolutions, where 8
 # triangles read as a sphere and keep the per-frame BVH builds small (an icosahedron's 20
@@ -37,8 +44,6 @@ def particle_mesh(positions: np.ndarray, alive: np.ndarray, radius: float, capac
     verts = centres[:, None, :] + r[:, None, None] * _OCTA_V[None, :, :]
     faces = _OCTA_F[None, :, :] + (np.arange(capacity, dtype=np.uint32) * _NV)[:, None, None]
     return verts.reshape(-1, 3), faces.reshape(-1, 3)
-
-
 
 
 @dataclass
@@ -82,3 +87,80 @@ def update_group(mi: Any, group: SliceGroup, per_slice_vertices: list[np.ndarray
     for params, verts in zip(group.params, per_slice_vertices):
         params[f"{group.key}.vertex_positions"] = mi.Float(np.asarray(verts, np.float32).ravel())
         params.update()
+
+
+def slice_count(loaded: LoadedScene, fi: StackedFrame) -> int:
+    """S: `render.time_slices`, at most the frame's N baked samples, at least 1."""
+    return max(1, min(loaded.scene.render.time_slices, fi.samples))
+
+
+def slice_samples(n: int, count: int, mode: str, u_fixed: float | None) -> list[int]:
+    """The stacked row each of the `count` slices shows (row 0: the frame's time, rows
+    1..n: the shutter samples): slice s of S the sample nearest u = s / (S - 1); all at one
+    instant for `off` and for one sub-frame at shutter fraction `u_fixed`."""
+    if mode == "off":
+        return [0] * count
+    if u_fixed is not None:
+        return [1 + int(round(u_fixed * (n - 1)))] * count
+    if count == 1:
+        return [0]
+    return [1 + int(round(s * (n - 1) / (count - 1))) for s in range(count)]
+
+
+class SlicedGeometry:
+    """The time-sliced groups of one job (one per name, in order): built on the cold
+    frame, their vertices rewritten per frame. `on_regroup` gets every group's scenes
+    whenever the set of scenes changes (the integrator's `set_slices`)."""
+
+    def __init__(self, mi: Any, loaded: LoadedScene, names: list[str], fi: StackedFrame, materials: dict[str, Any], on_regroup: Callable[[list[list[Any]]], None]) -> None:
+        self._mi = mi
+        self.loaded = loaded
+        self._on_regroup = on_regroup
+        self.groups = [self._build(name, fi, materials) for name in names]
+        on_regroup([g.scenes for g in self.groups])
+
+    def _build(self, name: str, fi: StackedFrame, materials: dict[str, Any]) -> SliceGroup:
+        from .build import DEFAULT_MATERIAL
+
+        mi = self._mi
+        obj = next(o for o in self.loaded.scene.objects if o.name == name)
+        bsdf = mi.load_dict(materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL)
+        slices = slice_count(self.loaded, fi)
+        if isinstance(obj, Particles):
+            n = fi.particles[name][0].shape[1] if name in fi.particles else 0
+            capacity = max(64, 1 << int(np.ceil(np.log2(max(n, 1) * 1.5))))
+            return build_group(mi, name, "particles", capacity, np.zeros((0, 3)), bsdf, slices, radius=obj.radius)
+        from ..motion.deform import bind_mesh
+
+        verts, faces = bind_mesh(self.loaded, obj)
+        return build_group(mi, name, "deform", len(verts), np.asarray(faces, np.uint32), bsdf, slices)
+
+    def update(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> None:
+        """Each slice's geometry at its time (`slice_samples`): particles from their
+        baked positions, deforming meshes from their object-space vertices posed by the
+        object's own baked frame."""
+        n = fi.samples
+        index = slice_samples(n, slice_count(self.loaded, fi), mode, u_fixed)
+        for g in self.groups:
+            per_slice = []
+            if g.kind == "particles":
+                positions, alive = fi.particles.get(g.name, (np.zeros((n + 1, 0, 3)), np.zeros((n + 1, 0), bool)))
+                if positions.shape[1] > g.capacity:  # more particles than room: grow (one recompile)
+                    self._grow(g, positions.shape[1])
+                    return self.update(fi, mode, u_fixed)
+                for i in index:
+                    per_slice.append(particle_mesh(positions[i], alive[i], g.radius, g.capacity)[0])
+            else:
+                t, q, s = fi.objects[g.name]
+                local = fi.vertices[g.name]
+                for i in index:
+                    per_slice.append(quat_rotate(q[i], local[i] * s[i]) + t[i])
+            update_group(self._mi, g, per_slice)
+
+    def _grow(self, group: SliceGroup, needed: int) -> None:
+        """Replace a particle group by one with room for `needed` particles (x1.5)."""
+        k = self.groups.index(group)
+        capacity = 1 << int(np.ceil(np.log2(needed * 1.5)))
+        bsdf = group.scenes[0].shapes()[0].bsdf()
+        self.groups[k] = build_group(self._mi, group.name, "particles", capacity, group.faces, bsdf, len(group.scenes), radius=group.radius)
+        self._on_regroup([g.scenes for g in self.groups])

@@ -34,6 +34,13 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from ..timeline import format_frames
+from .aovs import BY_NAME, layer
+from .denoise import NOISY_LAYER, denoise_frame
+
+# the layers the pass reads (the AOV table's names for them)
+ALBEDO, NORMAL, MOTION = layer("albedo"), layer("normal"), layer("motion")
+
 RADIUS = 2  # neighbours on each side (bench_denoise: radius 2 flickers 0.4x per-frame denoising, radius 1 0.52x)
 # agreement thresholds: guides (albedo in [0, 1], normal components in [-1, 1]) and the
 # colour test in standard errors of the 3x3 local means
@@ -78,10 +85,10 @@ def agreement(cur: dict[str, np.ndarray], other: dict[str, np.ndarray], inside: 
     in part has an averaged, wrong one: the neighbour's pixel there differs), and 3x3 colour
     means within COLOUR_SIGMAS standard errors."""
     ok = inside.copy()
-    if "motion" in other:
-        ok &= np.abs(other["motion"] - cur["motion"]).max(axis=2) < MOTION_TOL
-    ok &= np.abs(other["albedo"] - cur["albedo"]).max(axis=2) < ALBEDO_TOL
-    ok &= np.abs(other["N"] - cur["N"]).max(axis=2) < NORMAL_TOL
+    if MOTION in other:
+        ok &= np.abs(other[MOTION] - cur[MOTION]).max(axis=2) < MOTION_TOL
+    ok &= np.abs(other[ALBEDO] - cur[ALBEDO]).max(axis=2) < ALBEDO_TOL
+    ok &= np.abs(other[NORMAL] - cur[NORMAL]).max(axis=2) < NORMAL_TOL
     c0, c1 = cur["color"], other["color"]
     m0, m1 = _box3(c0), _box3(c1)
     var = np.maximum(_box3(c0 * c0) - m0 * m0, 0) + np.maximum(_box3(c1 * c1) - m1 * m1, 0)
@@ -94,14 +101,14 @@ def blend(cur: dict[str, np.ndarray], neighbours: Sequence[tuple[int, dict[str, 
     """The current frame's noisy colour averaged with each neighbour's (d frames away),
     reprojected and kept where it agrees. Returns the blend and the per-pixel count of
     frames in it (1 = the current frame alone)."""
-    flow = cur["motion"] / shutter_fraction if shutter_fraction > 0 else np.zeros_like(cur["motion"])
+    flow = cur[MOTION] / shutter_fraction if shutter_fraction > 0 else np.zeros_like(cur[MOTION])
     total = cur["color"].astype(np.float64)
     count = np.ones(total.shape[:2])
     for d, other in neighbours:
         f = d * flow
         warped = {}
         inside = np.ones(total.shape[:2], bool)
-        for key in ("color", "albedo", "N", "motion"):
+        for key in ("color", ALBEDO, NORMAL, MOTION):
             if key not in other:
                 continue
             warped[key], inside_k = warp(other[key], f)
@@ -128,12 +135,15 @@ def _layers(channels: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """The pass's inputs from a frame's channels. A layer the frame lacks (the scalar
     fallback renders no AOVs) reads as zeros: no motion, and guides that always agree, so
     only the colour test decides there."""
-    shape = channels["noisy.R"].shape
+    shape = channels[f"{NOISY_LAYER}.R"].shape
 
-    def stack(layer: str, comps: str) -> np.ndarray:
-        return np.stack([channels.get(f"{layer}.{c}", np.zeros(shape)).astype(np.float32) for c in comps], axis=2)
+    def stack(name: str, comps: Sequence[str]) -> np.ndarray:
+        return np.stack([channels.get(f"{name}.{c}", np.zeros(shape)).astype(np.float32) for c in comps], axis=2)
 
-    return {"color": stack("noisy", "RGB"), "alpha": channels["noisy.A"].astype(np.float32), "albedo": stack("albedo", "RGB"), "N": stack("N", "XYZ"), "motion": stack("motion", "XY")}
+    layers = {"color": stack(NOISY_LAYER, "RGB"), "alpha": channels[f"{NOISY_LAYER}.A"].astype(np.float32)}
+    for aov in (BY_NAME["albedo"], BY_NAME["normal"], BY_NAME["motion"]):
+        layers[aov.layer] = stack(aov.layer, aov.suffixes)
+    return layers
 
 
 def _meta(header: dict[str, Any], key: str) -> Any:
@@ -146,7 +156,6 @@ def process_frame(path: str, neighbours: list[tuple[int, str]]) -> dict[str, Any
     """Blend, denoise and rewrite one frame (RGBA only; every layer and attribute kept).
     `neighbours`: (frame offset, path) of its complete timeline neighbours."""
     from ..frame_output import META_PREFIX, publish
-    from .denoise import denoise_frame
 
     import OpenEXR
 
@@ -162,7 +171,7 @@ def process_frame(path: str, neighbours: list[tuple[int, str]]) -> dict[str, Any
         hashes.append(f"{_meta(h, 'frame')}:{_meta(h, 'motion_hash')}")
     color, count = blend(cur, others, s)
     rgba = np.concatenate([cur["color"], cur["alpha"][..., None]], axis=2)
-    aovs = {"albedo": cur["albedo"], "N": cur["N"]}
+    aovs = {ALBEDO: cur[ALBEDO], NORMAL: cur[NORMAL]}
     out, _, meta = denoise_frame(rgba, aovs, color=color)
     for c, name in enumerate("RGB"):  # alpha (coverage) stays as it is
         channels[name] = np.ascontiguousarray(out[..., c], dtype=channels[name].dtype)
@@ -231,7 +240,5 @@ def temporal_pass(loaded: Any, job: Any, out_dir: Path, frames: Sequence[int], w
         else:
             done = [process_frame(p, n) for p, n in todo]
     if pending:
-        from ..farm.frames import format_frames
-
         log(f"  temporal: frames {format_frames(pending)} keep their per-frame denoising until their neighbours are rendered")
     return {"mode": "reproject", "blended": [d["frame"] for d in done], "pending": pending, "blended_share": {d["frame"]: d["blended"] for d in done}}

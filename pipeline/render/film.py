@@ -1,0 +1,156 @@
+"""The deterministic film of the `motion_path` integrator: an image whose bits do not
+depend on the thread count.
+
+Mitsuba's film splats every sample into its neighbours with atomic adds, whose order
+varies with the threads; sums of floats then differ in the last bit. Here a pixel's
+samples are consecutive lanes, so for each reconstruction-filter offset a row gather
+(`row_sums`) adds one pixel's weighted samples in a fixed order, and the image gathers
+those sums offset by offset, also in a fixed order: no atomics anywhere. Large sample
+counts run as passes (see `MAX_LANES`), summed in pass order.
+
+Field rendering (telecine/field_render.py) sets `FIELD_ROWS` while a field renders: the
+film then traces and returns only that field's rows.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any, Callable
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..errors import SampleCountError
+
+# At most this many sample lanes in flight per pass: per-sample colour, film position
+# and filter weights are kept for the film, about 80 bytes a lane (~0.7 GB a pass).
+# A 1080p frame at 256 spp is 531M lanes: it runs as passes of fewer samples per pixel.
+# ($MOTION_MAX_LANES overrides it: less memory per worker, more passes.)
+MAX_LANES = int(os.environ.get("MOTION_MAX_LANES", 1 << 23))
+
+# (row offset, row step) while a field is rendered (telecine/field_render.py sets it);
+# None: every row
+FIELD_ROWS: tuple[int, int] | None = None
+
+# sample(scene, sampler, ray, medium, active) -> (radiance, valid, AOV channels)
+SampleFn = Callable[..., tuple[Any, Any, list[Any]]]
+
+
+def render(sample: SampleFn, scene: mi.Scene, sensor: Any, seed: Any, spp: int) -> Any:
+    """Render `sensor`'s image of `scene`, every sample's value from `sample` (the
+    integrator's path). Returns a mi.TensorXf [H, W, 4 + AOV channels] (RGBA, alpha = the
+    pixel's coverage); H counts only the field's rows while FIELD_ROWS is set."""
+    film = sensor.film()
+    sampler = sensor.sampler()
+    spp = int(spp) if spp else int(sampler.sample_count())
+    if spp < 1:
+        raise SampleCountError(f"the film needs at least 1 sample per pixel, got {spp}")
+    size = film.crop_size()
+    width, height = int(size[0]), int(size[1])
+    # field rendering (telecine/field_render.py): only the rows offset, offset + 2, ...
+    offset, step = FIELD_ROWS if FIELD_ROWS is not None else (0, 1)
+    out_h = (height - offset + step - 1) // step
+    n_px = width * out_h
+    per_pass = max(1, min(spp, MAX_LANES // max(n_px, 1)))
+    total: list[Any] = []
+    done, index = 0, 0
+    while done < spp:
+        count = min(per_pass, spp - done)
+        # pass 0 keeps the frame's seed; later passes derive theirs from it and the pass
+        pass_seed = seed if index == 0 else mi.sample_tea_32(int(seed), index)[0]
+        acc, used = render_pass(sample, scene, sensor, sampler, pass_seed, count, width, height, (offset, step))
+        total = acc if index == 0 else [t + a for t, a in zip(total, acc)]
+        dr.eval(total)
+        done += used
+        index += 1
+    weight = total[-1]
+    inv = dr.select(weight > 0, dr.rcp(weight), 0.0)
+    planes = [a * inv for a in total[:-1]]
+    # interleave to [H, W, C]: each element written exactly once (no conflicts)
+    n_ch = len(planes)
+    target = dr.arange(mi.UInt32, n_px)
+    flat = dr.zeros(mi.Float, n_px * n_ch)
+    for c, plane in enumerate(planes):
+        dr.scatter(flat, plane, target * n_ch + c)
+    return mi.TensorXf(flat, shape=(out_h, width, n_ch))
+
+
+def render_pass(sample: SampleFn, scene: mi.Scene, sensor: Any, sampler: Any, seed: Any, spp: int, width: int, height: int, rows: tuple[int, int] = (0, 1)) -> tuple[list[Any], int]:
+    """One pass of `spp` samples per pixel: per-pixel filter-weighted sums of every
+    channel and of the weights (unnormalised), and the sample count actually used.
+    `rows` (offset, step): only image rows offset, offset + step, ... (a field)."""
+    offset, step = rows
+    out_h = (height - offset + step - 1) // step
+    n_px = width * out_h
+    sampler.set_sample_count(spp)
+    spp = int(sampler.sample_count())  # the sampler may round (multijitter)
+    sampler.set_samples_per_wavefront(spp)
+    sampler.seed(seed, n_px * spp)
+
+    # ray generation in Mitsuba's order of sampler dimensions
+    pixel = dr.arange(mi.UInt32, n_px * spp) // spp
+    px = mi.Vector2f(mi.Float(pixel % width), mi.Float(offset + step * (pixel // width)))
+    film_pos = px + sampler.next_2d()
+    time = sensor.shutter_open() + sampler.next_1d() * sensor.shutter_open_time()
+    aperture = sampler.next_2d() if sensor.needs_aperture_sample() else mi.Point2f(0.5)
+    ray, ray_weight = sensor.sample_ray_differential(time, 0.0, film_pos / mi.Vector2f(width, height), aperture)
+    L, valid, aovs = sample(scene, sampler, ray, None, True)
+    L = L * ray_weight
+    channels = [L[0], L[1], L[2], dr.select(valid, 1.0, 0.0), *aovs]
+    dr.eval(channels, film_pos)
+
+    # reconstruction, one row of filter offsets oy at a time: every source pixel sums,
+    # over its own samples in order, the filter-weighted channels it sends to each of
+    # the pixels (ox, oy) away (`row_sums`: one kernel); then every target pixel
+    # gathers those sums from its neighbours, offset by offset in a fixed order
+    rfilter = sensor.film().rfilter()
+    reach = max(0, int(np.ceil(rfilter.radius() - 0.5)))
+    target = dr.arange(mi.UInt32, n_px)
+    tx, ty = mi.Int32(target % width), mi.Int32(target // width)
+    acc = [mi.Float(dr.zeros(mi.Float, n_px)) for _ in range(len(channels) + 1)]
+    for oy in range(-reach, reach + 1):
+        if oy % step:
+            continue  # a row of the other field: not rendered
+        sums = row_sums(rfilter, channels, film_pos, spp, width, n_px, oy, reach, (offset, step))
+        dr.eval(sums)
+        for ox in range(-reach, reach + 1):
+            sx, sy = tx - ox, ty - oy // step  # the source pixel whose samples land here
+            ok = (sx >= 0) & (sx < width) & (sy >= 0) & (sy < out_h)
+            src = mi.UInt32(dr.select(ok, sy * width + sx, 0))
+            acc = [a + dr.gather(mi.Float, v, src, ok) for a, v in zip(acc, sums[ox + reach])]
+        dr.eval(acc)
+    return acc, spp
+
+
+def row_sums(rfilter: Any, channels: list[Any], film_pos: Any, spp: int, width: int, n_px: int, oy: int, reach: int, rows: tuple[int, int] = (0, 1)) -> list[list[Any]]:
+    """For every source pixel (one lane each) and each x offset ox in [-reach, reach]:
+    the sums over the pixel's spp samples, in sample order, of channel * w and of w,
+    where w = f(x) f(y) is the separable filter's weight of the sample for the pixel
+    (ox, oy) away. Returns [2 reach + 1][channels + 1] arrays of n_px."""
+    source = dr.arange(mi.UInt32, n_px)
+    sx, sy = mi.Float(source % width), mi.Float(rows[0] + rows[1] * (source // width))  # frame rows (a field: every other)
+    widths = 2 * reach + 1
+    zero = [mi.Float(dr.zeros(mi.Float, n_px)) for _ in range(widths * (len(channels) + 1))]
+
+    def body(s: Any, *acc: Any) -> tuple[Any, ...]:
+        index = source * spp + s
+        fx = dr.gather(mi.Float, film_pos.x, index)
+        fy = dr.gather(mi.Float, film_pos.y, index)
+        values = [dr.gather(mi.Float, c, index) for c in channels]
+        wy = rfilter.eval(sy + (oy + 0.5) - fy)  # the target pixel's centre minus the sample
+        out = list(acc)
+        k = 0
+        for ox in range(-reach, reach + 1):
+            w = rfilter.eval(sx + (ox + 0.5) - fx) * wy
+            for v in values:
+                out[k] = out[k] + v * w
+                k += 1
+            out[k] = out[k] + w
+            k += 1
+        return (s + 1, *out)
+
+    state = dr.while_loop((mi.UInt32(0), *zero), lambda s, *acc: s < spp, body, label="film_row")
+    flat = list(state[1:])
+    per = len(channels) + 1
+    return [flat[i * per : (i + 1) * per] for i in range(widths)]

@@ -1,0 +1,79 @@
+"""The scene's Mitsuba records at one instant of a frame: its objects' shapes, its lights
+and its sensor at the frame's time (u None) or at a shutter fraction u.
+
+The first-frame cache builds its static set and its sensor from these (render/scene_cache.py),
+and the scalar fallback builds whole scenes from them, one per instant
+(render/scalar_fallback.py).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, Iterable
+
+import numpy as np
+
+from ..scene.loader import LoadedScene
+from .build import light_dict, object_shapes, sensor_dict, trs_matrix
+from .shutter_poses import pose_at
+
+if TYPE_CHECKING:
+    from .stacked import StackedFrame
+
+
+def add_shapes(d: dict[str, Any], loaded: LoadedScene, objects: Iterable[Any], fi: StackedFrame, materials: dict[str, Any], u: float | None = None) -> None:
+    """The visible `objects`' shapes at the frame time (u None) or at shutter fraction u,
+    added to the scene dictionary d."""
+    for obj in objects:
+        if not obj.visible:
+            continue
+        t, q, s = fi.objects[obj.name]
+        ot, oq = pose_at(t, q, u)
+        for k, shape in enumerate(object_shapes(obj, loaded, trs_matrix(ot, oq, s[0]), materials)):
+            d[f"{obj.name}__{k}"] = shape
+
+
+def light_key(index: int, light: Any) -> str:
+    """The name a light's baked tracks are stored under (its name, or `light<index>`)."""
+    return light.name or f"light{index}"
+
+
+def light_record(loaded: LoadedScene, index: int, light: Any, fi: StackedFrame, u: float | None = None) -> dict[str, Any]:
+    """One light at the frame's time (u None) or at shutter fraction u, placed by its baked
+    world_from_light frame, with its animated scalars at the frame's time."""
+    key = light_key(index, light)
+    pose = fi.lights.get(key)
+    m = None
+    if pose is not None:
+        lt, lq = pose_at(pose[0], pose[1], u)
+        m = trs_matrix(lt, lq, pose[2][0])
+    scalars = {k: first_value(v) for k, v in fi.light_scalars.get(key, {}).items()}
+    return light_dict(light, loaded, m, scalars)
+
+
+def add_lights(d: dict[str, Any], loaded: LoadedScene, fi: StackedFrame, u: float | None = None, skip: frozenset[int] = frozenset()) -> None:
+    """Every light (but those whose index is in `skip`) at the frame's time (u None) or at
+    shutter fraction u, added to the scene dictionary d."""
+    for i, light in enumerate(loaded.scene.lights):
+        if i in skip:
+            continue
+        d[light_key(i, light).replace(".", "_")] = light_record(loaded, i, light, fi, u)
+
+
+def sensor_record(loaded: LoadedScene, spp: int, fi: StackedFrame, u: float | None = None, **extra: Any) -> dict[str, Any]:
+    """The camera's sensor at the frame's time (u None) or at shutter fraction u, with the
+    frame's field of view and orthographic width; `extra`: sensor_dict's keywords."""
+    scene = loaded.scene
+    ct, cq = pose_at(fi.camera[0], fi.camera[1], u)
+    settings = scene.render
+    return sensor_dict(scene.camera, trs_matrix(ct, cq), float(fi.fov[0]), settings.resolution, spp, settings.filter, ortho_width=ortho_width(fi), **extra)
+
+
+def ortho_width(fi: StackedFrame) -> float | None:
+    """The orthographic width at the frame's time, if the camera is orthographic."""
+    return None if fi.ortho_width is None else float(fi.ortho_width[0])
+
+
+def first_value(values: np.ndarray) -> Any:
+    """The frame-time value of an animated scalar or colour channel."""
+    v = np.asarray(values)[0]
+    return float(v) if np.ndim(v) == 0 else tuple(float(x) for x in np.ravel(v))

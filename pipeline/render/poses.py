@@ -1,0 +1,222 @@
+"""Moving-object poses at a ray's time, for the `motion_path` integrator (drjit side).
+
+Everything that moves inside a frame's shutter (rigid movers, the camera, moving lights) is
+posed per sample from baked samples across the shutter. They all come to the kernels in
+ONE opaque float array per frame (`FrameData`): its blocks (`FRAME_BLOCKS`) sit at named
+offsets, fixed for a job, so a new frame replays the compiled kernels instead of
+compiling new ones. At shutter fraction u a pose is interpolated between the two samples
+around u: translation linearly, rotation by shortest-arc slerp (never a matrix lerp).
+
+A `Pose` (world_from_object as translation t and unit quaternion q) maps rays, points,
+vectors and interactions between world space and the body's rest frame, the one place
+where the inverse rigid transform is written (docs/rendering.md, "Time per sample").
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple, Sequence
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..errors import FrameDataError
+
+# The blocks of the per-frame data array, in order (see `FrameData.set`):
+#   mover_t [M, N, 3], mover_q [M, N, 4]   movers' world_from_object across the shutter
+#   camera_t [N, 3], camera_rel [N, 4]     camera translation, rotation C(u) C(frame)^-1
+#   sensor_origin [3]                      the sensor's position at the frame time
+#   camera_q [N, 4]                        camera rotation across the shutter
+#   light_t [L, N, 3], light_q [L, N, 4]   moving lights' world_from_light across the shutter
+#   light_rgb [L, 3]                       moving lights' colours at the frame time
+#   mover_sphere [M, 4]                    movers' rest-frame bounding spheres (centre, radius)
+FRAME_BLOCKS = ("mover_t", "mover_q", "camera_t", "camera_rel", "sensor_origin", "camera_q", "light_t", "light_q", "light_rgb", "mover_sphere")
+
+
+def qrot(q: Any, v: Any) -> Any:
+    """Rotate vector v by unit quaternion q = (w, x, y, z) stored as mi.Vector4f."""
+    u = mi.Vector3f(q.y, q.z, q.w)
+    w = q.x
+    t = 2 * dr.cross(u, v)
+    return v + w * t + dr.cross(u, t)
+
+
+def qconj(q: Any) -> Any:
+    """The conjugate (the inverse rotation) of unit quaternion q = (w, x, y, z)."""
+    return mi.Vector4f(q.x, -q.y, -q.z, -q.w)
+
+
+def slerp(q0: Any, q1: Any, f: Any) -> Any:
+    """Shortest-arc spherical interpolation of unit quaternions (w, x, y, z)."""
+    d = dr.dot(q0, q1)
+    q1 = dr.select(d < 0, -q1, q1)
+    d = dr.abs(d)
+    theta = dr.acos(dr.minimum(d, 1.0))
+    s = dr.sin(theta)
+    small = s < 1e-4
+    w0 = dr.select(small, 1 - f, dr.sin((1 - f) * theta) / s)
+    w1 = dr.select(small, f, dr.sin(f * theta) / s)
+    return dr.normalize(w0 * q0 + w1 * q1)
+
+
+class Pose(NamedTuple):
+    """A rigid world_from_object transform: translation t (mi.Vector3f) and unit quaternion q
+    (mi.Vector4f). Rigid maps keep lengths, so ray parameters and local BSDF directions are
+    the same in both frames."""
+
+    t: Any
+    q: Any
+
+    def point_to_rest(self, p: Any) -> Any:
+        """object_from_world applied to a point."""
+        return qrot(qconj(self.q), p - self.t)
+
+    def vector_to_rest(self, v: Any) -> Any:
+        """object_from_world applied to a direction or normal."""
+        return qrot(qconj(self.q), v)
+
+    def point_to_world(self, p: Any) -> Any:
+        """world_from_object applied to a point."""
+        return qrot(self.q, p) + self.t
+
+    def vector_to_world(self, v: Any) -> Any:
+        """world_from_object applied to a direction or normal."""
+        return qrot(self.q, v)
+
+    def ray_to_rest(self, ray: Any) -> Any:
+        """The ray in the body's rest frame."""
+        qi = qconj(self.q)
+        local = mi.Ray3f(ray)
+        local.o = qrot(qi, ray.o - self.t)
+        local.d = qrot(qi, ray.d)
+        return local
+
+    def interaction_to_rest(self, it: Any) -> Any:
+        """A reference point (position and normal) in the body's rest frame, for emitter
+        sampling and pdf queries there."""
+        return mi.Interaction3f(it.t, it.time, it.wavelengths, self.point_to_rest(it.p), self.vector_to_rest(it.n))
+
+    def direction_sample_to_rest(self, ds: Any) -> Any:
+        """A world-space direction sample in the body's rest frame (built field by field:
+        the structs' copy constructors lose fields in drjit 1.5)."""
+        qi = qconj(self.q)
+        return mi.DirectionSample3f(qrot(qi, ds.p - self.t), qrot(qi, ds.n), ds.uv, ds.time, ds.pdf, ds.delta, qrot(qi, ds.d), ds.dist, ds.emitter)
+
+    def surface_to_world(self, si: Any) -> Any:
+        """A rest-frame surface interaction moved to world space: p, normals, the shading
+        frame and the surface derivatives rotate; wi is local and stays as it is."""
+        si.p = qrot(self.q, si.p) + self.t
+        si.n = qrot(self.q, si.n)
+        si.sh_frame.s = qrot(self.q, si.sh_frame.s)
+        si.sh_frame.t = qrot(self.q, si.sh_frame.t)
+        si.sh_frame.n = qrot(self.q, si.sh_frame.n)
+        si.dp_du = qrot(self.q, si.dp_du)
+        si.dp_dv = qrot(self.q, si.dp_dv)
+        return si
+
+
+def select_pose(index: Any, poses: Sequence[Pose]) -> Pose:
+    """poses[index] per lane (index a mi.UInt32; lanes outside the list get poses[0])."""
+    t, q = poses[0]
+    for k in range(1, len(poses)):
+        t = dr.select(index == k, poses[k][0], t)
+        q = dr.select(index == k, poses[k][1], q)
+    return Pose(t, q)
+
+
+class FrameData:
+    """The per-frame poses of one job in ONE opaque array, read by name.
+
+    With several fresh arrays per frame, drjit recycles variable indices from two frames
+    back, their relative order flips and the kernel's input order with it, which
+    alternates between two kernel variants; one array keeps one kernel."""
+
+    def __init__(self) -> None:
+        self.array = mi.Float(0.0)
+        self.at: dict[str, int] = dict.fromkeys(FRAME_BLOCKS, 0)  # block name -> element offset
+        self.n_samples = 2  # baked samples across the shutter (N)
+
+    def set(self, blocks: dict[str, tuple[Any, tuple[int, ...]]]) -> None:
+        """Write one frame: `blocks` maps every name of FRAME_BLOCKS to (values, the shape
+        they must have). A wrong shape is a `FrameDataError`."""
+        flat = []
+        for name in FRAME_BLOCKS:
+            value, shape = blocks[name]
+            value = np.asarray(value, dtype=np.float32)
+            if value.shape != shape:
+                raise FrameDataError(f"frame data {name!r} has shape {value.shape}, expected {shape}")
+            flat.append(value.ravel())
+        # element offsets of each block; the gathers below index in units of 3 or 4 floats
+        offsets = np.cumsum([0, *(len(a) for a in flat[:-1])])
+        self.at = {name: int(o) for name, o in zip(FRAME_BLOCKS, offsets)}
+        self.array = mi.Float(np.concatenate(flat))
+        # opaque: new values each frame must not become new literals in the kernel
+        dr.make_opaque(self.array)
+
+    def segment(self, u: Any) -> tuple[Any, Any]:
+        """The shutter segment [i, i + 1] of the N samples holding fraction u, and the
+        position f in [0, 1] inside it."""
+        x = dr.clip(u, 0.0, 1.0) * (self.n_samples - 1)
+        i = dr.minimum(mi.UInt32(dr.floor(x)), self.n_samples - 2)
+        return i, x - mi.Float(i)
+
+    def vec(self, block: str, width: int, j: Any, active: Any) -> Any:
+        """Element j of the `width`-float records of `block` (mi.Vector3f or Vector4f)."""
+        base = self.at[block] + j * width
+        comps = [dr.gather(mi.Float, self.array, base + c, active) for c in range(width)]
+        return mi.Vector3f(*comps) if width == 3 else mi.Vector4f(*comps)
+
+    def pose(self, t_block: str, q_block: str, record: int, i: Any, f: Any, active: Any) -> Pose:
+        """The pose of the track starting at sample `record` of the blocks, at position f
+        of segment i: translation lerped, rotation slerped."""
+        j = record + i
+        t0 = self.vec(t_block, 3, j, active)
+        t1 = self.vec(t_block, 3, j + 1, active)
+        q0 = self.vec(q_block, 4, j, active)
+        q1 = self.vec(q_block, 4, j + 1, active)
+        return Pose(dr.lerp(t0, t1, f), slerp(q0, q1, f))
+
+    def sample_pose(self, t_block: str, q_block: str, record: int, active: Any) -> Pose:
+        """The baked sample `record` of the blocks, as it is (no interpolation)."""
+        return Pose(self.vec(t_block, 3, mi.UInt32(record), active), self.vec(q_block, 4, mi.UInt32(record), active))
+
+    def poses(self, t_block: str, q_block: str, count: int, u: Any, active: Any) -> list[Pose]:
+        """The poses at shutter fraction u of `count` tracks of N samples each."""
+        i, f = self.segment(u)
+        return [self.pose(t_block, q_block, k * self.n_samples, i, f, active) for k in range(count)]
+
+
+# --- bounding spheres: rays that miss a mover never pay for its traversal -----------------
+
+
+def bounding_spheres(movers: Sequence[mi.Scene]) -> np.ndarray:
+    """Each scene's bounding sphere (centre, radius) from its bounding box, padded a little
+    so that a grazing ray is never culled by rounding."""
+    out = np.zeros((len(movers), 4))
+    for k, mover in enumerate(movers):
+        box = mover.bbox()
+        lo, hi = np.array(box.min, dtype=float).ravel(), np.array(box.max, dtype=float).ravel()
+        out[k, :3] = (lo + hi) / 2
+        out[k, 3] = np.linalg.norm(hi - lo) / 2 * (1 + 1e-4) + 1e-5
+    return out
+
+
+def posed_spheres(data: FrameData, poses: Sequence[Pose], active: Any) -> list[tuple[Any, Any]]:
+    """Each mover's bounding sphere (world centre, squared radius) at the path's time."""
+    out = []
+    for index, (t, q) in enumerate(poses):
+        s = data.vec("mover_sphere", 4, mi.UInt32(index), active)
+        out.append((qrot(q, mi.Vector3f(s.x, s.y, s.z)) + t, dr.square(s.w)))
+    return out
+
+
+def may_hit(sphere: tuple[Any, Any], ray: Any, active: Any) -> Any:
+    """Whether the ray's segment [0, maxt] meets a posed bounding sphere (`posed_spheres`)."""
+    centre, r2 = sphere
+    oc = ray.o - centre
+    a = dr.squared_norm(ray.d)
+    b = dr.dot(oc, ray.d)
+    disc = dr.square(b) - a * (dr.squared_norm(oc) - r2)
+    root = dr.safe_sqrt(disc)
+    # the segment [0, maxt] meets the sphere: roots (-b -+ root) / a straddle some of it
+    return active & (disc >= 0) & (-b + root >= 0) & (-b - root <= ray.maxt * a)

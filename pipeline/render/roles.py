@@ -1,0 +1,68 @@
+"""What each object and light of a scene is to the renderer, fixed for a job.
+
+An object is static (in the static set, built once, its BVH never rebuilt), a rigid mover
+(its own rest-frame scene, posed per path: render/poses.py) or time-sliced geometry
+(particle systems and deforming meshes: render/slices.py). A light is static, moving
+(point, spot or directional, posed per path by the integrator) or animated in another
+way (an environment light: its parameters are updated per frame).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from ..scene.loader import LoadedScene
+from ..scene.schema import Empty, Particles
+
+# light types the integrator poses per path at the path's own time
+PATH_POSED_LIGHTS = ("point", "spot", "directional")
+
+
+def is_static(loaded: LoadedScene, name: str) -> bool:
+    """An object is static iff neither it nor any ancestor moves."""
+    by_name = {o.name: o for o in loaded.scene.objects}
+    node = by_name.get(name)
+    while node is not None:
+        if node.motion.type != "static":
+            return False
+        node = by_name.get(node.parent) if node.parent else None
+    return True
+
+
+@dataclass(frozen=True)
+class Roles:
+    """The scene's objects and lights by how the renderer draws them (names in scene order;
+    lights as (index in the scene's lights, light))."""
+
+    static_names: list[str]
+    mover_names: list[str]
+    slice_names: list[str]
+    moving_lights: list[tuple[int, Any]]  # posed per path by the integrator
+    animated_lights: list[tuple[int, Any]]  # other lights that change: updated per frame
+
+
+def sort_scene(loaded: LoadedScene) -> Roles:
+    """The roles of every object and light of `loaded`."""
+    objects = loaded.scene.objects
+    # non-rigid geometry: particle systems and deforming meshes render as time slices
+    slice_names = [o.name for o in objects if o.visible and (isinstance(o, Particles) or getattr(o, "deform", None) is not None)]
+    static_names = [o.name for o in objects if is_static(loaded, o.name) and o.name not in slice_names]
+    mover_names = [
+        o.name
+        for o in objects
+        if o.name not in static_names and o.name not in slice_names and not isinstance(o, (Empty, Particles)) and o.visible
+    ]
+    # lights whose pose can change (their own motion or a moving parent)
+    animated = [
+        (i, light)
+        for i, light in enumerate(loaded.scene.lights)
+        if light.motion.type != "static" or (light.parent is not None and not is_static(loaded, light.parent))
+    ]
+    return Roles(
+        static_names=static_names,
+        mover_names=mover_names,
+        slice_names=slice_names,
+        moving_lights=[(i, light) for i, light in animated if light.type in PATH_POSED_LIGHTS],
+        animated_lights=[(i, light) for i, light in animated if light.type not in PATH_POSED_LIGHTS],
+    )

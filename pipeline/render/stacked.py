@@ -1,0 +1,60 @@
+"""The renderer's view of one baked frame: every track stacked as [frame time, N shutter
+samples] (`StackedFrame`, built by `stack_frame` alone from a `BakedFrame`), the shape the
+first-frame cache, the scalar fallback and the slices read."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..bake import BakedFrame
+
+
+@dataclass(frozen=True)
+class StackedFrame:
+    """The renderer's own view of one `BakedFrame`, built by `stack_frame` alone: every
+    track stacked as [frame time, N shutter samples], row 0 at the frame time and rows
+    1..N across the shutter (`samples` = N)."""
+
+    frame: int
+    time: float
+    shutter: tuple[float, float]
+    samples: int
+    objects: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]  # name -> (t [1+N,3], q [1+N,4], s [1+N,3])
+    camera: tuple[np.ndarray, np.ndarray]  # (t [1+N,3], q [1+N,4])
+    fov: np.ndarray  # [1+N]
+    lights: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=dict)
+    light_scalars: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+    vertices: dict[str, np.ndarray] = field(default_factory=dict)  # deforming meshes [1+N, V, 3], object space
+    ortho_width: np.ndarray | None = None  # [1+N], orthographic cameras
+    particles: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)  # (positions [1+N, n, 3], alive [1+N, n])
+
+
+def stack_frame(frame: BakedFrame) -> StackedFrame:
+    """`frame.at_frame` followed by `frame.across_shutter`, track by track."""
+    at, across = frame.at_frame, frame.across_shutter
+
+    def pose(p: Any, q: Any) -> tuple[np.ndarray, ...]:
+        return tuple(np.concatenate([x, y]) for x, y in zip(p, q))
+
+    fov = np.concatenate([at.camera_scalars["fov"], across.camera_scalars["fov"]])
+    ortho = np.concatenate([at.camera_scalars["ortho_width"], across.camera_scalars["ortho_width"]]) if "ortho_width" in at.camera_scalars else None
+    return StackedFrame(
+        frame=frame.frame,
+        time=float(frame.time),
+        shutter=(float(frame.shutter[0]), float(frame.shutter[1])),
+        samples=len(across.times),
+        objects={n: pose(p, across.objects[n]) for n, p in at.objects.items()},  # type: ignore[misc]
+        camera=pose(at.camera, across.camera)[:2],  # type: ignore[arg-type]
+        fov=np.asarray(fov, dtype=float),
+        ortho_width=None if ortho is None else np.asarray(ortho, dtype=float),
+        lights={n: pose(p, across.lights[n]) for n, p in at.lights.items()},  # type: ignore[misc]
+        light_scalars={n: {c: np.concatenate([v, across.light_scalars[n][c]]) for c, v in d.items()} for n, d in at.light_scalars.items()},
+        vertices={n: np.concatenate([v, across.vertices[n]]) for n, v in at.vertices.items()},
+        particles={
+            n: (np.concatenate([p.positions, across.particles[n].positions]), np.concatenate([p.alive, across.particles[n].alive]))
+            for n, p in at.particles.items()
+        },
+    )

@@ -1,0 +1,86 @@
+"""The scene a path meets at its own time, for the `motion_path` integrator: the static
+set (one `mi.Scene`, its BVH never rebuilt), the time-sliced groups of non-rigid geometry
+(render/slices.py: one scene per baked sample, a path sees the slice nearest its time) and
+the rigid movers (one rest-frame scene each, posed per path: render/poses.py).
+
+`intersect` finds the nearest hit over all of them and returns it in world space;
+`occluded` answers a shadow ray against the same set at the same time.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import drjit as dr
+import mitsuba as mi
+
+from .poses import Pose, may_hit, select_pose
+
+
+class World:
+    """The geometry of one job besides the static scene: movers and slice groups."""
+
+    def __init__(self) -> None:
+        self.movers: list[mi.Scene] = []
+        self.slices: list[list[mi.Scene]] = []  # per non-rigid object: one scene per shutter sample
+        self.emissive: list[int] = []  # indices of movers that carry area emitters
+
+    def set_movers(self, movers: Sequence[mi.Scene]) -> None:
+        """The rigid movers' rest-frame scenes (fixed for a job)."""
+        self.movers = list(movers)
+        self.emissive = [k for k, m in enumerate(self.movers) if len(m.emitters()) > 0]
+
+    def set_slices(self, groups: Sequence[Sequence[mi.Scene]]) -> None:
+        """For each deforming object or particle system, one world-space scene per slice."""
+        self.slices = [list(g) for g in groups]
+
+    def slice_of(self, u: Any) -> Any:
+        """The time slice a path at shutter fraction u sees: the nearest of S slices
+        (all groups have the same S)."""
+        count = len(self.slices[0]) if self.slices else 1
+        return mi.UInt32(dr.round(dr.clip(u, 0.0, 1.0) * (count - 1)))
+
+    def intersect(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[Pose], active: Any, k: Any, spheres: list[tuple[Any, Any]]) -> tuple[Any, Any, Any]:
+        """Nearest hit over all scenes, in world space; whether it is on a mover or a
+        slice; and which mover (len(movers) for none). `poses` and `spheres`: the movers'
+        poses and posed bounding spheres at the path's time; k: its slice."""
+        si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
+        on_mover = mi.Bool(False)
+        hit_mover = mi.UInt32(len(self.movers))
+        for group in self.slices:
+            for s, slice_scene in enumerate(group):
+                mine = active & (k == s)
+                si_s = slice_scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=mine)
+                closer = mine & si_s.is_valid() & (si_s.t < si.t)
+                si = dr.select(closer, si_s, si)
+                on_mover |= closer
+        # movers: a preliminary hit per mover (traversal only, and only for rays that meet
+        # its bounding sphere at their time); the surface interaction of the nearest is
+        # computed once, in its rest frame, and moved to world space
+        nearest = dr.select(si.is_valid(), si.t, dr.inf)
+        best = dr.zeros(mi.PreliminaryIntersection3f)
+        for index, (mover, pose) in enumerate(zip(self.movers, poses)):
+            near = may_hit(spheres[index], ray, active)
+            pi = mover.ray_intersect_preliminary(pose.ray_to_rest(ray), coherent=False, active=near)
+            closer = active & pi.is_valid() & (pi.t < nearest)
+            best = dr.select(closer, pi, best)
+            nearest = dr.select(closer, pi.t, nearest)
+            hit_mover = dr.select(closer, mi.UInt32(index), hit_mover)
+        if self.movers:
+            won = active & (hit_mover < len(self.movers))
+            pose = select_pose(hit_mover, poses)
+            si_m = best.compute_surface_interaction(pose.ray_to_rest(ray), mi.RayFlags.All, won)
+            si = dr.select(won, pose.surface_to_world(si_m), si)
+            on_mover |= won
+        return si, on_mover, hit_mover
+
+    def occluded(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[Pose], active: Any, k: Any, spheres: list[tuple[Any, Any]]) -> Any:
+        """Whether a shadow ray is blocked by any scene at the path's time."""
+        hit = scene.ray_test(ray, active)
+        for group in self.slices:
+            for s, slice_scene in enumerate(group):
+                hit |= slice_scene.ray_test(ray, active & ~hit & (k == s))
+        for index, (mover, pose) in enumerate(zip(self.movers, poses)):
+            near = may_hit(spheres[index], ray, active & ~hit)
+            hit |= mover.ray_test(pose.ray_to_rest(ray), near)
+        return hit
