@@ -21,7 +21,7 @@ import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from .cache import cache_root
 from .errors import RendererError
@@ -277,3 +277,24 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def load_dict(d: dict[str, Any]) -> Any:
+    """`mi.load_dict` with at least 2 drjit threads while it runs.
+
+    Mitsuba reads OpenEXR files (environment maps, bitmap textures) by handing OpenEXR's
+    line-block tasks to drjit's thread pool and waiting for them; drjit's thread count
+    includes the calling thread, so a pool set to 1 thread (2 local workers on 2 cores, or
+    `--threads 1`) has no thread to run them and the read deadlocks. The count goes back
+    to what the job planned before rendering, so the plan and the report stay true."""
+    import drjit as dr
+    import mitsuba as mi
+
+    threads = dr.thread_count()
+    if threads >= 2 or mi.variant() == "scalar_rgb":
+        return mi.load_dict(d)
+    dr.set_thread_count(2)
+    try:
+        return mi.load_dict(d)
+    finally:
+        dr.set_thread_count(threads)

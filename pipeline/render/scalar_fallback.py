@@ -15,6 +15,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from ..scene.loader import LoadedScene
+from ..variant import load_dict
 from .build import material_dict
 from .instant import add_lights, add_shapes, sensor_record
 
@@ -45,7 +46,7 @@ class ScalarFallback:
 
     def scene(self, fi: StackedFrame, u: float | None) -> Any:
         """The loaded `mi.Scene` of `scene_dict`."""
-        return self._mi.load_dict(self.scene_dict(fi, u))
+        return load_dict(self.scene_dict(fi, u))
 
     def render_at(self, fi: StackedFrame, u: float | None, seed: int, spp: int) -> Any:
         """The image of the scene at one instant (u None: the frame's time)."""

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..motion.pose import quat_mul
 from ..scene.loader import LoadedScene
+from ..variant import load_dict
 from .build import LIGHT_CHANNEL, material_dict, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
 from .instant import add_lights, add_shapes, light_key, light_record, sensor_record
@@ -74,7 +75,7 @@ class SceneCache:
         static = [o for o in scene.objects if o.name in set(self.roles.static_names)]
         add_shapes(d, loaded, static, fi, materials)
         add_lights(d, loaded, fi, skip=frozenset(i for i, _ in self.roles.moving_lights))
-        self.scene = mi.load_dict(d)
+        self.scene = load_dict(d)
         self._params = mi.traverse(self.scene)
         # movers: one rest-frame scene each (scale kept in the rest frame)
         movers = []
@@ -86,13 +87,13 @@ class SceneCache:
             md: dict[str, Any] = {"type": "scene"}
             for k, shape in enumerate(object_shapes(obj, loaded, np.diag([*s[0], 1.0]), materials)):
                 md[f"{name}__{k}"] = shape
-            movers.append(mi.load_dict(md))
+            movers.append(load_dict(md))
             self._mover_scale[name] = np.array(s[0])
             self._mover_params[name] = mi.traverse(movers[-1])
         self._movers = movers
         integrator = self.integrator
         integrator.set_movers(movers, fi.samples)
-        integrator.set_lights([(light.type, mi.load_dict(unit_light_dict(light))) for _, light in self.roles.moving_lights])
+        integrator.set_lights([(light.type, load_dict(unit_light_dict(light))) for _, light in self.roles.moving_lights])
         w, h = settings.resolution
         if scene.camera.type == "orthographic":
             integrator.set_projection("orthographic", w / scene.camera.ortho_width, w, h)
@@ -132,7 +133,7 @@ class SceneCache:
         dr, mi = self._dr, self._mi
         keys: list[str] = []
         for i, light in self.roles.animated_lights:
-            fresh = mi.traverse(mi.load_dict(light_record(self.loaded, i, light, fi)))
+            fresh = mi.traverse(load_dict(light_record(self.loaded, i, light, fi)))
             prefix = light_key(i, light).replace(".", "_")
             for k in fresh.keys():
                 target = f"{prefix}.{k}"

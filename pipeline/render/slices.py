@@ -22,6 +22,7 @@ import numpy as np
 from ..motion.pose import quat_rotate
 from ..scene.loader import LoadedScene
 from ..scene.schema import Particles
+from ..variant import load_dict
 
 if TYPE_CHECKING:
     from .stacked import StackedFrame
@@ -76,7 +77,7 @@ def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bs
         p["vertex_positions"] = mi.Float(np.asarray(verts, np.float32).ravel())
         p["faces"] = mi.UInt32(np.asarray(fcs, np.uint32).ravel())
         p.update()
-        scene = mi.load_dict({"type": "scene", key: mesh})
+        scene = load_dict({"type": "scene", key: mesh})
         scenes.append(scene)
         params.append(mi.traverse(scene))
     return SliceGroup(name, kind, scenes, params, count, faces, radius, key)
@@ -124,7 +125,7 @@ class SlicedGeometry:
 
         mi = self._mi
         obj = next(o for o in self.loaded.scene.objects if o.name == name)
-        bsdf = mi.load_dict(materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL)
+        bsdf = load_dict(materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL)
         slices = slice_count(self.loaded, fi)
         if isinstance(obj, Particles):
             n = fi.particles[name][0].shape[1] if name in fi.particles else 0
