@@ -62,6 +62,12 @@ def sheet_layout(seq: Sequence, max_frames: int = 60) -> SheetLayout:
     return SheetLayout(picked, tuple(seq.numbers[i] for i in picked), step, len(seq.missing), header)
 
 
+def _ordinal(n: int) -> str:
+    """2 -> '2nd', 3 -> '3rd', 11 -> '11th', 21 -> '21st'."""
+    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{suffix}"
+
+
 def contact_sheet(
     in_dir: str | Path | Sequence,
     out_path: str | Path,
@@ -115,7 +121,7 @@ def contact_sheet(
     # figimage puts array row 0 at the bottom of the figure: flip so row 0 is the top.
     fig.figimage(sheet[::-1], 0, 0, origin="lower", resize=False)
     fig.text(GAP / width, 1 - 4 / height, (
-        f"{layout.header}\n{view.description}{f'  (every {step}th frame)' if step > 1 else ''}"
+        f"{layout.header}\n{view.description}{f'  (every {_ordinal(step)} frame)' if step > 1 else ''}"
     ), color="white", fontsize=8, va="top", ha="left", family="monospace")
     for x, y, number in places:
         fig.text(x / width, 1 - (y + 2) / height, f"{number:04d}", color="white", fontsize=9,
