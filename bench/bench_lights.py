@@ -63,7 +63,6 @@ def warm_frames(loaded: Any, frames: list[int]) -> tuple[list[np.ndarray], list[
     """Frames rendered by one worker-style renderer: images and render seconds (the first
     frame, cold, is rendered and dropped)."""
     from motion.pipeline.render.frame_renderer import FrameRenderer
-    from motion.pipeline.render.stacked import stack_frame
     from motion.pipeline.bake import evaluate_frames
 
     gc.collect()

@@ -60,7 +60,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..geometry import BOX, CYLINDER
+from ..geometry import BOX
 from ..motion.pose import quat_mul, quat_normalize, quat_to_matrix
 from .forces import cross
 from .collisions import TOL, BoxCollider, Collider, ContactBodies, PlaneCollider, SphereCollider

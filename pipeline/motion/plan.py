@@ -26,7 +26,7 @@ import heapq
 import math
 from dataclasses import dataclass
 from functools import cached_property
-from pathlib import Path
+import pathlib
 from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
@@ -116,7 +116,7 @@ class Grid:
         return binary_dilation(padded, structure=kernel)[w:-w, w:-w] | self.wall
 
 
-def grid_from_image(path: Path, cell: float, origin: Sequence[float], threshold: float) -> Grid:
+def grid_from_image(path: pathlib.Path, cell: float, origin: Sequence[float], threshold: float) -> Grid:
     """Walls where the image's luminance (0..1) is below `threshold`; one pixel per cell,
     row 0 at origin z, column 0 at origin x."""
     from PIL import Image
