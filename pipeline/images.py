@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import AssetError, InputFileError
+from .errors import AssetError
 from .limits import open_bounded
 
 MAX_IMAGE_BYTES = 2 * 1024**3  # one texture or environment map file
@@ -30,10 +30,7 @@ def check_image(path: Path) -> tuple[int, int]:
     kind = IMAGE_FORMATS.get(path.suffix.lower())
     if kind is None:
         raise AssetError(f"{path}: unsupported image format {path.suffix!r} (use {', '.join(sorted(IMAGE_FORMATS))})")
-    try:
-        fh = open_bounded(path, MAX_IMAGE_BYTES, "image file")
-    except InputFileError as exc:
-        raise AssetError(f"{path}: {exc.reason}") from None
+    fh = open_bounded(path, MAX_IMAGE_BYTES, "image file", AssetError)
     try:
         with fh:
             if kind == "OpenEXR":

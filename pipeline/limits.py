@@ -7,16 +7,36 @@ from __future__ import annotations
 import os
 import stat
 import typing
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Callable, Iterator
 
-from .errors import InputFileError
+from .errors import InputFileError, MotionError
+
+ErrorFor = Callable[[str], MotionError]  # the caller's own error from "FILE: reason"
 
 
-def open_bounded(path: str | Path, limit: int, what: str) -> typing.BinaryIO:
+@contextmanager
+def _as(error: ErrorFor | None) -> Iterator[None]:
+    """Re-raise an InputFileError as the caller's own error, `error("FILE: reason")`."""
+    try:
+        yield
+    except InputFileError as exc:
+        if error is None:
+            raise
+        raise error(f"{exc.file}: {exc.reason}") from None
+
+
+def open_bounded(path: str | Path, limit: int, what: str, error: ErrorFor | None = None) -> typing.BinaryIO:
     """Open an input file for reading after checking that it is a regular file of at most
     `limit` bytes: a device (/dev/zero), a pipe or a folder is refused before a byte is
-    read. The caller closes the file. Raises InputFileError with the reason."""
-    file = str(path)
+    read. The caller closes the file. Raises InputFileError with the reason, or
+    `error("FILE: reason")` when the caller gives its own error class."""
+    with _as(error):
+        return _open_bounded(str(path), limit, what)
+
+
+def _open_bounded(file: str, limit: int, what: str) -> typing.BinaryIO:
     try:
         # O_NONBLOCK: opening a FIFO must not wait for a writer; fstat then refuses it
         fd = os.open(file, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
@@ -40,9 +60,14 @@ def open_bounded(path: str | Path, limit: int, what: str) -> typing.BinaryIO:
     return os.fdopen(fd, "rb")
 
 
-def read_bounded(path: str | Path, limit: int, what: str) -> bytes:
+def read_bounded(path: str | Path, limit: int, what: str, error: ErrorFor | None = None) -> bytes:
     """The bytes of a regular file of at most `limit` bytes (see `open_bounded`); a file
     that grows past the limit while being read is refused too."""
+    with _as(error):
+        return _read_bounded(path, limit, what)
+
+
+def _read_bounded(path: str | Path, limit: int, what: str) -> bytes:
     with open_bounded(path, limit, what) as fh:
         try:
             # read what fstat promised (+1 to see growth), then more only while under the

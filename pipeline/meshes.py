@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import AssetError, InputFileError, MeshFormatError
+from .errors import AssetError, MeshFormatError
 
 MAX_MESH_BYTES = 2 * 1024**3  # one mesh file
 MAX_POLYGON = 256  # vertices of one face
@@ -35,10 +35,7 @@ def load_mesh(path: Path, faces: bool = True) -> tuple[np.ndarray, np.ndarray]:
     from .limits import read_bounded
 
     path = Path(path)
-    try:
-        data = read_bounded(path, MAX_MESH_BYTES, "mesh file")
-    except InputFileError as exc:
-        raise AssetError(f"{path}: {exc.reason}") from None
+    data = read_bounded(path, MAX_MESH_BYTES, "mesh file", AssetError)
     try:
         if path.suffix.lower() == ".obj":
             verts, tris = _load_obj(data)

@@ -139,14 +139,10 @@ def read_document(path: str | Path) -> dict[str, Any]:
     numbers as Python's json module allows (a RecursionError is a bad file), NPZ arrays
     declared no larger than MAX_BAKE_ARRAY_BYTES in all before any is decompressed, and
     no pickled objects."""
-    from ..errors import InputFileError
     from ..limits import open_bounded
 
     path = Path(path)
-    try:
-        fh = open_bounded(path, MAX_BAKE_BYTES, "baked-motion file")
-    except InputFileError as exc:
-        raise BakeFileError(f"{path}: {exc.reason}") from None
+    fh = open_bounded(path, MAX_BAKE_BYTES, "baked-motion file", BakeFileError)
     try:
         with fh:
             head = fh.read(6)
