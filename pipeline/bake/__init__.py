@@ -18,7 +18,7 @@ from .evaluate import bake, evaluate_frames
 from .files import FORMAT, VERSION, read_baked, write_baked
 from .fingerprint import fingerprint, leaves
 from .records import BakedFrame, BakedMotion, summary
-from .timing import frame_sample_times, simulate_for, simulation_range
+from .timing import sample_seconds, simulate_for, simulation_range
 
 __all__ = [
     "FORMAT",
@@ -31,7 +31,7 @@ __all__ = [
     "check_motion",
     "evaluate_frames",
     "fingerprint",
-    "frame_sample_times",
+    "sample_seconds",
     "leaves",
     "motion_problems",
     "pose_problem",

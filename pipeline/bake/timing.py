@@ -13,22 +13,13 @@ if TYPE_CHECKING:
     from ..scene.loader import LoadedScene
 
 
-def frame_sample_times(loaded: "LoadedScene", frame: int) -> tuple[Fraction, tuple[Fraction, Fraction], list[Fraction]]:
-    """Exact frame time, shutter interval and the `render.shutter_samples` times across it."""
-    scene = loaded.scene
-    timeline = scene.timeline.timeline()
-    shutter = scene.camera.shutter
-    t_open, t_close = timeline.shutter(frame, Fraction(shutter.angle), shutter.position)
-    n = scene.render.shutter_samples
-    samples = [t_open + (t_close - t_open) * k / (n - 1) for k in range(n)]
-    return timeline.seconds(frame), (t_open, t_close), samples
-
-
 def sample_seconds(loaded: "LoadedScene", frames: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """`frame_sample_times` of many frames as float64 arrays: frame times [F], shutters
-    [F, 2] and sample times [F, N]. Each value is the exact rational time rounded once to
-    the nearest float (the same bits as `float()` of the Fraction), computed with integer
-    arithmetic: a bake of a long shot does not pay for 10^4 Fraction objects."""
+    """When each frame is sampled, as float64 arrays: frame times [F], shutters [F, 2]
+    ([open, close]) and the `render.shutter_samples` times across each shutter [F, N]
+    (open..close inclusive). Each value is the exact rational time (Fractions from the
+    timeline) rounded once to the nearest float, the same bits as `float()` of the
+    Fraction; the samples are computed with integer arithmetic, so a bake of a long shot
+    does not pay for 10^4 Fraction objects."""
     scene = loaded.scene
     timeline = scene.timeline.timeline()
     angle, position = Fraction(scene.camera.shutter.angle), scene.camera.shutter.position
@@ -58,8 +49,8 @@ def simulation_range(loaded: "LoadedScene", frames: Sequence[int] = ()) -> tuple
     timeline = loaded.scene.timeline.timeline()
     ends = [timeline.first, timeline.last] + ([min(frames), max(frames)] if len(frames) else [])
     lo, hi = min(ends), max(ends)
-    (t_lo, (open_lo, _), _), (t_hi, (_, close_hi), _) = frame_sample_times(loaded, lo), frame_sample_times(loaded, hi)
-    return min(0.0, float(min(t_lo, open_lo))), float(max(t_hi, close_hi))
+    times, shutters, _ = sample_seconds(loaded, [lo, hi])
+    return min(0.0, float(min(times[0], shutters[0, 0]))), float(max(times[1], shutters[1, 1]))
 
 
 def simulate_for(loaded: "LoadedScene", frames: Sequence[int] = (), on_progress: Any = None) -> Any | None:
