@@ -113,24 +113,21 @@ class DaskExecutor:
         self._running[worker] = (fut, chunk_id)
 
     def poll(self, timeout: float) -> list[Event]:
-        """Wait up to `timeout` s; the chunks finished or failed since, and workers that joined or left."""
+        """Wait up to `timeout` s; the frames written, the chunks finished or failed since,
+        and workers that joined or left."""
         from distributed import wait
 
         futs = [f for f, _ in self._running.values()]
-        if futs and not self._written:
-            # wake on a finished chunk or, in slices, on a frame a worker logged
-            deadline = time.monotonic() + timeout
-            while not self._written:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    break
-                try:
-                    wait(futs, timeout=min(left, 0.1), return_when="FIRST_COMPLETED")
-                    break
-                except Exception:  # a timeout (dask's own TimeoutError type)
-                    continue
-        elif not futs:
+        if not futs:
             time.sleep(timeout)
+        # wait for a finished chunk, in slices so that a frame a worker logged wakes us too
+        deadline = time.monotonic() + timeout
+        while futs and not self._written and (left := deadline - time.monotonic()) > 0:
+            try:
+                wait(futs, timeout=min(left, 0.1), return_when="FIRST_COMPLETED")
+                break
+            except Exception:  # a timeout (dask's own TimeoutError type)
+                continue
         self._refresh()
         events: list[Event] = []
         while self._written:
