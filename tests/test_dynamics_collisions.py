@@ -135,3 +135,31 @@ def test_ball_rests_on_box_and_on_sphere_collider_it_rolls_off(tmp_path):
     d = np.linalg.norm(sim.bodies.x[:, 0], axis=1)
     assert d.min() >= 1.1 - 1e-6
     assert sim.bodies.x[-1, 0, 1] < 0  # it rolled off the top and fell past
+
+
+def test_ball_at_rest_is_held_through_coasts_as_stepping_leaves_it(tmp_path, monkeypatch):
+    # one ball comes to rest early while another keeps bouncing: the coast stage holds the
+    # resting one on the floor instead of stepping every body, and the result is what
+    # stepping each step gives, to rounding; contacts the same, step by step
+    from motion.pipeline.dynamics import step as step_module
+
+    objects = [ball("lo", 1.0, x=-1.0, restitution=0.2), ball("hi", 2.0, x=1.0, restitution=0.9), floor(restitution=1.0)]
+    dyn = {"integrator": "semi-implicit-euler", "step": 0.001}
+    coasted = []
+    real_coast = step_module.coast
+
+    def counting(*args, **kwargs):
+        done = real_coast(*args, **kwargs)
+        coasted.append(done)
+        return done
+
+    monkeypatch.setattr(step_module, "coast", counting)
+    fast = run(tmp_path, objects, 4.0, dyn, name="coasting").bodies
+    monkeypatch.setattr(step_module, "coast", lambda *args, **kwargs: 0)
+    slow = run(tmp_path, objects, 4.0, dyn, name="stepping").bodies
+    steps = len(slow.times) - 1
+    assert sum(coasted) > 0.8 * steps  # most steps coast, though "lo" rests from ~1.2 s on
+    np.testing.assert_array_equal(fast.times, slow.times)
+    np.testing.assert_allclose(fast.x, slow.x, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(fast.contact, slow.contact)
+    assert fast.contact[-1, 0] and np.all(fast.x[fast.times > 2.0, 0, 1] == 0.1)  # at rest, on the floor

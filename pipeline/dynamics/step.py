@@ -252,16 +252,18 @@ class Recorder:
             self.ke_each.append(energy[0])
             self.pe_each.append(energy[1])
 
-    def record_many(self, t: np.ndarray, x: np.ndarray, v: np.ndarray, q: np.ndarray | None, kinetic: np.ndarray, potential: np.ndarray) -> None:
-        """Keep K states at once (coast: no contacts; per-body energies [K, n], no shared
-        terms): times [K], x and v [K, n, 3], one orientation [n, 4] for all."""
+    def record_many(self, t: np.ndarray, x: np.ndarray, v: np.ndarray, q: np.ndarray | None, kinetic: np.ndarray, potential: np.ndarray,
+                    contact: np.ndarray) -> None:
+        """Keep K states at once (coast: per-body energies [K, n], no shared terms): times
+        [K], x and v [K, n, 3], one orientation [n, 4] for all, and the bodies [n] in
+        contact throughout (at rest on a support)."""
         K = len(t)
         self.t.extend(t.tolist())
         self.x.extend(x.astype(self.group.record_dtype))
         self.v.extend(v.astype(self.group.record_dtype))
         if q is not None:
             self.q.extend(np.broadcast_to(q, (K,) + q.shape))
-        self.c.extend(np.zeros((K, x.shape[1]), dtype=bool))
+        self.c.extend(np.broadcast_to(contact, (K, x.shape[1])))
         self.ke.extend(kinetic.sum(axis=1).tolist())
         self.pe.extend(potential.sum(axis=1).tolist())
         if self.each:
@@ -285,6 +287,39 @@ class Recorder:
 
 
 COAST_STEPS = 512  # steps one coast batch looks ahead at most
+# m/s: a body this slow on a level support is at rest (the collide stage leaves it in
+# place). Holding it through a coast moves it less than 1e-9 m per second coasted.
+REST_SPEED = 1e-9
+# rad/s: spin this slow is rounding left by friction on a contact without slip (about
+# 1e-14 after a bounce); a coast keeps orientations as they are, so it turns a body by
+# less than 1e-9 rad per second coasted from where stepping would.
+REST_SPIN = 1e-9
+
+
+def resting(group: Group, x: np.ndarray, v: np.ndarray, move: np.ndarray, a: np.ndarray, step: float) -> np.ndarray:
+    """Bodies [n] at rest on a level support: moving, sphere-shaped for collisions (boxes and
+    cylinders need their true shape), slower than REST_SPEED, and one step of free fall
+    from where they are would meet a collider whose normal is opposite their constant
+    acceleration a [n, 3] (to 1e-9 relative): a level floor under gravity, nothing to
+    slide down."""
+    held = move & (np.einsum("ij,ij->i", v, v) <= REST_SPEED * REST_SPEED)
+    if group.shapes is not None:
+        held &= ~group.shapes.shaped()
+    if not held.any() or not group.colliders:
+        return np.zeros(len(x), dtype=bool)
+    idx = np.flatnonzero(held)
+    acc = a[idx]
+    g = np.sqrt(np.einsum("ij,ij->i", acc, acc))
+    x0 = x[idx]
+    x1 = x0 + (step * step) * acc
+    supported = np.zeros(idx.size, dtype=bool)
+    radius = group.system.props.radius[idx]
+    for col in group.colliders:
+        hits = col.sweep(x0, x1, radius)
+        supported |= hits.hit & (np.einsum("ij,ij->i", hits.normal, acc) <= -(1.0 - 1e-9) * g) & (g > 0)
+    out = np.zeros(len(x), dtype=bool)
+    out[idx[supported]] = True
+    return out
 
 
 def coast(group: Group, integrator: Integrator, ctx: StepContext, t0: float, t1: float, step: float, guard: Guard, recorder: "Recorder") -> int:
@@ -292,7 +327,7 @@ def coast(group: Group, integrator: Integrator, ctx: StepContext, t0: float, t1:
     but free flight, all at once; returns how many (0: take the next step normally).
 
     It applies when D's velocity part is a constant acceleration a (System.
-    constant_acceleration: uniform gravity only) and nothing spins (w = 0, and nothing
+    constant_acceleration: uniform gravity only) and nothing spins (|w| <= REST_SPIN, and nothing
     in D makes it spin), for a fixed-step integrator, on whole steps of the fixed grid
     t0 + k step, before the next body's start time. Then k steps of the integrator from
     (x, v) are exactly v_k = v + k h a and x_k = x + k h v + c(k) h^2 a, with the
@@ -302,14 +337,19 @@ def coast(group: Group, integrator: Integrator, ctx: StepContext, t0: float, t1:
     pairs (the bounding spheres, as the collide stage's broad phase); the steps before
     the first with a possible contact, and with a finite state within the guard's energy
     bound, are recorded. The same arithmetic in a different order: positions differ from
-    stepping by rounding only (1e-16 relative per step, not accumulated)."""
+    stepping by rounding only (1e-16 relative per step, not accumulated).
+
+    A body at rest on a level support (`resting`) is held where it is, in contact, through
+    the coast: what the collide stage does to it each step (the support impulse cancels
+    what gravity added, no slip, so no friction) is to leave it there; so one ball at rest
+    does not stop the others from coasting. Anything that comes near it ends the coast."""
     system = group.system
     c = integrator.ballistic
     if c is None or integrator.adaptive or group.record_stride != 1 or not system.props.names:
         return 0
     a = system.constant_acceleration()
     s = system.unpack(group.X)
-    if a is None or (system.rotating and s.w.any()):
+    if a is None or (system.rotating and np.abs(s.w).max(initial=0.0) > REST_SPIN):
         return 0
     p = system.props
     index = ctx.index + np.arange(1, COAST_STEPS + 1)
@@ -324,13 +364,16 @@ def coast(group: Group, integrator: Integrator, ctx: StepContext, t0: float, t1:
         return 0
     n = system.n
     move = system.moving()
-    acc = np.where(move[:, None], a, 0.0)
+    held = resting(group, s.x, s.v, move, a, step)
+    fly = move & ~held
+    acc = np.where(fly[:, None], a, 0.0)
     k = np.arange(K + 1, dtype=np.float64)[:, None, None]
-    xs = s.x[None] + (k * step) * np.where(move[:, None], s.v, 0.0)[None] + (c(k) * step * step) * acc[None]
-    vs = s.v[None] + (k * step) * acc[None]
-    # the first step with a possible contact ends the coast before it
+    xs = s.x[None] + (k * step) * np.where(fly[:, None], s.v, 0.0)[None] + (c(k) * step * step) * acc[None]
+    vs = np.where(held[:, None], 0.0, s.v)[None] + (k * step) * acc[None]
+    # the first step with a possible contact ends the coast before it (held bodies lie
+    # on their support: only the bodies in flight are swept against the colliders)
     x0, x1 = xs[:-1].reshape(-1, 3), xs[1:].reshape(-1, 3)
-    moving = np.tile(move, K)
+    moving = np.tile(fly, K)
     first = K
     for col in group.colliders:
         hit = col.sweep(x0, x1, np.tile(p.radius, K)).hit & moving
@@ -359,7 +402,7 @@ def coast(group: Group, integrator: Integrator, ctx: StepContext, t0: float, t1:
             group.shapes.begin_step()
     q = s.q.copy() if system.rotating else None
     w = s.w.copy() if system.rotating else None
-    recorder.record_many(t_end[:K], xs[1 : K + 1], vs[1 : K + 1], q, kinetic[:K], potential[:K])
+    recorder.record_many(t_end[:K], xs[1 : K + 1], vs[1 : K + 1], q, kinetic[:K], potential[:K], held)
     group.X = system.pack(xs[K], vs[K], q, w)
     return K
 
