@@ -12,9 +12,12 @@ noisy machine)."""
 from __future__ import annotations
 
 import argparse
-import platform
+import sys
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import cpu_model  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = ["cannonball", "bouncing-balls", "spinning-top"]
@@ -47,7 +50,7 @@ def main() -> None:
     ap.add_argument("scenes", nargs="*", default=DEFAULT)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
-    print(f"# {platform.processor() or platform.machine()}; CPU seconds, best of {args.repeat}")
+    print(f"# {cpu_model()}; CPU seconds, best of {args.repeat}")
     for name in args.scenes:
         path = Path(name) if name.endswith(".yaml") else ROOT / "scenes" / f"{name}.yaml"
         sim, bk, steps = bake_seconds(path, args.repeat)

@@ -7,21 +7,25 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import resource
+import sys
 import time
 import tracemalloc
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from motion.pipeline.dynamics import forces
-from motion.pipeline.dynamics.collisions import PlaneCollider
-from motion.pipeline.dynamics.guard import Guard
-from motion.pipeline.dynamics.integrators import make_integrator
-from motion.pipeline.dynamics.particles import Spawns
-from motion.pipeline.dynamics.step import StepDynamics, run_group
-from motion.pipeline.dynamics.world import particle_group
-from motion.pipeline.dynamics.state import BodyProps, Environment, System
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _common import cpu_model  # noqa: E402
+from motion.pipeline.dynamics import forces  # noqa: E402
+from motion.pipeline.dynamics.collisions import PlaneCollider  # noqa: E402
+from motion.pipeline.dynamics.guard import Guard  # noqa: E402
+from motion.pipeline.dynamics.integrators import make_integrator  # noqa: E402
+from motion.pipeline.dynamics.particles import Spawns  # noqa: E402
+from motion.pipeline.dynamics.step import StepDynamics, run_group  # noqa: E402
+from motion.pipeline.dynamics.world import particle_group  # noqa: E402
+from motion.pipeline.dynamics.state import BodyProps, Environment, System  # noqa: E402
 
 G = np.array([0.0, -9.81, 0.0])
 RADIUS, MASS, CD = 0.01, 0.001, 0.47
@@ -68,13 +72,17 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--particles", type=int, default=100_000)
     ap.add_argument("--steps", type=int, default=50)
+    ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
     n, steps, h = args.particles, args.steps, 1 / 480
-    print(f"# {n} particles, {steps} steps of {h:.5f} s, gravity + drag (+ ground plane)")
+    print(f"# {cpu_model()}, {os.cpu_count()} cores")
+    print(f"# {n} particles, {steps} steps of {h:.5f} s, gravity + drag (+ ground plane); median of {args.repeat} runs after a warm-up")
+    run_ours(n, "semi-implicit-euler", 5, h, True)  # the process's first big allocations: not the simulation's cost
     results = {}
     for integ in ("semi-implicit-euler", "rk4"):
         for plane in (True, False):
-            rate, el = run_ours(n, integ, steps, h, plane)
+            runs = sorted(run_ours(n, integ, steps, h, plane) for _ in range(args.repeat))
+            rate, el = runs[len(runs) // 2]
             results[(integ, plane)] = rate
             print(f"ours {integ:20s} plane={plane!s:5s}: {rate / 1e6:7.2f} M particle-steps/s ({el:.2f} s)")
     for method in ("RK45", "RK23"):

@@ -97,7 +97,14 @@ class System:
         self.active = np.ones(self.n, dtype=bool)
         # constant for the run (props and environment do not change): computed once
         self._gravity = forces.gravity(props.mass, env.gravity)
+        self._gravity_acc = self._gravity * props.inv_mass[:, None]
         self._air_drag = bool(np.any(props.cd > 0) or np.any(props.linear > 0))
+        # gravity and air drag only (what big particle systems have): D's accelerations in
+        # a few passes over memory, from rates per unit mass computed once (see acceleration)
+        self._plain = not (env.fluids or env.force_field is not None or env.wind is not None or (env.springs is not None and env.springs.count)
+                           or (env.newtonian is not None and self.n > 1))
+        self._drag_rate = (0.5 * env.air_density * props.cd * props.area * props.inv_mass,
+                           props.linear * props.inv_mass if props.linear.any() else None)
         self._isotropic = rotating and props.count > 0 and isotropic(props.inertia)
         self._free = props.inv_mass > 0  # not pinned (pinned: inverse mass 0)
         self.x_ref = np.zeros((self.n, 3))  # where gravity's potential is zero
@@ -168,6 +175,23 @@ class System:
             total += forces.newtonian_gravity(x, p.mass, *env.newtonian)
         return total
 
+    def acceleration(self, t: float, x: np.ndarray, v: np.ndarray, dt: float) -> np.ndarray:
+        """Each body's acceleration [n, 3] (m/s^2): forces / mass, a new array. Under gravity
+        and air drag only, a = g - c v with drag's rate c per unit mass (forces.
+        drag_coefficient, capped at 1/dt), without forming the forces."""
+        if not self._plain:
+            acc = self.forces(t, x, v, dt)
+            acc *= self.props.inv_mass[:, None]
+            return acc
+        if not self._air_drag:
+            return self._gravity_acc.copy()
+        quadratic, linear = self._drag_rate
+        rate = forces.drag_coefficient(v, quadratic, linear, 1.0 / dt if dt > 0 else None)
+        np.negative(rate, out=rate)
+        acc = v * rate[:, None]
+        acc += self._gravity_acc
+        return acc
+
     def constant_acceleration(self) -> np.ndarray | None:
         """Each body's acceleration [n, 3] (m/s^2) when D's velocity part does not depend on
         the state or the time (uniform gravity only: no drag, fluids, fields, springs or
@@ -177,7 +201,7 @@ class System:
             return None
         if (env.springs is not None and env.springs.count) or (env.newtonian is not None and self.n > 1):
             return None
-        return self._gravity * self.props.inv_mass[:, None]
+        return self._gravity_acc
 
     def moving(self) -> np.ndarray:
         """active and not pinned (cached until `active` is set again; do not modify)."""
@@ -194,8 +218,7 @@ class System:
         s = self.unpack(X)
         move = self.moving()
         everyone = bool(move.all())
-        acc = self.forces(t, s.x, s.v, dt)
-        acc *= self.props.inv_mass[:, None]
+        acc = self.acceleration(t, s.x, s.v, dt)
         out = np.zeros(X.shape)
         n = self.n
         if not self.rotating:
@@ -212,11 +235,11 @@ class System:
 
     def velocity_rate(self, t: float, X: np.ndarray, dt: float) -> np.ndarray:
         """The velocity-like part of D (accelerations, angular accelerations): D[split:]
-        without the position-like rates (semi-implicit Euler uses only this part)."""
+        without the position-like rates (semi-implicit Euler uses only this part); a new
+        array, which the integrator may scale in place."""
         s = self.unpack(X)
         move = self.moving()
-        acc = self.forces(t, s.x, s.v, dt)
-        acc *= self.props.inv_mass[:, None]
+        acc = self.acceleration(t, s.x, s.v, dt)
         everyone = bool(move.all())
         if not everyone:
             acc = np.where(move[:, None], acc, 0.0)
@@ -267,4 +290,6 @@ class System:
             shared += float(forces.spring_energy(s.x, env.springs).sum())
         if env.newtonian is not None and self.n > 1:
             shared += forces.newtonian_energy(s.x[move], p.mass[move], *env.newtonian)
+        if move.all():  # (the usual case: no masking passes)
+            return kinetic, potential, shared
         return np.where(move, kinetic, 0.0), np.where(move, potential, 0.0), shared
