@@ -128,6 +128,9 @@ def cost(path: Path) -> dict[str, Any]:
         times.append(denoise(rgba, big)[1])
     out["denoise_1080p_s"] = round(min(times), 3)
     out["target_1080p_le_0_5s"] = out["denoise_1080p_s"] <= 0.5
+    # the floor under any pipeline: OIDN's RT filter alone (colour + albedo + normal, set up
+    # once, best of 2), at each of its quality levels
+    out["oidn_alone_s"] = oidn_alone({"320x180": (img, aovs), "1920x1080": (rgba, big)})
     # the same bits whatever the number of threads
     results = []
     for threads in (1, 2):
@@ -135,6 +138,36 @@ def cost(path: Path) -> dict[str, Any]:
         results.append(denoise(img, aovs)[0])
     out["same_bits_1_and_2_threads"] = bool(np.array_equal(results[0], results[1]))
     print("cost", json.dumps(out), flush=True)
+    return out
+
+
+def oidn_alone(images: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]]) -> dict[str, float]:
+    """Seconds of OIDN's own filter execution per image and quality (High is what the
+    worker uses; Balanced and Fast trade quality for speed), the filter made beforehand."""
+    import drjit as dr
+    import mitsuba_oidn as oidn
+
+    from motion.pipeline.render.aovs import layer
+
+    device = oidn.Device(oidn.DeviceType.CPU)
+    out: dict[str, float] = {}
+    for size, (rgba, aovs) in images.items():
+        color = np.ascontiguousarray(rgba[..., :3], dtype=np.float32)
+        albedo = np.ascontiguousarray(np.clip(aovs[layer("albedo")][..., :3], 0, 1), dtype=np.float32)
+        normal = np.ascontiguousarray(np.clip(aovs[layer("normal")][..., :3], -1, 1), dtype=np.float32)
+        for quality in ("High", "Balanced", "Fast"):
+            flt = device.new_filter("RT")
+            flt.hdr, flt.quality, flt.input_scale = True, getattr(oidn.Quality, quality), 1.0
+            result = np.zeros_like(color)
+            for name, image in (("color", color), ("albedo", albedo), ("normal", normal), ("output", result)):
+                flt.set_image(name, image)
+            flt.execute()
+            times = []
+            for _ in range(2):
+                start = time.perf_counter()
+                flt.execute()
+                times.append(time.perf_counter() - start)
+            out[f"{size} {quality} ({dr.thread_count()} threads)"] = round(min(times), 3)
     return out
 
 
