@@ -34,9 +34,10 @@ def export(in_dir: Path, fmt: str, out_dir: Path | None, quality: int, exposure:
     """Write each EXR frame of IN_DIR as a PNG or JPEG, with the movies' view transform."""
     from motion.pipeline.telecine.export import export_images
 
-    done = export_images(in_dir, out_dir or Path(in_dir) / fmt, fmt, exposure=exposure, ocio_config=ocio_config,
-                         ocio_display=ocio_display, ocio_view=ocio_view, ocio_colorspace=ocio_colorspace,
-                         prefix=prefix, quality=quality)
+    from motion.pipeline.telecine.movie import ViewTransform
+
+    view = ViewTransform(exposure, ocio_config, ocio_display, ocio_view, ocio_colorspace)
+    done = export_images(in_dir, out_dir or Path(in_dir) / fmt, fmt, view=view, prefix=prefix, quality=quality)
     click.echo(f"wrote {len(done.paths)} {fmt.upper()} images to {done.out_dir} ({done.paths[0].name} .. {done.paths[-1].name}; {done.view})")
 
 
@@ -52,8 +53,10 @@ def view(in_dir: Path, out_path: Path | None, fmt: str, open_browser: bool, expo
     from motion.pipeline.telecine.export import export_images, write_flipbook
 
     page = out_path or Path(in_dir) / "flipbook" / "index.html"
-    done = export_images(in_dir, page.parent / "frames", fmt, exposure=exposure, ocio_config=ocio_config,
-                         ocio_display=ocio_display, ocio_view=ocio_view, ocio_colorspace=ocio_colorspace, prefix=prefix)
+    from motion.pipeline.telecine.movie import ViewTransform
+
+    view = ViewTransform(exposure, ocio_config, ocio_display, ocio_view, ocio_colorspace)
+    done = export_images(in_dir, page.parent / "frames", fmt, view=view, prefix=prefix)
     path = write_flipbook(done, page)
     click.echo(f"wrote {path} ({len(done.paths)} frames in {done.out_dir})")
     if open_browser:

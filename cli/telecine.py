@@ -55,7 +55,7 @@ def telecine(in_dir: Path, out_dir: Path, pattern: str | None, field_order: str 
         from motion.pipeline.telecine.movie import ViewTransform, choose_codec
 
         choose_codec(movie, codec)  # a bad extension or codec fails before any work
-        ViewTransform(exposure, ocio_config, ocio_display, ocio_view, ocio_colorspace)
+        view = ViewTransform(exposure, ocio_config, ocio_display, ocio_view, ocio_colorspace)
     elif ocio_config is not None or ocio_display or ocio_view or ocio_colorspace:
         raise UsageError("--ocio applies to the movie; give --movie FILE")
     with count_bar("telecine" if not inverse else "inverse telecine") as progress:
@@ -77,9 +77,8 @@ def telecine(in_dir: Path, out_dir: Path, pattern: str | None, field_order: str 
         from motion.pipeline.telecine.movie import sequence_movie
 
         with count_bar("movie") as progress:
-            path = sequence_movie(result.out_dir, movie, rate=result.rate, codec=codec, exposure=exposure,
-                                  ocio_config=ocio_config, ocio_display=ocio_display, ocio_view=ocio_view,
-                                  ocio_colorspace=ocio_colorspace, prefix=result.paths[0].name.rsplit(".", 2)[0], progress=progress)
+            path = sequence_movie(result.out_dir, movie, rate=result.rate, codec=codec, view=view,
+                                  prefix=result.paths[0].name.rsplit(".", 2)[0], progress=progress)
         click.echo(f"wrote {path}")
 
 
@@ -105,11 +104,9 @@ def contact_sheet(in_dir: Path, out_path: Path, thumb_width: int, columns: int |
     from motion.pipeline.telecine.movie import ViewTransform
     from motion.pipeline.telecine.sequence import discover
 
-    ViewTransform(exposure, ocio_config, ocio_display, ocio_view, ocio_colorspace)  # bad options first
+    view = ViewTransform(exposure, ocio_config, ocio_display, ocio_view, ocio_colorspace)  # bad options first
     seq = discover(in_dir, prefix, require_even_height=False, allow_gaps=True)
-    path = make_sheet(seq, out_path, thumb_width=thumb_width, columns=columns, max_frames=max_frames,
-                      exposure=exposure, ocio_config=ocio_config, ocio_display=ocio_display, ocio_view=ocio_view,
-                      ocio_colorspace=ocio_colorspace)
+    path = make_sheet(seq, out_path, thumb_width=thumb_width, columns=columns, max_frames=max_frames, view=view)
     missing = f", {len(seq.missing)} missing" if seq.missing else ""
     click.echo(f"wrote {path} ({len(seq)} frames{missing})")
 

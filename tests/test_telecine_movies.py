@@ -69,7 +69,7 @@ def test_60i_movie_decodes_interlaced(tmp_path: Path, order: str, suffix: str, c
 
 
 def test_24p_movie_progressive_and_view_transform(tmp_path: Path) -> None:
-    movie = sequence_movie(grey_seq(tmp_path / "in", 4), tmp_path / "p.mov", rate=Fraction(24000, 1001), exposure=1.0)
+    movie = sequence_movie(grey_seq(tmp_path / "in", 4), tmp_path / "p.mov", rate=Fraction(24000, 1001), view=ViewTransform(exposure=1.0))
     stream, frames = decode(movie)
     assert len(frames) == 4 and stream.average_rate == Fraction(24000, 1001)
     assert not frames[0].interlaced_frame and stream.field_order == AV_FIELD_PROGRESSIVE

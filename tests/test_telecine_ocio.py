@@ -85,7 +85,7 @@ def test_movie_and_contact_sheet_through_builtin_config(tmp_path: Path) -> None:
         # Every pixel of each field, within ~1.5 steps of ProRes' 10-bit video-range luma.
         assert np.abs(frame[0::2] - expected[top]).max() < 1.5e-3
         assert np.abs(frame[1::2] - expected[bottom]).max() < 1.5e-3
-    sheet = contact_sheet(tmp_path / "in", tmp_path / "s.png", thumb_width=32, columns=3, ocio_config=CONFIG)
+    sheet = contact_sheet(tmp_path / "in", tmp_path / "s.png", thumb_width=32, columns=3, view=ViewTransform(ocio_config=CONFIG))
     img = matplotlib.image.imread(sheet)
     y0 = 30 + 4
     for k in range(3):

@@ -13,16 +13,23 @@ from ..farm.report import write_report
 from .request import RenderRequest
 
 
+def deliver_view(req: RenderRequest) -> Any:
+    """The deliverables' `ViewTransform` from the request's exposure and OCIO options."""
+    from ..telecine.movie import ViewTransform
+
+    return ViewTransform(**{k: v for k, v in req.deliver_view.items() if v is not None})
+
+
 def check_deliver(req: RenderRequest, loaded: Any, frames: list[int], out_dir: Path, create: bool = True) -> None:
     """What `--deliver` would find wrong after the last frame, found before the first:
     format names, the view transform (OCIO config, display, view), interlaced formats on an
     odd height, a selection with gaps (the telecine needs a gapless sequence), the movie
     encoders, a deliver folder that cannot be created."""
     from ..telecine.deliver import parse_formats
-    from ..telecine.movie import CODECS, ViewTransform
+    from ..telecine.movie import CODECS
 
     wanted = parse_formats(req.deliver or "")
-    ViewTransform(**{k: v for k, v in req.deliver_view.items() if v is not None})
+    deliver_view(req)  # a bad OCIO config, display or view
     height = loaded.scene.render.resolution[1]
     interlaced = [f for f in wanted if f in ("60i", "50i")]
     if interlaced and height % 2:
@@ -53,7 +60,7 @@ def deliver_and_record(req: RenderRequest, out_dir: Path, report: dict[str, Any]
     (rewritten in place)."""
     from ..telecine.deliver import deliver, parse_formats
 
-    done = deliver(out_dir, out_dir / "deliver", parse_formats(req.deliver or ""), **{k: v for k, v in req.deliver_view.items() if v is not None})
+    done = deliver(out_dir, out_dir / "deliver", parse_formats(req.deliver or ""), view=deliver_view(req))
     record: dict[str, list[str]] = {}
     for fmt, paths in done.items():
         movies = [p for p in paths if p.suffix.lower() != ".exr"]

@@ -75,11 +75,7 @@ def contact_sheet(
     thumb_width: int = 240,
     columns: int | None = None,
     max_frames: int = 60,
-    exposure: float = 0.0,
-    ocio_config: str | Path | None = None,
-    ocio_display: str | None = None,
-    ocio_view: str | None = None,
-    ocio_colorspace: str | None = None,
+    view: ViewTransform | None = None,
     prefix: str | None = None,
 ) -> Path:
     """Write a PNG grid of the sequence in `in_dir` to `out_path` and return its path.
@@ -95,7 +91,7 @@ def contact_sheet(
         raise UsageError(f"{out_path}: the contact sheet is written as PNG (use a .png name)")
     if thumb_width < 8 or max_frames < 1:
         raise UsageError("thumbnail width must be >= 8 and max frames >= 1")
-    view = ViewTransform(exposure, ocio_config, ocio_display, ocio_view, ocio_colorspace)
+    view = view or ViewTransform()
     seq = in_dir if isinstance(in_dir, Sequence) else discover(in_dir, prefix, require_even_height=False,
                                                                allow_gaps=True)
     layout = sheet_layout(seq, max_frames)

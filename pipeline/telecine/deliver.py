@@ -47,10 +47,7 @@ def deliver(
     film_speed: str | Fraction = "23.976",
     drop_frame: bool = False,
     codec: str | None = None,
-    exposure: float = 0.0,
-    ocio_config: str | Path | None = None,
-    ocio_display: str | None = None,
-    ocio_view: str | None = None,
+    view: ViewTransform | None = None,
     prefix: str | None = None,
     overwrite: bool = False,
     report: Report | None = None,
@@ -64,8 +61,7 @@ def deliver(
     seq = discover(in_dir, prefix, require_even_height=any(f in ("60i", "50i") for f in wanted))
     out_dir = Path(out_dir)
     film = film_rate(film_speed)
-    view = dict(exposure=exposure, ocio_config=ocio_config, ocio_display=ocio_display, ocio_view=ocio_view)
-    ViewTransform(**view)  # a bad OCIO config or view fails before anything is written
+    view = view or ViewTransform()  # (a bad OCIO config or view failed when it was made)
     say = report or (lambda fmt, step: None)
     done: dict[str, list[Path]] = {}
     for fmt in wanted:
@@ -74,7 +70,7 @@ def deliver(
             movie = out_dir / f"{seq.prefix}_{fmt}{ext}"
             say(fmt, f"movie {movie}")
             done[fmt] = [sequence_movie(seq, movie, rate=film, field_order=None,
-                                        codec=codec if fmt == "24p" else "h264", **view)]
+                                        codec=codec if fmt == "24p" else "h264", view=view)]
         elif fmt in ("60i", "50i"):
             pat, speed = (pattern, film) if fmt == "60i" else ("2:2", Fraction(25))
             say(fmt, f"{pat} pulldown to {out_dir / fmt}")
@@ -83,9 +79,9 @@ def deliver(
                                     overwrite=overwrite, sequence=seq)
             movie = out_dir / f"{seq.prefix}_{fmt}.mov"
             say(fmt, f"movie {movie}")
-            done[fmt] = list(res.paths) + [sequence_movie(res.out_dir, movie, codec=codec, **view)]
+            done[fmt] = list(res.paths) + [sequence_movie(res.out_dir, movie, codec=codec, view=view)]
         elif fmt == "contact":
             sheet = out_dir / f"{seq.prefix}_contact.png"
             say(fmt, f"contact sheet {sheet}")
-            done[fmt] = [contact_sheet(seq.directory, sheet, prefix=seq.prefix, **view)]
+            done[fmt] = [contact_sheet(seq.directory, sheet, prefix=seq.prefix, view=view)]
     return done

@@ -62,11 +62,7 @@ def export_images(
     out_dir: str | Path,
     fmt: str = "png",
     *,
-    exposure: float = 0.0,
-    ocio_config: str | Path | None = None,
-    ocio_display: str | None = None,
-    ocio_view: str | None = None,
-    ocio_colorspace: str | None = None,
+    view: ViewTransform | None = None,
     prefix: str | None = None,
     quality: int = 92,
     progress: Progress | None = None,
@@ -77,7 +73,7 @@ def export_images(
         raise UsageError(f"--format: {fmt!r} is not one of {', '.join(FORMATS)}")
     if not 1 <= int(quality) <= 95:
         raise UsageError(f"--quality must be 1-95, got {quality}")
-    view = ViewTransform(exposure, ocio_config, ocio_display, ocio_view, ocio_colorspace)
+    view = view or ViewTransform()
     seq = discover(in_dir, prefix, require_even_height=False, allow_gaps=True)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -306,11 +306,7 @@ def sequence_movie(
     rate: Fraction | None = None,
     field_order: str | None = "auto",
     codec: str | None = None,
-    exposure: float = 0.0,
-    ocio_config: str | Path | None = None,
-    ocio_display: str | None = None,
-    ocio_view: str | None = None,
-    ocio_colorspace: str | None = None,
+    view: ViewTransform | None = None,
     prefix: str | None = None,
     progress: Progress | None = None,
 ) -> Path:
@@ -329,7 +325,6 @@ def sequence_movie(
         field_order = meta_order if meta_order in ("tff", "bff") else None
     if field_order and seq.height % 2:
         raise FrameIOError(f"{seq.paths[0]}: odd height {seq.height}; interlaced fields need an even number of rows")
-    view = ViewTransform(exposure, ocio_config, ocio_display, ocio_view, ocio_colorspace)
     frames = (read_checked(seq, i).rgba for i in range(len(seq)))
     return write_movie(
         path, frames, rate, width=seq.width, height=seq.height, codec=codec, field_order=field_order,
