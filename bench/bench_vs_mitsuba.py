@@ -1,6 +1,6 @@
 """Our warm frame against the engine's own speed: Mitsuba's `path` on the same frame (issue 10).
 
-    python bench/bench_vs_mitsuba.py [--quick] [--final] [--presets P,..] [--frames N] [--json FILE]
+    python bench/bench_vs_mitsuba.py [--quick] [--final] [--presets P,..] [--movers M,..] [--frames N] [--json FILE]
 
 For each case the bench shot of bench_render.py (100k-triangle terrain, constant +
 directional light, orbiting spheres) is rendered two ways, interleaved frame by frame in
@@ -116,6 +116,7 @@ def main() -> None:
     parser.add_argument("--final", action="store_true", help="also the final preset (1080p, 256 spp): minutes per frame")
     parser.add_argument("--presets", default="ci-smoke,preview", help="comma-separated presets for the mover and particle cases (default: ci-smoke,preview)")
     parser.add_argument("--frames", type=int, default=5, help="warm frames per case (median)")
+    parser.add_argument("--movers", help="comma-separated mover counts, only those cases (default: 0,1,4,16, the particles and blur off)")
     parser.add_argument("--json", type=Path, help="also write the figures as JSON")
     args = parser.parse_args()
     from motion.pipeline import variant
@@ -126,12 +127,13 @@ def main() -> None:
     unknown = [p for p in presets if p not in PRESETS or p == "final"]
     if unknown:
         parser.error(f"--presets takes ci-smoke and/or preview (the final preset is --final), not {', '.join(unknown)}")
+    only = [int(m) for m in args.movers.split(",")] if args.movers else None
     for preset in presets:
-        for movers in (0, 4) if args.quick else (0, 1, 4, 16):
+        for movers in only or ((0, 4) if args.quick else (0, 1, 4, 16)):
             cases.append((preset, movers, 0, "stochastic"))
-        if not args.quick:
+        if not args.quick and only is None:
             cases.append((preset, 0, 10_000, "stochastic"))
-    if "preview" in presets:
+    if "preview" in presets and only is None:
         cases.append(("preview", 4, 0, "off"))
     if args.final:
         cases += [("final", 0, 0, "stochastic"), ("final", 4, 0, "stochastic")]
@@ -152,7 +154,7 @@ def main() -> None:
                 f"{b['path_kernel_ms']:.0f} | {b['film_and_other_kernels_ms']:.0f} | {b['python_and_rest_ms']:.0f} |",
                 flush=True,
             )
-    if "preview" in presets:
+    if "preview" in presets and only is None:
         blurred = next(r for r in rows if r["preset"] == "preview" and r["movers"] == 4 and r["blur"] == "stochastic")
         still = next(r for r in rows if r["preset"] == "preview" and r["movers"] == 4 and r["blur"] == "off")
         # each side divided by the twin measured beside it, so that machine noise between the

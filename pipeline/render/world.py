@@ -61,11 +61,13 @@ class World:
         best = dr.zeros(mi.PreliminaryIntersection3f)
         for index, (mover, pose) in enumerate(zip(self.movers, poses)):
             near = may_hit(spheres[index], ray, active)
-            pi = mover.ray_intersect_preliminary(pose.ray_to_rest(ray), coherent=False, active=near)
-            closer = active & pi.is_valid() & (pi.t < nearest)
-            best = dr.select(closer, pi, best)
-            nearest = dr.select(closer, pi.t, nearest)
-            hit_mover = dr.select(closer, mi.UInt32(index), hit_mover)
+
+            def visit(best: Any, nearest: Any, hit_mover: Any, mover: Any = mover, pose: Pose = pose, near: Any = near, index: int = index) -> tuple[Any, Any, Any]:
+                pi = mover.ray_intersect_preliminary(pose.ray_to_rest(ray), coherent=False, active=near)
+                closer = near & pi.is_valid() & (pi.t < nearest)
+                return dr.select(closer, pi, best), dr.select(closer, pi.t, nearest), dr.select(closer, mi.UInt32(index), hit_mover)
+
+            best, nearest, hit_mover = _if_any(near, visit, (best, nearest, hit_mover))
         if self.movers:
             won = active & (hit_mover < len(self.movers))
             pose = select_pose(hit_mover, poses)
@@ -82,5 +84,18 @@ class World:
                 hit |= slice_scene.ray_test(ray, active & ~hit & (k == s))
         for index, (mover, pose) in enumerate(zip(self.movers, poses)):
             near = may_hit(spheres[index], ray, active & ~hit)
-            hit |= mover.ray_test(pose.ray_to_rest(ray), near)
+
+            def test(hit: Any, mover: Any = mover, pose: Pose = pose, near: Any = near) -> Any:
+                return hit | mover.ray_test(pose.ray_to_rest(ray), near)
+
+            hit = _if_any(near, test, (hit,))
         return hit
+
+
+def _if_any(cond: Any, body: Any, state: tuple[Any, ...]) -> Any:
+    """`body(*state)` where `cond` holds, else the state unchanged, as a symbolic branch:
+    on the LLVM backend a packet of lanes none of which meets the mover's bounding sphere
+    jumps over the mover's rest-frame ray, its BVH call and the selects, so a frame pays
+    for the movers its rays can hit, not for every mover on every ray (masked lanes alone
+    would still compute all of it). The values are those of the masked code, bit for bit."""
+    return dr.if_stmt(state, cond, body, lambda *unchanged: unchanged if len(unchanged) > 1 else unchanged[0], label="mover")
