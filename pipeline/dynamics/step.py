@@ -266,7 +266,7 @@ class Rows:
         self.k += 1
 
     def extend(self, rows: np.ndarray) -> None:
-        """Keep K records ([K, ...], or one row broadcast to K with `count`)."""
+        """Keep K records ([K, ...]; a broadcast view is fine)."""
         self._room(len(rows))
         self.data[self.k : self.k + len(rows)] = rows
         self.k += len(rows)
