@@ -231,13 +231,15 @@ def posed_spheres(data: FrameData, poses: Sequence[Pose], active: Any) -> list[t
     return out
 
 
-def may_hit(sphere: tuple[Any, Any], ray: Any, active: Any) -> Any:
-    """Whether the ray's segment [0, maxt] meets a posed bounding sphere (`posed_spheres`)."""
+def may_hit(sphere: tuple[Any, Any], ray: Any, active: Any, maxt: Any = None) -> Any:
+    """Whether the ray's segment [0, maxt] (default: the ray's own maxt) meets a posed
+    bounding sphere (`posed_spheres`)."""
     centre, r2 = sphere
+    maxt = ray.maxt if maxt is None else maxt
     oc = ray.o - centre
     a = dr.squared_norm(ray.d)
     b = dr.dot(oc, ray.d)
     disc = dr.square(b) - a * (dr.squared_norm(oc) - r2)
     root = dr.safe_sqrt(disc)
     # the segment [0, maxt] meets the sphere: roots (-b -+ root) / a straddle some of it
-    return active & (disc >= 0) & (-b + root >= 0) & (-b - root <= ray.maxt * a)
+    return active & (disc >= 0) & (-b + root >= 0) & (-b - root <= maxt * a)

@@ -60,10 +60,13 @@ class World:
         nearest = dr.select(si.is_valid(), si.t, dr.inf)
         best = dr.zeros(mi.PreliminaryIntersection3f)
         for index, (mover, pose) in enumerate(zip(self.movers, poses)):
-            near = may_hit(spheres[index], ray, active)
+            # only up to the nearest hit so far: a mover whose sphere lies beyond it cannot be closer
+            near = may_hit(spheres[index], ray, active, nearest)
 
             def visit(best: Any, nearest: Any, hit_mover: Any, mover: Any = mover, pose: Pose = pose, near: Any = near, index: int = index) -> tuple[Any, Any, Any]:
-                pi = mover.ray_intersect_preliminary(pose.ray_to_rest(ray), coherent=False, active=near)
+                local = pose.ray_to_rest(ray)
+                local.maxt = dr.minimum(local.maxt, nearest)
+                pi = mover.ray_intersect_preliminary(local, coherent=False, active=near)
                 closer = near & pi.is_valid() & (pi.t < nearest)
                 return dr.select(closer, pi, best), dr.select(closer, pi.t, nearest), dr.select(closer, mi.UInt32(index), hit_mover)
 
