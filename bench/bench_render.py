@@ -149,9 +149,10 @@ def cold_empty_caches(folder: Path) -> dict[str, object]:
     return out
 
 
-def fpm_figures(folder: Path, preset_args: list[str], frames: int, label: str) -> dict[str, float]:
-    """2. frames/min: one cached worker vs a fresh process per frame (the naive farm)."""
-    scene = shot(folder, movers=4, last=frames)
+def fpm_figures(folder: Path, preset_args: list[str], frames: int, label: str, scene: Path | None = None) -> dict[str, float]:
+    """2. frames/min: one cached worker vs a fresh process per frame (the naive farm), on
+    the bench shot or on `scene` (frames 0 .. frames-1)."""
+    scene = scene or shot(folder, movers=4, last=frames)
     out = folder / f"fpm-{label}"
     t0 = time.perf_counter()
     subprocess.run([MOTION, "render", str(scene), *preset_args, "--frames", f"0-{frames - 1}", "--workers", "1", "--no-progress", "-o", str(out / "cached")], check=True, capture_output=True)
@@ -295,7 +296,16 @@ def memory(folder: Path, frames: int) -> dict[str, object]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="fewer frames (a smoke run of the benchmark)")
+    parser.add_argument("--fpm-shot", type=Path, help="only figure 2, on this scene at its own settings (e.g. scenes/cannonball-splash.yaml, the make render shot)")
+    parser.add_argument("--fpm-frames", type=int, default=24, help="frames for --fpm-shot (default 24)")
     args = parser.parse_args()
+    if args.fpm_shot is not None:
+        from _common import cpu_model
+
+        with tempfile.TemporaryDirectory() as tmp:
+            figures = fpm_figures(Path(tmp), [], args.fpm_frames, "shot", args.fpm_shot.resolve())
+        print(json.dumps({"cpu": cpu_model(), "shot": str(args.fpm_shot), "2_frames_per_minute": figures}, indent=1))
+        return 0
     from motion.pipeline import variant
 
     choice = variant.activate("auto", quiet=True)

@@ -35,6 +35,9 @@ def bake(scene: Path, output: Path, frames: str | None, preset: str | None) -> N
         f"{s['lights']} lights, {s['deforming']} deforming, {s['particle_systems']} particle systems "
         f"({time.perf_counter() - t0:.2f} s)"
     )
+    if output.suffix.lower() == ".json" and (s["deforming"] or s["particle_systems"]):
+        click.echo(f"note: JSON carries rigid poses only: the deforming meshes and particle systems are not in {output}; "
+                   "bake to .npz to render them with --motion", err=True)
 
 
 commands = [bake]

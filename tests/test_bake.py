@@ -214,12 +214,16 @@ def test_read_baked_returns_the_records_that_were_written(tmp_path: Path) -> Non
         assert (back.scene, back.fps, back.shutter_angle, back.shutter_position) == (baked.scene, baked.fps, baked.shutter_angle, baked.shutter_position)
         assert [f.frame for f in back.frames] == [0, 5] and back.samples_per_frame == 9
         assert fingerprint(back.frames) == fingerprint(baked.frames), ext
-    flock = load_scene(SCENES / "flock.yaml", {"render": {"shutter_samples": 3}})
-    fb = bake(flock, [2])
-    back = read_baked(write_baked(fb, tmp_path / "f.npz")).frame(2)
-    assert list(back.across_shutter.vertices) == ["darts"]
-    np.testing.assert_array_equal(back.across_shutter.vertices["darts"], fb.frame(2).across_shutter.vertices["darts"])
-    assert back.at_frame.vertices == {}  # not in the file (docs/bake-format.md)
+    # NPZ: a deforming mesh's vertices and a particle system, at the frame and across the
+    # shutter, come back bit for bit (every leaf: the fingerprint)
+    for name, objs in (("flock", ["darts"]), ("cannonball-splash", ["splash", "crown"])):
+        loaded = load_scene(SCENES / f"{name}.yaml", {"render": {"shutter_samples": 3}})
+        fb = bake(loaded, [2, 40])
+        back = read_baked(write_baked(fb, tmp_path / f"{name}.npz"))
+        assert fingerprint(back.frames) == fingerprint(fb.frames), name
+        heavy = "vertices" if name == "flock" else "particles"
+        for f in back.frames:
+            assert sorted(getattr(f.at_frame, heavy)) == sorted(objs) == sorted(getattr(f.across_shutter, heavy))
 
 
 def test_read_baked_refuses_a_broken_frame(tmp_path: Path) -> None:
@@ -235,11 +239,19 @@ def test_read_baked_refuses_a_broken_frame(tmp_path: Path) -> None:
         read_baked(tmp_path / "m.json")
 
 
-def test_farm_motion_file_refuses_nonrigid_scenes_and_says_why(tmp_path: Path) -> None:
+def test_farm_motion_file_takes_nonrigid_scenes_from_npz_only(tmp_path: Path) -> None:
+    from motion.pipeline.bake import fingerprint
     from motion.pipeline.errors import UsageError
     from motion.pipeline.farm.motion_source import file_inputs
 
     flock = load_scene(SCENES / "flock.yaml", {"render": {"shutter_samples": 3}})
-    path = write_baked(bake(flock, [2]), tmp_path / "f.npz")
-    with pytest.raises(UsageError, match="frame-time geometry a bake file does not carry"):
-        file_inputs(flock, path, [2])
+    baked = bake(flock, [2, 3])
+    frames = file_inputs(flock, write_baked(baked, tmp_path / "f.npz"), [3])
+    assert fingerprint(frames) == fingerprint([baked.frame(3)])  # what the farm renders: the bake's own
+    with pytest.raises(UsageError, match=r"whose geometry a JSON bake does not carry; bake to \.npz"):
+        file_inputs(flock, write_baked(baked, tmp_path / "f.json"), [3])
+    # an NPZ without the frame-time geometry (as written before it was carried) is refused
+    arrays = dict(np.load(tmp_path / "f.npz"))
+    np.savez_compressed(tmp_path / "old.npz", **{k: v for k, v in arrays.items() if not k.startswith("at_frame/vertices/")})
+    with pytest.raises(UsageError, match="no frame-time geometry for darts"):
+        file_inputs(flock, tmp_path / "old.npz", [3])

@@ -1,5 +1,5 @@
 """Bake files: `write_baked` stores a BakedMotion as JSON (readable; rigid transforms
-and scalars) or NPZ (also vertex arrays and particles across the shutter), and
+and scalars) or NPZ (also vertex arrays and particles, at the frame and across the shutter), and
 `read_baked` is the one reader: it returns the same typed, validated records
 (docs/bake-format.md)."""
 
@@ -99,11 +99,12 @@ def write_baked(baked: BakedMotion, path: str | Path) -> Path:
                 "sample_times": np.stack([f.sample_times for f in baked.frames]),
             }
             per_frame = [_motion_arrays(f.across_shutter, "samples", True) for f in baked.frames]
-            at_frame = [_motion_arrays(f.at_frame, "at_frame", False) for f in baked.frames]
+            at_frame = [_motion_arrays(f.at_frame, "at_frame", True) for f in baked.frames]
             for rows in (per_frame, at_frame):
                 for key in rows[0]:
                     stacked = np.stack([r[key] for r in rows])
-                    arrays[key] = stacked[:, 0] if key.startswith("at_frame/") else stacked
+                    # at_frame values drop their time axis of 1 (particle ids have none)
+                    arrays[key] = stacked[:, 0] if key.startswith("at_frame/") and not key.endswith("/ids") else stacked
             with open(tmp, "wb") as fh:
                 np.savez_compressed(fh, **arrays)
         tmp.replace(path)
@@ -201,8 +202,8 @@ def read_baked(path: str | Path) -> BakedMotion:
     checked (finite times, poses finite with unit rotations, shapes matching the header's
     samples_per_frame). Raises BakeFileError naming the file (and the frame) on a bad one.
 
-    JSON carries no vertices or particles; NPZ carries them across the shutter (not at the
-    frame time, docs/bake-format.md)."""
+    JSON carries no vertices or particles; NPZ carries them at the frame time and across
+    the shutter (docs/bake-format.md)."""
     path = Path(path)
     doc = read_document(path)
     try:
@@ -287,7 +288,7 @@ def _check_frame(frame: BakedFrame, samples: int, path: Path) -> None:
 
 def _npz_records(arrays: dict[str, np.ndarray]) -> list[dict[str, Any]]:
     """The NPZ layout (stacked over frames) as the JSON layout, one record per frame;
-    vertices and particles (samples only) nest like the rest."""
+    vertices and particles nest like the rest."""
     out = []
     for k, f in enumerate(arrays["frames"]):
         rec: dict[str, Any] = {"frame": int(f), "time": float(arrays["times"][k]), "shutter": arrays["shutter"][k], "at_frame": {}, "samples": {}}

@@ -50,18 +50,25 @@ def file_inputs(loaded: LoadedScene, path: str | Path, frames: Sequence[int]) ->
 
     path = Path(path)
     nonrigid = [o.name for o in loaded.scene.objects if o.shape == "particles" or getattr(o, "deform", None) is not None]
-    if nonrigid:
-        # JSON carries rigid poses only; NPZ carries vertices and particles across the
-        # shutter but not at the frame time, which the renderer needs (docs/bake-format.md)
+    if nonrigid and path.suffix.lower() != ".npz":
+        # JSON carries rigid poses only (docs/bake-format.md)
         raise UsageError(
             f"--motion {path}: {loaded.name} has particle systems or deforming meshes ({', '.join(nonrigid)}), "
-            "whose frame-time geometry a bake file does not carry; render without --motion so they are baked here"
+            "whose geometry a JSON bake does not carry; bake to .npz (motion bake SCENE -o motion.npz)"
         )
     try:
         baked = read_baked(path)
     except BakeFileError as exc:
         raise BakeFileError(f"--motion {exc}") from None
     _check_meta(baked, loaded, path)
+    if nonrigid and baked.frames:
+        first = baked.frames[0].at_frame
+        lacking = [n for n in nonrigid if n not in first.vertices and n not in first.particles]
+        if lacking:
+            raise UsageError(
+                f"--motion {path}: it has no frame-time geometry for {', '.join(lacking)} "
+                "(an NPZ from before the bake carried it); bake it again with this version"
+            )
     by_frame = {f.frame: f for f in baked.frames}
     missing = [f for f in frames if f not in by_frame]
     if missing:
