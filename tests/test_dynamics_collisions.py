@@ -163,3 +163,30 @@ def test_ball_at_rest_is_held_through_coasts_as_stepping_leaves_it(tmp_path, mon
     np.testing.assert_allclose(fast.x, slow.x, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(fast.contact, slow.contact)
     assert fast.contact[-1, 0] and np.all(fast.x[fast.times > 2.0, 0, 1] == 0.1)  # at rest, on the floor
+
+
+def test_mesh_collider_edges_and_corners_are_rounded(tmp_path):
+    # a roof of two faces meeting at a ridge, and a pyramid's apex: a ball dropped on the
+    # ridge or the apex lands on it (faces alone let it pass between them and fall through)
+    (tmp_path / "tent.obj").write_text("v -1 0 -2\nv 0 1 -2\nv 0 1 2\nv -1 0 2\nv 1 0 -2\nv 1 0 2\nf 1 2 3 4\nf 2 5 6 3\n")
+    (tmp_path / "pyramid.obj").write_text("v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nv 0 1 0\nf 1 2 5\nf 2 3 5\nf 3 4 5\nf 4 1 5\n")
+    dyn = {"integrator": "semi-implicit-euler", "step": 0.002}
+    for mesh in ("tent", "pyramid"):
+        solid = {"name": mesh, "shape": "mesh", "file": f"{mesh}.obj", "collider": {"restitution": 0.0}}
+        on_top = run(tmp_path, [ball("b", 2.0, restitution=0.0), solid, floor(y=-1.0)], 1.0, dyn, name=f"{mesh}_top").bodies
+        np.testing.assert_allclose(on_top.x[-1, 0], [0.0, 1.1, 0.0], atol=1e-9)  # balanced on the ridge / apex
+    # just off the ridge it rolls down the +x side, never closer to the roof than its radius
+    tent = {"name": "tent", "shape": "mesh", "file": "tent.obj", "collider": {"restitution": 0.0}}
+    tr = run(tmp_path, [ball("b", 2.0, x=0.02, restitution=0.0), tent, floor(y=-1.0)], 1.5, dyn, name="tent_off").bodies
+    x, y = tr.x[:, 0, 0], tr.x[:, 0, 1]
+
+    def to_segment(a: tuple[float, float], b: tuple[float, float]) -> np.ndarray:
+        # the roof's cross-section is the polyline (-1, 0) - (0, 1) - (1, 0): distance in x, y
+        (ax, ay), (bx, by) = a, b
+        u = np.clip(((x - ax) * (bx - ax) + (y - ay) * (by - ay)) / ((bx - ax) ** 2 + (by - ay) ** 2), 0.0, 1.0)
+        return np.hypot(x - ax - u * (bx - ax), y - ay - u * (by - ay))
+
+    clearance = np.minimum(to_segment((-1, 0), (0, 1)), to_segment((0, 1), (1, 0)))
+    assert clearance.min() >= 0.1 - 1e-6
+    assert (clearance < 0.1 + 1e-6).sum() > 100  # it rolled on the roof, in contact
+    assert x[-1] > 1.0 and y[-1] == pytest.approx(-0.9, abs=1e-9)  # off the eave, onto the floor

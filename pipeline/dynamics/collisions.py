@@ -5,8 +5,9 @@ Scheme (one step, after the integrator moved every body from (x0, v0) to (x1, v1
 1. Sweep. Each body's centre moves along the segment x0 -> x1; a static collider is
    inflated by the body's radius, so the segment against the inflated shape gives the
    time of impact s in [0, 1] (plane: linear; sphere: quadratic; box: slab test; mesh:
-   per triangle plane + barycentric test). A body that crosses a surface within one step
-   is caught wherever it ends: nothing tunnels, whatever the speed.
+   per triangle plane + barycentric test, then the cylinders about its edges and the
+   spheres about its vertices). A body that crosses a surface within one step is caught
+   wherever it ends: nothing tunnels, whatever the speed.
 2. Resolve (static collider): at the contact, v_c = v0 + s (v1 - v0) is the velocity and
    n the unit normal towards the body. Restitution eps = min(eps_body, eps_collider);
    below a resting speed v_rest = 2 |g| h the contact is treated as resting (eps = 0).
@@ -221,8 +222,13 @@ class BoxCollider(Collider):
 
 @dataclass
 class MeshCollider(Collider):
-    """A triangle mesh in world space ([m, 3, 3]); two-sided. Contacts are found against
-    each triangle's face (centre over the triangle); edges and vertices are not rounded."""
+    """A triangle mesh in world space ([m, 3, 3]); two-sided. A body's sphere is swept
+    against each triangle's face (centre over the triangle), each edge (the cylinder of
+    radius r about the segment) and each vertex (the sphere of radius r about it): the
+    mesh grown by r with rounded edges and corners, so a ball dropped on a ridge or a
+    corner lands on it instead of passing between the faces. Faces win ties with the
+    edges and vertices they border (a ball on a flat mesh over an inner edge has the
+    face's normal)."""
 
     triangles: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
 
@@ -240,6 +246,16 @@ class MeshCollider(Collider):
         d01 = np.einsum("ij,ij->i", self._e1, self._e2)
         d11 = np.einsum("ij,ij->i", self._e2, self._e2)
         self._dots = (d00, d01, d11, d00 * d11 - d01 * d01)
+        # each edge and vertex once (shared by neighbouring triangles), by exact coordinates
+        points, index = np.unique(self.triangles.reshape(-1, 3), axis=0, return_inverse=True)
+        corners = index.reshape(-1, 3)
+        pairs = np.sort(np.concatenate([corners[:, [0, 1]], corners[:, [1, 2]], corners[:, [2, 0]]]), axis=1)
+        pairs = np.unique(pairs, axis=0) if len(pairs) else pairs.reshape(0, 2)
+        self._vertices = points
+        self._edge_p = points[pairs[:, 0]]
+        edge = points[pairs[:, 1]] - self._edge_p
+        self._edge_len = np.linalg.norm(edge, axis=1)
+        self._edge_dir = edge / np.where(self._edge_len > 0, self._edge_len, 1.0)[:, None]
 
     def sweep(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
         """Segments against every triangle's face grown by r; the earliest hit counts."""
@@ -247,10 +263,16 @@ class MeshCollider(Collider):
         m = len(self.triangles)
         if m == 0 or len(x0) == 0:
             return out
-        chunk = max(1, _MESH_CHUNK // m)
+        chunk = max(1, _MESH_CHUNK // (m + len(self._edge_p) + len(self._vertices)))
         for lo in range(0, len(x0), chunk):
             sl = slice(lo, lo + chunk)
             h = self._sweep_chunk(x0[sl], x1[sl], r[sl])
+            for other in (self._sweep_edges(x0[sl], x1[sl], r[sl]), self._sweep_vertices(x0[sl], x1[sl], r[sl])):
+                first = other.hit & (~h.hit | (other.s < h.s))  # strictly earlier: faces win ties
+                h.hit |= first
+                h.s = np.where(first, other.s, h.s)
+                h.normal = np.where(first[:, None], other.normal, h.normal)
+                h.depth0 = np.where(first, other.depth0, h.depth0)
             out.hit[sl], out.s[sl], out.normal[sl], out.depth0[sl] = h.hit, h.s, h.normal, h.depth0
         return out
 
@@ -282,6 +304,88 @@ class MeshCollider(Collider):
         hit = np.isfinite(key[rows, best])
         normal = side[rows, best][:, None] * n_t[best]
         return Hits(hit, s[rows, best], normal, np.maximum(-d0[rows, best], 0.0))
+
+    def _sweep_edges(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
+        """The centres' segments against the cylinders of radius r about the edges: the
+        distance to the edge's line, |m + s n|, with the parts of (x0 - p) and of the step d
+        across the edge, reaches r where a s^2 + b s + c = 0; the contact counts where the
+        centre is then alongside the edge (beyond its ends is a vertex's) and the segment
+        runs inside the cylinder for more than TOL (as sphere colliders). Only the (body,
+        edge) pairs whose bounding spheres meet are tested (`_near_pairs`)."""
+        e_all, length_all = self._edge_dir, self._edge_len
+        bi, ei = _near_pairs(x0, x1, r, self._edge_p + 0.5 * length_all[:, None] * e_all, 0.5 * length_all)
+        if bi.size == 0:
+            return _no_hits(len(x0))
+        e, p, length = e_all[ei], self._edge_p[ei], length_all[ei]
+        w0 = x0[bi] - p
+        d = x1[bi] - x0[bi]
+        along0 = np.einsum("ik,ik->i", w0, e)
+        along_d = np.einsum("ik,ik->i", d, e)
+        m = w0 - along0[:, None] * e
+        n = d - along_d[:, None] * e
+        a = np.einsum("ik,ik->i", n, n)
+        b = 2.0 * np.einsum("ik,ik->i", m, n)
+        mm = np.einsum("ik,ik->i", m, m)
+        c = mm - r[bi] ** 2
+        disc = b * b - 4.0 * a * c
+        root = np.sqrt(np.maximum(disc, 0.0))
+        a_safe = np.where(a > 0, a, 1.0)
+        s_in = (-b - root) / (2.0 * a_safe)
+        s_out = (-b + root) / (2.0 * a_safe)
+        inside = c < 0
+        entering = (~inside) & (a > 0) & (disc > 0) & (b < 0) & (s_in >= 0) & (s_in < 1) & ((np.minimum(s_out, 1.0) - s_in) * np.sqrt(a) > TOL)
+        s = np.where(inside, 0.0, np.clip(s_in, 0.0, 1.0))
+        along = along0 + s * along_d
+        valid = (inside | entering) & (along >= 0) & (along <= length)
+        centre = x0[bi] + s[:, None] * d
+        normal = _unit_or_up(centre - (p + along[:, None] * e))
+        depth0 = np.where(inside, r[bi] - np.sqrt(mm), 0.0)
+        return _earliest(len(x0), bi, valid, s, normal, depth0)
+
+    def _sweep_vertices(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
+        """The centres' segments against the spheres of radius r about the vertices (only
+        the pairs whose bounding spheres meet)."""
+        bi, vi = _near_pairs(x0, x1, r, self._vertices, np.zeros(len(self._vertices)))
+        if bi.size == 0:
+            return _no_hits(len(x0))
+        hits = _sweep_spheres(x0[bi] - self._vertices[vi], x1[bi] - self._vertices[vi], r[bi])
+        return _earliest(len(x0), bi, hits.hit, hits.s, hits.normal, hits.depth0)
+
+
+def _near_pairs(x0: np.ndarray, x1: np.ndarray, r: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(body, feature) index pairs whose bounding spheres meet: the body's segment grown by
+    its radius (about the segment's middle) and the feature's (an edge's about its
+    middle, a vertex's of radius 0), with a margin far above rounding."""
+    if len(centres) == 0 or len(x0) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    mid = 0.5 * (x0 + x1)
+    reach = 0.5 * np.linalg.norm(x1 - x0, axis=1) + r
+    # |mid - c|^2 by its expansion (one matrix product), checked with a margin
+    d2 = np.einsum("ij,ij->i", mid, mid)[:, None] - 2.0 * (mid @ centres.T) + np.einsum("ij,ij->i", centres, centres)[None, :]
+    scale = 1.0 + float(np.abs(mid).max()) + float(np.abs(centres).max())
+    limit = reach[:, None] + radii[None, :] + 1e-6 * scale
+    return np.nonzero(d2 <= limit * limit)
+
+
+def _earliest(count: int, body: np.ndarray, valid: np.ndarray, s: np.ndarray, normal: np.ndarray, depth0: np.ndarray) -> Hits:
+    """Per body (of `count`), the earliest valid contact among its candidate pairs."""
+    out = _no_hits(count)
+    keep = np.flatnonzero(valid)
+    if keep.size == 0:
+        return out
+    order = keep[np.lexsort((s[keep], body[keep]))]  # by body, then by time of impact
+    first = order[np.unique(body[order], return_index=True)[1]]
+    who = body[first]
+    out.hit[who], out.s[who], out.normal[who], out.depth0[who] = True, s[first], normal[first], depth0[first]
+    return out
+
+
+def _unit_or_up(v: np.ndarray) -> np.ndarray:
+    """Rows of v made unit length; +Y where a row is zero (a centre exactly on an edge)."""
+    norm = np.linalg.norm(v, axis=1)
+    up = np.zeros_like(v)
+    up[:, 1] = 1.0
+    return np.where(norm[:, None] > 0, v / np.where(norm > 0, norm, 1.0)[:, None], up)
 
 
 @dataclass
