@@ -255,3 +255,8 @@ def test_farm_motion_file_takes_nonrigid_scenes_from_npz_only(tmp_path: Path) ->
     np.savez_compressed(tmp_path / "old.npz", **{k: v for k, v in arrays.items() if not k.startswith("at_frame/vertices/")})
     with pytest.raises(UsageError, match="no frame-time geometry for darts"):
         file_inputs(flock, tmp_path / "old.npz", [3])
+    # frame-time vertices that do not match the shutter samples' are a located error
+    arrays["at_frame/vertices/darts"] = arrays["at_frame/vertices/darts"][:, :-1]
+    np.savez_compressed(tmp_path / "bad.npz", **arrays)
+    with pytest.raises(BakeFileError, match=r"bad.npz: frame 2: the vertices of 'darts' at the frame time have shape"):
+        read_baked(tmp_path / "bad.npz")

@@ -284,6 +284,15 @@ def _check_frame(frame: BakedFrame, samples: int, path: Path) -> None:
         problems = motion_problems(motion)
         if problems:
             raise BakeFileError(f"{path}: frame {frame.frame}: {problems[0][2]}")
+    # the frame-time geometry must match the shutter samples' (the renderer stacks them)
+    at, across = frame.at_frame, frame.across_shutter
+    shapes = [(f"vertices of {n!r}", v.shape[1:], across.vertices[n].shape[1:] if n in across.vertices else None) for n, v in at.vertices.items()]
+    shapes += [(f"particles of {n!r}", (ps.positions.shape[1:], ps.alive.shape[1:], ps.ids.shape),
+                (across.particles[n].positions.shape[1:], across.particles[n].alive.shape[1:], across.particles[n].ids.shape) if n in across.particles else None)
+               for n, ps in at.particles.items()]
+    for what, at_shape, across_shape in shapes:
+        if at_shape != across_shape:
+            raise BakeFileError(f"{path}: frame {frame.frame}: the {what} at the frame time have shape {at_shape}, across the shutter {across_shape}")
 
 
 def _npz_records(arrays: dict[str, np.ndarray]) -> list[dict[str, Any]]:

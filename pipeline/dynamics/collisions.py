@@ -258,7 +258,8 @@ class MeshCollider(Collider):
         self._edge_dir = edge / np.where(self._edge_len > 0, self._edge_len, 1.0)[:, None]
 
     def sweep(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
-        """Segments against every triangle's face grown by r; the earliest hit counts."""
+        """Segments against the mesh grown by r (faces, edges, vertices); the earliest hit
+        counts."""
         out = _no_hits(len(x0))
         m = len(self.triangles)
         if m == 0 or len(x0) == 0:
