@@ -195,13 +195,9 @@ class System:
     def constant_acceleration(self) -> np.ndarray | None:
         """Each body's acceleration [n, 3] (m/s^2) when D's velocity part does not depend on
         the state or the time (uniform gravity only: no drag, fluids, fields, springs or
-        Newtonian gravity), else None. Pinned and inactive bodies are not masked here."""
-        env = self.env
-        if self._air_drag or env.fluids or env.force_field is not None or env.wind is not None:
-            return None
-        if (env.springs is not None and env.springs.count) or (env.newtonian is not None and self.n > 1):
-            return None
-        return self._gravity_acc
+        Newtonian gravity), else None. Pinned and inactive bodies are not masked here; the
+        array is the system's own (do not modify)."""
+        return self._gravity_acc if self._plain and not self._air_drag else None
 
     def moving(self) -> np.ndarray:
         """active and not pinned (cached until `active` is set again; do not modify)."""

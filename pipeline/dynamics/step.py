@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from . import forces
-from .collisions import Collider, ContactBodies, _sweep_spheres, resolve_pairs, resolve_static
+from .collisions import Collider, ContactBodies, Hits, _sweep_spheres, resolve_pairs, resolve_static
 from .guard import Guard
 from ..motion.pose import quat_exp, quat_mul
 from .integrators import Integrator
@@ -159,15 +159,19 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
         return contact, impacts
     p = system.props
     shaped = group.shapes.shaped() & moving if group.shapes is not None else np.zeros(system.n, dtype=bool)
-    # the first pass's sphere sweeps, done before anything else: most steps of a small
-    # system touch nothing, and then nothing more needs computing
-    first_hits = []
-    for col in group.colliders:
+
+    def sweep(col: Collider) -> Hits:
+        """The moving bodies' sphere sweeps against `col` (boxes and cylinders against
+        plane, box and sphere colliders: their true shape, below)."""
         hits = col.sweep(s0.x, s1.x, p.radius)
         hits.hit &= moving
         if true_shape_collider(col):
-            hits.hit &= ~shaped  # boxes and cylinders: their true shape, below
-        first_hits.append(hits)
+            hits.hit &= ~shaped
+        return hits
+
+    # the first pass's sphere sweeps, done before anything else: most steps of a small
+    # system touch nothing, and then nothing more needs computing
+    first_hits = [sweep(col) for col in group.colliders]
     if not shaped.any() and group.pairs[0].size == 0 and not any(h.hit.any() for h in first_hits):
         return contact, impacts
     inv_mass = np.where(moving, p.inv_mass, 0.0)
@@ -195,13 +199,7 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
                 if out.shape[1]:
                     impacts.append(np.stack((ctx.t + out[3] * ctx.dt, out[0], out[1], out[2], *out[4:7]), axis=1))
         for ci, col in enumerate(group.colliders):
-            if fresh:
-                hits = first_hits[ci]
-            else:
-                hits = col.sweep(s0.x, s1.x, p.radius)
-                hits.hit &= moving
-                if true_shape_collider(col):
-                    hits.hit &= ~shaped  # boxes and cylinders: their true shape, above
+            hits = first_hits[ci] if fresh else sweep(col)
             if not hits.hit.any():
                 continue
             found, fresh = True, False
