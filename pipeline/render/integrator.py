@@ -33,7 +33,7 @@ import numpy as np
 
 from . import aovs as aov_table
 from . import film
-from .poses import FrameData, Pose, bounding_spheres, posed_spheres
+from .poses import FrameData, Pose, posed_spheres
 from .world import World
 
 
@@ -117,7 +117,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
                 "light_t": (light_translation, (nl, n, 3)),
                 "light_q": (light_rotation, (nl, n, 4)),
                 "light_rgb": (light_color, (nl, 3)),
-                "mover_sphere": (bounding_spheres(self.world.movers), (m, 4)),
+                "mover_sphere": (self.world.bounding_spheres(), (m, 4)),
             }
         )
 

@@ -13,8 +13,9 @@ from typing import Any, Sequence
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
-from .poses import Pose, may_hit, select_pose
+from .poses import Pose, bounding_spheres, may_hit, select_pose
 
 
 class World:
@@ -24,11 +25,22 @@ class World:
         self.movers: list[mi.Scene] = []
         self.slices: list[list[mi.Scene]] = []  # per non-rigid object: one scene per shutter sample
         self.emissive: list[int] = []  # indices of movers that carry area emitters
+        self._spheres: tuple[list[tuple[float, ...]], np.ndarray] | None = None  # (boxes, spheres)
 
     def set_movers(self, movers: Sequence[mi.Scene]) -> None:
         """The rigid movers' rest-frame scenes (fixed for a job)."""
         self.movers = list(movers)
         self.emissive = [k for k, m in enumerate(self.movers) if len(m.emitters()) > 0]
+        self._spheres = None
+
+    def bounding_spheres(self) -> np.ndarray:
+        """The movers' rest-frame bounding spheres [M, 4] (`poses.bounding_spheres`), made
+        again only when a mover's box changed (a keyed scale): a mesh mover's sphere reads
+        its vertices, which a warm frame need not do."""
+        boxes = [tuple(np.array(b.min, dtype=float).ravel()) + tuple(np.array(b.max, dtype=float).ravel()) for b in (m.bbox() for m in self.movers)]
+        if self._spheres is None or self._spheres[0] != boxes:
+            self._spheres = (boxes, bounding_spheres(self.movers))
+        return self._spheres[1]
 
     def set_slices(self, groups: Sequence[Sequence[mi.Scene]]) -> None:
         """For each deforming object or particle system, one world-space scene per slice."""
