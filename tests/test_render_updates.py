@@ -98,3 +98,33 @@ render: {resolution: [32, 24], spp: 16, max_depth: 6, integrator: %s, motion_blu
     (direct_img,), _, r = render(load(tmp_path, room % "direct", "direct.yaml"), [0])
     assert r.max_depth == 2
     assert direct_img[..., :3].mean() < 0.9 * path_img[..., :3].mean()  # no interreflection
+
+
+def test_keyed_envmap_warm_frames_follow_without_reading_the_map_again(tmp_path: Path) -> None:
+    # an environment map whose scale is keyed: each warm frame takes the frame's scale,
+    # bit for bit what a cold render of that frame gives, from the pixels loaded on the
+    # cold frame (the map's file may be gone by then: it is not read again)
+    import numpy as np
+
+    sky = np.array([[1.0, 0.2, 0.1], [0.1, 0.9, 0.2], [0.2, 0.1, 1.0], [0.8, 0.8, 0.8]] * 2, dtype="<f4").reshape(2, 4, 3)
+    (tmp_path / "sky.pfm").write_bytes(b"PF\n4 2\n-1.0\n" + sky.tobytes())
+    scene = """
+timeline: {fps: 24, first: 0, last: 24}
+camera: {position: [0, 1, 3], look_at: [0, 0.5, 0], fov: 60}
+lights:
+  - {type: envmap, file: sky.pfm, scale: 1.0,
+     motion: {type: keyframes, channels: {scale: {keys: [{time: 0, value: 1.0}, {time: 24, value: 3.0}]}}}}
+materials: [{name: white, type: diffuse, color: 0.8}]
+objects:
+  - {name: floor, shape: rectangle, width: 4, height: 4, material: white, transform: {rotate: {euler: [-90, 0, 0]}}}
+render: {resolution: [32, 24], spp: 4, max_depth: 3, motion_blur: off}
+"""
+    loaded = load(tmp_path, scene)
+    (first,), _, renderer = render(loaded, [0])
+    (tmp_path / "sky.pfm").rename(tmp_path / "gone.pfm")
+    (warm,), stats, _ = render(loaded, [12], renderer=renderer)
+    assert any(k.endswith(".scale") for k in stats[0].updated_params) and stats[0].kernels_compiled == 0
+    (tmp_path / "gone.pfm").rename(tmp_path / "sky.pfm")
+    (cold,), _, _ = render(loaded, [12])
+    np.testing.assert_array_equal(warm, cold)
+    assert warm[..., :3].mean() > 1.5 * first[..., :3].mean()  # scale 2 at frame 12 against 1

@@ -129,11 +129,17 @@ class SceneCache:
 
     def _update_lights(self, fi: StackedFrame) -> list[str]:
         """Animated lights at the frame's time: build the light as it is now and copy its
-        parameters into the scene (opaque, so new values replay the same kernels)."""
+        parameters into the scene (opaque, so new values replay the same kernels). An
+        environment map is built around a 2x1 stand-in image: its pixels are never copied,
+        so a warm frame does not read and decode the map's file again."""
         dr, mi = self._dr, self._mi
         keys: list[str] = []
         for i, light in self.roles.animated_lights:
-            fresh = mi.traverse(load_dict(light_record(self.loaded, i, light, fi)))
+            record = light_record(self.loaded, i, light, fi)
+            if "filename" in record:
+                record = {k: v for k, v in record.items() if k != "filename"}
+                record["bitmap"] = mi.Bitmap(np.ones((1, 2, 3), dtype=np.float32))
+            fresh = mi.traverse(load_dict(record))
             prefix = light_key(i, light).replace(".", "_")
             for k in fresh.keys():
                 target = f"{prefix}.{k}"
