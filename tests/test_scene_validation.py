@@ -242,3 +242,28 @@ def test_bad_preset_reports_every_problem_with_lines(tmp_path: Path, capsys: pyt
         f"{preset}:3:3: render.resolutoin: unknown key 'resolutoin'; did you mean 'resolution'?",
         f"{preset}:4:14: frame_count: Input should be greater than or equal to 1 (got 0)",
     ]
+
+
+def test_a_shared_asset_is_decoded_once_and_reported_where_named(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # two materials name one broken texture: both fields are reported, the file decoded once
+    import motion.pipeline.images as images
+
+    calls: list[Path] = []
+    real = images.check_image
+
+    def counting(path: Path) -> tuple[int, int]:
+        calls.append(path)
+        return real(path)
+
+    monkeypatch.setattr(images, "check_image", counting)
+    (tmp_path / "t.png").write_text("not a png")
+    text = BASE.replace(
+        "  - {name: red, type: diffuse, color: [0.8, 0.1, 0.1]}",
+        "  - {name: red, type: diffuse, color: {file: t.png}}\n  - {name: blue, type: plastic, color: {file: t.png}}",
+    )
+    (tmp_path / "scene.yaml").write_text(text)
+    with pytest.raises(SceneError) as err:
+        load_scene(tmp_path / "scene.yaml")
+    message = str(err.value)
+    assert "materials[0].color.file" in message and "materials[1].color.file" in message
+    assert len(calls) == 1

@@ -156,7 +156,10 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
         if spring.a == spring.b:
             add(("dynamics", "springs", j), "a spring needs two different bodies")
 
-    # asset files: present, and (when `assets`) opened and decoded as the renderer will
+    # asset files: present, and (when `assets`) opened and decoded as the renderer will,
+    # each file once however many fields name it (its outcome is reported at each)
+    decoded: dict[tuple[Path, str], str | None] = {}
+
     def check_file(loc: "Loc", rel: str, kind: str) -> None:
         if not (base_dir / rel).is_file():
             if (base_dir / rel).exists():
@@ -166,17 +169,22 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
             return
         if not assets:
             return
-        try:
-            if kind == "mesh":
-                from ..meshes import load_mesh
+        key = ((base_dir / rel).resolve(), kind)
+        if key not in decoded:
+            decoded[key] = None
+            try:
+                if kind == "mesh":
+                    from ..meshes import load_mesh
 
-                load_mesh((base_dir / rel).resolve())
-            else:
-                from ..images import check_image
+                    load_mesh(key[0])
+                else:
+                    from ..images import check_image
 
-                check_image((base_dir / rel).resolve())
-        except AssetError as exc:
-            add(loc, f"{kind} file {rel}: {str(exc).split(': ', 1)[-1]}")
+                    check_image(key[0])
+            except AssetError as exc:
+                decoded[key] = str(exc).split(": ", 1)[-1]
+        if decoded[key] is not None:
+            add(loc, f"{kind} file {rel}: {decoded[key]}")
 
     for i, obj in enumerate(scene.objects):
         if isinstance(obj, Mesh):
