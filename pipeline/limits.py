@@ -11,7 +11,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Iterator
 
-from .errors import InputFileError, MotionError
+from .errors import InputFileError, MotionError, UsageError
 
 ErrorFor = Callable[[str], MotionError]  # the caller's own error from "FILE: reason"
 
@@ -84,3 +84,32 @@ def _read_bounded(path: str | Path, limit: int, what: str) -> bytes:
         raise InputFileError(str(path), f"{what} is over the limit of {limit} bytes")
     return data
 
+
+
+# Environment variables that size a worker's work (the README's table): name -> default.
+ENV_SIZES = {
+    "MOTION_MAX_LANES": 1 << 23,  # samples one render pass traces at once (render/film.py)
+    "MOTION_ASSET_CACHE_CAP": 2 * 1024**3,  # bytes of converted assets kept (render/assets.py)
+}
+
+
+def env_size(name: str) -> int:
+    """The positive integer in environment variable `name` (one of ENV_SIZES), its default
+    when unset or empty; anything else is a UsageError naming the variable."""
+    raw = os.environ.get(name, "").strip()
+    if not raw:
+        return ENV_SIZES[name]
+    try:
+        value = int(raw)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise UsageError(f"${name}: expected a positive whole number, got {raw!r}")
+    return value
+
+
+def check_env_sizes() -> None:
+    """Every ENV_SIZES variable readable, checked before any work (a bad one would
+    otherwise fail every frame in the workers)."""
+    for name in ENV_SIZES:
+        env_size(name)

@@ -379,3 +379,17 @@ def test_fuzz_structural_yaml_mutations(tmp_path: Path, text: str) -> None:
         load_preset(str(preset))
     except SceneError as err:
         assert err.problems
+
+
+@pytest.mark.parametrize("name", ["MOTION_MAX_LANES", "MOTION_ASSET_CACHE_CAP"])
+@pytest.mark.parametrize("value", ["abc", "0", "-5", "1e9"])
+def test_bad_sizing_environment_variable_is_one_line_before_any_work(tmp_path: Path, name: str, value: str) -> None:
+    from _support import run_motion
+
+    (tmp_path / "scene.yaml").write_text(BASE)
+    out = tmp_path / "out"
+    res = run_motion("render", str(tmp_path / "scene.yaml"), "--preset", "ci-smoke", "-o", str(out), env={name: value}, timeout=120)
+    assert res.returncode == 2, res.stderr
+    assert "Traceback" not in res.stderr
+    assert res.stderr.strip().splitlines()[-1] == f"error: ${name}: expected a positive whole number, got {value!r}"
+    assert not list(out.glob("*.exr"))  # refused before any frame

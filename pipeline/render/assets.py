@@ -16,9 +16,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..cache import cache_root
+from ..limits import env_size
 
 CONVERSION_VERSION = "ply-v1"
-DEFAULT_CAP_BYTES = 2 * 1024**3
 
 _stats_lock = threading.Lock()
 STATS = {"hits": 0, "misses": 0}
@@ -84,7 +84,7 @@ def info(folder: Path | None = None) -> CacheInfo:
 
 def enforce_cap(cap_bytes: int | None = None) -> int:
     """Delete least recently used assets until the folder is under the cap; returns bytes freed."""
-    cap = cap_bytes if cap_bytes is not None else int(os.environ.get("MOTION_ASSET_CACHE_CAP", DEFAULT_CAP_BYTES))
+    cap = cap_bytes if cap_bytes is not None else env_size("MOTION_ASSET_CACHE_CAP")
     folder = assets_dir()
     if not folder.is_dir():
         return 0

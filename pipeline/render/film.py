@@ -6,15 +6,14 @@ varies with the threads; sums of floats then differ in the last bit. Here a pixe
 samples are consecutive lanes, so for each reconstruction-filter offset a row gather
 (`row_sums`) adds one pixel's weighted samples in a fixed order, and the image gathers
 those sums offset by offset, also in a fixed order: no atomics anywhere. Large sample
-counts run as passes (see `MAX_LANES`), summed in pass order.
+counts run as passes (at most $MOTION_MAX_LANES lanes each), summed in pass order.
 
-Field rendering (telecine/field_render.py) sets `FIELD_ROWS` while a field renders: the
+Field rendering (render/fields.py) sets `FIELD_ROWS` while a field renders: the
 film then traces and returns only that field's rows.
 """
 
 from __future__ import annotations
 
-import os
 from typing import Any, Callable
 
 import drjit as dr
@@ -22,14 +21,14 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import SampleCountError
+from ..limits import env_size
 
-# At most this many sample lanes in flight per pass: per-sample colour, film position
-# and filter weights are kept for the film, about 80 bytes a lane (~0.7 GB a pass).
-# A 1080p frame at 256 spp is 531M lanes: it runs as passes of fewer samples per pixel.
-# ($MOTION_MAX_LANES overrides it: less memory per worker, more passes.)
-MAX_LANES = int(os.environ.get("MOTION_MAX_LANES", 1 << 23))
+# At most $MOTION_MAX_LANES (default 2^23, limits.ENV_SIZES) sample lanes are in flight
+# per pass: per-sample colour, film position and filter weights are kept for the film,
+# about 80 bytes a lane (~0.7 GB a pass). A 1080p frame at 256 spp is 531M lanes: it runs
+# as passes of fewer samples per pixel. A lower value: less memory per worker, more passes.
 
-# (row offset, row step) while a field is rendered (telecine/field_render.py sets it);
+# (row offset, row step) while a field is rendered (render/fields.py sets it);
 # None: every row
 FIELD_ROWS: tuple[int, int] | None = None
 
@@ -48,11 +47,11 @@ def render(sample: SampleFn, scene: mi.Scene, sensor: Any, seed: Any, spp: int) 
         raise SampleCountError(f"the film needs at least 1 sample per pixel, got {spp}")
     size = film.crop_size()
     width, height = int(size[0]), int(size[1])
-    # field rendering (telecine/field_render.py): only the rows offset, offset + 2, ...
+    # field rendering (render/fields.py): only the rows offset, offset + 2, ...
     offset, step = FIELD_ROWS if FIELD_ROWS is not None else (0, 1)
     out_h = (height - offset + step - 1) // step
     n_px = width * out_h
-    per_pass = max(1, min(spp, MAX_LANES // max(n_px, 1)))
+    per_pass = max(1, min(spp, env_size("MOTION_MAX_LANES") // max(n_px, 1)))
     total: list[Any] = []
     done, index = 0, 0
     while done < spp:

@@ -27,6 +27,7 @@ from ..farm.run import MAX_RETRIES, MAX_THREADS, MAX_WORKERS, default_workers, r
 from ..farm.scheduler import Scheduler
 from ..farm.task import TaskContext
 from ..frame_output import is_complete
+from ..limits import check_env_sizes
 from ..presets import Preset, load_preset, overrides_from, spread
 from ..render.job import RenderJob, expected_meta, frame_path, scene_hashes
 from ..scene.loader import LoadedScene, load_scene
@@ -127,6 +128,7 @@ def preflight(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: 
     from ..frame_output import inside
     from ..scene.checks import bake_budget_problems
 
+    check_env_sizes()  # $MOTION_MAX_LANES, $MOTION_ASSET_CACHE_CAP
     for flag, value, limit in (("--workers", req.workers, MAX_WORKERS), ("--threads", req.threads, MAX_THREADS), ("--retries", req.retries, MAX_RETRIES)):
         if value is not None and value > limit:
             raise UsageError(f"{flag} {value}: the limit is {limit}")
