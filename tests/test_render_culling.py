@@ -48,3 +48,38 @@ def test_a_grazing_ray_is_kept_and_a_near_miss_is_culled() -> None:
     hits = np.array(mover.ray_intersect_preliminary(ray).is_valid(), dtype=bool)
     assert hits.tolist() == [True, True, False, False]
     assert near.tolist() == [True, True, False, False]  # the box's sphere (0.87) kept 0.55 and 0.8
+
+
+def test_the_swept_sphere_holds_the_mover_at_every_time_of_the_shutter() -> None:
+    """world.py tests a ray against a mover's swept sphere before it poses the mover at
+    the ray's time: the sphere must hold the posed bounding sphere at every u, also for a
+    rest centre off the origin that swings through large rotations between samples."""
+    from motion.pipeline.motion.pose import quat_exp, quat_rotate
+    from motion.pipeline.render.poses import swept_spheres
+    from motion.pipeline.render.shutter_poses import resample
+
+    rng = np.random.default_rng(7)
+    n = 5
+    axis = np.array([0.3, 1.0, -0.4]) / np.linalg.norm([0.3, 1.0, -0.4])
+    q = quat_exp(np.outer(np.linspace(0.0, 4.0, n), axis))  # 1 rad between samples
+    t = np.cumsum(rng.normal(size=(n, 3)), axis=0) + [500.0, 0.0, 0.0]  # far from the origin
+    rest = np.array([[0.3, -0.2, 0.5, 0.4]])
+    swept = swept_spheres(t[None], q[None], rest)[0]
+    reach = 0.0
+    for u in np.linspace(0.0, 1.0, 801):
+        tt, qq = resample(t, q, float(u))
+        centre = quat_rotate(qq, rest[0, :3]) + tt
+        reach = max(reach, float(np.linalg.norm(centre - swept[:3])) + rest[0, 3])
+    assert reach <= swept[3]
+    assert swept[3] < 1.2 * reach  # and not much bigger than the path it holds
+
+
+def test_a_still_mover_sweeps_its_own_sphere() -> None:
+    from motion.pipeline.render.poses import swept_spheres
+
+    n = 9
+    t = np.tile([1.0, 2.0, 3.0], (1, n, 1))
+    q = np.tile([1.0, 0.0, 0.0, 0.0], (1, n, 1))
+    swept = swept_spheres(t, q, np.array([[0.0, 0.0, 0.0, 0.5]]))[0]
+    np.testing.assert_allclose(swept[:3], [1.0, 2.0, 3.0])
+    assert 0.5 < swept[3] < 0.5 * 1.001

@@ -33,7 +33,7 @@ import numpy as np
 
 from . import aovs as aov_table
 from . import film
-from .poses import FrameData, Pose, posed_spheres
+from .poses import FrameData, MoverTracks, Pose, swept_spheres
 from .world import World
 
 
@@ -106,6 +106,8 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             camera_rotation = camera_rotation_rel
         if light_translation is None:
             light_translation, light_rotation, light_color = np.zeros((0, n, 3)), np.zeros((0, n, 4)), np.zeros((0, 3))
+        rest_spheres = self.world.bounding_spheres()
+        swept = swept_spheres(mover_translation, mover_rotation, rest_spheres) if np.shape(mover_translation) == (m, n, 3) and np.shape(mover_rotation) == (m, n, 4) else np.zeros((m, 4))
         self.frame_data.set(
             {
                 "mover_t": (mover_translation, (m, n, 3)),
@@ -117,7 +119,8 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
                 "light_t": (light_translation, (nl, n, 3)),
                 "light_q": (light_rotation, (nl, n, 4)),
                 "light_rgb": (light_color, (nl, 3)),
-                "mover_sphere": (self.world.bounding_spheres(), (m, 4)),
+                "mover_sphere": (rest_spheres, (m, 4)),
+                "mover_swept": (swept, (m, 4)),
             }
         )
 
@@ -130,11 +133,10 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         si: Any,
         bsdf: Any,
         ctx: Any,
-        poses: list[Pose],
+        movers: MoverTracks,
         light_poses: list[Pose],
         k_slice: Any,
         active: Any,
-        spheres: list[tuple[Any, Any]],
     ) -> Any:
         """Direct light at si from the moving lights and the emitters on movers, each posed
         at the path's time: the reference point goes into the light's (or mover's) rest
@@ -148,27 +150,27 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             d = pose.vector_to_world(ds.d)
             shadow = si.spawn_ray(d) if kind == "directional" else si.spawn_ray_to(pose.point_to_world(ds.p))
             ok = active & (ds.pdf != 0.0)
-            ok &= ~self.world.occluded(scene, shadow, poses, ok, k_slice, spheres)
+            ok &= ~self.world.occluded(scene, shadow, movers, ok, k_slice)
             rgb = self.frame_data.vec("light_rgb", 3, mi.UInt32(index), ok)
             value = bsdf.eval(ctx, si, si.to_local(d), ok)
             L += dr.select(ok, value * weight * mi.Spectrum(rgb.x, rgb.y, rgb.z), 0.0)
         # area emitters on movers: sampled in the mover's rest frame, MIS against BSDF sampling
         for k in self.world.emissive:
-            pose = poses[k]
+            pose = movers.pose(k)
             ds, weight = self.world.movers[k].sample_emitter_direction(pose.interaction_to_rest(si), sampler.next_2d(), False, active)
             d = pose.vector_to_world(ds.d)
             ok = active & (ds.pdf != 0.0)
-            ok &= ~self.world.occluded(scene, si.spawn_ray_to(pose.point_to_world(ds.p)), poses, ok, k_slice, spheres)
+            ok &= ~self.world.occluded(scene, si.spawn_ray_to(pose.point_to_world(ds.p)), movers, ok, k_slice)
             value, bsdf_pdf = bsdf.eval_pdf(ctx, si, si.to_local(d), ok)
             mis = dr.select(ds.delta, 1.0, _mis(ds.pdf, bsdf_pdf))
             L += dr.select(ok, mis * value * weight, 0.0)
         return L
 
-    def _mover_emitter_pdf(self, ds: Any, ref: Any, hit_mover: Any, poses: list[Pose], pdf: Any, active: Any) -> Any:
+    def _mover_emitter_pdf(self, ds: Any, ref: Any, hit_mover: Any, movers: MoverTracks, pdf: Any, active: Any) -> Any:
         """The solid-angle pdf with which `_moving_light_terms` would have sampled the
         emitter that a BSDF-sampled ray hit on a mover (in the mover's rest frame)."""
         for k in self.world.emissive:
-            pose = poses[k]
+            pose = movers.pose(k)
             mine = active & (hit_mover == k)
             local = pose.direction_sample_to_rest(ds)
             pdf = dr.select(mine, self.world.movers[k].pdf_emitter_direction(pose.interaction_to_rest(ref), local, mine), pdf)
@@ -187,16 +189,18 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             x, y = local.x / z * scale, local.y / z * scale
         return mi.Vector2f(cx - x, cy - y)
 
-    def _motion_vector(self, si: Any, hit_mover: Any, poses: list[Pose], active: Any) -> Any:
-        """Screen-space motion of the first hit across the shutter, in pixels."""
+    def _motion_vector(self, si: Any, hit_mover: Any, movers: MoverTracks, active: Any) -> Any:
+        """Screen-space motion of the first hit across the shutter, in pixels: a point on
+        a mover follows the mover from the first baked sample to the last."""
         last = self.frame_data.n_samples - 1
         p0, p1 = mi.Vector3f(si.p), mi.Vector3f(si.p)
-        for index, pose in enumerate(poses):
-            mine = hit_mover == index
-            rest = pose.point_to_rest(si.p)
+        if len(movers):
+            mine = active & (hit_mover < len(movers))
+            index = dr.select(mine, hit_mover, 0)
+            rest = movers.pose(index).point_to_rest(si.p)
             r = index * self.frame_data.n_samples
-            p0 = dr.select(mine, self.frame_data.sample_pose("mover_t", "mover_q", r, active).point_to_world(rest), p0)
-            p1 = dr.select(mine, self.frame_data.sample_pose("mover_t", "mover_q", r + last, active).point_to_world(rest), p1)
+            p0 = dr.select(mine, self.frame_data.sample_pose("mover_t", "mover_q", r, mine).point_to_world(rest), p0)
+            p1 = dr.select(mine, self.frame_data.sample_pose("mover_t", "mover_q", r + last, mine).point_to_world(rest), p1)
         v = self._project(p1, last, active) - self._project(p0, 0, active)
         return dr.select(si.is_valid(), v, 0.0)
 
@@ -237,8 +241,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         ray.o = camera.point_to_world(ray.o - cam_origin)
         ray.d = camera.vector_to_world(ray.d)
 
-        poses = data.poses("mover_t", "mover_q", len(self.world.movers), u, active)
-        spheres = posed_spheres(data, poses, active)
+        movers = MoverTracks(data, len(self.world.movers), u, active)
         light_poses = data.poses("light_t", "light_q", len(self.lights), u, active)
         k_slice = self.world.slice_of(u)
         bsdf_ctx = mi.BSDFContext()
@@ -258,7 +261,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         want_aovs = len(self.aovs) > 0  # a Python bool: @dr.syntax keeps it a plain `if`
 
         while dr.hint(active, max_iterations=self.max_depth, label="motion_path"):
-            si, on_mover, hit_mover = self.world.intersect(scene, ray, poses, active, k_slice, spheres)
+            si, on_mover, hit_mover = self.world.intersect(scene, ray, movers, active, k_slice)
             valid |= active & si.is_valid() & (depth == 0)
             if want_aovs:
                 first = active & (depth == 0) & si.is_valid()
@@ -269,7 +272,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
                 if "normal" in self.aovs:
                     aov_n = dr.select(first, si.sh_frame.n, aov_n)
                 if "motion" in self.aovs:
-                    aov_mv = dr.select(first, self._motion_vector(si, hit_mover, poses, first), aov_mv)
+                    aov_mv = dr.select(first, self._motion_vector(si, hit_mover, movers, first), aov_mv)
                 if "albedo" in self.aovs:
                     # misses count too: they see the environment (or nothing)
                     primary = active & (depth == 0)
@@ -282,7 +285,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
                 scene.pdf_emitter_direction(prev_si, ds, ~prev_bsdf_delta & ~on_mover),
                 0.0,
             )
-            em_pdf = self._mover_emitter_pdf(ds, prev_si, hit_mover, poses, em_pdf, ~prev_bsdf_delta & on_mover)
+            em_pdf = self._mover_emitter_pdf(ds, prev_si, hit_mover, movers, em_pdf, ~prev_bsdf_delta & on_mover)
             mis_bsdf = dr.select(depth == 0, 1.0, _mis(prev_bsdf_pdf, em_pdf))
             L += beta * mis_bsdf * ds.emitter.eval(si, active & (prev_bsdf_pdf > 0))
 
@@ -294,7 +297,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), False, active_em)
             active_em &= ds_em.pdf != 0.0
             shadow = si.spawn_ray_to(ds_em.p)
-            occluded = self.world.occluded(scene, shadow, poses, active_em, k_slice, spheres)
+            occluded = self.world.occluded(scene, shadow, movers, active_em, k_slice)
             active_em &= ~occluded
             wo = si.to_local(ds_em.d)
             bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, wo, active_em)
@@ -302,7 +305,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             L += dr.select(active_em, beta * mis_em * bsdf_val * em_weight, 0.0)
             # moving lights and emitters on movers, each at this path's time u
             lit = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-            L += beta * self._moving_light_terms(scene, sampler, si, bsdf, bsdf_ctx, poses, light_poses, k_slice, lit, spheres)
+            L += beta * self._moving_light_terms(scene, sampler, si, bsdf, bsdf_ctx, movers, light_poses, k_slice, lit)
 
             # BSDF sampling: the next segment of the path
             bs, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(), active_next)

@@ -21,6 +21,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import FrameDataError
+from ..motion.pose import quat_rotate
 
 # The blocks of the per-frame data array, in order (see `FrameData.set`):
 #   mover_t [M, N, 3], mover_q [M, N, 4]   movers' world_from_object across the shutter
@@ -30,7 +31,8 @@ from ..errors import FrameDataError
 #   light_t [L, N, 3], light_q [L, N, 4]   moving lights' world_from_light across the shutter
 #   light_rgb [L, 3]                       moving lights' colours at the frame time
 #   mover_sphere [M, 4]                    movers' rest-frame bounding spheres (centre, radius)
-FRAME_BLOCKS = ("mover_t", "mover_q", "camera_t", "camera_rel", "sensor_origin", "camera_q", "light_t", "light_q", "light_rgb", "mover_sphere")
+#   mover_swept [M, 4]                     movers' world-space spheres across the shutter
+FRAME_BLOCKS = ("mover_t", "mover_q", "camera_t", "camera_rel", "sensor_origin", "camera_q", "light_t", "light_q", "light_rgb", "mover_sphere", "mover_swept")
 
 
 def qrot(q: Any, v: Any) -> Any:
@@ -115,15 +117,6 @@ class Pose(NamedTuple):
         return si
 
 
-def select_pose(index: Any, poses: Sequence[Pose]) -> Pose:
-    """poses[index] per lane (index a mi.UInt32; lanes outside the list get poses[0])."""
-    t, q = poses[0]
-    for k in range(1, len(poses)):
-        t = dr.select(index == k, poses[k][0], t)
-        q = dr.select(index == k, poses[k][1], q)
-    return Pose(t, q)
-
-
 class FrameData:
     """The per-frame poses of one job in ONE opaque array, read by name.
 
@@ -176,8 +169,9 @@ class FrameData:
         q1 = self.vec(q_block, 4, j + 1, active)
         return Pose(dr.lerp(t0, t1, f), slerp(q0, q1, f))
 
-    def sample_pose(self, t_block: str, q_block: str, record: int, active: Any) -> Pose:
-        """The baked sample `record` of the blocks, as it is (no interpolation)."""
+    def sample_pose(self, t_block: str, q_block: str, record: Any, active: Any) -> Pose:
+        """The baked sample `record` (an int, or a mi.UInt32 per lane) of the blocks, as it
+        is (no interpolation)."""
         return Pose(self.vec(t_block, 3, mi.UInt32(record), active), self.vec(q_block, 4, mi.UInt32(record), active))
 
     def poses(self, t_block: str, q_block: str, count: int, u: Any, active: Any) -> list[Pose]:
@@ -222,13 +216,68 @@ def _shape_reach(shape: Any, centre: np.ndarray) -> float:
     return float(np.linalg.norm(np.maximum(np.abs(lo - centre), np.abs(hi - centre))))
 
 
-def posed_spheres(data: FrameData, poses: Sequence[Pose], active: Any) -> list[tuple[Any, Any]]:
-    """Each mover's bounding sphere (world centre, squared radius) at the path's time."""
-    out = []
-    for index, (t, q) in enumerate(poses):
-        s = data.vec("mover_sphere", 4, mi.UInt32(index), active)
-        out.append((qrot(q, mi.Vector3f(s.x, s.y, s.z)) + t, dr.square(s.w)))
+def swept_spheres(t: np.ndarray, q: np.ndarray, rest: np.ndarray) -> np.ndarray:
+    """Each mover's world-space sphere [M, 4] (centre, radius) that holds it at every time
+    of the shutter, from its N baked samples t [M, N, 3], q [M, N, 4] and its rest-frame
+    bounding sphere rest [M, 4] (`bounding_spheres`).
+
+    Between samples j and j + 1 the rest centre c lies at lerp(t) + slerp(q) c: inside the
+    parallelogram of the four points t_a + R(q_b) c (a, b in {j, j + 1}), but for the arc
+    that the rotation bows out of its chord, by at most |c| (1 - cos(theta / 2)) =
+    |c| (1 - |q_j . q_j+1|). The sphere holds all those corners, that bow and the rest
+    radius, padded for float32 rounding in the kernel (positions far from the origin round
+    to about 6e-8 of their distance)."""
+    m = len(rest)
+    out = np.zeros((m, 4))
+    if m == 0:
+        return out
+    t = np.asarray(t, dtype=float)
+    q = np.asarray(q, dtype=float)
+    c = np.broadcast_to(np.asarray(rest, dtype=float)[:, None, :3], t.shape)
+    rc = quat_rotate(q, c)
+    corners = np.concatenate([t + rc, t[:, :-1] + rc[:, 1:], t[:, 1:] + rc[:, :-1]], axis=1)
+    centre = (corners.min(axis=1) + corners.max(axis=1)) / 2
+    reach = np.sqrt(((corners - centre[:, None]) ** 2).sum(axis=2)).max(axis=1)
+    dots = np.abs((q[:, :-1] * q[:, 1:]).sum(axis=2)) if q.shape[1] > 1 else np.ones((m, 1))
+    bow = np.linalg.norm(rest[:, :3], axis=1) * (1.0 - np.minimum(dots, 1.0)).max(axis=1)
+    radius = reach + bow + rest[:, 3]
+    out[:, :3] = centre
+    out[:, 3] = radius * (1 + 1e-4) + 1e-6 * np.abs(centre).max(axis=1) + 1e-5
     return out
+
+
+class MoverTracks:
+    """The rigid movers at a path's time u, read from the frame data on demand.
+
+    A mover's pose is NOT computed for every path up front: with many movers the poses of
+    all of them would stay live across the whole path loop (7 floats a mover a lane).
+    A ray first meets each mover's swept sphere (`swept`: one value for all lanes, from
+    `swept_spheres`); only lanes past it pose the mover at their own time (`pose`) and
+    test its posed bounding sphere (`posed_sphere`), exactly as tight as before."""
+
+    def __init__(self, data: FrameData, count: int, u: Any, active: Any) -> None:
+        self.data = data
+        self.count = count
+        self.active = active
+        self.segment = data.segment(u)
+
+    def __len__(self) -> int:
+        return self.count
+
+    def pose(self, index: Any) -> Pose:
+        """Mover `index` (an int, or a mi.UInt32 per lane below the count) at the path's time."""
+        i, f = self.segment
+        return self.data.pose("mover_t", "mover_q", index * self.data.n_samples, i, f, self.active)
+
+    def swept(self, index: int) -> tuple[Any, Any]:
+        """Mover `index`'s sphere across the whole shutter (world centre, squared radius)."""
+        s = self.data.vec("mover_swept", 4, mi.UInt32(index), self.active)
+        return mi.Vector3f(s.x, s.y, s.z), dr.square(s.w)
+
+    def posed_sphere(self, index: int, pose: Pose) -> tuple[Any, Any]:
+        """Mover `index`'s bounding sphere at the path's time (world centre, squared radius)."""
+        s = self.data.vec("mover_sphere", 4, mi.UInt32(index), self.active)
+        return qrot(pose.q, mi.Vector3f(s.x, s.y, s.z)) + pose.t, dr.square(s.w)
 
 
 def may_hit(sphere: tuple[Any, Any], ray: Any, active: Any, maxt: Any = None) -> Any:

@@ -67,7 +67,7 @@ class SceneCache:
         loaded = self.loaded
         scene = loaded.scene
         settings = scene.render
-        materials = {m.name: material_dict(m, loaded) for m in scene.materials}
+        materials = {m.name: load_dict(material_dict(m, loaded)) for m in scene.materials}
         d: dict[str, Any] = {"type": "scene"}
         aovs = integrator_aovs(scene)  # the user's, plus the denoiser's guides
         d["integrator"] = {"type": "motion_path", "max_depth": self.max_depth, "rr_depth": settings.rr_depth, "aovs": ",".join(aovs)}

@@ -125,7 +125,8 @@ class SlicedGeometry:
 
         mi = self._mi
         obj = next(o for o in self.loaded.scene.objects if o.name == name)
-        bsdf = load_dict(materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL)
+        material = materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
+        bsdf = load_dict(material) if isinstance(material, dict) else material
         slices = slice_count(self.loaded, fi)
         if isinstance(obj, Particles):
             n = fi.particles[name][0].shape[1] if name in fi.particles else 0

@@ -15,7 +15,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .poses import Pose, bounding_spheres, may_hit, select_pose
+from .poses import MoverTracks, bounding_spheres, may_hit
 
 
 class World:
@@ -52,10 +52,10 @@ class World:
         count = len(self.slices[0]) if self.slices else 1
         return mi.UInt32(dr.round(dr.clip(u, 0.0, 1.0) * (count - 1)))
 
-    def intersect(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[Pose], active: Any, k: Any, spheres: list[tuple[Any, Any]]) -> tuple[Any, Any, Any]:
+    def intersect(self, scene: mi.Scene, ray: mi.Ray3f, movers: MoverTracks, active: Any, k: Any) -> tuple[Any, Any, Any]:
         """Nearest hit over all scenes, in world space; whether it is on a mover or a
-        slice; and which mover (len(movers) for none). `poses` and `spheres`: the movers'
-        poses and posed bounding spheres at the path's time; k: its slice."""
+        slice; and which mover (len(movers) for none). `movers`: the movers at the path's
+        time; k: its slice."""
         si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
         on_mover = mi.Bool(False)
         hit_mover = mi.UInt32(len(self.movers))
@@ -67,43 +67,55 @@ class World:
                 si = dr.select(closer, si_s, si)
                 on_mover |= closer
         # movers: a preliminary hit per mover (traversal only, and only for rays that meet
-        # its bounding sphere at their time); the surface interaction of the nearest is
-        # computed once, in its rest frame, and moved to world space
+        # its swept sphere and then its bounding sphere at their time); the surface
+        # interaction of the nearest is computed once, in its rest frame, and moved to
+        # world space
         nearest = dr.select(si.is_valid(), si.t, dr.inf)
         best = dr.zeros(mi.PreliminaryIntersection3f)
-        for index, (mover, pose) in enumerate(zip(self.movers, poses)):
+        for index, mover in enumerate(self.movers):
             # only up to the nearest hit so far: a mover whose sphere lies beyond it cannot be closer
-            near = may_hit(spheres[index], ray, active, nearest)
+            swept = may_hit(movers.swept(index), ray, active, nearest)
 
-            def visit(best: Any, nearest: Any, hit_mover: Any, mover: Any = mover, pose: Pose = pose, near: Any = near, index: int = index) -> tuple[Any, Any, Any]:
+            def visit(best: Any, nearest: Any, hit_mover: Any, mover: Any = mover, index: int = index, swept: Any = swept) -> tuple[Any, Any, Any]:
+                # posed at the lane's own time only past the swept sphere: the exact test
+                pose = movers.pose(index)
+                near = may_hit(movers.posed_sphere(index, pose), ray, swept, nearest)
                 local = pose.ray_to_rest(ray)
                 local.maxt = dr.minimum(local.maxt, nearest)
                 pi = mover.ray_intersect_preliminary(local, coherent=False, active=near)
                 closer = near & pi.is_valid() & (pi.t < nearest)
                 return dr.select(closer, pi, best), dr.select(closer, pi.t, nearest), dr.select(closer, mi.UInt32(index), hit_mover)
 
-            best, nearest, hit_mover = _if_any(near, visit, (best, nearest, hit_mover))
+            best, nearest, hit_mover = _if_any(swept, visit, (best, nearest, hit_mover))
         if self.movers:
             won = active & (hit_mover < len(self.movers))
-            pose = select_pose(hit_mover, poses)
-            si_m = best.compute_surface_interaction(pose.ray_to_rest(ray), mi.RayFlags.All, won)
-            si = dr.select(won, pose.surface_to_world(si_m), si)
+
+            # a branch too: packets in which no lane hit a mover skip the winner's pose,
+            # its surface interaction and the selects over the whole interaction
+            def surface(si: Any) -> Any:
+                pose = movers.pose(dr.select(won, hit_mover, 0))
+                si_m = best.compute_surface_interaction(pose.ray_to_rest(ray), mi.RayFlags.All, won)
+                return dr.select(won, pose.surface_to_world(si_m), si)
+
+            si = _if_any(won, surface, (si,))
             on_mover |= won
         return si, on_mover, hit_mover
 
-    def occluded(self, scene: mi.Scene, ray: mi.Ray3f, poses: list[Pose], active: Any, k: Any, spheres: list[tuple[Any, Any]]) -> Any:
+    def occluded(self, scene: mi.Scene, ray: mi.Ray3f, movers: MoverTracks, active: Any, k: Any) -> Any:
         """Whether a shadow ray is blocked by any scene at the path's time."""
         hit = scene.ray_test(ray, active)
         for group in self.slices:
             for s, slice_scene in enumerate(group):
                 hit |= slice_scene.ray_test(ray, active & ~hit & (k == s))
-        for index, (mover, pose) in enumerate(zip(self.movers, poses)):
-            near = may_hit(spheres[index], ray, active & ~hit)
+        for index, mover in enumerate(self.movers):
+            swept = may_hit(movers.swept(index), ray, active & ~hit)
 
-            def test(hit: Any, mover: Any = mover, pose: Pose = pose, near: Any = near) -> Any:
+            def test(hit: Any, mover: Any = mover, index: int = index, swept: Any = swept) -> Any:
+                pose = movers.pose(index)
+                near = may_hit(movers.posed_sphere(index, pose), ray, swept)
                 return hit | mover.ray_test(pose.ray_to_rest(ray), near)
 
-            hit = _if_any(near, test, (hit,))
+            hit = _if_any(swept, test, (hit,))
         return hit
 
 
