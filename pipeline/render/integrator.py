@@ -254,29 +254,31 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         prev_bsdf_pdf = mi.Float(1.0)
         prev_bsdf_delta = mi.Bool(True)
         valid = mi.Bool(False)
-        aov_z = mi.Float(0.0)
-        aov_n = mi.Vector3f(0.0)
-        aov_mv = mi.Vector2f(0.0)
-        aov_albedo = mi.Color3f(0.0)
-        want_aovs = len(self.aovs) > 0  # a Python bool: @dr.syntax keeps it a plain `if`
+        # the computed AOVs' values, only those asked for: a loop variable that the loop
+        # never changes makes drjit trace the whole loop body twice per frame (its
+        # OptimizeLoops pass drops it, then records again); so do the read-only locals,
+        # hence `exclude`
+        zeros = {"depth": mi.Float(0.0), "normal": mi.Vector3f(0.0), "motion": mi.Vector2f(0.0), "albedo": mi.Color3f(0.0)}
+        aov = {a.name: zeros[a.name] for a in aov_table.computed(self.aovs)}
+        want_aovs = len(aov) > 0  # a Python bool: @dr.syntax keeps it a plain `if`
 
         while dr.hint(active, max_iterations=self.max_depth, label="motion_path"):
             si, on_mover, hit_mover = self.world.intersect(scene, ray, movers, active, k_slice)
             valid |= active & si.is_valid() & (depth == 0)
             if want_aovs:
                 first = active & (depth == 0) & si.is_valid()
-                if "depth" in self.aovs:
+                if "depth" in aov:
                     # camera-space depth along the view axis, with the camera at this time
                     view = data.pose("camera_t", "camera_q", 0, ci, cf, first)
-                    aov_z = dr.select(first, view.point_to_rest(si.p).z, aov_z)
-                if "normal" in self.aovs:
-                    aov_n = dr.select(first, si.sh_frame.n, aov_n)
-                if "motion" in self.aovs:
-                    aov_mv = dr.select(first, self._motion_vector(si, hit_mover, movers, first), aov_mv)
-                if "albedo" in self.aovs:
+                    aov["depth"] = dr.select(first, view.point_to_rest(si.p).z, aov["depth"])
+                if "normal" in aov:
+                    aov["normal"] = dr.select(first, si.sh_frame.n, aov["normal"])
+                if "motion" in aov:
+                    aov["motion"] = dr.select(first, self._motion_vector(si, hit_mover, movers, first), aov["motion"])
+                if "albedo" in aov:
                     # misses count too: they see the environment (or nothing)
                     primary = active & (depth == 0)
-                    aov_albedo = dr.select(primary, self._albedo(scene, si, ray, primary), aov_albedo)
+                    aov["albedo"] = dr.select(primary, self._albedo(scene, si, ray, primary), aov["albedo"])
             # emission reached by BSDF sampling, MIS-weighted against emitter sampling of the
             # same emitter: the static scene's, or the emissive mover's in its rest frame
             ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
@@ -325,8 +327,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
 
         if scene.environment() is not None:
             valid = mi.Bool(True)
-        values = {"depth": [aov_z], "normal": [aov_n.x, aov_n.y, aov_n.z], "motion": [aov_mv.x, aov_mv.y], "albedo": [aov_albedo.x, aov_albedo.y, aov_albedo.z]}
-        channels: list[Any] = [c for aov in aov_table.computed(self.aovs) for c in values[aov.name]]
+        channels: list[Any] = [c for a in aov_table.computed(self.aovs) for c in ([aov[a.name]] if a.name == "depth" else list(aov[a.name]))]
         return L, valid, channels
 
     # --- the image --------------------------------------------------------------------
@@ -344,7 +345,11 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         Returns [H, W, 4 + AOV channels] (RGBA, alpha = the pixel's coverage)."""
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
-        return film.render(self.sample, scene, sensor, seed, spp)
+        # the path loop's state holds read-only locals (@dr.syntax passes every local the
+        # body reads): with OptimizeLoops drjit would drop them and trace the body again,
+        # every frame; LLVM folds them as well
+        with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, False):
+            return film.render(self.sample, scene, sensor, seed, spp)
 
     def aov_names(self) -> list[str]:
         """The EXR channel names of the AOV channels after RGBA (`aovs.channel_names`)."""
