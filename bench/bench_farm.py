@@ -88,7 +88,11 @@ class Cluster:
         for p in reversed(self.procs):
             p.terminate()
         for p in self.procs:
-            p.wait(10)
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:  # a worker still inside a task's kernel: not a result
+                p.kill()
+                p.wait()
 
 
 def throughput(frames: int, tmp: Path) -> dict[str, dict]:

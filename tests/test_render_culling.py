@@ -83,3 +83,15 @@ def test_a_still_mover_sweeps_its_own_sphere() -> None:
     swept = swept_spheres(t, q, np.array([[0.0, 0.0, 0.0, 0.5]]))[0]
     np.testing.assert_allclose(swept[:3], [1.0, 2.0, 3.0])
     assert 0.5 < swept[3] < 0.5 * 1.001
+
+
+def test_movers_near_the_camera_are_posed_once_per_path() -> None:
+    """`eager_movers` picks the movers whose swept sphere covers a good share of the image
+    (posed once per path) and leaves small, far ones on demand; only speed depends on it."""
+    from motion.pipeline.render.poses import eager_movers
+
+    scale = (320 / 2) / np.tan(np.radians(50) / 2)  # perspective, 320 px across a 50 degree view
+    swept = np.array([[0.0, 0.0, -2.0, 0.5], [0.0, 0.0, -40.0, 0.5], [0.0, 0.0, 0.0, 1.0]])
+    got = eager_movers(swept, np.zeros(3), ("perspective", scale), 320 * 180)
+    assert got == [True, False, True]  # close-up; far and small; the camera inside it
+    assert eager_movers(swept[:2], np.zeros(3), ("orthographic", 320 / 100.0), 320 * 180) == [False, False]

@@ -33,7 +33,7 @@ import numpy as np
 
 from . import aovs as aov_table
 from . import film
-from .poses import FrameData, MoverTracks, Pose, swept_spheres
+from .poses import FrameData, MoverTracks, Pose, eager_movers, swept_spheres
 from .world import World
 
 
@@ -55,6 +55,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         self.rr_depth = int(props.get("rr_depth", 5))
         self.aovs = [a for a in str(props.get("aovs", "")).split(",") if a]
         self._projection = ("perspective", 1.0, 0.0, 0.0)  # kind, scale (px per unit), cx, cy
+        self._eager: list[bool] | None = None  # movers posed once per path (poses.eager_movers), chosen on the first frame
         self.world = World()
         self.frame_data = FrameData()
         self.lights: list[tuple[str, Any]] = []  # moving lights: (kind, emitter in its rest frame)
@@ -66,6 +67,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         baked samples across the shutter."""
         self.world.set_movers(movers)
         self.frame_data.n_samples = max(2, int(n_samples))
+        self._eager = None
 
     def set_lights(self, lights: Sequence[tuple[str, Any]]) -> None:
         """The lights that move (fixed for a job): (kind, emitter) with kind `point`, `spot` or
@@ -108,6 +110,9 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             light_translation, light_rotation, light_color = np.zeros((0, n, 3)), np.zeros((0, n, 4)), np.zeros((0, 3))
         rest_spheres = self.world.bounding_spheres()
         swept = swept_spheres(mover_translation, mover_rotation, rest_spheres) if np.shape(mover_translation) == (m, n, 3) and np.shape(mover_rotation) == (m, n, 4) else np.zeros((m, 4))
+        if self._eager is None:  # once per job: a new choice would compile a new kernel
+            kind, scale, cx, cy = self._projection
+            self._eager = eager_movers(swept, np.asarray(sensor_origin, dtype=float).ravel(), (kind, scale), int(4 * cx * cy))
         self.frame_data.set(
             {
                 "mover_t": (mover_translation, (m, n, 3)),
@@ -241,7 +246,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         ray.o = camera.point_to_world(ray.o - cam_origin)
         ray.d = camera.vector_to_world(ray.d)
 
-        movers = MoverTracks(data, len(self.world.movers), u, active)
+        movers = MoverTracks(data, len(self.world.movers), u, active, self._eager or ())
         light_poses = data.poses("light_t", "light_q", len(self.lights), u, active)
         k_slice = self.world.slice_of(u)
         bsdf_ctx = mi.BSDFContext()
