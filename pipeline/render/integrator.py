@@ -259,10 +259,8 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         prev_bsdf_pdf = mi.Float(1.0)
         prev_bsdf_delta = mi.Bool(True)
         valid = mi.Bool(False)
-        # the computed AOVs' values, only those asked for: a loop variable that the loop
-        # never changes makes drjit trace the whole loop body twice per frame (its
-        # OptimizeLoops pass drops it, then records again); so do the read-only locals,
-        # hence `exclude`
+        # the computed AOVs' values, only those asked for: none asked, none carried
+        # through the loop
         zeros = {"depth": mi.Float(0.0), "normal": mi.Vector3f(0.0), "motion": mi.Vector2f(0.0), "albedo": mi.Color3f(0.0)}
         aov = {a.name: zeros[a.name] for a in aov_table.computed(self.aovs)}
         want_aovs = len(aov) > 0  # a Python bool: @dr.syntax keeps it a plain `if`
