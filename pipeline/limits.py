@@ -85,26 +85,33 @@ def _read_bounded(path: str | Path, limit: int, what: str) -> bytes:
     return data
 
 
-
-# Environment variables that size a worker's work (the README's table): name -> default.
-ENV_SIZES = {
-    "MOTION_MAX_LANES": 1 << 23,  # samples one render pass traces at once (render/film.py)
-    "MOTION_ASSET_CACHE_CAP": 2 * 1024**3,  # bytes of converted assets kept (render/assets.py)
+# Environment variables that size a worker's work (the README's table):
+# name -> (default, most accepted or None)
+ENV_SIZES: dict[str, tuple[int, int | None]] = {
+    # samples one render pass traces at once (render/film.py): about 80 bytes a lane, so
+    # 2^28 is ~21 GB a pass, and lane indices are 32-bit
+    "MOTION_MAX_LANES": (1 << 23, 1 << 28),
+    # bytes of converted assets kept on disk (render/assets.py)
+    "MOTION_ASSET_CACHE_CAP": (2 * 1024**3, None),
 }
 
 
 def env_size(name: str) -> int:
     """The positive integer in environment variable `name` (one of ENV_SIZES), its default
-    when unset or empty; anything else is a UsageError naming the variable."""
+    when unset or empty; anything else, or more than its limit, is a UsageError naming
+    the variable."""
+    default, most = ENV_SIZES[name]
     raw = os.environ.get(name, "").strip()
     if not raw:
-        return ENV_SIZES[name]
+        return default
     try:
         value = int(raw)
     except ValueError:
         value = 0
     if value < 1:
         raise UsageError(f"${name}: expected a positive whole number, got {raw!r}")
+    if most is not None and value > most:
+        raise UsageError(f"${name}: {value} is over the limit of {most}")
     return value
 
 

@@ -393,3 +393,17 @@ def test_bad_sizing_environment_variable_is_one_line_before_any_work(tmp_path: P
     assert "Traceback" not in res.stderr
     assert res.stderr.strip().splitlines()[-1] == f"error: ${name}: expected a positive whole number, got {value!r}"
     assert not list(out.glob("*.exr"))  # refused before any frame
+
+
+def test_max_lanes_over_its_limit_is_refused_before_any_work(tmp_path: Path) -> None:
+    # 2^40 lanes would ask one render pass for ~80 TB; the limit is 2^28 (~21 GB)
+    from _support import run_motion
+
+    (tmp_path / "scene.yaml").write_text(BASE)
+    out = tmp_path / "out"
+    big = str(1 << 40)
+    res = run_motion("render", str(tmp_path / "scene.yaml"), "--preset", "ci-smoke", "-o", str(out), env={"MOTION_MAX_LANES": big}, timeout=120)
+    assert res.returncode == 2, res.stderr
+    assert "Traceback" not in res.stderr
+    assert res.stderr.strip().splitlines()[-1] == f"error: $MOTION_MAX_LANES: {big} is over the limit of {1 << 28}"
+    assert not list(out.glob("*.exr"))

@@ -313,8 +313,8 @@ def eager_movers(swept: np.ndarray, eye: np.ndarray, projection: tuple[str, floa
 
 
 def may_hit(sphere: tuple[Any, Any], ray: Any, active: Any, maxt: Any = None) -> Any:
-    """Whether the ray's segment [0, maxt] (default: the ray's own maxt) meets a posed
-    bounding sphere (`posed_spheres`)."""
+    """Whether the ray's segment [0, maxt] (default: the ray's own maxt) meets a sphere
+    given as (world centre, squared radius): `MoverTracks.swept` or `.posed_sphere`."""
     centre, r2 = sphere
     maxt = ray.maxt if maxt is None else maxt
     oc = ray.o - centre

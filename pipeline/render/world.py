@@ -121,8 +121,9 @@ class World:
 
 def _if_any(cond: Any, body: Any, state: tuple[Any, ...]) -> Any:
     """`body(*state)` where `cond` holds, else the state unchanged, as a symbolic branch:
-    on the LLVM backend a packet of lanes none of which meets the mover's bounding sphere
-    jumps over the mover's rest-frame ray, its BVH call and the selects, so a frame pays
+    on the LLVM backend a packet of lanes none of which meets a mover's swept sphere
+    jumps over its pose, its rest-frame ray, its BVH call and the selects (and one in
+    which no lane hit a mover, over the winner's surface interaction), so a frame pays
     for the movers its rays can hit, not for every mover on every ray (masked lanes alone
     would still compute all of it). The values are those of the masked code, bit for bit."""
     return dr.if_stmt(state, cond, body, lambda *unchanged: unchanged if len(unchanged) > 1 else unchanged[0], label="mover")
