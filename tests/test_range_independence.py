@@ -96,3 +96,41 @@ def test_frames_of_overlapping_ranges_are_the_same_frames(tmp_path: Path) -> Non
         assert np.array_equal(read_frame(a / name).rgba, second[name]), name
         if name in first:
             assert np.array_equal(first[name], second[name]), name
+
+
+def _renumbered(tmp_path: Path, first: int) -> Path:
+    """The ball-and-fountain scene, its 48 frames numbered from `first`, with a second ball
+    released at `start: 0.5` (seconds on the dynamics clock)."""
+    folder = tmp_path / f"f{first}"
+    folder.mkdir()
+    doc = yaml.safe_load(_scene(folder, "rk4", particles=True).read_text())
+    doc["name"] = "renumbered"
+    doc["timeline"] = {"fps": "24000/1001", "first": first, "last": first + 47}
+    doc["objects"].append({"name": "late", "shape": "sphere", "radius": 0.2, "material": "red", "transform": {"translate": [1.0, 1.5, 0]},
+                           "motion": {"type": "dynamics", "mass": 1.0, "start": 0.5}})
+    path = folder / "renumbered.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def test_the_simulation_starts_with_the_shot(tmp_path: Path) -> None:
+    """Issue 23: a shot numbered from 1001 simulates what the same shot numbered from 0
+    does: the clock starts at the first frame (not 41.7 s earlier, when the ball would have
+    left the floor long before frame 1001), and `start:` counts from there."""
+    zero, late = load_scene(_renumbered(tmp_path, 0)), load_scene(_renumbered(tmp_path, 1001))
+    t0, _ = simulation_range(late)
+    assert 41.70 < t0 < 41.75  # frame 1001 at 24000/1001 fps opens its shutter at 41.7 s
+    frames = [0, 11, 12, 13, 30, 47]
+    a = {fi.frame: fi for fi in baked_inputs(zero, frames, simulation_for(zero, frames))}
+    b = {fi.frame: fi for fi in baked_inputs(late, [1001 + f for f in frames], simulation_for(late, [1001 + f for f in frames]))}
+    for f in frames:
+        for name in ("ball", "late"):
+            pa = a[f].across_shutter.objects[name].translation
+            pb = b[1001 + f].across_shutter.objects[name].translation
+            assert np.allclose(pa, pb, atol=1e-6), (f, name, pa, pb)
+        assert np.array_equal(a[f].across_shutter.particles["spray"].alive, b[1001 + f].across_shutter.particles["spray"].alive), f
+    # the late ball is held until 0.5 s after the first frame (frame 12 at 23.976 fps), then falls
+    held = b[1001 + 11].at_frame.objects["late"].translation[0]
+    assert np.allclose(held, [1.0, 1.5, 0.0]), held
+    assert b[1001 + 30].at_frame.objects["late"].translation[0][1] < 1.4
+    assert b[1001].at_frame.objects["ball"].translation[0][1] > 1.0  # in the air at the start, not 1,470 m below the floor

@@ -41,8 +41,9 @@ def sample_seconds(loaded: "LoadedScene", frames: Sequence[int]) -> tuple[np.nda
 
 def simulation_range(loaded: "LoadedScene", frames: Sequence[int] = ()) -> tuple[float, float]:
     """The time range (s) the scene's dynamics are simulated over: the whole timeline,
-    from min(0, the first frame's shutter open) to the last frame's shutter close, never
-    the selection. A frame's motion then does not depend on which other frames were
+    from the first frame's shutter open (the shot starts there, whatever its frame number:
+    a frame-1001 shot does not simulate 41 s before its first frame) to the last frame's
+    shutter close, never the selection. A frame's motion then does not depend on which other frames were
     selected (the fixed step grid starts at the same time and no run is cut short next to
     it; emitters spawn the same particles). Frames outside the timeline (the API allows
     them) widen the range."""
@@ -50,7 +51,7 @@ def simulation_range(loaded: "LoadedScene", frames: Sequence[int] = ()) -> tuple
     ends = [timeline.first, timeline.last] + ([min(frames), max(frames)] if len(frames) else [])
     lo, hi = min(ends), max(ends)
     times, shutters, _ = sample_seconds(loaded, [lo, hi])
-    return min(0.0, float(min(times[0], shutters[0, 0]))), float(max(times[1], shutters[1, 1]))
+    return float(min(times[0], shutters[0, 0])), float(max(times[1], shutters[1, 1]))
 
 
 def simulate_for(loaded: "LoadedScene", frames: Sequence[int] = (), on_progress: Any = None) -> Any | None:

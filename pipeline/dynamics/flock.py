@@ -68,8 +68,9 @@ class FlockParams:
     start: float
 
     @classmethod
-    def from_spec(cls, spec: Any) -> "FlockParams":
-        """From a scene `Flock` record."""
+    def from_spec(cls, spec: Any, epoch: float = 0.0) -> "FlockParams":
+        """From a scene `Flock` record; its `start` counts from `epoch`, the scene time of
+        the shot's first frame (world.shot_start)."""
         up = np.asarray(spec.up, dtype=np.float64)
         w = spec.weights
         return cls(
@@ -98,7 +99,7 @@ class FlockParams:
             planar=bool(spec.planar),
             up=up / np.linalg.norm(up),
             step=float(spec.step),
-            start=float(spec.start),
+            start=epoch + float(spec.start),
         )
 
 

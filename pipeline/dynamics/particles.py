@@ -51,15 +51,18 @@ def _orthonormal(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return a, np.cross(d, a)
 
 
-def emit(emitter: object, world_from_object: np.ndarray, t_end: float) -> Spawns:
+def emit(emitter: object, world_from_object: np.ndarray, t_end: float, epoch: float = 0.0) -> Spawns:
     """Draw every particle the emitter spawns before min(stop, t_end). `emitter` is a scene
-    ParticleEmitter; world_from_object a 4x4 matrix (the particle object's transform)."""
+    ParticleEmitter; world_from_object a 4x4 matrix (the particle object's transform);
+    the emitter's `start`/`stop` count from `epoch`, the scene time of the shot's first
+    frame (world.shot_start)."""
     e = emitter
-    stop = t_end if e.stop is None else min(e.stop, t_end)  # type: ignore[attr-defined]
-    count = 0 if stop < e.start else min(e.max_count, int(math.floor((stop - e.start) * e.rate)) + 1)  # type: ignore[attr-defined]
+    start = epoch + e.start  # type: ignore[attr-defined]
+    stop = t_end if e.stop is None else min(epoch + e.stop, t_end)  # type: ignore[attr-defined]
+    count = 0 if stop < start else min(e.max_count, int(math.floor((stop - start) * e.rate)) + 1)  # type: ignore[attr-defined]
     rng = np.random.Generator(np.random.PCG64(e.seed))  # type: ignore[attr-defined]
     i = np.arange(count)
-    birth = e.start + i / e.rate  # type: ignore[attr-defined]
+    birth = start + i / e.rate  # type: ignore[attr-defined]
     birth = birth[birth <= stop] if count else birth
     count = birth.size
     u = rng.random((count, 3))

@@ -23,7 +23,7 @@ from .integrators import make_integrator
 from .particles import ParticleSamples, Spawns, emit
 from .step import run_group
 from .track import Track
-from .world import build_bodies, build_colliders, emitter_group, static_matrix
+from .world import build_bodies, build_colliders, emitter_group, shot_start, static_matrix
 
 if TYPE_CHECKING:
     from ..scene import LoadedScene
@@ -151,7 +151,7 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0, on_progr
         if obj.shape != "particles":
             continue
         m = static_matrix(loaded, i, "a particle emitter")
-        spawns = emit(obj.emitter, m, t_end)
+        spawns = emit(obj.emitter, m, t_end, shot_start(loaded))
         group = emitter_group(loaded, i, spawns, colliders, t_start, t_end, d.step)
         p = group.system.props
         guard = Guard([f"{obj.name}[{k}]" for k in range(spawns.count)] if spawns.count <= 100_000 else [obj.name], d.integrator, d.energy_growth_limit, 0.0,
@@ -163,7 +163,7 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0, on_progr
             from .flock import FlockParams, check_instance_budget, simulate_flock
 
             check_instance_budget(loaded, i)
-            flocks[obj.name] = simulate_flock(FlockParams.from_spec(obj.deform), colliders, t_start, t_end, obj.name)
+            flocks[obj.name] = simulate_flock(FlockParams.from_spec(obj.deform, shot_start(loaded)), colliders, t_start, t_end, obj.name)
     followers: dict[str, FollowerTrack] = {}
     for i, obj in enumerate(loaded.scene.objects):
         if obj.motion.type == "plan" and obj.motion.follower is not None:

@@ -132,8 +132,18 @@ def build_environment(loaded: "LoadedScene", names: list[str], x: np.ndarray | N
     )
 
 
+def shot_start(loaded: "LoadedScene") -> float:
+    """The scene time (s) at which the dynamics clock reads 0: the timeline's first frame.
+    Every `start`/`stop` of a dynamics block counts from there, as Blender and Houdini start
+    a simulation at the scene's start frame: a shot numbered from 1001 simulates what the
+    same shot numbered from 0 does (docs/dynamics.md)."""
+    timeline = loaded.scene.timeline.timeline()
+    return float(timeline.seconds(timeline.first))
+
+
 def build_bodies(loaded: "LoadedScene", t_start: float) -> tuple[Group, list[np.ndarray]] | None:
     """The group of dynamics bodies (None if the scene has none) and their scales."""
+    epoch = shot_start(loaded)
     objs = [o for o in loaded.scene.objects if o.motion.type == "dynamics"]
     if not objs:
         return None
@@ -162,7 +172,7 @@ def build_bodies(loaded: "LoadedScene", t_start: float) -> tuple[Group, list[np.
             restitution=m.restitution,
             friction=m.friction,
             static_friction=m.static_friction if m.static_friction is not None else m.friction,
-            start=m.start,
+            start=epoch + m.start,
             inertia=inertia,
             inv_inertia=1.0 / inertia if rigid else np.zeros(3),
         )

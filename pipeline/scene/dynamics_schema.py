@@ -25,7 +25,8 @@ class Drag(Model):
 class DynamicsMotion(Model):
     """`motion: {type: dynamics}`: the object is a simulated body (rigid, or a particle
     that does not rotate) with its mass, initial velocities, contact material and drag;
-    `pinned` holds it still with infinite mass; `start` holds it until then."""
+    `pinned` holds it still with infinite mass; `start` holds it until then (seconds after
+    the shot's first frame: the dynamics clock, docs/dynamics.md)."""
 
     type: Literal["dynamics"]
     body: Literal["particle", "rigid"] = "rigid"
@@ -37,7 +38,7 @@ class DynamicsMotion(Model):
     static_friction: NonNegative | None = None
     drag: Drag | None = None
     pinned: bool = False  # infinite mass: forces and impulses do not move it
-    start: FiniteFloat = 0.0  # seconds: held at its transform before this time
+    start: FiniteFloat = 0.0  # seconds after the first frame: held at its transform before then
 
 
 class Spring(Model):
@@ -106,8 +107,8 @@ class ParticleEmitter(Model):
     drag: Drag | None = None
     seed: int = 0
     max_count: Annotated[int, Field(ge=1, le=10_000_000)] = 100_000
-    start: FiniteFloat = 0.0
-    stop: FiniteFloat | None = None
+    start: FiniteFloat = 0.0  # seconds after the first frame (the dynamics clock)
+    stop: FiniteFloat | None = None  # seconds after the first frame
 
     @model_validator(mode="after")
     def _window(self) -> "ParticleEmitter":
