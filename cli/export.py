@@ -62,7 +62,14 @@ def view(in_dir: Path, out_path: Path | None, fmt: str, open_browser: bool, expo
     if open_browser:
         import webbrowser
 
-        webbrowser.open(path.resolve().as_uri())
+        try:
+            opened = webbrowser.open(path.resolve().as_uri())
+        except webbrowser.Error:
+            opened = False
+        if not opened:  # a headless machine (no display, no browser): say so, never pretend
+            from motion.pipeline.errors import UsageError
+
+            raise UsageError(f"--open: no web browser can be started here (no display or none installed); the flipbook is written: open {path.resolve()} on a machine with one")
 
 
 commands = [export, view]

@@ -3,6 +3,7 @@ and determinism: frames from 1 worker, 2 workers and 3 shards are bit-identical.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -75,17 +76,25 @@ def test_ci_recipe_shards_and_gather(ci_run) -> None:
     reports = [report(gather / "frames", f"render-report.shard-{i}-of-3.json") for i in (1, 2, 3)]
     assert [r["frames_this_job"] for r in reports] == ["0-3", "4-7", "8-11"]
     assert sum(r["totals"]["rendered"] for r in reports) == 12
-    assert (gather / "deliver" / "60i").is_dir() and list((gather / "deliver" / "60i").glob("*.exr"))
-    assert (gather / "deliver" / "contact.png").stat().st_size > 0
+    # the gather step's `--check --deliver` assembled from the complete frames (issue 23)
+    deliver = gather / "frames" / "deliver"
+    assert (deliver / "60i").is_dir() and list((deliver / "60i").glob("*.exr"))
+    assert (deliver / "farm-tiny_contact.png").stat().st_size > 0 and (deliver / "farm-tiny_24p.mov").stat().st_size > 0
+    made = json.loads((deliver / "manifest.json").read_text())["formats"]
+    assert set(made) == {"24p", "60i", "contact"} and all(m["frames"] == "0-11" for m in made.values())
 
 
 def test_ci_gather_check_fails_on_a_missing_frame(ci_run, tmp_path) -> None:
     partial = tmp_path / "frames"
-    shutil.copytree(ci_run["gather"] / "frames", partial)
+    shutil.copytree(ci_run["gather"] / "frames", partial, ignore=shutil.ignore_patterns("deliver"))
     (partial / "farm-tiny.0005.exr").unlink()
     res = motion("render", SCENE, "--preset", "ci-smoke", "--frames", FRAMES, "-o", partial, "--check")
     assert res.returncode == 3, res.stderr
     assert "missing 5" in res.stderr
+    # with --deliver: exit 3 and no deliver folder made (it was left empty before, exit 0)
+    res = motion("render", SCENE, "--preset", "ci-smoke", "--frames", FRAMES, "-o", partial, "--check", "--deliver", "24p,contact")
+    assert res.returncode == 3 and "missing 5" in res.stderr, res.stderr
+    assert not (partial / "deliver").exists()
 
 
 def test_one_worker_two_workers_three_shards_bit_identical(ci_run, tmp_path) -> None:

@@ -14,10 +14,12 @@ import pytest
 from farm_util import SCENE, SLOW, TINY, frames_in, motion, report, start_motion, wait_for
 from motion.pipeline.farm.progress import BakeProgress
 
+LINES = [a for a in TINY if a != "--no-progress"]  # stderr is not a terminal: plain progress lines
+
 
 def test_bake_progress_reports_simulated_seconds_per_second_and_eta(caplog) -> None:
     caplog.set_level(logging.INFO, logger="motion")
-    shown = BakeProgress(stream=io.StringIO(), live=False, every_s=0.0)
+    shown = BakeProgress(stream=io.StringIO(), live=None, every_s=0.0)  # not a terminal: plain lines
     for k in range(1, 5):
         shown.simulated(k * 0.5, 0.0, 4.0)
     shown.baked(96)
@@ -29,7 +31,7 @@ def test_bake_progress_reports_simulated_seconds_per_second_and_eta(caplog) -> N
 def test_render_prints_the_bake_rate(tmp_path) -> None:
     from test_range_independence import _scene
 
-    res = motion("render", _scene(tmp_path), "-o", tmp_path / "out", "--frames", "0-1", *TINY, "--workers", "1")
+    res = motion("render", _scene(tmp_path), "-o", tmp_path / "out", "--frames", "0-1", *LINES, "--workers", "1")
     assert res.returncode == 0, res.stderr
     line = next(l for l in res.stderr.splitlines() if l.startswith("motion: bake:"))
     # the whole timeline is simulated (frame 0 opens at -1/96 s, frame 47 closes at 47/24 + 1/96 s), not 2 frames
@@ -41,7 +43,7 @@ def test_progress_is_per_frame_and_interrupted_frames_are_not_rendered(tmp_path)
     (a worker reports each finished frame); after Ctrl-C the frames on disk are rendered
     and the rest are "not rendered", none "failed"."""
     out = tmp_path / "out"
-    proc = start_motion("render", SCENE, "-o", out, "--frames", "0-13", "--workers", "1", "--chunk-size", "14", *SLOW)
+    proc = start_motion("render", SCENE, "-o", out, "--frames", "0-13", "--workers", "1", "--chunk-size", "14", *[a for a in SLOW if a != "--no-progress"])
     lines: list[str] = []
     seen_at: list[int] = []
 

@@ -34,9 +34,9 @@ def run_chunk_reporting(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFra
 
     worker = get_worker()
 
-    def written(frame: int) -> None:
+    def written(frame: int, seconds: float) -> None:
         try:
-            worker.log_event(topic, {"worker": worker.address, "chunk": chunk_id, "frame": frame})
+            worker.log_event(topic, {"worker": worker.address, "chunk": chunk_id, "frame": frame, "seconds": seconds})
         except Exception:  # progress is best effort; the chunk's result carries every frame
             pass
 
@@ -73,7 +73,7 @@ class DaskExecutor:
         """Called on the client's event loop for each frame a worker logged."""
         msg = event[1]
         try:
-            self._written.append(FrameWritten(str(msg["worker"]), int(msg["chunk"]), int(msg["frame"])))
+            self._written.append(FrameWritten(str(msg["worker"]), int(msg["chunk"]), int(msg["frame"]), float(msg.get("seconds", 0.0))))
         except (KeyError, TypeError, ValueError):
             return
 

@@ -37,6 +37,7 @@ class FrameWritten:
     worker: str
     chunk_id: int
     frame: int
+    seconds: float = 0.0  # the frame's setup, render, denoise and write in the worker
 
 
 Event = Union[Done, Lost, FrameWritten]

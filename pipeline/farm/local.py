@@ -50,8 +50,8 @@ def _worker_main(conn: Connection) -> None:
             return
         chunk_id, job, inputs, ctx = msg
 
-        def written(frame: int, chunk_id: int = chunk_id) -> None:
-            conn.send(("frame", chunk_id, frame))
+        def written(frame: int, seconds: float, chunk_id: int = chunk_id) -> None:
+            conn.send(("frame", chunk_id, (frame, seconds)))
 
         try:
             reply: Any = ("done", chunk_id, run_chunk(chunk_id, job, inputs, ctx, on_frame=written))
@@ -141,7 +141,7 @@ class LocalExecutor:
                 except (EOFError, OSError):
                     continue  # died; the sentinel fires too
                 if kind == "frame":
-                    events.append(FrameWritten(w.name, chunk_id, payload))
+                    events.append(FrameWritten(w.name, chunk_id, payload[0], payload[1]))
                     continue
                 w.chunk = None
                 events.append(Done(w.name, chunk_id, payload) if kind == "done" else Lost(w.name, chunk_id, payload))

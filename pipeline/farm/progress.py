@@ -19,8 +19,16 @@ log = logging.getLogger("motion")
 class Progress:
     """Counts frames as the scheduler reports them and shows them."""
 
-    def __init__(self, total: int, already: int = 0, label: str = "render", stream: TextIO | None = None, live: bool | None = None) -> None:
+    def __init__(self, total: int, already: int = 0, label: str = "render", stream: TextIO | None = None, live: bool | None = None,
+                 estimate_s: float | None = None) -> None:
+        """`live`: True draws the bar, None draws it on a terminal (plain lines every 2 s
+        elsewhere, for CI logs), False (--no-progress) shows neither: only the warnings
+        and the summary. `estimate_s`: the plan's estimate of a frame's cost in worker
+        seconds divided by the workers (the ETA before two frames are done)."""
         self.stream = stream or sys.stderr
+        self.quiet = live is False
+        self.estimate_s = estimate_s
+        self._first_done: float | None = None  # when this run's first frame was done
         self.total = total
         self.done = already
         self.already = already
@@ -43,10 +51,19 @@ class Progress:
 
     @property
     def eta_s(self) -> float | None:
-        """Seconds until every frame is done at the current rate; None before the first frame."""
-        rate = self.rate_fpm / 60.0
+        """Seconds until every frame is done. The rate is measured from the first frame
+        done, not from the start: start-up and the workers' cold first frames (kernel
+        compilation) would otherwise make the first ETAs several times too long. Before a
+        second frame, the plan's estimate per frame, if any; else None."""
         left = self.total - self.done - self.failed
-        return left / rate if rate > 0 else None
+        run_done = self.done - self.already
+        if self._first_done is not None and run_done >= 2:
+            dt = time.monotonic() - self._first_done
+            if dt > 0:
+                return left * dt / (run_done - 1)
+        if self.estimate_s is not None:
+            return left * self.estimate_s
+        return None
 
     def __enter__(self) -> "Progress":
         if self.live:
@@ -55,10 +72,11 @@ class Progress:
 
             self._bar = Bar(
                 TextColumn("[bold]{task.description}"),
-                BarColumn(),
+                # a healthy bar is green (rich's default pink reads as an error); red only when frames failed
+                BarColumn(complete_style="green", finished_style="bold green"),
                 MofNCompleteColumn(),
                 TextColumn("{task.fields[fpm]:.1f} fr/min"),
-                TextColumn("failed {task.fields[failed]}"),
+                TextColumn("{task.fields[failed_text]}"),
                 TimeElapsedColumn(),
                 TextColumn("ETA"),
                 TimeRemainingColumn(),
@@ -66,13 +84,18 @@ class Progress:
                 transient=False,
             )
             self._bar.start()
-            self._task = self._bar.add_task(self.label, total=self.total, completed=self.done, fpm=0.0, failed=0)
+            self._task = self._bar.add_task(self.label, total=self.total, completed=self.done, fpm=0.0, failed=0, failed_text="[dim]0 failed")
         return self
 
     def __exit__(self, *exc: Any) -> None:
         if self._bar is not None:
             self._refresh()
             self._bar.stop()
+
+    def note(self, message: str) -> None:
+        """A line about the run's progress (its plan, the executor): INFO, or DEBUG with
+        --no-progress, which leaves only the warnings and the summary."""
+        self.log(message, logging.DEBUG if self.quiet else logging.INFO)
 
     def log(self, message: str, level: int = logging.INFO) -> None:
         """One line: above the live bar when there is one, else through the logger."""
@@ -83,14 +106,19 @@ class Progress:
 
     def _refresh(self) -> None:
         if self._bar is not None:
-            self._bar.update(self._task, completed=self.done + self.failed, fpm=self.rate_fpm, failed=self.failed)
+            failed_text = f"[bold red]{self.failed} failed" if self.failed else "[dim]0 failed"
+            self._bar.update(self._task, completed=self.done + self.failed, fpm=self.rate_fpm, failed=self.failed, failed_text=failed_text)
+            if self.failed:
+                self._bar.columns[1].complete_style = "red"
 
     def event(self, kind: str, data: dict[str, Any]) -> None:
         """Scheduler notifications: written (a worker finished a frame; its chunk is still
         running), rendered, skipped, done_elsewhere, failed, retry, excluded, held. A frame
         is counted once, when it is first reported written or done."""
         if kind == "written":
-            log.debug(f"  frame {data.get('frame')} written by {data.get('worker')}")
+            seconds = data.get("seconds")
+            took = f" in {seconds:.2f}s" if isinstance(seconds, (int, float)) and seconds > 0 else ""
+            self.log(f"  frame {data.get('frame')}: {data.get('path') or '?'}{took} ({data.get('worker')})", logging.DEBUG)
         if kind in ("written", "rendered", "skipped", "done_elsewhere"):
             frame = data.get("frame")
             if frame in self._counted:
@@ -98,6 +126,8 @@ class Progress:
             if frame is not None:
                 self._counted.add(frame)
             self.done += 1
+            if kind in ("written", "rendered") and self._first_done is None:
+                self._first_done = time.monotonic()
         elif kind == "failed":
             self.failed += 1
             self.log(f"  frame {data['frame']} FAILED: {data.get('error')}", logging.WARNING)
@@ -110,7 +140,7 @@ class Progress:
         elif kind == "held":
             self.log(f"  frame {data['frame']} is being rendered by another job ({data['holder']}); waiting")
         self._refresh()
-        if self._bar is None and kind in ("written", "rendered", "skipped", "done_elsewhere", "failed"):
+        if self._bar is None and not self.quiet and kind in ("written", "rendered", "skipped", "done_elsewhere", "failed"):
             now = time.monotonic()
             finished = self.done + self.failed >= self.total
             if finished or now - self._last_line >= 2.0:
@@ -128,6 +158,7 @@ class BakeProgress:
     def __init__(self, stream: TextIO | None = None, live: bool | None = None, every_s: float = 2.0) -> None:
         self.stream = stream or sys.stderr
         self.live = (self.stream.isatty() if live is None else live) and log.isEnabledFor(logging.INFO)
+        self.quiet = live is False  # --no-progress: the bake's lines at DEBUG only
         self.every_s = every_s
         self.t0 = time.monotonic()
         self._last = self.t0
@@ -167,7 +198,7 @@ class BakeProgress:
             print("\r" + line, end="", file=self.stream, flush=True)
             self._drawn = True
         else:
-            log.info(line)
+            log.log(logging.DEBUG if self.quiet else logging.INFO, line)
 
     def baked(self, frames: int) -> None:
         """The bake is done: one summary line."""
@@ -181,4 +212,4 @@ class BakeProgress:
             sim = f"simulated {simulated:.2f} s of dynamics in {self._sim_wall:.2f} s ({rate:.3g} simulated s per s), "
         else:
             sim = ""
-        log.info(f"motion: bake: {sim}{frames} frames baked in {total:.2f} s")
+        log.log(logging.DEBUG if self.quiet else logging.INFO, f"motion: bake: {sim}{frames} frames baked in {total:.2f} s")

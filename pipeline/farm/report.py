@@ -7,8 +7,9 @@ import json
 import os
 import statistics
 import tempfile
+import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from ..errors import DiskFaultError, UsageError
 from ..frame_output import disk_fault, write_atomic
@@ -90,6 +91,7 @@ def build_report(
         "scene_name": loaded.name,
         "output_dir": str(out_dir),
         "run_id": run_id,
+        "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "settings_hash": job.settings_hash,
         "scene_hash": job.scene_hash,
         "selection": format_frames(selected),
@@ -106,6 +108,46 @@ def build_report(
         "workers": workers,
         "frames": rows,
     }
+
+
+HISTORY_LIMIT = 100  # runs kept in a report's history
+
+
+def merge_previous(report: dict[str, Any], path: str | Path, exists: Callable[[int], bool]) -> None:
+    """Keep what the report at `path` knew of the folder: a rerun that renders nothing (or
+    a few frames) must not lose the record of the frames already there. Skipped frames keep
+    the row of the run that rendered them (`rendered_in_run`, worker, times); the earlier
+    run joins `history` (newest last, at most HISTORY_LIMIT); `folder` lists every frame of
+    the folder that a run of this report rendered and that is still on disk."""
+    try:
+        before = json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        before = None
+    if not isinstance(before, dict) or before.get("scene_name") != report.get("scene_name"):
+        before = {}
+    old_rows = {r.get("frame"): r for r in before.get("frames", []) if isinstance(r, dict)}
+    for row in report["frames"]:
+        prev = old_rows.get(row["frame"])
+        if row["status"] == "skipped" and isinstance(prev, dict):
+            if prev.get("status") == "rendered":
+                row["rendered_in_run"] = before.get("run_id")
+                row.update({k: prev[k] for k in ("worker", "render_s", "setup_s", "denoise_s", "path") if k in prev})
+            elif "rendered_in_run" in prev:
+                row.update({k: prev[k] for k in ("rendered_in_run", "worker", "render_s", "setup_s", "denoise_s", "path") if k in prev})
+    for row in report["frames"]:
+        if row["status"] == "rendered":
+            row["rendered_in_run"] = report.get("run_id")
+    history = [h for h in before.get("history", []) if isinstance(h, dict)]
+    if before.get("run_id"):
+        history.append({k: before.get(k) for k in ("run_id", "finished", "selection", "shard", "frames_this_job", "settings_hash", "totals")})
+    report["history"] = history[-HISTORY_LIMIT:]
+    known = set()
+    folder = before.get("folder")
+    if isinstance(folder, dict) and isinstance(folder.get("frames"), list):
+        known |= {f for f in folder["frames"] if isinstance(f, int)}
+    known |= {r["frame"] for r in report["frames"] if r["status"] in ("rendered", "skipped", "done_elsewhere")}
+    frames = sorted(f for f in known if exists(f))
+    report["folder"] = {"frames": frames, "complete": format_frames(frames), "count": len(frames)}
 
 
 def write_report(report: dict[str, Any], path: str | Path) -> Path:

@@ -36,17 +36,6 @@ def default_workers(frames: int) -> int:
     return max(1, min(cores, frames, MAX_DEFAULT_WORKERS))
 
 
-def scheduler_target(spec: str) -> dict[str, str]:
-    """`tcp://host:port` (or `host:port`) -> address; an existing file -> scheduler file."""
-    if "://" in spec:
-        return {"address": spec}
-    if Path(spec).is_file():
-        return {"scheduler_file": spec}
-    if ":" in spec and not spec.endswith(".json"):
-        return {"address": f"tcp://{spec}"}
-    raise UsageError(f"--scheduler: {spec!r} is neither tcp://HOST:PORT nor an existing scheduler file")
-
-
 def run_chunks(
     chunk_list: list[list[int]],
     job: RenderJob,
@@ -69,15 +58,16 @@ def run_chunks(
     try:
         if chunk_list:
             if scheduler:
+                from .address import scheduler_target
                 from .cluster import DaskExecutor
 
                 executor = DaskExecutor(**scheduler_target(scheduler))
-                progress.log(f"  executor: dask at {executor.address}, {len(executor.live_workers())} workers")
+                progress.note(f"  executor: dask at {executor.address}, {len(executor.live_workers())} workers")
             else:
                 from .local import LocalExecutor
 
                 executor = LocalExecutor(min(workers, len(chunk_list)))
-                progress.log(f"  executor: local, {executor.n} worker processes x {threads} threads")
+                progress.note(f"  executor: local, {executor.n} worker processes x {threads} threads")
             sched = Scheduler(executor, job, by_frame, ctx, cfg, notify=progress.event, no_worker_grace_s=120.0 if scheduler else 0.0)
             with progress:
                 sched.run(chunk_list)

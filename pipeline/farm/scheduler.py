@@ -157,7 +157,7 @@ class Scheduler:
                 if isinstance(event, Done):
                     self._done(event)
                 elif isinstance(event, FrameWritten):
-                    self.notify("written", {"frame": event.frame, "worker": event.worker})
+                    self.notify("written", {"frame": event.frame, "worker": event.worker, "seconds": event.seconds, "path": self.ctx.paths.get(event.frame)})
                 else:
                     self._lost(event)
             self._check_timeouts()

@@ -39,9 +39,9 @@ class ChunkResult:
     disk_fault: str | None = None  # the disk refused a write: the chunk stopped there
 
 
-def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext, on_frame: Callable[[int], None] | None = None) -> ChunkResult:
-    """Render one chunk in this worker process (local or Dask). `on_frame(frame)` is
-    called as each frame is written (the local executor tells the farm at once, so
+def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext, on_frame: Callable[[int, float], None] | None = None) -> ChunkResult:
+    """Render one chunk in this worker process (local or Dask). `on_frame(frame, seconds)`
+    is called as each frame is written (seconds: its setup, render, denoise and write) (the local executor tells the farm at once, so
     progress moves per frame, not per chunk)."""
     t0 = time.perf_counter()
     me = Claimant.here(ctx.run_id)
@@ -69,7 +69,7 @@ def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: 
                 out.disk_fault = fault
                 break
             if on_frame is not None and all(r.ok for r in results):
-                on_frame(fi.frame)
+                on_frame(fi.frame, sum(r.setup_s + r.render_s + r.denoise_s + r.write_s for r in results))
         finally:
             release(path, ctx.run_id)
     out.seconds = time.perf_counter() - t0

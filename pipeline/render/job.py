@@ -80,9 +80,18 @@ def scene_hashes(loaded: LoadedScene) -> tuple[str, str]:
     """(scene, settings) hashes: the scene file's bytes; the validated scene with every
     override applied, plus the renderer's version."""
     scene_hash = hashlib.sha256(loaded.path.read_bytes()).hexdigest()[:16]
-    canon = json.dumps(loaded.scene.model_dump(mode="json"), sort_keys=True)
+    # output.deliver says what a full render assembles afterwards: not how a frame looks
+    canon = json.dumps(loaded.scene.model_dump(mode="json", exclude={"output": {"deliver"}}), sort_keys=True)
     settings_hash = hashlib.sha256(f"{RENDERER_VERSION}|{canon}".encode()).hexdigest()[:16]
     return scene_hash, settings_hash
+
+
+def render_settings(scene: Any) -> dict[str, Any]:
+    """The settings a frame is rendered with (the scene's `render:` block as resolved from
+    flag, preset, scene and default, and how it is stored), kept in each frame's header so
+    a rerun can name the setting that makes an existing frame stale."""
+    out = scene.output
+    return {**scene.render.model_dump(mode="json"), "pixel_type": out.pixel_type, "compression": out.compression, "aovs": list(out.aovs)}
 
 
 def frame_path(job: RenderJob, loaded: LoadedScene, frame: int) -> Path:
@@ -208,6 +217,7 @@ def _render_one(job: RenderJob, fi: BakedFrame) -> FrameResult:
             "scene": scene_reference(loaded.path, out),
             "render_seconds": float(stats.render_s),
             "renderer": RENDERER_VERSION,
+            "render_settings": json.dumps(render_settings(scene), sort_keys=True),
             **denoise_meta,
             **({"field": parity, "fieldOrder": job.fields} if parity else {}),
         }

@@ -389,6 +389,8 @@ class OutputSettings(Model):
     pixel_type: Literal["half", "float"] = "half"
     compression: Literal["zip", "zips", "piz", "zstd", "none"] = "zip"
     aovs: list[Literal["depth", "normal", "motion", "albedo"]] = []
+    # made after a render of the whole shot (a gapless run of frames); `--deliver` overrides
+    deliver: list[Literal["24p", "60i", "50i", "review", "contact"]] = []
     owner: str | None = None
     comments: str | None = None
 

@@ -9,6 +9,7 @@ import it themselves.
 
 from __future__ import annotations
 
+import logging
 import os
 import time
 from dataclasses import dataclass
@@ -22,17 +23,19 @@ from ..farm.config import FarmConfig, load_farm_config
 from ..farm.frames import chunks as make_chunks
 from ..farm.frames import default_chunk_size, format_frames, parse_frames, parse_shard, shard
 from ..farm.progress import Progress
-from ..farm.report import build_report, check_writable, write_report, write_report_somewhere
+from ..farm.report import build_report, check_writable, merge_previous, write_report, write_report_somewhere
 from ..farm.run import MAX_RETRIES, MAX_THREADS, MAX_WORKERS, default_workers, run_chunks
 from ..farm.scheduler import Scheduler
 from ..farm.task import TaskContext
-from ..frame_output import is_complete
 from ..limits import check_env_sizes
 from ..presets import Preset, load_preset, overrides_from, spread
-from ..render.job import RenderJob, expected_meta, frame_path, scene_hashes
+from ..render.job import RenderJob, expected_meta, frame_path, render_settings, scene_hashes
 from ..scene.loader import LoadedScene, load_scene
-from .deliver import check_deliver, deliver_and_record
-from .plan import check_only, plan
+from .deliver import DeliverPlan, check_deliver, deliver_and_record, deliver_plan
+from .estimate import estimate, samples_of
+from .estimate import record as record_cost
+from .plan import check_only, plan, resolved_settings
+from .stale import FrameStates, frame_states
 from .request import RenderRequest
 
 
@@ -55,12 +58,13 @@ def check_request(req: RenderRequest) -> None:
         raise UsageError(f"--workers must be at least 1, got {req.workers}")
     if req.workers is not None and req.scheduler:
         raise UsageError("--workers is for the local executor; a Dask cluster (--scheduler) sizes itself")
-    if req.deliver and req.shard:
-        raise UsageError("--deliver needs every frame: assemble after all shards (docs/ci-sharding.md)")
-    if req.deliver:
+    explicit = bool(req.deliver) and req.deliver.strip().lower() != "none"  # type: ignore[union-attr]
+    if explicit and req.shard:
+        raise UsageError("--deliver needs every frame: assemble after all shards with --check --deliver (docs/ci-sharding.md)")
+    if explicit:
         from ..telecine.deliver import parse_formats
 
-        parse_formats(req.deliver)  # a wrong name fails now, not after the last frame
+        parse_formats(req.deliver)  # type: ignore[arg-type]  # a wrong name fails now, not after the last frame
 
 
 def load_shot(req: RenderRequest) -> tuple[Preset | None, dict[str, Any], LoadedScene]:
@@ -173,14 +177,17 @@ def motion_inputs(req: RenderRequest, loaded: LoadedScene, sel: Selection) -> li
     return inputs
 
 
-def complete_frames(req: RenderRequest, job: RenderJob, out_dir: Path, frames: list[int], paths: dict[int, str], by_frame: dict[int, BakedFrame]) -> list[int]:
-    """The frames --resume keeps: complete and made from this scene, motion and settings.
+def complete_frames(req: RenderRequest, job: RenderJob, job_scene: Any, out_dir: Path, frames: list[int], paths: dict[int, str], by_frame: dict[int, BakedFrame]) -> FrameStates:
+    """The frames on disk: those --resume keeps (complete and made from this scene, motion
+    and settings) and the stale ones this run replaces, each with the reason (shot/stale.py).
     Existing frames with neither --resume nor --overwrite are a UsageError."""
-    resume = req.resume and not req.overwrite
     existing = [f for f in frames if os.path.exists(paths[f])]
     if not req.resume and not req.overwrite and existing:
         raise UsageError(f"{out_dir}: frames {format_frames(existing)} exist; pass --resume to keep complete ones or --overwrite to re-render them")
-    return [f for f in frames if resume and f in existing and is_complete(paths[f], expected_meta(job, by_frame[f]))]
+    states = frame_states(existing, paths, {f: expected_meta(job, by_frame[f]) for f in existing}, render_settings(job_scene))
+    if req.overwrite:
+        return FrameStates(complete=[], stale={f: "--overwrite" for f in existing})
+    return states
 
 
 def summary_line(label: str, totals: dict[str, Any], report_path: Path | None) -> str:
@@ -220,17 +227,29 @@ def raise_failures(report: dict[str, Any], frames: list[int]) -> None:
 
 
 def finish(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: Path, frames: list[int], workers: int,
-           report: dict[str, Any], report_path: Path | None, say: Callable[[str], None]) -> None:
+           report: dict[str, Any], report_path: Path | None, say: Callable[[str], None], wanted: DeliverPlan,
+           paths: dict[int, str]) -> None:
     """After every frame: the temporal pass (render.temporal != off) and the deliverables
-    (--deliver), each recorded in the report."""
+    (--deliver, else the scene's output.deliver), each recorded in the report."""
     if loaded.scene.render.temporal != "off":
         from ..render.temporal import temporal_pass
 
         report["temporal"] = temporal_pass(loaded, job, out_dir, frames, workers=workers, log=say)
         if report_path is not None:
             write_report(report, report_path)
-    if req.deliver:
-        report["deliverables"] = deliver_and_record(req, out_dir, report, report_path, say)
+    say_outputs(wanted, frames, paths, say)
+    if wanted and frames:
+        report["deliverables"] = deliver_and_record(req, out_dir, [Path(paths[f]) for f in frames], wanted.formats, report, report_path, say)
+
+
+def say_outputs(wanted: DeliverPlan, frames: list[int], paths: dict[int, str], say: Callable[[str], None]) -> None:
+    """Where the frames are (the true paths, whatever -o said), and the deliverables the
+    scene asks for that this run leaves out, with why."""
+    if frames:
+        first, last = paths[frames[0]], paths[frames[-1]]
+        say(f"  frames: {first}" + (f" .. {Path(last).name}" if last != first else "") + f" ({len(frames)})")
+    for fmt, why in wanted.skipped.items():
+        say(f"  {fmt}: not made: {why} (the scene's output.deliver)")
 
 
 # --- the whole render ----------------------------------------------------------------------
@@ -247,10 +266,17 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     sel = select_frames(req, loaded, preset)
     frames = sel.frames
     out_dir = output_folder(req, loaded)
-    if req.deliver:
-        check_deliver(req, loaded, frames, out_dir, create=not req.dry_run)  # every check that can fail, before the first task
+    wanted = deliver_plan(req, loaded, sel.selected if not req.shard else frames)
+    if wanted:
+        check_deliver(req, loaded, frames, out_dir, wanted.formats)  # every check that can fail, before the first task
     job, workers, threads = make_job(req, loaded, overrides, out_dir, frames)
     preflight(req, loaded, job, out_dir, frames)
+    if req.scheduler and not req.check:
+        from ..farm.address import probe_scheduler
+
+        probe_scheduler(req.scheduler)  # in seconds, before the bake (and in --dry-run)
+    if req.check and wanted:
+        check_writable(out_dir, "output folder")  # --check --deliver writes the deliverables
     warn_variant(req, loaded)
 
     t0 = time.perf_counter()
@@ -259,27 +285,36 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     by_frame = {fi.frame: fi for fi in inputs}
     paths = {f: str(frame_path(job, loaded, f)) for f in frames}
 
-    skipped = complete_frames(req, job, out_dir, frames, paths, by_frame)
+    states = complete_frames(req, job, loaded.scene, out_dir, frames, paths, by_frame)
+    skipped = states.complete
     todo = [f for f in frames if f not in set(skipped)]
     if req.check:
-        return check_only(loaded.name, out_dir, frames, todo, paths)
+        result = check_only(loaded.name, out_dir, frames, todo, paths, states.stale)
+        if wanted:
+            say = Progress(total=0, live=False).log
+            say_outputs(wanted, frames, paths, say)
+            result["deliverables"] = deliver_and_record(req, out_dir, [Path(paths[f]) for f in frames], wanted.formats, result, None, say)
+        return result
     chunk_size = cfg.chunk_size or default_chunk_size(len(todo), workers if not req.scheduler else 2)
     chunk_list = make_chunks(todo, chunk_size)
+    cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), workers if not req.scheduler else 1, bake_s)
     shard_spec = sel.shard_spec
     default_name = f"render-report.shard-{shard_spec[0]}-of-{shard_spec[1]}.json" if shard_spec else "render-report.json"
     if req.dry_run:
         return plan(req, loaded, out_dir, sel.selected, frames, shard_spec, skipped, chunk_list, chunk_size, workers, threads, paths,
-                    Path(req.report or out_dir / default_name))
+                    Path(req.report or out_dir / default_name), states.stale, wanted, resolved_settings(req, loaded, preset), cost)
 
     out_dir.mkdir(parents=True, exist_ok=True)
     run_id = new_run_id()
     ctx = TaskContext(run_id=run_id, paths=paths, resume=req.resume and not req.overwrite, stale_after_s=cfg.stale_after_s)
     label = f"{loaded.name}" + (f" shard {shard_spec[0]}/{shard_spec[1]}" if shard_spec else "")
-    progress = Progress(total=len(frames), already=len(skipped), label=label, live=req.progress)
-    progress.log(
+    progress = Progress(total=len(frames), already=len(skipped), label=label, live=req.progress, estimate_s=cost["per_frame_s"] if todo else None)
+    progress.note(
         f"motion: {label}: {len(frames)} frames ({format_frames(frames) or 'none'}) -> {out_dir}; "
         f"{len(skipped)} already complete, {len(todo)} to render in {len(chunk_list)} chunks of <= {chunk_size}"
     )
+    for line in states.describe():
+        progress.log(f"motion: {line}", logging.WARNING)
     t_farm = time.perf_counter()
     sched, interrupted = run_chunks(chunk_list, job, by_frame, ctx, cfg, progress, scheduler=req.scheduler, workers=workers, threads=threads)
     farm_s = time.perf_counter() - t_farm
@@ -301,11 +336,15 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         motion_file=str(req.motion_file) if req.motion_file else None,
     )
     report["report"] = str(req.report or out_dir / default_name)
+    if states.stale:
+        report["replaced"] = [{"frame": f, "reason": why} for f, why in sorted(states.stale.items())]
+    merge_previous(report, Path(req.report or out_dir / default_name), lambda f: os.path.exists(frame_path(job, loaded, f)))
+    record_cost(loaded.name, job.settings_hash, samples_of(loaded.scene), report)
     report_path, report_fault = write_report_somewhere(report, req.report or out_dir / default_name, run_id)
     progress.log(summary_line(label, report["totals"], report_path))
     stop_on_disk_fault(sched, report, report_path, report_fault)
     if interrupted:
         raise KeyboardInterrupt
     raise_failures(report, frames)
-    finish(req, loaded, job, out_dir, frames, workers, report, report_path, progress.log)
+    finish(req, loaded, job, out_dir, frames, workers, report, report_path, progress.log, wanted, paths)
     return report

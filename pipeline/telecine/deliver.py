@@ -20,7 +20,7 @@ from .cadence import film_rate
 from .contact_sheet import contact_sheet
 from .convert import telecine_sequence
 from .movie import ViewTransform, sequence_movie
-from .sequence import discover
+from .sequence import Sequence, discover
 
 FORMATS = ("24p", "60i", "50i", "review", "contact")
 
@@ -51,14 +51,16 @@ def deliver(
     prefix: str | None = None,
     overwrite: bool = False,
     report: Report | None = None,
+    sequence: Sequence | None = None,
 ) -> dict[str, list[Path]]:
-    """Make the requested deliverables of the sequence in `in_dir` under `out_dir`.
+    """Make the requested deliverables of the sequence in `in_dir` (or of `sequence`, a
+    selection of its frames: sequence.select) under `out_dir`.
 
     Returns, per format, the paths written (movie, contact sheet; for 60i/50i the movie
     after the EXR frames).
     """
     wanted = parse_formats(formats)
-    seq = discover(in_dir, prefix, require_even_height=any(f in ("60i", "50i") for f in wanted))
+    seq = sequence or discover(in_dir, prefix, require_even_height=any(f in ("60i", "50i") for f in wanted))
     out_dir = Path(out_dir)
     film = film_rate(film_speed)
     view = view or ViewTransform()  # (a bad OCIO config or view failed when it was made)
@@ -83,5 +85,5 @@ def deliver(
         elif fmt == "contact":
             sheet = out_dir / f"{seq.prefix}_contact.png"
             say(fmt, f"contact sheet {sheet}")
-            done[fmt] = [contact_sheet(seq.directory, sheet, prefix=seq.prefix, view=view)]
+            done[fmt] = [contact_sheet(seq, sheet, view=view)]
     return done

@@ -10,7 +10,7 @@ Each problem is a `FrameIOError` naming the offending frame.
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from fractions import Fraction
 from pathlib import Path
 from typing import Any, Iterator, Literal
@@ -173,6 +173,16 @@ def discover(
         first_meta=first_meta,
         missing=tuple(missing),
     )
+
+
+def select(seq: Sequence, numbers: list[int] | tuple[int, ...]) -> Sequence:
+    """The frames `numbers` of `seq`, in that order (what a run selected, not every frame
+    of its folder). FrameIOError naming the first absent frame."""
+    where = dict(zip(seq.numbers, seq.paths))
+    absent = [n for n in numbers if n not in where]
+    if absent:
+        raise FrameIOError(f"{seq.directory}: frame {absent[0]} of sequence {seq.prefix} is not there" + (f" ({len(absent)} absent)" if len(absent) > 1 else ""))
+    return replace(seq, numbers=tuple(numbers), paths=tuple(where[n] for n in numbers), missing=())
 
 
 def read_checked(seq: Sequence, index: int) -> Frame:

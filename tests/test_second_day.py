@@ -1,0 +1,230 @@
+"""A user's second day (issue 23): what a user does twice, not once. Reruns that just work,
+deliverables made from the frames the run selected and rebuilt only when those change,
+stale frames named, a dry run that shows the resolved settings and the job's cost, status
+like Blender's, and a scheduler that cannot be reached found in seconds."""
+
+from __future__ import annotations
+
+import io
+import json
+import logging
+import os
+import subprocess
+import time
+from pathlib import Path
+
+import av
+import pytest
+import yaml
+
+from farm_util import MOTION, ROOT, SCENE, TINY, frames_in, motion, report
+from motion.pipeline.farm.progress import Progress
+
+LINES = [a for a in TINY if a != "--no-progress"]  # stderr is not a terminal: plain progress lines
+
+
+def _movie_frames(path: Path) -> int:
+    with av.open(str(path)) as c:
+        return sum(1 for _ in c.decode(video=0))
+
+
+def test_the_same_command_twice_renders_and_rebuilds_nothing(tmp_path: Path) -> None:
+    """The second run of a render with deliverables exits 0, renders nothing and rebuilds
+    nothing (it failed with '60i already holds 8 frames; use --overwrite' before);
+    --overwrite rebuilds every deliverable; the report keeps the folder's record."""
+    out = tmp_path / "out"
+    args = ["render", SCENE, "-o", out, "--frames", "0-5", *TINY, "--deliver", "24p,60i,contact"]
+    first = motion(*args)
+    assert first.returncode == 0, first.stderr
+    movie = out / "deliver" / "farm-tiny_24p.mov"
+    made = {p.name: p.stat().st_mtime_ns for p in (out / "deliver").rglob("*") if p.is_file()}
+    second = motion(*args)
+    assert second.returncode == 0, second.stderr
+    assert "0 rendered, 6 skipped" in second.stderr
+    assert second.stderr.count("up to date") == 3, second.stderr
+    assert {p.name: p.stat().st_mtime_ns for p in (out / "deliver").rglob("*") if p.is_file()} == made
+    rep = report(out)
+    assert rep["deliverables"]["status"] == {"24p": "up to date", "60i": "up to date", "contact": "up to date"}
+    # a run that rendered nothing keeps the record of the frames in the folder
+    assert rep["folder"]["complete"] == "0-5" and len(rep["history"]) == 1
+    assert all(r["status"] == "skipped" and r["rendered_in_run"] == rep["history"][0]["run_id"] and "render_s" in r for r in rep["frames"])
+    again = motion(*args, "--overwrite")
+    assert again.returncode == 0, again.stderr  # the 60i folder is replaced, not refused
+    assert report(out)["deliverables"]["status"] == {"24p": "made", "60i": "made", "contact": "made"}
+    assert movie.stat().st_mtime_ns > made[movie.name]
+    assert not [p for p in (out / "deliver").iterdir() if p.name.startswith(".")]  # no staging left
+
+
+def test_a_deliverable_is_made_from_the_selected_frames_and_rebuilt_when_they_change(tmp_path: Path) -> None:
+    """`--frames 2-5 --deliver 24p` in a folder of frames 0-7: the movie holds the 4 frames
+    selected (it held all 8 before); re-rendering one of them rebuilds it."""
+    out = tmp_path / "out"
+    assert motion("render", SCENE, "-o", out, "--frames", "0-7", *TINY).returncode == 0
+    res = motion("render", SCENE, "-o", out, "--frames", "2-5", *TINY, "--deliver", "24p")
+    assert res.returncode == 0, res.stderr
+    movie = out / "deliver" / "farm-tiny_24p.mov"
+    assert _movie_frames(movie) == 4
+    assert json.loads((out / "deliver" / "manifest.json").read_text())["formats"]["24p"]["frames"] == "2-5"
+    res = motion("render", SCENE, "-o", out, "--frames", "2-5", "--resolution", "16x12", "--spp", "2", "--no-progress", "--deliver", "24p")
+    assert res.returncode == 0, res.stderr
+    assert "frames 2-5 exist but were made with other settings (spp 1 -> 2): they will be replaced" in res.stderr
+    assert report(out)["deliverables"]["status"] == {"24p": "made"}
+
+
+def test_stale_frames_are_named_by_the_dry_run_and_the_run(tmp_path: Path) -> None:
+    """A preview, then `--spp 2 --frames 0-1` into the same folder: the dry run and the run
+    say which frames are replaced and which setting differs (replaced without a word before)."""
+    out = tmp_path / "out"
+    assert motion("render", SCENE, "-o", out, "--frames", "0-3", *TINY).returncode == 0
+    dry = motion("render", SCENE, "-o", out, "--frames", "0-1", "--resolution", "16x12", "--spp", "2", "--dry-run", "--json")
+    assert dry.returncode == 0, dry.stderr
+    plan = json.loads(dry.stdout)
+    assert plan["replace"] == [{"frames": "0,1", "reason": "were made with other settings (spp 1 -> 2)"}]
+    run = motion("render", SCENE, "-o", out, "--frames", "0-1", "--resolution", "16x12", "--spp", "2", "--no-progress")
+    assert run.returncode == 0 and "frames 0,1 exist but were made with other settings (spp 1 -> 2)" in run.stderr, run.stderr
+    assert report(out)["replaced"] == [{"frame": f, "reason": "were made with other settings (spp 1 -> 2)"} for f in (0, 1)]
+    # the scene edited (not its render settings): named as such
+    doc = yaml.safe_load(SCENE.read_text())
+    doc["materials"][0]["color"] = [0.1, 0.7, 0.2]
+    edited = tmp_path / "farm-tiny.yaml"
+    edited.write_text(yaml.safe_dump(doc))
+    dry = motion("render", edited, "-o", out, "--frames", "2-3", *TINY, "--dry-run", "--json")
+    assert json.loads(dry.stdout)["replace"] == [{"frames": "2,3", "reason": "were made from another version of the scene or its settings"}]
+
+
+def test_the_dry_run_shows_resolved_settings_with_their_source_and_an_estimate(tmp_path: Path) -> None:
+    res = motion("render", SCENE, "-o", tmp_path / "out", "--preset", "ci-smoke", "--spp", "3", "--frames", "0-3", "--dry-run", "--json")
+    assert res.returncode == 0, res.stderr
+    plan = json.loads(res.stdout)
+    s = plan["settings"]
+    assert s["spp"] == {"value": 3, "from": "flag"}
+    assert s["resolution"] == {"value": [64, 36], "from": "preset ci-smoke"}
+    assert s["max_depth"]["from"] == "preset ci-smoke" and s["motion_blur"]["from"] == "default"
+    assert plan["estimate"]["seconds"] > 0 and plan["estimate"]["basis"]
+    text = motion("render", SCENE, "-o", tmp_path / "out", "--preset", "final", "--frames", "0-3", "--dry-run").stdout
+    assert "resolution 1920x1080 (preset final)" in text and "estimate:" in text
+
+
+def test_verbose_says_each_frame_path_and_time_and_no_progress_is_quiet(tmp_path: Path) -> None:
+    out = tmp_path / "v"
+    res = motion("-v", "render", SCENE, "-o", out, "--frames", "0-2", *LINES, "--workers", "1")
+    assert res.returncode == 0, res.stderr
+    for f in range(3):
+        path = out / f"farm-tiny.{f:04d}.exr"
+        assert any(line.startswith(f"  frame {f}: {path} in ") for line in res.stderr.splitlines()), res.stderr
+    quiet = motion("render", SCENE, "-o", tmp_path / "q", "--frames", "0-5", *TINY, "--workers", "1")
+    assert quiet.returncode == 0, quiet.stderr
+    lines = quiet.stderr.splitlines()
+    assert not [line for line in lines if "frames/min, 0 failed" in line and "rendered" not in line], lines  # no periodic lines
+    assert not [line for line in lines if "bake:" in line or "executor:" in line], lines
+    assert any("6 rendered, 0 skipped" in line for line in lines)
+
+
+def test_the_eta_is_measured_from_the_first_frame_done(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Start-up and cold frames do not inflate the ETA: 10 frames, the first done at 5 s
+    (cold), then one every 0.5 s: the ETA after 3 frames is 7 x 0.5 s, not 7 x 5/3 s."""
+    clock = [100.0]
+    monkeypatch.setattr(time, "monotonic", lambda: clock[0])
+    p = Progress(total=10, stream=io.StringIO(), live=False, estimate_s=0.6)
+    assert p.eta_s == pytest.approx(6.0)  # the plan's estimate before two frames are done
+    for frame, t in ((0, 105.0), (1, 105.5), (2, 106.0)):
+        clock[0] = t
+        p.event("written", {"frame": frame, "worker": "w", "seconds": 0.5, "path": f"f{frame}"})
+    assert p.eta_s == pytest.approx(3.5)
+
+
+def test_a_healthy_bar_is_green(tmp_path: Path) -> None:
+    logging.getLogger("motion").setLevel(logging.INFO)
+    with Progress(total=2, stream=io.StringIO(), live=True) as p:
+        assert p._bar.columns[1].complete_style == "green"
+        p.event("failed", {"frame": 0, "error": "x"})
+        assert p._bar.columns[1].complete_style == "red"
+
+
+@pytest.mark.parametrize("address,says", [
+    ("garbage://host:1", "unknown scheme 'garbage'"),
+    ("localhost:abc", "expected tcp://HOST:PORT"),
+    ("127.0.0.1:1", "cannot reach 127.0.0.1:1: Connection refused"),
+    ("SCHEDFILE", "not a Dask scheduler file (not JSON"),
+])
+def test_an_unreachable_scheduler_is_found_in_seconds_before_the_bake(tmp_path: Path, address: str, says: str) -> None:
+    if address == "SCHEDFILE":
+        address = str(tmp_path / "scheduler.json")
+        Path(address).write_text("not json")
+    for extra in ([], ["--dry-run"]):
+        t0 = time.monotonic()
+        res = motion("render", SCENE, "-o", tmp_path / "out", "--scheduler", address, *TINY, *extra)
+        assert time.monotonic() - t0 < 10
+        assert res.returncode == 2 and says in res.stderr, res.stderr
+        assert "bake:" not in res.stderr and "Traceback" not in res.stderr
+
+
+def test_a_server_that_is_not_dask_is_refused_in_seconds(tmp_path: Path) -> None:
+    import socket
+    import threading
+
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(4)
+    port = server.getsockname()[1]
+
+    def speak() -> None:  # a server that greets every connection with 4 MB of noise
+        for _ in range(2):
+            conn, _ = server.accept()
+            try:
+                conn.sendall(b"\xff" * (4 << 20))
+            except OSError:
+                pass
+            conn.close()
+
+    threading.Thread(target=speak, daemon=True).start()
+    t0 = time.monotonic()
+    res = motion("render", SCENE, "-o", tmp_path / "out", "--scheduler", f"tcp://127.0.0.1:{port}", *TINY)
+    assert time.monotonic() - t0 < 10
+    assert res.returncode == 2 and "answers, but not as a Dask scheduler" in res.stderr, res.stderr
+    server.close()
+
+
+def test_a_preset_spread_makes_what_it_can_of_the_scenes_deliverables(tmp_path: Path) -> None:
+    """The scene asks for 24p, 60i and a contact sheet (output.deliver); the ci-smoke
+    preset spreads 3 frames over the shot: the run exits 0, makes the contact sheet and
+    says why the movies are left out (exit 2 before: '--deliver needs a gapless run')."""
+    doc = yaml.safe_load(SCENE.read_text())
+    doc.setdefault("output", {})["deliver"] = ["24p", "60i", "contact"]
+    scene = tmp_path / "farm-tiny.yaml"
+    scene.write_text(yaml.safe_dump(doc))
+    res = motion("render", scene, "-o", tmp_path / "out", "--preset", "ci-smoke", "--no-progress")
+    assert res.returncode == 0, res.stderr
+    assert "24p: not made: frames 0,24,47 are not a gapless run" in res.stderr
+    assert (tmp_path / "out" / "deliver" / "farm-tiny_contact.png").is_file()
+    assert not (tmp_path / "out" / "deliver" / "farm-tiny_24p.mov").exists()
+    full = motion("render", scene, "-o", tmp_path / "full", "--frames", "0-3", *TINY)
+    assert full.returncode == 0 and (tmp_path / "full" / "deliver" / "farm-tiny_24p.mov").is_file(), full.stderr
+
+
+@pytest.mark.render
+def test_make_render_twice_with_the_readmes_smoke_args(tmp_path: Path) -> None:
+    """The README's `make render ARGS="--preset ci-smoke -o DIR"`, twice: both exit 0, the
+    second renders nothing, and the paths printed are the true ones under DIR (before:
+    exit 2 on the gaps, then paths under out/cannonball-splash echoed anyway)."""
+    out = tmp_path / "smoke"
+    env = {**os.environ, "MAKEFLAGS": ""}
+    cmd = ["make", "-s", "-C", str(ROOT), "render", f"ARGS=--preset ci-smoke --resolution 32x18 --spp 1 -o {out} --no-progress"]
+    first = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
+    assert first.returncode == 0, first.stdout + first.stderr
+    assert len(frames_in(out)) == 3
+    assert f"frames: {out}/cannonball-splash.0000.exr" in first.stderr
+    assert "out/cannonball-splash" not in (first.stdout + first.stderr).replace(str(out), "")
+    second = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
+    assert second.returncode == 0, second.stdout + second.stderr
+    assert "0 rendered, 3 skipped" in second.stderr and "contact: up to date" in second.stderr
+
+
+def test_view_open_on_a_headless_machine_says_so(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    assert motion("render", SCENE, "-o", out, "--frames", "0-1", *TINY).returncode == 0
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "BROWSER")}
+    res = subprocess.run([MOTION, "view", str(out), "--open"],
+                         capture_output=True, text=True, env={**env, "PATH": "/usr/bin:/bin"}, timeout=120)
+    assert res.returncode == 2 and "no web browser can be started here" in res.stderr, res.stderr
+    assert (out / "flipbook" / "index.html").is_file()
