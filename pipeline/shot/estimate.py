@@ -7,7 +7,7 @@ first frame and the farm's start-up (`$MOTION_CACHE_DIR/estimates.json`). A scen
 before is estimated from its own record, scaled by samples (pixels x spp) when the
 settings differ; a scene never rendered here from this machine's median cost per sample
 over the scenes it has rendered; a machine that has rendered nothing from built-in
-figures measured on a 2-core AMD EPYC (`basis` says which). bench/bench_estimate.py
+figures measured on a 2-core Xeon (`basis` says which). bench/bench_estimate.py
 measures the estimate against the real time on the examples.
 """
 
@@ -23,10 +23,10 @@ from typing import Any
 
 HISTORY_FILE = "estimates.json"
 MAX_SCENES = 200  # records kept (the oldest go first)
-# Built-in figures (no run recorded on this machine yet), from a 2-core AMD EPYC at the
+# Built-in figures (no run recorded on this machine yet), from a 2-core Xeon at the
 # example scenes' presets: warm seconds per sample, seconds a frame beyond its samples, a
 # worker's cold first frame beyond a warm one, and the farm's start-up.
-DEFAULT_S_PER_SAMPLE = 1.5e-6
+DEFAULT_S_PER_SAMPLE = 3e-7
 DEFAULT_FRAME_OVERHEAD_S = 0.08
 DEFAULT_COLD_EXTRA_S = 1.2
 DEFAULT_STARTUP_S = 1.5
