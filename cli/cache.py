@@ -1,4 +1,6 @@
-"""`motion cache info|clear`: the shared on-disk caches (converted assets, drjit kernels)."""
+"""`motion cache info|clear|key|warm`: the shared on-disk caches (converted assets, drjit
+kernels); `key` and `warm` serve a CI system that saves the kernel cache between runs
+(docs/ci-sharding.md)."""
 
 from __future__ import annotations
 
@@ -38,6 +40,40 @@ def cache_clear(what: str) -> None:
     for name, folder in _folders().items():
         if what in ("all", name):
             click.echo(f"{name}: removed {clear(folder)} files from {folder}")
+
+
+@cache.command("key")
+def cache_key() -> None:
+    """A key for saving and restoring the kernel cache in CI: it changes when compiled
+    kernels could no longer be reused (Mitsuba, drjit, motion, Python, CPU). Prints the key,
+    then the folder to save (DRJIT_CACHE_DIR)."""
+    from motion.pipeline.cache import kernel_cache_key, kernels_dir
+
+    click.echo(kernel_cache_key())
+    click.echo(str(kernels_dir()))
+
+
+@cache.command("warm")
+@click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--preset", help="The preset the CI job renders with (its resolution and depth make its kernels).")
+def cache_warm(scene: Path, preset: str | None) -> None:
+    """Compile SCENE's kernels into the kernel cache by rendering its first frame (into a
+    temporary folder, then removed), so a CI job's first frame is a warm one."""
+    import tempfile
+
+    from motion.pipeline.cache import kernels_dir
+    from motion.pipeline.render.assets import info
+    from motion.pipeline.scene import load_scene
+    from motion.pipeline.shot import RenderRequest, run_render
+
+    before = info(kernels_dir()).files
+    first = load_scene(scene).scene.timeline.first
+    with tempfile.TemporaryDirectory(prefix="motion-warm-") as tmp:
+        rep = run_render(RenderRequest(scene=scene, output_dir=Path(tmp), frames_spec=str(first), preset=preset, deliver="none",
+                                       progress=False, report=Path(tmp) / "report.json"))
+    compiled = sum(int(r.get("kernels_compiled") or 0) for r in rep.get("frames", []))
+    after = info(kernels_dir()).files
+    click.echo(f"kernels: {compiled} compiled for {scene} (frame {first}); {after} files ({after - before:+d}) in {kernels_dir()}")
 
 
 commands = [cache]

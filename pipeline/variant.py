@@ -13,6 +13,7 @@ and the drjit version, so later commands pay nothing.
 
 from __future__ import annotations
 
+import fnmatch
 import glob
 import importlib.metadata
 import json
@@ -72,21 +73,38 @@ def llvm_candidates() -> list[str | None]:
     explicit = os.environ.get(ENV_LLVM)
     if explicit:
         return [explicit]
+    # each library folder is listed once and only its libLLVM* names are matched: globbing
+    # the patterns one by one read /usr/lib/<triplet>/ (thousands of names) 30 times a
+    # major version, 80 ms of every process's start
+    listing: dict[str, list[str]] = {}
+
+    def names(folder_pattern: str) -> list[tuple[str, str]]:
+        out = []
+        for folder in sorted(glob.glob(folder_pattern)):
+            if folder not in listing:
+                try:
+                    listing[folder] = sorted(n for n in os.listdir(folder) if n.startswith("libLLVM"))
+                except OSError:
+                    listing[folder] = []
+            out += [(folder, n) for n in listing[folder]]
+        return out
+
     found: list[str] = []
     for major in range(30, 15, -1):
         patterns = [
-            f"/usr/lib/llvm-{major}/lib/libLLVM.so.*",
-            f"/usr/lib/llvm-{major}/lib/libLLVM-{major}.so",
-            f"/usr/lib/*-linux-gnu/libLLVM.so.{major}*",
-            f"/usr/lib/*-linux-gnu/libLLVM-{major}.so*",
-            f"/usr/lib64/libLLVM.so.{major}*",
-            f"/usr/lib64/libLLVM-{major}.so",
+            (f"/usr/lib/llvm-{major}/lib", "libLLVM.so.*"),
+            (f"/usr/lib/llvm-{major}/lib", f"libLLVM-{major}.so"),
+            ("/usr/lib/*-linux-gnu", f"libLLVM.so.{major}*"),
+            ("/usr/lib/*-linux-gnu", f"libLLVM-{major}.so*"),
+            ("/usr/lib64", f"libLLVM.so.{major}*"),
+            ("/usr/lib64", f"libLLVM-{major}.so"),
         ]
-        for pattern in patterns:
-            for path in sorted(glob.glob(pattern)):
-                real = os.path.realpath(path)
-                if real not in found:
-                    found.append(real)
+        for folder_pattern, name_pattern in patterns:
+            for folder, name in names(folder_pattern):
+                if fnmatch.fnmatchcase(name, name_pattern):
+                    real = os.path.realpath(os.path.join(folder, name))
+                    if real not in found:
+                        found.append(real)
     return [*found, None]
 
 

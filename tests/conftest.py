@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
+
+# The farm's tests exercise spawned worker processes (kills, retries, Ctrl-C); a small job
+# would otherwise render inline (farm/inline.py). Tests of that choice set it themselves.
+os.environ.setdefault("MOTION_EXECUTOR", "local")
 
 from _support import run_motion
 

@@ -105,12 +105,18 @@ def test_one_worker_two_workers_three_shards_bit_identical(ci_run, tmp_path) -> 
         assert res.returncode == 0, res.stderr
         outs[workers] = out
     assert len({r["worker"] for r in report(outs[2])["frames"]}) == 2  # both workers rendered
+    # a small job renders in this process (farm/inline.py): the same pixels (issue 28)
+    inline = tmp_path / "inline"
+    res = subprocess.run([MOTION, "render", str(SCENE), "--preset", "ci-smoke", "--frames", FRAMES, "-o", str(inline), "--no-progress"],
+                         capture_output=True, text=True, timeout=300, env={**os.environ, "MOTION_EXECUTOR": "inline"})
+    assert res.returncode == 0, res.stderr
+    assert report(inline)["executor"]["kind"] == "inline"
     sharded = ci_run["gather"] / "frames"
     for f in range(12):
         name = f"farm-tiny.{f:04d}.exr"
-        a, b, c = (read_frame(d / name) for d in (outs[1], outs[2], sharded))
+        a, b, c, d = (read_frame(folder / name) for folder in (outs[1], outs[2], sharded, inline))
         assert a.rgba.shape == (36, 64, 4)
-        assert np.array_equal(a.rgba, b.rgba) and np.array_equal(a.rgba, c.rgba), f"frame {f} differs"
-        assert a.meta["motion_hash"] == b.meta["motion_hash"] == c.meta["motion_hash"]
+        assert np.array_equal(a.rgba, b.rgba) and np.array_equal(a.rgba, c.rgba) and np.array_equal(a.rgba, d.rgba), f"frame {f} differs"
+        assert a.meta["motion_hash"] == b.meta["motion_hash"] == c.meta["motion_hash"] == d.meta["motion_hash"]
         assert a.meta["settings_hash"] == c.meta["settings_hash"]
     assert len({read_frame(outs[1] / f"farm-tiny.{f:04d}.exr").rgba.tobytes() for f in range(12)}) == 12  # frames differ

@@ -228,3 +228,52 @@ def test_view_open_on_a_headless_machine_says_so(tmp_path: Path) -> None:
                          capture_output=True, text=True, env={**env, "PATH": "/usr/bin:/bin"}, timeout=120)
     assert res.returncode == 2 and "no web browser can be started here" in res.stderr, res.stderr
     assert (out / "flipbook" / "index.html").is_file()
+
+
+# --- small jobs at the engine's start-up cost (issue 28) -------------------------------------
+
+
+def _auto(env_extra: dict[str, str] | None = None) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if k != "MOTION_EXECUTOR"}
+    return {**env, **(env_extra or {})}
+
+
+def test_a_small_job_renders_inline_and_a_large_one_on_workers(tmp_path: Path) -> None:
+    """The executor is chosen by the frames' estimated cost: 3 tiny frames render in this
+    process (no worker spawned), a job estimated at minutes spreads over worker processes,
+    and --workers always means processes."""
+    from motion.pipeline.shot.render import choose_inline
+    from motion.pipeline.shot.request import RenderRequest
+
+    small = {"warm_frame_s": 0.05, "cold_extra_s": 1.0}
+    large = {"warm_frame_s": 2.0, "cold_extra_s": 1.0}
+    req = RenderRequest(scene=SCENE)
+    env = _auto()
+    old = os.environ.pop("MOTION_EXECUTOR", None)
+    try:
+        assert choose_inline(req, small, [0, 1, 2]) and not choose_inline(req, large, list(range(24)))
+        assert not choose_inline(RenderRequest(scene=SCENE, workers=2), small, [0, 1, 2])
+        assert not choose_inline(RenderRequest(scene=SCENE, scheduler="tcp://x:1"), small, [0, 1, 2])
+    finally:
+        if old is not None:
+            os.environ["MOTION_EXECUTOR"] = old
+    res = subprocess.run([MOTION, "render", str(SCENE), "-o", str(tmp_path / "out"), "--frames", "0-2", *TINY], capture_output=True, text=True, env=env, timeout=300)
+    assert res.returncode == 0, res.stderr
+    rep = report(tmp_path / "out")
+    assert rep["executor"]["kind"] == "inline" and len({r["worker"] for r in rep["frames"]}) == 1
+
+
+def test_cache_warm_makes_a_ci_jobs_first_frame_warm(tmp_path: Path) -> None:
+    """`motion cache warm SCENE --preset P` compiles the job's kernels into a fresh cache;
+    the job then compiles none; `motion cache key` names what the cache depends on."""
+    env = _auto({"MOTION_CACHE_DIR": str(tmp_path / "cache"), "DRJIT_CACHE_DIR": str(tmp_path / "cache" / "kernels")})
+    key = subprocess.run([MOTION, "cache", "key"], capture_output=True, text=True, env=env, timeout=60)
+    assert key.returncode == 0 and key.stdout.startswith("motion-kernels-") and str(tmp_path / "cache" / "kernels") in key.stdout
+    warm = subprocess.run([MOTION, "cache", "warm", str(SCENE), "--preset", "ci-smoke"], capture_output=True, text=True, env=env, timeout=300)
+    assert warm.returncode == 0, warm.stderr
+    compiled = int(warm.stdout.split("kernels: ")[1].split()[0])
+    assert compiled > 0, warm.stdout
+    job = subprocess.run([MOTION, "render", str(SCENE), "--preset", "ci-smoke", "-o", str(tmp_path / "out"), "--no-progress"],
+                         capture_output=True, text=True, env=env, timeout=300)
+    assert job.returncode == 0, job.stderr
+    assert sum(int(r.get("kernels_compiled") or 0) for r in report(tmp_path / "out")["frames"]) == 0

@@ -46,4 +46,7 @@ else
   fi
 fi
 rm -f /tmp/motion-llvm-check.$$
+# bytecode for motion's own modules: where PYTHONDONTWRITEBYTECODE is set (CI images often
+# do) every `motion` command would otherwise compile them from source (~0.1 s a process)
+.venv/bin/python -m compileall -q -j0 pipeline cli configs >/dev/null 2>&1 || true
 say "ready: .venv/bin/motion (or 'source .venv/bin/activate' and then 'motion')"

@@ -3,8 +3,9 @@ driven by the scheduler until every chunk is done, failed everywhere, or Ctrl-C 
 cleanly. What to run (frames, baked inputs, the job) is the shot stage's
 (motion.pipeline.shot); this module only sizes and drives the executor.
 
-drjit is never imported in this process: workers are spawned (or are Dask workers) and
-import it themselves.
+drjit is imported in this process only for a small job that the shot stage runs inline
+(farm/inline.py); otherwise workers are spawned (or are Dask workers) and import it
+themselves.
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ def run_chunks(
     scheduler: str | None,
     workers: int,
     threads: int | None,
+    inline: bool = False,
 ) -> tuple[Scheduler | None, bool]:
     """Render the chunks on a Dask cluster (`scheduler`) or on at most `workers` local
     processes; returns the scheduler (None when there was nothing to run) and whether
@@ -63,6 +65,11 @@ def run_chunks(
 
                 executor = DaskExecutor(**scheduler_target(scheduler))
                 progress.note(f"  executor: dask at {executor.address}, {len(executor.live_workers())} workers")
+            elif inline:
+                from .inline import InlineExecutor
+
+                executor = InlineExecutor()
+                progress.note(f"  executor: inline (a small job: this process, no worker started) x {threads} threads")
             else:
                 from .local import LocalExecutor
 

@@ -61,7 +61,9 @@ def record(scene_name: str, settings_hash: str, samples: int, report: dict[str, 
     cost = lambda r: float(r.get("setup_s", 0.0)) + float(r.get("render_s", 0.0)) + float(r.get("denoise_s", 0.0)) + float(r.get("write_s", 0.0))  # noqa: E731
     warm = [cost(r) for r in rows if not r.get("cold")]
     cold = [cost(r) for r in rows if r.get("cold")]
-    warm_s = statistics.median(warm) if warm else statistics.median(cold)
+    if not warm:
+        return  # a job of cold frames only (a one-frame check, `motion cache warm`) says nothing of a warm frame
+    warm_s = statistics.median(warm)
     cold_extra = max(0.0, statistics.fmean(cold) - warm_s) if cold else 0.0
     workers = max(1, len(report.get("workers") or []) or 1)
     farm_s = float(report.get("totals", {}).get("farm_s", 0.0))

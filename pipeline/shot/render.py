@@ -12,7 +12,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -190,6 +190,26 @@ def complete_frames(req: RenderRequest, job: RenderJob, job_scene: Any, out_dir:
     return states
 
 
+INLINE_MAX_WORK_S = 1.5  # estimated seconds of warm frames under which a job renders in this process
+
+
+def choose_inline(req: RenderRequest, cost: dict[str, Any], todo: list[int]) -> bool:
+    """Whether the job's frames are cheaper to render here than to spread over spawned
+    workers: each worker costs an import of the stack and a cold scene build (about 0.6 s
+    on 2 cores) and parallel workers save at most the frames' own time, so a job whose
+    frames are estimated at under INLINE_MAX_WORK_S renders inline (farm/inline.py). Not
+    with --workers (processes asked for), --scheduler, --fields, or
+    $MOTION_EXECUTOR=local; $MOTION_EXECUTOR=inline forces it."""
+    forced = os.environ.get("MOTION_EXECUTOR", "").strip().lower()
+    if req.scheduler or req.fields or forced == "local" or not todo:
+        return False
+    if forced == "inline":
+        return True
+    if req.workers is not None:
+        return False
+    return cost["warm_frame_s"] * len(todo) <= INLINE_MAX_WORK_S
+
+
 def summary_line(label: str, totals: dict[str, Any], report_path: Path | None) -> str:
     """The run's one-line summary; interrupted frames are "not rendered", never failed."""
     not_rendered = f", {totals['not_rendered']} not rendered (interrupted)" if totals.get("not_rendered") else ""
@@ -296,8 +316,15 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
             result["deliverables"] = deliver_and_record(req, out_dir, [Path(paths[f]) for f in frames], wanted.formats, result, None, say)
         return result
     chunk_size = cfg.chunk_size or default_chunk_size(len(todo), workers if not req.scheduler else 2)
-    chunk_list = make_chunks(todo, chunk_size)
     cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), workers if not req.scheduler else 1, bake_s)
+    inline = choose_inline(req, cost, todo)
+    if inline:
+        from ..farm.local import threads_per_worker
+
+        workers, threads = 1, req.threads or threads_per_worker(1)
+        job = replace(job, threads=threads)
+        chunk_size = max(1, len(todo))
+    chunk_list = make_chunks(todo, chunk_size)
     shard_spec = sel.shard_spec
     default_name = f"render-report.shard-{shard_spec[0]}-of-{shard_spec[1]}.json" if shard_spec else "render-report.json"
     if req.dry_run:
@@ -316,7 +343,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     for line in states.describe():
         progress.log(f"motion: {line}", logging.WARNING)
     t_farm = time.perf_counter()
-    sched, interrupted = run_chunks(chunk_list, job, by_frame, ctx, cfg, progress, scheduler=req.scheduler, workers=workers, threads=threads)
+    sched, interrupted = run_chunks(chunk_list, job, by_frame, ctx, cfg, progress, scheduler=req.scheduler, workers=workers, threads=threads, inline=inline)
     farm_s = time.perf_counter() - t_farm
 
     report = build_report(
@@ -329,7 +356,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         skipped=skipped,
         sched=sched,
         cfg=cfg,
-        executor_info={"kind": "dask" if req.scheduler else "local", "workers": workers if not req.scheduler else None, "threads": threads, "scheduler": req.scheduler, "chunk_size": chunk_size, "chunks": len(chunk_list)},
+        executor_info={"kind": "dask" if req.scheduler else ("inline" if inline else "local"), "workers": workers if not req.scheduler else None, "threads": threads, "scheduler": req.scheduler, "chunk_size": chunk_size, "chunks": len(chunk_list)},
         timings={"bake_s": bake_s, "farm_s": farm_s, "wall_s": time.perf_counter() - t_start},
         run_id=run_id,
         interrupted=interrupted,

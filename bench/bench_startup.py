@@ -1,0 +1,96 @@
+"""Small jobs at the engine's start-up cost (issue 28): whole processes, as CI runs them.
+
+    python bench/bench_startup.py               # 5 alternating rounds, warm kernel cache, then an empty one
+    python bench/bench_startup.py --rounds 3 --no-cold
+
+Jobs (each a fresh process, alternating, medians, with the CPU named):
+- the ci-smoke job of every example (`motion -q render SCENE --preset ci-smoke`), and the
+  same job of bouncing-balls against the plain-Mitsuba script of its frames
+  (bench/plain/bouncing_balls_smoke.py: import mitsuba, load_dict, render x3, write EXR);
+- a one-frame preview render of bouncing-balls;
+- `motion validate` of every example, `--dry-run` of bouncing-balls, `motion --help`.
+With an empty kernel cache (a fresh DRJIT_CACHE_DIR and MOTION_CACHE_DIR for each run) the
+smoke job is measured again, with and without `motion cache warm` first.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import cpu_model  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+MOTION = str(BIN / "motion")
+EXAMPLES = sorted(p.stem for p in (ROOT / "scenes").glob("*.yaml"))
+
+
+def timed(cmd: list[str], env: dict[str, str] | None = None) -> tuple[float, float]:
+    """Wall seconds and peak RSS (MB) of one process (its children included)."""
+    t0 = time.perf_counter()
+    proc = subprocess.run(["/usr/bin/time", "-f", "%M", *cmd], capture_output=True, text=True, env=env)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)} exited {proc.returncode}:\n{proc.stderr[-2000:]}")
+    rss_kb = float(proc.stderr.strip().splitlines()[-1])
+    return wall, rss_kb / 1024
+
+
+def main() -> None:
+    """Measure and print the table."""
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--no-cold", action="store_true", help="skip the empty-kernel-cache runs")
+    args = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="bench-startup-"))
+    env = dict(os.environ)
+    jobs: dict[str, list[str]] = {
+        "plain mitsuba: bouncing-balls 3 frames": [sys.executable, str(ROOT / "bench" / "plain" / "bouncing_balls_smoke.py"), str(tmp / "plain")],
+    }
+    for name in EXAMPLES:
+        jobs[f"ci-smoke {name}"] = [MOTION, "-q", "render", str(ROOT / "scenes" / f"{name}.yaml"), "--preset", "ci-smoke", "-o", str(tmp / f"smoke-{name}"), "--overwrite"]
+    jobs["one preview frame bouncing-balls"] = [MOTION, "-q", "render", str(ROOT / "scenes" / "bouncing-balls.yaml"), "--preset", "preview", "--frames", "10",
+                                                "-o", str(tmp / "one"), "--overwrite"]
+    for name in EXAMPLES:
+        jobs[f"validate {name}"] = [MOTION, "validate", str(ROOT / "scenes" / f"{name}.yaml")]
+    jobs["--dry-run bouncing-balls"] = [MOTION, "-q", "render", str(ROOT / "scenes" / "bouncing-balls.yaml"), "--dry-run", "-o", str(tmp / "dry")]
+    jobs["--help"] = [MOTION, "--help"]
+    for cmd in jobs.values():  # once, untimed: kernels compiled, files cached
+        timed(cmd, env)
+    times: dict[str, list[float]] = {k: [] for k in jobs}
+    rss: dict[str, list[float]] = {k: [] for k in jobs}
+    for _ in range(args.rounds):
+        for name, cmd in jobs.items():
+            w, m = timed(cmd, env)
+            times[name].append(w)
+            rss[name].append(m)
+    print(f"# small jobs, whole processes, median of {args.rounds} alternating rounds, warm kernel cache ({cpu_model()})")
+    anchor = statistics.median(times["plain mitsuba: bouncing-balls 3 frames"])
+    for name in jobs:
+        med = statistics.median(times[name])
+        ratio = f"  {med / anchor:5.2f}x plain" if name.startswith("ci-smoke bouncing-balls") or name.startswith("plain") else ""
+        print(f"{name:42} {med:7.3f} s  {statistics.median(rss[name]):6.0f} MB{ratio}")
+    if args.no_cold:
+        return
+    print("# empty kernel cache (fresh MOTION_CACHE_DIR and DRJIT_CACHE_DIR each run)")
+    smoke = jobs["ci-smoke bouncing-balls"]
+    for label, warm_first in (("ci-smoke bouncing-balls, empty cache", False), ("ci-smoke bouncing-balls after `motion cache warm`", True)):
+        walls = []
+        for r in range(max(1, args.rounds // 2)):
+            cold = {**env, "MOTION_CACHE_DIR": str(tmp / f"cache-{label[:8]}-{r}{warm_first}"), "DRJIT_CACHE_DIR": str(tmp / f"cache-{label[:8]}-{r}{warm_first}" / "kernels")}
+            if warm_first:
+                timed([MOTION, "-q", "cache", "warm", str(ROOT / "scenes" / "bouncing-balls.yaml"), "--preset", "ci-smoke"], cold)
+            walls.append(timed(smoke, cold)[0])
+        print(f"{label:52} {statistics.median(walls):7.3f} s")
+
+
+if __name__ == "__main__":
+    main()
