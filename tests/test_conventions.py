@@ -45,7 +45,7 @@ def test_render_json_summary_and_verbose_log(job) -> None:
     summary = json.loads(res.stdout)
     assert summary["totals"]["rendered"] == 5 and summary["report"] == str(root / "out" / "render-report.json")
     assert summary["deliverables"]["24p"] == [str(root / "out" / "deliver" / "farm-tiny_24p.mov")]
-    assert all(f"frame {f} written by" in res.stderr for f in range(5, 10))  # -v: each frame as reported
+    assert all(f"frame {f}: {root / 'out' / f'farm-tiny.{f:04d}.exr'} in " in res.stderr for f in range(5, 10))  # -v: each frame's path and time
 
 
 def test_quiet_keeps_stderr_to_warnings(tmp_path: Path) -> None:

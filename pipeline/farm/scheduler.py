@@ -79,7 +79,12 @@ class Scheduler:
         notify: Notify | None = None,
         no_worker_grace_s: float = 120.0,
         poll_s: float = 0.2,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
+        """`clock` gives the time in seconds for timeouts, claim checks and the no-worker
+        grace (tests drive the decisions with a scripted executor and a clock of their own:
+        tests/test_farm_scheduler.py)."""
+        self.clock = clock
         self.ex = executor
         self.job = job
         self.inputs = inputs
@@ -186,7 +191,7 @@ class Scheduler:
             self.pending.remove(pick)
             for f in pick.frames:
                 self.frames[f].attempts += 1
-            self.running[w] = (pick, time.monotonic())
+            self.running[w] = (pick, self.clock())
             self.ex.submit(w, pick.id, self.job, [self.inputs[f] for f in pick.frames], self.ctx)
 
     def _take_running(self, worker: str, chunk_id: int | None) -> Chunk | None:
@@ -283,7 +288,7 @@ class Scheduler:
             release(path, self.ctx.run_id)
 
     def _check_timeouts(self) -> None:
-        now = time.monotonic()
+        now = self.clock()
         for w, (chunk, t0) in list(self.running.items()):
             if now - t0 > self.cfg.task_timeout_s:
                 reason = f"chunk {chunk.frames[0]}-{chunk.frames[-1]} timed out after {self.cfg.task_timeout_s:g}s on {w}"
@@ -295,7 +300,7 @@ class Scheduler:
                 self._retry_or_fail(chunk, chunk.frames, w, reason)
 
     def _check_waiting(self, every_s: float = 1.0) -> None:
-        now = time.monotonic()
+        now = self.clock()
         if not self.waiting or now - self._last_wait_check < every_s:
             return
         self._last_wait_check = now
@@ -322,7 +327,7 @@ class Scheduler:
         if usable:
             self._no_worker_since = None
             return
-        now = time.monotonic()
+        now = self.clock()
         if self._no_worker_since is None:
             self._no_worker_since = now
         if not self.ex.can_grow() or now - self._no_worker_since > self.grace_s:
