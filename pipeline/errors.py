@@ -64,6 +64,12 @@ class AssetError(MotionError):
     """An asset file (mesh, texture, environment map) is missing or unreadable."""
 
 
+class SceneChangedError(MotionError):
+    """A worker loaded a scene (file, or its settings) other than the one the job was
+    planned and baked from: the file was edited after `motion render` started (a late or
+    respawned worker). Its frames would carry the old hashes and be trusted by --resume."""
+
+
 class RendererError(MotionError):
     """The renderer could not be set up (no usable variant, Mitsuba failure)."""
 

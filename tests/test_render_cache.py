@@ -135,3 +135,26 @@ def test_bits_do_not_depend_on_the_thread_count(tmp_path: Path) -> None:
     assert np.array_equal(c, d)
     assert not np.array_equal(a, c)  # really another sampling (4 passes), yet the same picture:
     assert abs(float(a[..., :3].mean()) - float(c[..., :3].mean())) < 0.01 * float(a[..., :3].mean())
+
+
+def test_a_worker_refuses_a_scene_edited_after_the_job_started(tmp_path) -> None:
+    """Issue 26: a late or respawned worker loads the scene file again; if it was edited
+    since the job was planned (its hashes differ), the worker renders nothing from it (its
+    frames would carry the old hashes and --resume would trust them)."""
+    import shutil
+
+    from farm_util import SCENE
+    from motion.pipeline.bake import bake
+    from motion.pipeline.render.job import RenderJob, render_frames, scene_hashes
+    from motion.pipeline.scene import load_scene
+
+    scene = tmp_path / "farm-tiny.yaml"
+    shutil.copy(SCENE, scene)
+    loaded = load_scene(scene)
+    scene_hash, settings_hash = scene_hashes(loaded)
+    job = RenderJob(scene_path=str(scene), overrides={}, output_dir=str(tmp_path / "out"), scene_hash=scene_hash, settings_hash=settings_hash)
+    frame = bake(loaded, [0]).frame(0)
+    scene.write_text(scene.read_text().replace("radius: 0.3", "radius: 0.4"))  # edited after planning
+    (result,) = render_frames(job, [frame])
+    assert not result.ok and "changed after this render started" in (result.error or ""), result
+    assert not (tmp_path / "out").exists()

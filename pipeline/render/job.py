@@ -144,11 +144,17 @@ def _renderer(job: RenderJob) -> tuple[FrameRenderer, LoadedScene, str]:
     import gc
 
     gc.collect()
+    loaded = load_scene(job.scene_path, job.overrides, assets=False)  # the main process checked them
+    scene_hash, settings_hash = scene_hashes(loaded)
+    if (scene_hash, settings_hash) != (job.scene_hash, job.settings_hash):
+        from ..errors import SceneChangedError
+
+        raise SceneChangedError(f"{job.scene_path} changed after this render started (scene hash {scene_hash}, settings hash {settings_hash}; "
+                                f"the job was planned with {job.scene_hash}, {job.settings_hash}): this worker renders nothing from it; run motion render again")
     choice = variant_mod.activate(job.variant, threads=job.threads, quiet=True)
     import mitsuba as mi
 
     mi.set_log_level(mi.LogLevel.Error)
-    loaded = load_scene(job.scene_path, job.overrides, assets=False)  # the main process checked them
     renderer = FrameRenderer(loaded)
     _WORKER.update(key=job.key, renderer=renderer, loaded=loaded, variant=choice.variant)
     return renderer, loaded, choice.variant
