@@ -114,7 +114,8 @@ def test_dask_progress_is_per_frame(cluster, tmp_path) -> None:
     import threading
 
     out = tmp_path / "out"
-    proc = start_motion("render", SCENE, "-o", out, "--frames", "0-7", "--scheduler", cluster["address"], "--threads", "1", "--chunk-size", "8", *SLOW)
+    lines = [a for a in SLOW if a != "--no-progress"]  # stderr is not a terminal: plain progress lines
+    proc = start_motion("render", SCENE, "-o", out, "--frames", "0-7", "--scheduler", cluster["address"], "--threads", "1", "--chunk-size", "8", *lines)
     on_disk_at_first_line: list[int] = []
 
     def read() -> None:

@@ -2,13 +2,15 @@
 
 The cost of a frame depends on the scene far more than on any count we can read from it
 (depth, geometry, lights, denoiser), so the estimate is made from what this machine
-measured: every finished run records, per scene, a warm frame's cost, the workers' cold
-first frame and the farm's start-up (`$MOTION_CACHE_DIR/estimates.json`). A scene rendered
-before is estimated from its own record, scaled by samples (pixels x spp) when the
-settings differ; a scene never rendered here from this machine's median cost per sample
-over the scenes it has rendered; a machine that has rendered nothing from built-in
-figures measured on a 2-core Xeon (`basis` says which). bench/bench_estimate.py
-measures the estimate against the real time on the examples.
+measured: every finished run records, per scene and settings, a warm frame's cost, the
+workers' cold first frame and the farm's start-up (`$MOTION_CACHE_DIR/estimates.json`).
+A warm frame is a fixed part plus a part per camera sample (pixels x spp): a scene rendered
+before with these settings is estimated from that run; at two or more sample counts from
+the line through them; at one from that run shifted by this machine's cost per sample
+(measured on frames big enough for it to show); a scene never rendered here from the
+machine's cost per sample; a machine that has rendered nothing from built-in figures
+(`basis` says which). bench/bench_estimate.py measures the estimate against the real time
+on the examples.
 """
 
 from __future__ import annotations
@@ -22,14 +24,17 @@ from pathlib import Path
 from typing import Any
 
 HISTORY_FILE = "estimates.json"
-MAX_SCENES = 200  # records kept (the oldest go first)
-# Built-in figures (no run recorded on this machine yet), from a 2-core Xeon at the
-# example scenes' presets: warm seconds per sample, seconds a frame beyond its samples, a
-# worker's cold first frame beyond a warm one, and the farm's start-up.
-DEFAULT_S_PER_SAMPLE = 3e-7
-DEFAULT_FRAME_OVERHEAD_S = 0.08
-DEFAULT_COLD_EXTRA_S = 1.2
-DEFAULT_STARTUP_S = 1.5
+MAX_SCENES = 200  # scenes kept (the oldest go first)
+MAX_RUNS = 8  # observations kept per scene (one per settings)
+# A warm frame costs a fixed part (the frame's Python, its film and EXR, at small sizes the
+# whole cost) plus a part per camera sample. Built-in figures (nothing recorded on this
+# machine yet) from a 2-core Xeon: ci-smoke frames (9,216 samples) take 10-15 ms, preview
+# frames (921,600 samples, denoised) about 0.15 s.
+DEFAULT_FRAME_OVERHEAD_S = 0.012
+DEFAULT_S_PER_SAMPLE = 1.5e-7
+DEFAULT_COLD_EXTRA_S = 0.8
+DEFAULT_STARTUP_S = 0.8
+BIG_FRAME = 100_000  # samples above which a frame's cost says something about the machine's rate
 
 
 def history_path() -> Path:
@@ -50,14 +55,14 @@ def _read() -> dict[str, Any]:
         data = json.loads(history_path().read_text())
     except (OSError, ValueError):
         return {}
-    return data if isinstance(data, dict) and isinstance(data.get("scenes"), dict) else {}
+    if not (isinstance(data, dict) and isinstance(data.get("scenes"), dict) and data.get("version") == 2):
+        return {}
+    return data
 
 
 def record(scene_name: str, settings_hash: str, samples: int, report: dict[str, Any]) -> None:
     """Keep what this run measured (best effort: an unwritable cache only loses the record)."""
     rows = [r for r in report.get("frames", []) if r.get("status") == "rendered" and "render_s" in r]
-    if not rows:
-        return
     cost = lambda r: float(r.get("setup_s", 0.0)) + float(r.get("render_s", 0.0)) + float(r.get("denoise_s", 0.0)) + float(r.get("write_s", 0.0))  # noqa: E731
     warm = [cost(r) for r in rows if not r.get("cold")]
     cold = [cost(r) for r in rows if r.get("cold")]
@@ -68,9 +73,10 @@ def record(scene_name: str, settings_hash: str, samples: int, report: dict[str, 
     workers = max(1, len(report.get("workers") or []) or 1)
     farm_s = float(report.get("totals", {}).get("farm_s", 0.0))
     startup = max(0.0, farm_s - sum(cost(r) for r in rows) / workers)
-    data = _read() or {"version": 1, "scenes": {}}
-    data["scenes"][scene_name] = {"settings_hash": settings_hash, "samples": samples, "warm_s": warm_s, "cold_extra_s": cold_extra,
-                                  "startup_s": startup, "frames": len(rows), "workers": workers}
+    data = _read() or {"version": 2, "scenes": {}}
+    runs = [r for r in data["scenes"].pop(scene_name, []) if isinstance(r, dict) and r.get("settings_hash") != settings_hash]
+    runs.append({"settings_hash": settings_hash, "samples": samples, "warm_s": warm_s, "cold_extra_s": cold_extra, "startup_s": startup})
+    data["scenes"][scene_name] = runs[-MAX_RUNS:]
     while len(data["scenes"]) > MAX_SCENES:
         data["scenes"].pop(next(iter(data["scenes"])))
     try:
@@ -84,26 +90,51 @@ def record(scene_name: str, settings_hash: str, samples: int, report: dict[str, 
         pass
 
 
+def machine_rate(scenes: dict[str, Any]) -> float:
+    """Seconds per sample on this machine: the median over recorded frames big enough for
+    their samples to dominate, else the built-in figure."""
+    rates = [(float(r["warm_s"]) - DEFAULT_FRAME_OVERHEAD_S) / float(r["samples"]) for runs in scenes.values() for r in runs
+             if isinstance(r, dict) and float(r.get("samples", 0)) >= BIG_FRAME and float(r["warm_s"]) > DEFAULT_FRAME_OVERHEAD_S]
+    return statistics.median(rates) if rates else DEFAULT_S_PER_SAMPLE
+
+
+def warm_frame(runs: list[dict[str, Any]], settings_hash: str, samples: int, rate: float) -> tuple[float, str]:
+    """A warm frame's cost for this scene from its recorded runs: the same settings as
+    measured; two or more sample counts fitted by a line (fixed part + per sample); one
+    run shifted by the machine's rate for the samples added or removed."""
+    same = [r for r in runs if r.get("settings_hash") == settings_hash]
+    if same:
+        return float(same[-1]["warm_s"]), "this scene's last run with these settings"
+    points = sorted({int(r["samples"]): float(r["warm_s"]) for r in runs}.items())
+    if len(points) >= 2:
+        xs, ys = [float(x) for x, _ in points], [y for _, y in points]
+        mx, my = statistics.fmean(xs), statistics.fmean(ys)
+        b = sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sum((x - mx) ** 2 for x in xs)
+        b = max(b, 0.0)
+        a = max(0.0, my - b * mx)
+        return a + b * samples, f"this scene's runs at {len(points)} sample counts"
+    s0, w0 = points[0]
+    return max(DEFAULT_FRAME_OVERHEAD_S, w0 + rate * (samples - s0)), "this scene's last run, rescaled by this machine's cost per sample"
+
+
 def estimate(scene_name: str, settings_hash: str, samples: int, frames: int, workers: int, bake_s: float = 0.0) -> dict[str, Any]:
     """The job's expected wall time: bake, the farm's start-up, each worker's cold first
     frame, then warm frames shared among the workers. Returns the figures and their basis."""
     scenes = _read().get("scenes", {})
-    mine = scenes.get(scene_name)
-    startup, cold_extra = DEFAULT_STARTUP_S, DEFAULT_COLD_EXTRA_S
-    if isinstance(mine, dict) and mine.get("samples"):
-        scale = 1.0 if mine.get("settings_hash") == settings_hash else samples / float(mine["samples"])
-        warm = float(mine["warm_s"]) * scale
-        startup, cold_extra = float(mine["startup_s"]), float(mine["cold_extra_s"])
-        basis = "this scene's last run" if scale == 1.0 else "this scene's last run, scaled by samples"
+    runs = [r for r in scenes.get(scene_name, []) if isinstance(r, dict) and r.get("samples")]
+    rate = machine_rate(scenes)
+    if runs:
+        warm, basis = warm_frame(runs, settings_hash, samples, rate)
+        startup, cold_extra = float(runs[-1]["startup_s"]), float(runs[-1]["cold_extra_s"])
     else:
-        rates = [float(s["warm_s"]) / float(s["samples"]) for s in scenes.values() if isinstance(s, dict) and s.get("samples")]
-        if rates:
-            warm = statistics.median(rates) * samples + DEFAULT_FRAME_OVERHEAD_S
-            startup = statistics.median(float(s["startup_s"]) for s in scenes.values() if isinstance(s, dict) and "startup_s" in s)
-            cold_extra = statistics.median(float(s["cold_extra_s"]) for s in scenes.values() if isinstance(s, dict) and "cold_extra_s" in s)
-            basis = f"this machine's cost per sample over {len(rates)} scenes"
+        everything = [r for rs in scenes.values() for r in rs if isinstance(r, dict)]
+        warm = DEFAULT_FRAME_OVERHEAD_S + rate * samples
+        if everything:
+            startup = statistics.median(float(r["startup_s"]) for r in everything)
+            cold_extra = statistics.median(float(r["cold_extra_s"]) for r in everything)
+            basis = f"this machine's cost per sample ({len(everything)} runs recorded)"
         else:
-            warm = DEFAULT_S_PER_SAMPLE * samples + DEFAULT_FRAME_OVERHEAD_S
+            startup, cold_extra = DEFAULT_STARTUP_S, DEFAULT_COLD_EXTRA_S
             basis = "built-in figures (no run recorded on this machine yet)"
     workers = max(1, min(workers, frames)) if frames else 1
     per_worker = math.ceil(frames / workers) if frames else 0
