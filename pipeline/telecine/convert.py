@@ -220,7 +220,10 @@ def _sources_from_metadata(seq: Sequence, order: FieldOrder) -> list[int] | None
         meta = read_header_meta(seq, i)
         if "topFieldSource" not in meta or "bottomFieldSource" not in meta:
             return None
-        top, bottom = int(meta["topFieldSource"]), int(meta["bottomFieldSource"])
+        try:
+            top, bottom = int(meta["topFieldSource"]), int(meta["bottomFieldSource"])
+        except (TypeError, ValueError, OverflowError):
+            raise FrameIOError(f"{seq.paths[i]}: field sources {meta['topFieldSource']!r}, {meta['bottomFieldSource']!r} are not frame numbers") from None
         sources += [top, bottom] if order == "tff" else [bottom, top]
     return sources
 

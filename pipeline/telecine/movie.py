@@ -17,6 +17,8 @@ when no codec is given. Files are encoded to a hidden temporary name and renamed
 
 from __future__ import annotations
 
+import math
+
 import os
 import tempfile
 from dataclasses import dataclass, field
@@ -98,6 +100,7 @@ def builtin_ocio_configs() -> list[str]:
     return list(OCIO.BuiltinConfigRegistry())
 
 
+MAX_EXPOSURE_STOPS = 32  # x 4e9 either way: past that every pixel is black or white
 DEFAULT_VIEW_CONFIG = "ocio://cg-config-latest"  # its default view: ACES 2.0 - SDR 100 nits (Rec.709) on sRGB
 PLAIN_VIEW = ("none", "plain", "srgb")  # --ocio none: the untone-mapped sRGB curve
 
@@ -124,6 +127,8 @@ class ViewTransform:
         ocio_view: str | None = None,
         ocio_colorspace: str | None = None,
     ) -> None:
+        if not (isinstance(exposure, (int, float)) and math.isfinite(exposure) and abs(exposure) <= MAX_EXPOSURE_STOPS):
+            raise UsageError(f"--exposure {exposure}: expected a finite number of stops from {-MAX_EXPOSURE_STOPS} to {MAX_EXPOSURE_STOPS}")
         self.gain = np.float32(2.0 ** float(exposure))
         self._cpu = None
         self.display = self.view = self.source = None
