@@ -23,6 +23,7 @@ from ..motion.pose import quat_rotate
 from ..scene.loader import LoadedScene
 from ..scene.schema import Particles
 from ..variant import load_dict
+from .build import mitsuba_id
 
 if TYPE_CHECKING:
     from .stacked import StackedFrame
@@ -63,7 +64,7 @@ class SliceGroup:
 
 def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bsdf: Any, slices: int, radius: float = 0.0) -> SliceGroup:
     """S scenes, each with one mesh of `count` vertices (or particle capacity)."""
-    key = name.replace(".", "_")
+    key = mitsuba_id(name)
     scenes, params = [], []
     for _ in range(slices):
         if kind == "particles":
