@@ -105,6 +105,16 @@ def _run(argv: list[str] | None) -> int:
         return err.exit_code
     except click.exceptions.Exit as err:
         return err.exit_code
+    except OSError as err:
+        # a disk that refuses a write in any command (export, view, contact-sheet, bake):
+        # one line and exit 4, as `motion render` says it (docs/farm.md); others propagate
+        from motion.pipeline.frame_output import disk_fault
+
+        fault = disk_fault(err, "writing", err.filename or "?")
+        if fault is None:
+            raise
+        click.echo(f"error: {fault}", err=True)
+        return fault.exit_code
     return 0
 
 

@@ -19,6 +19,7 @@ import numpy as np
 import OpenEXR
 
 from .errors import DiskFaultError, FrameIOError
+from .files import DISK_FAULT_ERRNOS, _UMASK, _unlink_quietly, disk_fault, disk_fault_errno, publish, write_atomic, writing  # noqa: F401  (the write policy, re-exported)
 
 PixelType = Literal["half", "float"]
 Compression = Literal["zip", "zips", "piz", "zstd", "none"]
@@ -30,86 +31,6 @@ _COMPRESSION = {
     "zstd": OpenEXR.ZSTD_COMPRESSION,
     "none": OpenEXR.NO_COMPRESSION,
 }
-
-def _read_umask() -> int:
-    # os.umask can only be read by setting it; do it once, at import, while no other
-    # thread of ours is creating files
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _read_umask()
-
-
-# Errors that mean "this disk will not take our writes" (full, over quota, read-only, not
-# ours): a job stops on them at once instead of retrying elsewhere (docs/farm.md).
-DISK_FAULT_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG)
-
-
-def disk_fault_errno(exc: BaseException) -> int | None:
-    """The errno of a disk fault, or None. OpenEXR reports write errors as RuntimeError
-    with the system's message ('... No space left on device.'), so that is read too."""
-    if isinstance(exc, DiskFaultError):
-        return getattr(exc, "errno", None) or errno.EIO
-    if isinstance(exc, OSError) and exc.errno in DISK_FAULT_ERRNOS:
-        return exc.errno
-    if isinstance(exc, RuntimeError):
-        text = str(exc)
-        for code in DISK_FAULT_ERRNOS:
-            if os.strerror(code) in text:
-                return code
-    return None
-
-
-def disk_fault(exc: BaseException, doing: str, path: str | Path) -> DiskFaultError | None:
-    """A DiskFaultError (one line: what failed, where, why) for a disk fault, else None."""
-    code = disk_fault_errno(exc)
-    if code is None:
-        return None
-    if isinstance(exc, DiskFaultError):
-        return exc
-    err = DiskFaultError(f"disk fault: {os.strerror(code)} ({errno.errorcode.get(code, code)}) {doing} {path}")
-    err.errno = code  # type: ignore[attr-defined]
-    return err
-
-
-def _unlink_quietly(path: str | Path) -> None:
-    try:
-        os.unlink(path)
-    except OSError:
-        pass  # gone already, or the disk is read-only now: the next run's cleanup removes it
-
-
-def write_atomic(path: str | Path, data: bytes, doing: str = "writing") -> Path:
-    """Write `data` to `path` through a temporary file in the same folder and a rename:
-    a reader sees the old file or the whole new one. On any failure the temporary file is
-    removed (no zero-byte or partial file is left); a disk fault raises DiskFaultError."""
-    path = Path(path)
-    tmp = None
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        publish(tmp, path)
-        tmp = None
-    except BaseException as exc:
-        if tmp is not None:
-            _unlink_quietly(tmp)
-        fault = disk_fault(exc, doing, path)
-        if fault is not None:
-            raise fault from None
-        raise
-    return path
-
-
-def publish(tmp: str | Path, path: str | Path) -> None:
-    """Move a finished temporary file into place atomically, with the permissions a plain
-    `open` would have given it (mkstemp makes 0600 files; outputs are shared on a farm)."""
-    os.chmod(tmp, 0o666 & ~_UMASK)
-    os.replace(tmp, path)
-
 
 # Layers holding colours (the denoiser's noisy beauty and albedo guide): channels are
 # named <layer>.R/G/B/A, not .X/Y/Z/W.

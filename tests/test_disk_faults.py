@@ -181,3 +181,34 @@ def test_dead_owner_claim_is_stale(tmp_path: Path) -> None:
     cp.write_text(json.dumps({"run_id": "gone", "host": socket.gethostname(), "pid": dead.pid, "time": time.time()}))
     ok, _ = try_claim(frame, Claimant.here("run-d"), stale_after_s=3600)
     assert ok
+
+
+@pytest.mark.parametrize("command", [
+    ["export", "SRC", "-o", "DISK/png"],
+    ["export", "SRC", "--format", "jpg", "-o", "DISK/jpg"],
+    ["contact-sheet", "SRC", "-o", "DISK/sheet.png"],
+    ["view", "SRC", "-o", "DISK/flip/index.html"],
+    ["bake", SCENE, "-o", "DISK/motion.json", "--frames", "0-3"],
+    ["bake", SCENE, "-o", "DISK/motion.npz", "--frames", "0-3"],
+])
+def test_every_writer_reports_a_full_disk_in_one_line(small_disk: Path, tmp_path: Path, command: list[str]) -> None:
+    """Issue 24/26: every writer goes through the one write policy (pipeline/files.py):
+    on a full disk `export`, `contact-sheet`, `view` and `bake -o` end with one line and
+    exit 4 (tracebacks, exit 1, or exit 2 before), leaving no temporary file."""
+    src = tmp_path / "src"
+    done = run_motion("render", SCENE, "-o", str(src), "--frames", "0-3", "--resolution", "16x12", "--spp", "1", "--no-progress")
+    assert done.returncode == 0, done.stderr
+    try:  # fill the disk to the last block
+        with open(small_disk / "fill", "wb") as fh:
+            while True:
+                fh.write(b"\0" * 1024)
+                fh.flush()
+    except OSError:
+        pass
+    argv = [str(src) if a == "SRC" else a.replace("DISK", str(small_disk)) for a in command]
+    res = run_motion(*argv)
+    assert res.returncode == 4, res.stderr
+    lines = [line for line in res.stderr.splitlines() if line.strip() and not line.startswith("motion:")]
+    assert len(lines) == 1 and lines[0].startswith("error: disk fault: No space left on device") and "Traceback" not in res.stderr, res.stderr
+    (small_disk / "fill").unlink()
+    assert not _leftovers(small_disk), _leftovers(small_disk)

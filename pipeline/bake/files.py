@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import BakeFileError
+from ..files import writing
 from .checks import motion_problems
 from .records import BakedFrame, BakedMotion
 
@@ -72,8 +73,7 @@ def write_baked(baked: BakedMotion, path: str | Path) -> Path:
         raise BakeFileError(f"{path}: unknown extension {path.suffix!r} (use .json or .npz)")
     if not path.parent.exists():
         raise BakeFileError(f"{path}: directory {path.parent} does not exist")
-    tmp = path.with_name(f".{path.name}.tmp{suffix}")
-    try:
+    with writing(path, "writing the baked motion", suffix=suffix) as tmp:
         if suffix == ".json":
             doc = _meta(baked)
             frames = []
@@ -107,10 +107,6 @@ def write_baked(baked: BakedMotion, path: str | Path) -> Path:
                     arrays[key] = stacked[:, 0] if key.startswith("at_frame/") and not key.endswith("/ids") else stacked
             with open(tmp, "wb") as fh:
                 np.savez_compressed(fh, **arrays)
-        tmp.replace(path)
-    except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise BakeFileError(f"{path}: cannot write: {exc}") from None
     return path
 
 

@@ -12,15 +12,13 @@ draws the labels and writes the PNG, to a temporary file renamed into place.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import UsageError
-from ..frame_output import publish
+from ..files import writing
 from .movie import ViewTransform
 from .sequence import Sequence, discover, read_checked
 
@@ -129,13 +127,6 @@ def contact_sheet(
     for x, y, number in places:
         fig.text(x / width, 1 - (y + 2) / height, f"{number:04d}", color="white", fontsize=9,
                  va="top", ha="left", family="monospace")
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out_path.stem}.", suffix=".png", dir=out_path.parent)
-    os.close(fd)
-    try:
+    with writing(out_path, "writing the contact sheet", suffix=".png") as tmp:
         FigureCanvasAgg(fig).print_png(tmp)
-        publish(tmp, out_path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
     return out_path

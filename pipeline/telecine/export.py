@@ -19,7 +19,6 @@ from __future__ import annotations
 import html
 import json
 import os
-import tempfile
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -28,7 +27,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import UsageError
-from ..frame_output import publish
+from ..files import writing
 from ..timeline import timecode
 from .movie import ViewTransform
 from .sequence import Sequence, discover, read_checked
@@ -83,9 +82,7 @@ def export_images(
     for i, number in enumerate(seq.numbers):
         rgb = to_8bit(view(read_checked(seq, i).rgba))
         path = out / f"{seq.prefix}.{number:0{seq.padding}d}{FORMATS[fmt]}"
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=FORMATS[fmt], dir=out)
-        os.close(fd)
-        try:
+        with writing(path, f"writing the {fmt.upper()} image", suffix=FORMATS[fmt]) as tmp:
             image = Image.fromarray(rgb, "RGB")
             if fmt == "png":
                 info = PngImagePlugin.PngInfo()
@@ -94,10 +91,6 @@ def export_images(
                 image.save(tmp, format="PNG", pnginfo=info)
             else:
                 image.save(tmp, format="JPEG", quality=int(quality), subsampling=0)
-            publish(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
         paths.append(path)
         if progress is not None:
             progress(i + 1, len(seq))
@@ -142,15 +135,8 @@ def write_flipbook(exported: Exported, path: str | Path, title: str | None = Non
     }
     page = _PAGE.replace("__TITLE__", html.escape(data["title"])).replace(
         "__DATA__", json.dumps(data).replace("</", "<\\/"))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".html", dir=path.parent)
-    os.close(fd)
-    try:
-        Path(tmp).write_text(page, encoding="utf-8")
-        publish(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with writing(path, "writing the flipbook", suffix=".html") as tmp:
+        tmp.write_text(page, encoding="utf-8")
     return path
 
 
