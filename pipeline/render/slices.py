@@ -10,6 +10,16 @@ intersections per ray and group, and S small BVH builds per frame (docs/renderin
 
 Particles are octahedra (6 vertices, 8 triangles) of the system's radius; a dead or
 unborn particle collapses to a point, which no ray can hit.
+
+A deforming mesh is drawn from its render vertices (`meshes.RenderMesh`: one per distinct
+position/uv/normal corner of the file, as Mitsuba's own readers weld them), so it keeps
+its texture coordinates; deformed positions map onto them through `index`. Its normals
+per slice (`slice_normals`): the file's normals turned, vertex by vertex, by the rotation
+that takes the vertex's smooth normal at rest to its smooth normal in the slice (exact
+when nothing deforms; hard edges stay hard); without file normals, the smooth normals
+themselves; `face_normals: true` stays faceted. An emissive object or particle system
+carries its area emitter on every slice: the integrator samples the slice of the path's
+time and weights it by MIS (world.py, integrator.py), as it does emissive movers.
 """
 
 from __future__ import annotations
@@ -19,9 +29,10 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
+from ..meshes import RenderMesh, load_render_mesh, plain_render_mesh
 from ..motion.pose import quat_rotate
 from ..scene.loader import LoadedScene
-from ..scene.schema import Particles
+from ..scene.schema import Mesh, Particles
 from ..variant import load_dict
 
 if TYPE_CHECKING:
@@ -47,6 +58,38 @@ def particle_mesh(positions: np.ndarray, alive: np.ndarray, radius: float, capac
     return verts.reshape(-1, 3), faces.reshape(-1, 3)
 
 
+def smooth_normals(positions: np.ndarray, mesh: RenderMesh) -> np.ndarray:
+    """Area-weighted vertex normals [R, 3] of the render vertices, welded by file vertex
+    (a uv seam does not crease them): `positions` [V, 3] are the file vertices."""
+    p = positions[mesh.index]
+    f = mesh.faces
+    face_n = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])  # |.| = 2 area
+    acc = np.zeros_like(positions)
+    np.add.at(acc, mesh.index[f].ravel(), np.repeat(face_n, 3, axis=0))
+    return _unit(acc)[mesh.index]
+
+
+def slice_normals(positions: np.ndarray, rest: np.ndarray, mesh: RenderMesh, scale: np.ndarray) -> np.ndarray:
+    """Object-space normals [R, 3] of a deformed mesh (positions [V, 3], rest [V, 3], both
+    scaled): the file's normals turned by the rotation taking each vertex's smooth rest
+    normal a to its smooth deformed normal b (n' = c n + v x n + v (v.n) / (1 + c), with
+    v = a x b, c = a.b), or b itself where the file has none."""
+    b = smooth_normals(positions, mesh)
+    if mesh.normals is None:
+        return b
+    a = smooth_normals(rest, mesh)
+    n = _unit(mesh.normals / scale)  # a normal under a scale S: S^-1 n
+    v = np.cross(a, b)
+    c = np.sum(a * b, axis=1, keepdims=True)
+    turned = c * n + np.cross(v, n) + v * np.sum(v * n, axis=1, keepdims=True) / np.maximum(1.0 + c, 1e-6)
+    return _unit(np.where(c > -0.999, turned, b))
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(norm > 0, norm, 1.0)
+
+
 @dataclass
 class SliceGroup:
     """The S slice scenes of one deforming object or particle system."""
@@ -55,16 +98,24 @@ class SliceGroup:
     kind: str  # "particles" | "deform"
     scenes: list[Any]
     params: list[Any]
-    capacity: int  # particles (or vertices for a deforming mesh)
+    capacity: int  # particles (or render vertices for a deforming mesh)
     faces: np.ndarray
     radius: float = 0.0
     key: str = field(default="")
+    mesh: RenderMesh | None = None  # a deforming mesh's render vertices
+    smooth: bool = False  # per-slice vertex normals (`slice_normals`)
+    rest: np.ndarray | None = None  # the bind mesh's file vertices [V, 3]
+    emitter: dict[str, Any] | None = None  # the area emitter every slice carries
+    emissive: bool = False
 
 
-def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bsdf: Any, slices: int, radius: float = 0.0) -> SliceGroup:
-    """S scenes, each with one mesh of `count` vertices (or particle capacity)."""
+def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bsdf: Any, slices: int, radius: float = 0.0,
+                mesh: RenderMesh | None = None, smooth: bool = False, rest: np.ndarray | None = None, emitter: dict[str, Any] | None = None) -> SliceGroup:
+    """S scenes, each with one mesh of `count` vertices (or particle capacity); a deforming
+    mesh's texture coordinates are written once here, its positions and normals per frame."""
     key = name.replace(".", "_")
     scenes, params = [], []
+    uvs = mesh.uvs if mesh is not None else None
     for _ in range(slices):
         if kind == "particles":
             verts, fcs = particle_mesh(np.zeros((0, 3)), np.zeros(0, bool), radius, count)
@@ -72,22 +123,44 @@ def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bs
             verts, fcs = np.zeros((count, 3)), faces
         props = mi.Properties()
         props["bsdf"] = bsdf
-        mesh = mi.Mesh(key, len(verts), len(fcs), props, False, False)
-        p = mi.traverse(mesh)
+        if emitter is not None:
+            props["emitter"] = load_dict(emitter)
+        shape = mi.Mesh(key, len(verts), len(fcs), props, smooth, uvs is not None)
+        p = mi.traverse(shape)
         p["vertex_positions"] = mi.Float(np.asarray(verts, np.float32).ravel())
         p["faces"] = mi.UInt32(np.asarray(fcs, np.uint32).ravel())
+        if uvs is not None:
+            p["vertex_texcoords"] = mi.Float(np.asarray(uvs, np.float32).ravel())
         p.update()
-        scene = load_dict({"type": "scene", key: mesh})
+        scene = load_dict({"type": "scene", key: shape})
         scenes.append(scene)
         params.append(mi.traverse(scene))
-    return SliceGroup(name, kind, scenes, params, count, faces, radius, key)
+    return SliceGroup(name, kind, scenes, params, count, faces, radius, key, mesh, smooth, rest, emitter, emitter is not None)
 
 
-def update_group(mi: Any, group: SliceGroup, per_slice_vertices: list[np.ndarray]) -> None:
-    """Write each slice's world-space vertices (rebuilds that slice's small BVH)."""
-    for params, verts in zip(group.params, per_slice_vertices):
+def update_group(mi: Any, group: SliceGroup, per_slice_vertices: list[np.ndarray], per_slice_normals: list[np.ndarray] | None = None) -> None:
+    """Write each slice's world-space vertices (rebuilds that slice's small BVH) and, for a
+    smooth mesh, its world-space normals."""
+    for k, (params, verts) in enumerate(zip(group.params, per_slice_vertices)):
         params[f"{group.key}.vertex_positions"] = mi.Float(np.asarray(verts, np.float32).ravel())
+        if per_slice_normals is not None:
+            params[f"{group.key}.vertex_normals"] = mi.Float(np.asarray(per_slice_normals[k], np.float32).ravel())
         params.update()
+
+
+def render_mesh(loaded: LoadedScene, obj: Any, count: int, faces: np.ndarray) -> tuple[RenderMesh, bool]:
+    """The render vertices of a deforming object whose bind mesh has `count` vertices and
+    `faces`, and whether it is drawn smooth: a mesh file's own corners (uvs, normals;
+    smooth unless `face_normals`), a tessellated sphere or capsule smooth, any other
+    primitive or a flock's agents faceted, without uvs."""
+    from ..scene.motion_schema import Flock
+
+    if isinstance(obj, Mesh) and not isinstance(obj.deform, Flock):
+        mesh = load_render_mesh(loaded.asset(obj.file))
+        if obj.face_normals:
+            mesh = mesh._replace(normals=None)
+        return mesh, not obj.face_normals
+    return plain_render_mesh(count, faces), obj.shape in ("sphere", "capsule") and not isinstance(obj.deform, Flock)
 
 
 def slice_count(loaded: LoadedScene, fi: StackedFrame) -> int:
@@ -121,21 +194,23 @@ class SlicedGeometry:
         on_regroup([g.scenes for g in self.groups])
 
     def _build(self, name: str, fi: StackedFrame, materials: dict[str, Any]) -> SliceGroup:
-        from .build import DEFAULT_MATERIAL
+        from .build import DEFAULT_MATERIAL, spectrum
 
         mi = self._mi
         obj = next(o for o in self.loaded.scene.objects if o.name == name)
         material = materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
         bsdf = load_dict(material) if isinstance(material, dict) else material
+        emitter = {"type": "area", "radiance": spectrum(obj.emission.radiance)} if obj.emission is not None else None
         slices = slice_count(self.loaded, fi)
         if isinstance(obj, Particles):
             n = fi.particles[name][0].shape[1] if name in fi.particles else 0
             capacity = max(64, 1 << int(np.ceil(np.log2(max(n, 1) * 1.5))))
-            return build_group(mi, name, "particles", capacity, np.zeros((0, 3)), bsdf, slices, radius=obj.radius)
+            return build_group(mi, name, "particles", capacity, np.zeros((0, 3)), bsdf, slices, radius=obj.radius, emitter=emitter)
         from ..motion.deform import bind_mesh
 
         verts, faces = bind_mesh(self.loaded, obj)
-        return build_group(mi, name, "deform", len(verts), np.asarray(faces, np.uint32), bsdf, slices)
+        mesh, smooth = render_mesh(self.loaded, obj, len(verts), faces)
+        return build_group(mi, name, "deform", len(mesh.index), np.asarray(mesh.faces, np.uint32), bsdf, slices, mesh=mesh, smooth=smooth, rest=verts, emitter=emitter)
 
     def update(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> None:
         """Each slice's geometry at its time (`slice_samples`): particles from their
@@ -144,7 +219,7 @@ class SlicedGeometry:
         n = fi.samples
         index = slice_samples(n, slice_count(self.loaded, fi), mode, u_fixed)
         for g in self.groups:
-            per_slice = []
+            per_slice, normals = [], []
             if g.kind == "particles":
                 positions, alive = fi.particles.get(g.name, (np.zeros((n + 1, 0, 3)), np.zeros((n + 1, 0), bool)))
                 if positions.shape[1] > g.capacity:  # more particles than room: grow (one recompile)
@@ -155,14 +230,18 @@ class SlicedGeometry:
             else:
                 t, q, s = fi.objects[g.name]
                 local = fi.vertices[g.name]
+                mesh = g.mesh if g.mesh is not None else plain_render_mesh(g.capacity, g.faces)
                 for i in index:
-                    per_slice.append(quat_rotate(q[i], local[i] * s[i]) + t[i])
-            update_group(self._mi, g, per_slice)
+                    scaled = local[i] * s[i]
+                    per_slice.append(quat_rotate(q[i], scaled[mesh.index]) + t[i])
+                    if g.smooth and g.rest is not None:
+                        normals.append(quat_rotate(q[i], slice_normals(scaled, g.rest * s[i], mesh, s[i])))
+            update_group(self._mi, g, per_slice, normals or None)
 
     def _grow(self, group: SliceGroup, needed: int) -> None:
         """Replace a particle group by one with room for `needed` particles (x1.5)."""
         k = self.groups.index(group)
         capacity = 1 << int(np.ceil(np.log2(needed * 1.5)))
         bsdf = group.scenes[0].shapes()[0].bsdf()
-        self.groups[k] = build_group(self._mi, group.name, "particles", capacity, group.faces, bsdf, len(group.scenes), radius=group.radius)
+        self.groups[k] = build_group(self._mi, group.name, "particles", capacity, group.faces, bsdf, len(group.scenes), radius=group.radius, emitter=group.emitter)
         self._on_regroup([g.scenes for g in self.groups])
