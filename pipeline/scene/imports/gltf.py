@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .records import Expansion, ImportFileError, Origin, SpecError
+from .records import Expansion, ImportFileError, Origin, SpecError, import_frames
 from .cache import cached, file_digest, write_atomic, write_ply
 
 COMPONENTS = {5120: np.dtype("<i1"), 5121: np.dtype("<u1"), 5122: np.dtype("<i2"), 5123: np.dtype("<u2"), 5125: np.dtype("<u4"), 5126: np.dtype("<f4")}
@@ -258,11 +258,11 @@ class GltfReader:
 
         names = _Names()
         prefix = spec.prefix
-        root_name = names.take(spec.root or f"{prefix}{sanitize(self.path.stem)}")
-        node_name = {k: names.take(prefix + sanitize(nodes[k].name or f"node{k}")) for k in order}
         ex = Expansion()
-        root_origin = Origin(self.shown, "<root>", {"transform": ("imports", self.index, "transform")}, ("imports", self.index))
-        ex.objects.append(({"name": root_name, "shape": "empty", "transform": spec.transform.model_dump(mode="json", exclude_defaults=True)}, root_origin))
+        # glTF is metres and +Y up, as we are: a stage frame only where the entry overrides
+        frames, root_name = import_frames(names.take, spec, self.index, self.shown, f"{prefix}{sanitize(self.path.stem)}")
+        node_name = {k: names.take(prefix + sanitize(nodes[k].name or f"node{k}")) for k in order}
+        ex.objects.extend(frames)
         self.names, self.node_name, self.root_name, self.prefix = names, node_name, root_name, prefix
         self.material_names: dict[int | None, str] = {}
         self.motions = self._animations(included)

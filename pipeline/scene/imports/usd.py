@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from .records import Expansion, ImportFileError, Origin, SpecError
+from .records import Expansion, ImportFileError, Origin, SpecError, import_frames
 from .cache import cached, file_digest, write_ply
 from .gltf import _Names, sanitize
 
@@ -49,6 +49,29 @@ def _trs(m: np.ndarray, shown: str, where: str) -> dict[str, Any]:
         _fail(shown, where, "a sheared transform is not supported (translate, rotate, scale only)")
     x, y, z, w = Rotation.from_matrix(r).as_quat()
     return {"translate": [float(v) for v in m[:3, 3]], "rotate": {"quaternion": [float(w), float(x), float(y), float(z)]}, "scale": [float(v) for v in s]}
+
+
+TURN_STEP = 90.0  # degrees: the most a rotate op turns between two keys we write
+
+
+def _turn_codes(xf: Any, times: list[float]) -> list[float]:
+    """The time codes to key: the op samples, plus as many evenly spaced codes inside each
+    interval as keep every rotate op's angles (which USD interpolates linearly, so
+    0 -> 270 degrees turns 270 the long way) under TURN_STEP apart: slerp between keys
+    then follows USD's turn instead of the shortest arc, exactly for one-axis ops."""
+    from pxr import Usd, UsdGeom
+
+    rotates = [op for op in xf.GetOrderedXformOps() if str(UsdGeom.XformOp.GetOpTypeToken(op.GetOpType())).startswith("rotate")]
+    codes: list[float] = []
+    for a, b in zip(times[:-1], times[1:]):
+        turn = 0.0
+        for op in rotates:
+            va, vb = op.Get(Usd.TimeCode(a)), op.Get(Usd.TimeCode(b))
+            if va is not None and vb is not None:
+                turn = max(turn, float(np.max(np.abs(np.subtract(np.asarray(vb, dtype=np.float64), np.asarray(va, dtype=np.float64))))))
+        steps = max(1, min(int(math.ceil(turn / TURN_STEP)), MAX_SAMPLES))
+        codes.extend(a + (b - a) * k / steps for k in range(steps))
+    return codes + times[-1:]
 
 
 def _matrix(gf: Any) -> np.ndarray:
@@ -86,8 +109,14 @@ class UsdReader:
 
         spec = self.spec
         ex = Expansion()
-        root = self.names.take(spec.root or f"{spec.prefix}{sanitize(self.path.stem)}")
-        ex.objects.append(({"name": root, "shape": "empty", "transform": spec.transform.model_dump(mode="json", exclude_defaults=True)}, Origin(self.shown, "<root>", {"transform": ("imports", self.index, "transform")}, ("imports", self.index))))
+        # the stage's units and up axis (where authored: USD's own fallback is centimetres,
+        # but a stage without the metadata is taken in the shot's metres; docs/imports.md)
+        units = float(UsdGeom.GetStageMetersPerUnit(self.stage)) if UsdGeom.StageHasAuthoredMetersPerUnit(self.stage) else 1.0
+        if not math.isfinite(units) or units <= 0:
+            _fail(self.shown, "<stage>.metersPerUnit", f"{units} is not a positive number")
+        up = "z" if UsdGeom.GetStageUpAxis(self.stage) == UsdGeom.Tokens.z else "y"
+        frames, root = import_frames(self.names.take, spec, self.index, self.shown, f"{spec.prefix}{sanitize(self.path.stem)}", units, up)
+        ex.objects.extend(frames)
         if spec.nodes is not None:
             starts = []
             for name in spec.nodes:
@@ -144,7 +173,7 @@ class UsdReader:
             rec["transform"] = _trs(_matrix(xf.GetLocalTransformation(code)), self.shown, f"{where}.xformOp")
             return
         keys: dict[str, list[dict[str, Any]]] = {"translate": [], "rotate": [], "scale": []}
-        for code in times:
+        for code in _turn_codes(xf, times):
             trs = _trs(_matrix(xf.GetLocalTransformation(Usd.TimeCode(code))), self.shown, f"{where}.xformOp (time {code})")
             t = self.seconds(code)
             keys["translate"].append({"time": t, "value": trs["translate"]})
