@@ -194,13 +194,13 @@ class SlicedGeometry:
         on_regroup([g.scenes for g in self.groups])
 
     def _build(self, name: str, fi: StackedFrame, materials: dict[str, Any]) -> SliceGroup:
-        from .build import DEFAULT_MATERIAL, spectrum
+        from .build import DEFAULT_MATERIAL, emitter_dict
 
         mi = self._mi
         obj = next(o for o in self.loaded.scene.objects if o.name == name)
         material = materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
         bsdf = load_dict(material) if isinstance(material, dict) else material
-        emitter = {"type": "area", "radiance": spectrum(obj.emission.radiance)} if obj.emission is not None else None
+        emitter = emitter_dict(obj.emission, self.loaded) if obj.emission is not None else None
         slices = slice_count(self.loaded, fi)
         if isinstance(obj, Particles):
             n = fi.particles[name][0].shape[1] if name in fi.particles else 0

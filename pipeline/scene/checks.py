@@ -198,6 +198,9 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
     for i, light in enumerate(scene.lights):
         if isinstance(light, EnvmapLight):
             check_file(("lights", i, "file"), light.file, "image")
+    for i, obj in enumerate(scene.objects):
+        if obj.emission is not None and isinstance(obj.emission.radiance, Texture):
+            check_file(("objects", i, "emission", "radiance", "file"), obj.emission.radiance.file, "image")
     for i, mat in enumerate(scene.materials):
         for field in type(mat).model_fields:
             tex = getattr(mat, field, None)
