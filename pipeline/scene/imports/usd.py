@@ -243,7 +243,10 @@ class UsdReader:
                 self.materials[mpath] = self.names.take(self.spec.prefix + sanitize(material.GetPrim().GetName()))
             rec["material"] = self.materials[mpath]
             emission = self._surface_input(mpath, "emissiveColor")
-            if emission is not None and any(v > 0 for v in emission):
+            glow = self._texture(mpath, "emissiveColor")
+            if glow is not None:
+                rec["emission"] = {"radiance": glow}
+            elif emission is not None and any(v > 0 for v in emission):
                 rec["emission"] = {"radiance": emission}
 
     def _shader(self, mat_path: str) -> Any:
@@ -291,8 +294,10 @@ class UsdReader:
         return {"file": asset.resolvedPath, "raw": space == "raw"}
 
     def _material(self, mat_path: str, name: str) -> dict[str, Any]:
-        """UsdPreviewSurface -> principled: diffuseColor, metallic, roughness, clearcoat
-        (constants; texture-connected inputs take the shader's fallback value)."""
+        """UsdPreviewSurface -> principled: diffuseColor, metallic, roughness (constants or
+        UsdUVTextures), clearcoat; `normal` (a texture) -> normal_map; `opacity` (constant or
+        texture) -> opacity, cut at a positive opacityThreshold (constants only);
+        emissiveColor (constant or texture) -> the object's emission (`_mesh`)."""
         rec: dict[str, Any] = {"name": name, "type": "principled"}
         if self._shader(mat_path) is None:
             return {"name": name, "type": "diffuse"}
@@ -305,6 +310,20 @@ class UsdReader:
             v = self._surface_input(mat_path, src)
             if isinstance(v, float):
                 rec[key] = min(max(v, 0.0), 1.0)
+            texture = self._texture(mat_path, src) if key != "clearcoat" else None
+            if texture is not None:
+                rec[key] = {**texture, "raw": True}
+        normal = self._texture(mat_path, "normal")
+        if normal is not None:
+            rec["normal_map"] = {**normal, "raw": True}
+        opacity = self._surface_input(mat_path, "opacity")
+        threshold = self._surface_input(mat_path, "opacityThreshold")
+        mask = self._texture(mat_path, "opacity")
+        if mask is not None:
+            rec["opacity"] = {**mask, "raw": True}
+        elif isinstance(opacity, float) and opacity < 1.0:
+            cut = isinstance(threshold, float) and threshold > 0
+            rec["opacity"] = (1.0 if opacity >= threshold else 0.0) if cut else min(max(opacity, 0.0), 1.0)
         return rec
 
     # --- cameras and lights -------------------------------------------------------------
