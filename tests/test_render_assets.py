@@ -392,3 +392,23 @@ def test_imported_material_agrees_with_mitsuba_path(tmp_path: Path, kind: str) -
     reference = _card_reference(tmp_path, "holes64.png")
     scene = reference_scene(mi, SUN[1], {**ball_shape(mi), **reference}, resolution=RES, spp=SPP)
     _agree(images_out[0][..., :3], scene, kind)
+
+
+def test_slice_normals_follow_the_deformation(tmp_path: Path) -> None:
+    """A deformation that turns the ball 90 degrees about Z turns its file normals with it
+    (to 1e-6); unturned they are the file's own, even where they are not the mesh's smooth
+    normals (the file's exact sphere normals on a 12 x 7 ball)."""
+    activate()
+    from motion.pipeline.meshes import load_mesh, load_render_mesh
+    from motion.pipeline.render.slices import rest_normals, slice_normals, smooth_normals
+
+    _write_ball(tmp_path)
+    verts, _ = load_mesh(tmp_path / "ball.obj")
+    mesh = load_render_mesh(tmp_path / "ball.obj")
+    one = np.ones(3)
+    rest = rest_normals(verts, mesh, one)
+    file_n = mesh.normals / np.linalg.norm(mesh.normals, axis=1, keepdims=True)
+    np.testing.assert_allclose(slice_normals(verts, rest, mesh), file_n, atol=1e-9)
+    assert np.abs(smooth_normals(verts, mesh) - file_n).max() > 1e-3  # the file's, not recomputed
+    turn = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    np.testing.assert_allclose(slice_normals(verts @ turn.T, rest, mesh), file_n @ turn.T, atol=1e-6)

@@ -14,10 +14,10 @@ unborn particle collapses to a point, which no ray can hit.
 A deforming mesh is drawn from its render vertices (`meshes.RenderMesh`: one per distinct
 position/uv/normal corner of the file, as Mitsuba's own readers weld them), so it keeps
 its texture coordinates; deformed positions map onto them through `index`. Its normals
-per slice (`slice_normals`): the file's normals turned, vertex by vertex, by the rotation
-that takes the vertex's smooth normal at rest to its smooth normal in the slice (exact
-when nothing deforms; hard edges stay hard); without file normals, the smooth normals
-themselves; `face_normals: true` stays faceted. An emissive object or particle system
+per slice (`slice_normals`): the file's normals carried, vertex by vertex, by a local
+frame (the welded smooth normal and the edge to one neighbour) from rest to the slice
+(exact when nothing deforms and for any rigid turn; hard edges stay hard); without file
+normals, the smooth normals themselves; `face_normals: true` stays faceted. An emissive object or particle system
 carries its area emitter on every slice: the integrator samples the slice of the path's
 time and weights it by MIS (world.py, integrator.py), as it does emissive movers.
 """
@@ -58,31 +58,65 @@ def particle_mesh(positions: np.ndarray, alive: np.ndarray, radius: float, capac
     return verts.reshape(-1, 3), faces.reshape(-1, 3)
 
 
-def smooth_normals(positions: np.ndarray, mesh: RenderMesh) -> np.ndarray:
+def smooth_normals(positions: np.ndarray, mesh: RenderMesh, per_file_vertex: bool = False) -> np.ndarray:
     """Area-weighted vertex normals [R, 3] of the render vertices, welded by file vertex
-    (a uv seam does not crease them): `positions` [V, 3] are the file vertices."""
+    (a uv seam does not crease them): `positions` [V, 3] are the file vertices. With
+    `per_file_vertex`, the welded normals [V, 3] themselves."""
     p = positions[mesh.index]
     f = mesh.faces
     face_n = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])  # |.| = 2 area
-    acc = np.zeros_like(positions)
-    np.add.at(acc, mesh.index[f].ravel(), np.repeat(face_n, 3, axis=0))
-    return _unit(acc)[mesh.index]
+    corners = mesh.index[f].ravel()
+    weights = np.repeat(face_n, 3, axis=0)
+    acc = _unit(np.stack([np.bincount(corners, weights[:, c], minlength=len(positions)) for c in range(3)], axis=1))
+    return acc if per_file_vertex else acc[mesh.index]
 
 
-def slice_normals(positions: np.ndarray, rest: np.ndarray, mesh: RenderMesh, scale: np.ndarray) -> np.ndarray:
-    """Object-space normals [R, 3] of a deformed mesh (positions [V, 3], rest [V, 3], both
-    scaled): the file's normals turned by the rotation taking each vertex's smooth rest
-    normal a to its smooth deformed normal b (n' = c n + v x n + v (v.n) / (1 + c), with
-    v = a x b, c = a.b), or b itself where the file has none."""
-    b = smooth_normals(positions, mesh)
+def neighbours(mesh: RenderMesh, count: int) -> np.ndarray:
+    """For each of the `count` file vertices, one file vertex it shares an edge with (the
+    next corner of a face it is in; itself where it is in none)."""
+    out = np.arange(count)
+    f = mesh.index[mesh.faces]
+    out[f[:, 0]], out[f[:, 1]], out[f[:, 2]] = f[:, 1], f[:, 2], f[:, 0]
+    return out
+
+
+def _frames(positions: np.ndarray, normals: np.ndarray, neighbour: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A frame [V, 3, 3] per file vertex (columns: the edge to its neighbour made normal to
+    n, their cross product, n) and where it is degenerate (an edge along n)."""
+    e = positions[neighbour] - positions
+    t = e - np.sum(e * normals, axis=1, keepdims=True) * normals
+    length = np.linalg.norm(t, axis=1)
+    t = _unit(t)
+    return np.stack([t, np.cross(normals, t), normals], axis=2), length < 1e-12
+
+
+def rest_normals(rest: np.ndarray, mesh: RenderMesh, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """What `slice_normals` needs of the bind mesh under `scale`: the file normals
+    expressed in each file vertex's rest frame [R, 3] (a normal under a scale S is
+    S^-1 n), the rest frames' degeneracy [V] and the neighbours [V]; None where the file
+    has no normals."""
     if mesh.normals is None:
-        return b
-    a = smooth_normals(rest, mesh)
-    n = _unit(mesh.normals / scale)  # a normal under a scale S: S^-1 n
-    v = np.cross(a, b)
-    c = np.sum(a * b, axis=1, keepdims=True)
-    turned = c * n + np.cross(v, n) + v * np.sum(v * n, axis=1, keepdims=True) / np.maximum(1.0 + c, 1e-6)
-    return _unit(np.where(c > -0.999, turned, b))
+        return None
+    neighbour = neighbours(mesh, len(rest))
+    frames, bad = _frames(rest * scale, smooth_normals(rest * scale, mesh, True), neighbour)
+    n = _unit(mesh.normals / scale)
+    local = np.einsum("rji,rj->ri", frames[mesh.index], n)  # F_rest^T n
+    return local, bad, neighbour
+
+
+def slice_normals(positions: np.ndarray, rest: tuple[np.ndarray, np.ndarray, np.ndarray] | None, mesh: RenderMesh) -> np.ndarray:
+    """Object-space normals [R, 3] of a deformed mesh (file vertices [V, 3], scaled): each
+    file normal carried by its vertex's local frame, n' = F_deformed F_rest^T n, the frame
+    being the welded smooth normal and the edge to one neighbour (exact for any rigid
+    turn, and for no deformation: n' = n); the smooth normals themselves where the file
+    has none or a frame is degenerate. `rest`: `rest_normals` under the same scale."""
+    b = smooth_normals(positions, mesh, True)
+    if mesh.normals is None or rest is None:
+        return b[mesh.index]
+    local, bad, neighbour = rest
+    frames, bad_now = _frames(positions, b, neighbour)
+    turned = np.einsum("rij,rj->ri", frames[mesh.index], local)
+    return _unit(np.where((bad | bad_now)[mesh.index][:, None], b[mesh.index], turned))
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -107,6 +141,7 @@ class SliceGroup:
     rest: np.ndarray | None = None  # the bind mesh's file vertices [V, 3]
     emitter: dict[str, Any] | None = None  # the area emitter every slice carries
     emissive: bool = False
+    rest_cache: dict[tuple[float, ...], Any] = field(default_factory=dict)  # scale -> `rest_normals`
 
 
 def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bsdf: Any, slices: int, radius: float = 0.0,
@@ -235,7 +270,11 @@ class SlicedGeometry:
                     scaled = local[i] * s[i]
                     per_slice.append(quat_rotate(q[i], scaled[mesh.index]) + t[i])
                     if g.smooth and g.rest is not None:
-                        normals.append(quat_rotate(q[i], slice_normals(scaled, g.rest * s[i], mesh, s[i])))
+                        key = tuple(float(c) for c in s[i])
+                        if key not in g.rest_cache:
+                            g.rest_cache.clear()
+                            g.rest_cache[key] = rest_normals(g.rest, mesh, s[i])
+                        normals.append(quat_rotate(q[i], slice_normals(scaled, g.rest_cache[key], mesh)))
             update_group(self._mi, g, per_slice, normals or None)
 
     def _grow(self, group: SliceGroup, needed: int) -> None:
