@@ -226,6 +226,10 @@ MATERIAL_CASES: dict[str, tuple[str, Any]] = {
         "  - {name: m, type: diffuse, color: [0.2, 0.6, 0.3], opacity: {file: holes.png, filter: nearest}}\n",
         lambda p: {"type": "mask", "opacity": _bitmap(p / "holes.png", filter_type="nearest"), "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.2, 0.6, 0.3]}}},
     ),
+    "textured-conductor-tint": (
+        "  - {name: m, type: conductor, preset: none, tint: {file: colour.png, filter: nearest}}\n",
+        lambda p: {"type": "conductor", "material": "none", "specular_reflectance": {"type": "bitmap", "filename": str(p / "colour.png"), "filter_type": "nearest"}},
+    ),
     "thin-dielectric": (
         "  - {name: m, type: thindielectric, ior: 1.5}\n",
         lambda p: {"type": "thindielectric", "int_ior": 1.5},
@@ -242,7 +246,7 @@ def test_material_agrees_with_mitsuba_path(tmp_path: Path, case: str) -> None:
 
     from _light_scenes import BALL, ball_shape
 
-    _write_maps(tmp_path)
+    _write_card_images(tmp_path)
     material, reference = MATERIAL_CASES[case]
     text = light_scene_yaml(SUN[0], BALL + _card_yaml("m"), resolution=RES, spp=SPP, last=1).replace("materials:\n", "materials:\n" + material)
     images, _, _ = render(load(tmp_path, text), [0])

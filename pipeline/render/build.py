@@ -123,17 +123,17 @@ def _plastic(m: Plastic, loaded: LoadedScene) -> Dict:
 
 @_material("conductor")
 def _conductor(m: Conductor, loaded: LoadedScene) -> Dict:
-    return _smooth_or_rough("conductor", m.roughness, material=m.preset, specular_reflectance=spectrum(m.tint))
+    return _smooth_or_rough("conductor", m.roughness, material=m.preset, specular_reflectance=color(m.tint, loaded))
 
 
 @_material("dielectric")
 def _dielectric(m: Dielectric, loaded: LoadedScene) -> Dict:
-    return _smooth_or_rough("dielectric", m.roughness, int_ior=m.ior, specular_transmittance=spectrum(m.tint))
+    return _smooth_or_rough("dielectric", m.roughness, int_ior=m.ior, specular_transmittance=color(m.tint, loaded))
 
 
 @_material("thindielectric")
 def _thindielectric(m: ThinDielectric, loaded: LoadedScene) -> Dict:
-    return {"type": "thindielectric", "int_ior": m.ior, "specular_transmittance": spectrum(m.tint)}
+    return {"type": "thindielectric", "int_ior": m.ior, "specular_transmittance": color(m.tint, loaded)}
 
 
 @_material("principled")

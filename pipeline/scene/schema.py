@@ -216,7 +216,7 @@ class Conductor(_Material):
     type: Literal["conductor"]
     preset: ConductorPreset = "Al"
     roughness: Annotated[float, Field(ge=0, le=1)] = 0.0
-    tint: Color = 1.0
+    tint: ColorOrTexture = 1.0  # scales the reflectance; a texture: RGB over the uv
 
 
 class Dielectric(_Material):
@@ -226,7 +226,7 @@ class Dielectric(_Material):
     type: Literal["dielectric"]
     ior: Annotated[float, Field(gt=1, le=4)] = 1.5
     roughness: Annotated[float, Field(ge=0, le=1)] = 0.0
-    tint: Color = 1.0
+    tint: ColorOrTexture = 1.0  # scales the transmittance; a texture: RGB over the uv
 
     @field_validator("two_sided")
     @classmethod
