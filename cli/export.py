@@ -9,7 +9,7 @@ import click
 
 _VIEW_OPTIONS = [
     click.option("--exposure", type=float, default=0.0, show_default=True, help="Exposure in stops (as the movies)."),
-    click.option("--ocio", "ocio_config", default=None, help="OCIO config for the view transform: a .ocio file or ocio://cg-config-latest etc."),
+    click.option("--ocio", "ocio_config", default=None, help="OCIO config for the view transform: a .ocio file or a built-in ocio://NAME (default: ocio://cg-config-latest, ACES 2.0 SDR on sRGB; none: the plain sRGB curve)."),
     click.option("--ocio-display", default=None, help="OCIO display (default: the config's)."),
     click.option("--ocio-view", default=None, help="OCIO view (default: the display's)."),
     click.option("--ocio-colorspace", default=None, help="OCIO colour space of the frames."),

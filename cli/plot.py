@@ -3,6 +3,7 @@ judge a simulation (motion.pipeline.dynamics.plots)."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import click
@@ -26,8 +27,13 @@ def plot(scene: Path, what: str, output: Path, until: float | None) -> None:
     loaded = load_scene(scene)
     t_start, t_end = simulation_range(loaded)
     if until is not None:
+        from motion.pipeline.scene.checks import MAX_SIMULATION_STEPS
+
+        steps = (until - t_start) / loaded.scene.dynamics.step if math.isfinite(until) else math.inf
+        if not (math.isfinite(until) and until > t_start and steps <= MAX_SIMULATION_STEPS):
+            raise UsageError(f"--until {until}: expected a time after the simulation's start ({t_start:g} s) "
+                             f"that takes at most {MAX_SIMULATION_STEPS} steps of {loaded.scene.dynamics.step:g} s")
         t_end = float(until)
-        t_start = min(t_start, t_end)
     path = plot_simulation(loaded, simulate(loaded, t_end, t_start), what, output)
     click.echo(f"wrote {path}")
 

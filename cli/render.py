@@ -51,7 +51,7 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--no-cache", is_flag=True, help="Naive path for comparison: a fresh Mitsuba scene for every frame.")
 @click.option("--deliver", "deliver_spec", help="After the last frame, assemble deliverables: 24p,60i,50i,review,contact.")
 @click.option("--exposure", type=float, default=0.0, show_default=True, help="Deliverables' view transform: exposure in stops.")
-@click.option("--ocio", "ocio_config", help="Deliverables' view transform: an OCIO config file or built-in URI (ocio://cg-config-latest).")
+@click.option("--ocio", "ocio_config", help="Deliverables' view transform: an OCIO config file or built-in ocio://NAME (default: ocio://cg-config-latest, ACES 2.0 SDR on sRGB; none: the plain sRGB curve).")
 @click.option("--ocio-display", help="OCIO display (default: the config's default).")
 @click.option("--ocio-view", help="OCIO view (default: the display's default).")
 @click.option("--dry-run", is_flag=True, help="Say what would be rendered (frames, chunks, executor, outputs) and write nothing.")

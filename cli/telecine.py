@@ -30,7 +30,7 @@ CODEC_NAMES = ["prores", "prores4444", "h264"]
 @click.option("--exposure", type=float, default=0.0, show_default=True, help="Movie exposure in stops.")
 @click.option("--ocio", "ocio_config", default=None,
               help="OCIO config for the movie's view transform: a .ocio file or a built-in URI "
-                   "(ocio://cg-config-latest, ocio://studio-config-latest, ocio://default).")
+                   "(default: ocio://cg-config-latest, ACES 2.0 SDR on sRGB; ocio://studio-config-latest; none: the plain sRGB curve).")
 @click.option("--ocio-display", default=None, help="OCIO display (default: the config's).")
 @click.option("--ocio-view", default=None, help="OCIO view (default: the display's).")
 @click.option("--ocio-colorspace", default=None,
@@ -72,7 +72,9 @@ def telecine(in_dir: Path, out_dir: Path, pattern: str | None, field_order: str 
                                        overwrite=overwrite, progress=progress)
     how = result.cadence.name + (f" phase {result.detection.phase} (detected)" if result.detection else "")
     order = f", {result.field_order}" if result.field_order and not inverse else ""
-    click.echo(f"wrote {len(result.paths)} frames to {result.out_dir} ({how}{order}, {result.rate} fps)")
+    from motion.pipeline.timeline import rate_label
+
+    click.echo(f"wrote {len(result.paths)} frames to {result.out_dir} ({how}{order}, {rate_label(result.rate)})")
     if movie is not None:
         from motion.pipeline.telecine.movie import sequence_movie
 

@@ -31,8 +31,13 @@ def validate(scenes: tuple[Path, ...], preset: str | None, as_json: bool) -> Non
             results.append({"path": str(path), "ok": False, "problems": [asdict(p) for p in err.problems]})
             continue
         s = loaded.scene
+        from motion.pipeline.scene.checks import scene_warnings
+
+        warnings = scene_warnings(s)
+        for w in warnings:
+            click.echo(f"{path}: warning: {w}", err=True)
         results.append({"path": str(path), "ok": True, "name": loaded.name, "frames": [s.timeline.first, s.timeline.last], "fps": str(s.timeline.fps),
-                        "objects": len(s.objects), "lights": len(s.lights), "materials": len(s.materials)})
+                        "objects": len(s.objects), "lights": len(s.lights), "materials": len(s.materials), "warnings": warnings})
         if not as_json:
             click.echo(
                 f"{path}: ok ({loaded.name}: frames {s.timeline.first}-{s.timeline.last} at {s.timeline.fps} fps, "

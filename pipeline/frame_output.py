@@ -290,11 +290,27 @@ def read_header(path: str | Path) -> dict[str, Any]:
         raise FrameIOError(f"{path}: not a readable OpenEXR file ({exc})") from None
 
 
+MAX_FRAME_PIXELS = 1 << 28  # a frame we read: 16384 x 16384 (4 GiB of float32 RGBA)
+
+
+def check_data_window(path: Path, header: Mapping[str, Any]) -> None:
+    """A data window we can hold: FrameIOError for one that declares more than
+    MAX_FRAME_PIXELS (a 100000 x 100000 header would ask for 149 GiB) or none at all."""
+    try:
+        lo, hi = header["dataWindow"]
+        w, h = int(hi[0]) - int(lo[0]) + 1, int(hi[1]) - int(lo[1]) + 1
+    except (KeyError, TypeError, ValueError, IndexError):
+        raise FrameIOError(f"{path}: header has no usable dataWindow") from None
+    if w < 1 or h < 1 or w * h > MAX_FRAME_PIXELS:
+        raise FrameIOError(f"{path}: data window {w}x{h} is not a frame we read (at most {MAX_FRAME_PIXELS} pixels)")
+
+
 def read_frame(path: str | Path) -> Frame:
     """Read a frame written by `write_frame` (or any RGB/RGBA EXR) back as float32."""
     path = Path(path)
     if not path.is_file():
         raise FrameIOError(f"{path}: no such frame")
+    check_data_window(path, read_header(path))  # before a pixel is allocated
     try:
         with OpenEXR.File(str(path)) as f:
             header = dict(f.header())

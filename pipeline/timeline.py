@@ -111,6 +111,34 @@ class Timeline:
         raise ValueError(f"shutter position must be start, center or end, got {position!r}")
 
 
+def rate_label(fps: Fraction | float | int) -> str:
+    """A frame rate as people read it, exact where that matters: '24 fps', '23.976 fps
+    (24000/1001)', '29.97 fps (30000/1001)'.
+
+    >>> rate_label(Fraction(24000, 1001))
+    '23.976 fps (24000/1001)'
+    >>> rate_label(Fraction(25))
+    '25 fps'
+    """
+    f = Fraction(fps).limit_denominator(1_000_000)
+    if f.denominator == 1:
+        return f"{f.numerator} fps"
+    shown = f"{float(f):.3f}".rstrip("0").rstrip(".")
+    return f"{shown} fps ({f.numerator}/{f.denominator})"
+
+
+def frame_timecode(frame: int, fps: Fraction, drop_frame: bool = False) -> str | None:
+    """The timecode of frame number `frame` (not of its place in a range): frames are
+    counted at the nominal rate from 00:00:00:00 at frame 0, as telecine does, so frame
+    1001 of a 24 or 23.976 fps shot is 00:00:41:17 (1001 = 41 x 24 + 17) whatever frame a
+    render starts at. None for a negative frame number (timecode has no sign).
+
+    >>> frame_timecode(1001, Fraction(24000, 1001))
+    '00:00:41:17'
+    """
+    return timecode(frame, fps, drop_frame) if frame >= 0 else None
+
+
 def timecode(frame: int, fps: Fraction, drop_frame: bool = False) -> str:
     """SMPTE timecode HH:MM:SS:FF (or HH:MM:SS;FF drop-frame) of a 0-based frame count.
 

@@ -105,6 +105,35 @@ def _bake_json(mutate: str) -> bytes:
     return json.dumps(doc).replace("Infinity", "1e999").encode()
 
 
+def _exr(meta: dict[str, Any] | None = None, fps: Any = 24, window: tuple[int, int] | None = None) -> bytes:
+    """A real 6x4 EXR frame's bytes; `fps` may be anything the header can hold (a string);
+    `window` rewrites its data window's far corner in the (otherwise valid) header."""
+    import tempfile
+    from fractions import Fraction
+
+    import OpenEXR
+
+    from motion.pipeline.frame_output import write_frame
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "f.0000.exr"
+        if isinstance(fps, str):
+            header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage, "framesPerSecond": fps}
+            with OpenEXR.File(header, {"RGBA": np.full((4, 6, 4), 0.5, np.float32)}) as f:
+                f.write(str(path))
+        else:
+            write_frame(path, np.full((4, 6, 4), 0.5, np.float32), meta or {"frame": 0}, fps=Fraction(fps))
+        data = bytearray(path.read_bytes())
+    if window is not None:
+        at = data.find(b"dataWindow\x00box2i\x00") + len(b"dataWindow\x00box2i\x00") + 4
+        data[at + 8 : at + 16] = struct.pack("<ii", *window)
+    return bytes(data)
+
+
+EXR = _exr()
+SEQ = {f"in/a.{i:04d}.exr": EXR for i in range(4)}
+DYN = BASE.replace("radius: 0.5}", "radius: 0.5, motion: {type: dynamics}}")
+
 # (id, class, files {name: text | bytes | "<fifo>" | ("sparse", size)}, argv run in the case folder)
 V = ["validate", "scene.yaml"]
 
@@ -201,6 +230,31 @@ CASES: list[tuple[str, str, dict[str, Any], list[str]]] = [
     ("motion-folder", "misreported", {"scene.yaml": BASE, "m.json/x": "1"}, _r("--motion", "m.json")),
     ("report-unwritable", "misreported", {"scene.yaml": BASE, "afile": "x"}, _r("--report", "afile/report.json")),
     ("output-unwritable", "misreported", {"scene.yaml": BASE, "afile": "x"}, ["render", "scene.yaml", "-o", "afile/out", "--no-progress"]),
+    # --- round 3 (issue 24): the options of the commands beside `render` ---
+    ("export-exposure-5000", "options", SEQ, ["export", "in", "-o", "out/png", "--exposure", "5000"]),
+    ("export-exposure-nan", "options", SEQ, ["export", "in", "-o", "out/png", "--exposure", "nan"]),
+    ("view-exposure-inf", "options", SEQ, ["view", "in", "-o", "out/v/index.html", "--exposure", "inf"]),
+    ("sheet-exposure-nan", "options", SEQ, ["contact-sheet", "in", "-o", "out/c.png", "--exposure", "nan"]),
+    ("deliver-exposure-nan", "options", {"scene.yaml": BASE}, _r("--deliver", "contact", "--exposure", "nan")),
+    ("sheet-columns-negative", "options", SEQ, ["contact-sheet", "in", "-o", "out/c.png", "--columns", "-1"]),
+    ("sheet-columns-1e9", "options", SEQ, ["contact-sheet", "in", "-o", "out/c.png", "--columns", "1000000000"]),
+    ("sheet-width-1e9", "options", SEQ, ["contact-sheet", "in", "-o", "out/c.png", "--width", "1000000000"]),
+    ("telecine-film-speed-0.3", "options", SEQ, ["telecine", "in", "-o", "out/t", "--film-speed", "0.3"]),
+    ("telecine-film-speed-1e9", "options", SEQ, ["telecine", "in", "-o", "out/t", "--film-speed", "1e9"]),
+    ("plot-until-1e12", "options", {"scene.yaml": DYN}, ["plot", "scene.yaml", "-o", "out/p.png", "--until", "1e12"]),
+    ("plot-until-nan", "options", {"scene.yaml": DYN}, ["plot", "scene.yaml", "-o", "out/p.png", "--until", "nan"]),
+    ("exr-fps-string", "options", {f"in/a.{i:04d}.exr": _exr(fps="abc") for i in range(2)}, ["contact-sheet", "in", "-o", "out/c.png"]),
+    ("exr-window-1e5", "options", {"in/a.0000.exr": _exr(window=(99999, 99999))}, ["export", "in", "-o", "out/png"]),
+    ("exr-window-1e5-sheet", "options", {"in/a.0000.exr": EXR, "in/a.0001.exr": _exr(window=(99999, 99999))}, ["contact-sheet", "in", "-o", "out/c.png"]),
+    ("inverse-field-source-abc", "options", {f"in/a.{i:04d}.exr": _exr({"frame": i, "topFieldSource": "abc", "bottomFieldSource": "abc"}, fps=30) for i in range(5)},
+     ["telecine", "in", "-o", "out/t", "--inverse"]),
+    # --- round 3: a scheduler address that is not one (probed in seconds, before the bake) ---
+    ("scheduler-scheme", "scheduler", {"scene.yaml": BASE}, _r("--scheduler", "garbage://host:1")),
+    ("scheduler-port-text", "scheduler", {"scene.yaml": BASE}, _r("--scheduler", "localhost:abc")),
+    ("scheduler-port-range", "scheduler", {"scene.yaml": BASE}, _r("--scheduler", "tcp://127.0.0.1:99999")),
+    ("scheduler-file-not-json", "scheduler", {"scene.yaml": BASE, "s.json": "not json"}, _r("--scheduler", "s.json")),
+    ("scheduler-file-no-address", "scheduler", {"scene.yaml": BASE, "s.json": '{"id": 1}'}, _r("--scheduler", "s.json")),
+    ("scheduler-refused", "scheduler", {"scene.yaml": BASE}, _r("--scheduler", "tcp://127.0.0.1:1", "--dry-run")),
 ]
 
 DRIVER = r"""
@@ -296,7 +350,7 @@ def test_hostile_case_is_a_clean_error(results: tuple[Path, set[str], set[str], 
 
 def test_every_class_is_covered() -> None:
     kinds = {c[1] for c in CASES}
-    assert kinds == {"yaml-bomb", "sizes", "render-time", "output", "non-finite", "misreported"}
+    assert kinds == {"yaml-bomb", "sizes", "render-time", "output", "non-finite", "misreported", "options", "scheduler"}
     assert not Path("/tmp/motion-escaped").exists()
 
 

@@ -267,3 +267,50 @@ def test_a_shared_asset_is_decoded_once_and_reported_where_named(tmp_path: Path,
     message = str(err.value)
     assert "materials[0].color.file" in message and "materials[1].color.file" in message
     assert len(calls) == 1
+
+
+FOUR_MISTAKES = """\
+timeline: {fps: 24, first: 0, last: 10}
+camera: {position: [0, 1, 5], look_at: [0, 0, 0], fov: 40}
+materials:
+  - {name: red, type: diffuse, color: [0.8, 0.1, 0.1]}
+objects:
+  - name: ball
+    shape: sphere
+    radius: 0.3
+    material: rde
+    motion:
+      type: keyframes
+      interpolation: catmul-rom
+      channels:
+        translate:
+          keys: [{time: 0, value: [0, 0, 0]}, {time: 1, value: [1, 0, 0]}]
+  - name: box
+    shape: cube
+    sise: 1
+render: {resolution: [64, 36], spp: -4}
+"""
+
+
+def test_every_problem_at_once_in_file_order_with_did_you_mean(tmp_path: Path) -> None:
+    """Issue 23: a scene with 4 mistakes reports all 4 in one run, in line order: the
+    unknown material (a semantic check) beside the schema's errors, not after they are
+    fixed; a misspelt choice gets a suggestion as a misspelt key does."""
+    path = tmp_path / "four.yaml"
+    path.write_text(FOUR_MISTAKES)
+    with pytest.raises(SceneError) as err:
+        load_scene(path)
+    problems = err.value.problems
+    assert [p.yaml_path for p in problems] == ["objects[0].material", "objects[0].motion.interpolation", "objects[1].sise", "render.spp"], problems
+    assert [p.line for p in problems] == sorted(p.line for p in problems)
+    assert "did you mean 'red'" in problems[0].message
+    assert "did you mean 'catmull-rom'" in problems[1].message
+    assert "did you mean 'size'" in problems[2].message
+
+
+def test_an_empty_or_unlit_scene_is_warned_about(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "empty.yaml"
+    path.write_text("camera: {position: [0, 0, 5], look_at: [0, 0, 0]}\n")
+    assert main(["validate", str(path)]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the scene has no objects" in err and "every frame renders black" in err

@@ -277,3 +277,40 @@ def test_cache_warm_makes_a_ci_jobs_first_frame_warm(tmp_path: Path) -> None:
                          capture_output=True, text=True, env=env, timeout=300)
     assert job.returncode == 0, job.stderr
     assert sum(int(r.get("kernels_compiled") or 0) for r in report(tmp_path / "out")["frames"]) == 0
+
+
+# --- deliverables a studio accepts --------------------------------------------------------
+
+
+def test_timecode_comes_from_the_frame_number_and_the_rate_is_named(tmp_path: Path) -> None:
+    """A shot numbered 1001-1006 at 24 fps: frame 1001's timecode is 00:00:41:17 in its EXR
+    and its 24p movie (it was 00:00:00:00); the 24p movie plays at 23.976 and says so."""
+    from motion.pipeline.frame_output import read_header, timecode_str
+
+    scene = tmp_path / "tc.yaml"
+    scene.write_text("timeline: {fps: 24, first: 1001, last: 1006}\ncamera: {position: [0, 0, 5], look_at: [0, 0, 0]}\n"
+                     "lights: [{type: constant, radiance: 1}]\nobjects: [{name: b, shape: sphere, radius: 0.5}]\nrender: {resolution: [16, 12], spp: 1}\n")
+    res = motion("render", scene, "-o", tmp_path / "out", "--deliver", "24p,60i", "--no-progress")
+    assert res.returncode == 0, res.stderr
+    assert timecode_str(read_header(tmp_path / "out" / "tc.1001.exr")["timeCode"]) == "00:00:41:17"
+    with av.open(str(tmp_path / "out" / "deliver" / "tc_24p.mov")) as c:
+        assert c.streams.video[0].metadata.get("timecode") == "00:00:41:17"
+    assert "tc_24p.mov (23.976 fps (24000/1001))" in res.stderr
+    assert "tc_60i.mov (29.97 fps (30000/1001) interlaced, 2 fields a frame)" in res.stderr
+    made = json.loads((tmp_path / "out" / "deliver" / "manifest.json").read_text())["formats"]
+    assert made["24p"]["outputs"][0]["rate"] == "23.976 fps (24000/1001)"
+
+
+def test_the_default_view_keeps_a_bright_sky_from_clipping() -> None:
+    """The deliverables' default view is OCIO's ACES 2.0 SDR (a tone curve): an HDR sky of
+    1.5-6 scene-linear clips under 1% of its pixels (the plain sRGB curve clipped them all)."""
+    import numpy as np
+
+    from motion.pipeline.telecine.movie import ViewTransform
+
+    sky = np.ones((64, 64, 4), np.float32)
+    sky[..., 0], sky[..., 1], sky[..., 2] = np.linspace(1.5, 4.0, 64)[:, None], np.linspace(2.0, 5.0, 64)[:, None], np.linspace(3.0, 6.0, 64)[:, None]
+    clipped = lambda view: float((view.encode(sky) >= 1.0 - 1e-6).any(axis=-1).mean())  # noqa: E731
+    assert clipped(ViewTransform()) < 0.01
+    assert clipped(ViewTransform(ocio_config="none")) == 1.0
+    assert "ACES 2.0" in ViewTransform().description

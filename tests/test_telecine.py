@@ -117,8 +117,9 @@ def test_exr_telecine_fields_exact(tmp_path: Path) -> None:
 def test_timecode_drop_frame_and_exact_mode(tmp_path: Path) -> None:
     src = write_seq(tmp_path / "in", 4)
     res = telecine_sequence(src, tmp_path / "df", drop_frame=True)
-    assert timecode_str(read_header(res.paths[4])["timeCode"]) == "00:00:00;04"
-    assert timecode_str(read_header(telecine_sequence(src, tmp_path / "ndf").paths[4])["timeCode"]) == "00:00:00:04"
+    # film frame 1 starts video frame 1 (1 x 30/24, rounded down): video frame 4 is 00:00:00;05
+    assert timecode_str(read_header(res.paths[4])["timeCode"]) == "00:00:00;05"
+    assert timecode_str(read_header(telecine_sequence(src, tmp_path / "ndf").paths[4])["timeCode"]) == "00:00:00:05"
     exact = telecine_sequence(src, tmp_path / "exact", film_speed="24")
     assert exact.rate == 30 and read_header(exact.paths[0])["framesPerSecond"] == Fraction(30)
     with pytest.raises(UsageError, match="drop-frame"):

@@ -69,7 +69,7 @@ def test_60i_movie_decodes_interlaced(tmp_path: Path, order: str, suffix: str, c
 
 
 def test_24p_movie_progressive_and_view_transform(tmp_path: Path) -> None:
-    movie = sequence_movie(grey_seq(tmp_path / "in", 4), tmp_path / "p.mov", rate=Fraction(24000, 1001), view=ViewTransform(exposure=1.0))
+    movie = sequence_movie(grey_seq(tmp_path / "in", 4), tmp_path / "p.mov", rate=Fraction(24000, 1001), view=ViewTransform(exposure=1.0, ocio_config="none"))
     stream, frames = decode(movie)
     assert len(frames) == 4 and stream.average_rate == Fraction(24000, 1001)
     assert not frames[0].interlaced_frame and stream.field_order == AV_FIELD_PROGRESSIVE
@@ -79,7 +79,7 @@ def test_24p_movie_progressive_and_view_transform(tmp_path: Path) -> None:
 
 
 def test_view_transform_and_ocio_request() -> None:
-    view = ViewTransform(exposure=-1)
+    view = ViewTransform(exposure=-1, ocio_config="none")  # the plain sRGB curve (the default is ACES's tone curve)
     out = view(np.array([[[0.0, 0.36, 4.0, 1.0]]], np.float32))
     assert out.dtype == np.uint16 and out[0, 0, 0] == 0 and out[0, 0, 2] == 65535
     assert abs(out[0, 0, 1] / 65535 - float(srgb_encode(np.array(0.18)))) < 1e-4
@@ -109,7 +109,8 @@ def test_contact_sheet(tmp_path: Path) -> None:
     img = matplotlib.image.imread(sheet)
     assert img.shape[:2] == (30 + 2 * (24 + 18 + 4) + 4, 4 * (32 + 4) + 4)
     y0, x0 = 30 + 4, 4  # first thumbnail
-    assert abs(img[y0 + 2, x0 + 16, 0] - float(srgb_encode(np.array(0.18)))) < 2 / 255
+    default = ViewTransform().encode(np.full((1, 1, 4), 0.18, np.float32))[0, 0, 0]  # the default view (ACES 2.0 SDR)
+    assert abs(img[y0 + 2, x0 + 16, 0] - float(default)) < 2 / 255
     assert img[y0 + 20, x0 + 16, 0] == 0
     assert np.allclose(box_resize(np.arange(16.0).reshape(4, 4, 1), 2, 2)[..., 0], [[2.5, 4.5], [10.5, 12.5]])
 
@@ -167,7 +168,8 @@ def test_contact_sheet_accepts_gaps_telecine_refuses_them(tmp_path: Path, capsys
     assert "(11 frames, 90 missing)" in capsys.readouterr().out
     img = matplotlib.image.imread(tmp_path / "c.png")
     shown = [img[30 + 4 + 12, 4 + k * 36 + 16, 0] for k in range(11)]  # each thumbnail's centre, in order
-    np.testing.assert_allclose(shown, srgb_encode(0.02 * np.arange(1, 12)), atol=1 / 255)
+    levels = np.repeat((0.02 * np.arange(1, 12, dtype=np.float32))[:, None, None], 4, axis=2)
+    np.testing.assert_allclose(shown, ViewTransform().encode(levels)[:, 0, 0], atol=1 / 255)
     # Telecine and movies stay strict: one line naming the first missing frame, nothing written.
     assert main(["telecine", str(src), "-o", str(tmp_path / "60i")]) == 2
     err = capsys.readouterr().err.strip().splitlines()

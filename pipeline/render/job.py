@@ -25,7 +25,7 @@ from typing import Any, Sequence
 from ..bake import BakedFrame, fingerprint
 from ..frame_output import write_frame
 from ..scene.loader import LoadedScene, load_scene
-from ..timeline import timecode
+from ..timeline import frame_timecode
 from .frame_renderer import FrameRenderer, frame_seed
 
 RENDERER_VERSION = "motion-render-1"
@@ -238,7 +238,7 @@ def _render_one(job: RenderJob, fi: BakedFrame) -> FrameResult:
             rgba,
             meta,
             fps=Fraction(fps),
-            timecode=timecode(fi.frame - scene.timeline.first, fps, drop_frame=drop) if fi.frame >= scene.timeline.first else None,
+            timecode=frame_timecode(fi.frame, fps, drop_frame=drop),  # from the frame number: 1001 at 24 fps is 00:00:41:17
             pixel_type=scene.output.pixel_type,
             compression=scene.output.compression,
             standard=standard,

@@ -395,3 +395,15 @@ def expression_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
             check(("dynamics", field, j), text, ("t", "x", "y", "z"))
     return problems
 
+
+
+def scene_warnings(scene: Scene) -> list[str]:
+    """What is valid but almost surely not meant: a scene with nothing in it, or with no
+    light (no light, no emissive object, no environment), renders black frames."""
+    out = []
+    if not scene.objects:
+        out.append("the scene has no objects: its frames show only the lights' environment")
+    emissive = any(getattr(o, "emission", None) is not None for o in scene.objects)
+    if not scene.lights and not emissive:
+        out.append("the scene has no lights and no emissive objects: every frame renders black")
+    return out

@@ -19,7 +19,7 @@ from .checks import semantic_problems
 from .imports import expand_imports
 from .problems import problems_from_validation
 from .schema import Scene
-from .source import Loc, SourceMap, parse_yaml, read_yaml_file
+from .source import Loc, SourceMap, parse_yaml, read_yaml_file, yaml_path
 
 __all__ = ["LoadedScene", "Loc", "deep_merge", "load_scene"]  # Loc: for type hints of the motion stage
 
@@ -69,11 +69,75 @@ def load_scene(path: str | Path, overrides: Mapping[str, Any] | None = None, ass
     try:
         scene = Scene.model_validate(data)
     except ValidationError as exc:
-        raise SceneError(problems_from_validation(exc, data, source, Scene)) from None
+        problems = problems_from_validation(exc, data, source, Scene)
+        problems += salvaged_problems(exc, data, source, path.parent, problems, assets)
+        raise SceneError(in_file_order(problems, file)) from None
     problems = semantic_problems(scene, path.parent, source, assets=assets)
     if problems:
-        raise SceneError(problems)
+        raise SceneError(in_file_order(problems, file))
     return LoadedScene(scene=scene, path=path.resolve(), source=source, data=data)
+
+
+def in_file_order(problems: list[Problem], file: str) -> list[Problem]:
+    """The scene file's problems by line and column, then those of other files (imports)."""
+    return sorted(problems, key=lambda p: (p.file != file, p.file, p.line or 0, p.column or 0))
+
+
+SALVAGE_ROUNDS = 8
+
+
+def salvage(exc: ValidationError, data: dict[str, Any]) -> tuple[Scene, list[tuple[str | int, ...]]] | None:
+    """The scene without the fields the schema refused (each dropped, or its enclosing
+    mapping when a required field is missing), so that the semantic checks can run on the
+    rest and every problem is reported at once. None when that would drop a whole item of a
+    list (later references to it would be reported as unknown) or does not converge."""
+    import copy
+
+    from .problems import _strip_tags
+
+    doc = copy.deepcopy(data)
+    dropped: list[tuple[str | int, ...]] = []
+    for _ in range(SALVAGE_ROUNDS):
+        for err in exc.errors(include_url=False):
+            loc = _strip_tags(tuple(err["loc"]), doc)
+            if err["type"] == "missing" or (loc and isinstance(loc[-1], int)):
+                loc = loc[:-1]  # the enclosing mapping goes, not the absent key
+            if not loc or isinstance(loc[-1], int):
+                return None  # a whole list item (or the document) would go
+            node: Any = doc
+            for part in loc[:-1]:
+                try:
+                    node = node[part]
+                except (KeyError, IndexError, TypeError):
+                    node = None
+                    break
+            if isinstance(node, dict) and loc[-1] in node:
+                del node[loc[-1]]
+                dropped.append(loc)
+        try:
+            return Scene.model_validate(doc), dropped
+        except ValidationError as again:
+            exc = again
+    return None
+
+
+def salvaged_problems(exc: ValidationError, data: dict[str, Any], source: SourceMap, base_dir: Path, found: list[Problem], assets: bool) -> list[Problem]:
+    """The semantic problems (unknown material, missing asset, ...) of the part of the
+    scene the schema accepted, beside the schema's own: found in one run, not one after
+    the other. Problems at or below a dropped field, or at a path already reported, are
+    left out (they are about what was dropped)."""
+    saved = salvage(exc, data)
+    if saved is None:
+        return []
+    scene, dropped = saved
+    seen = {p.yaml_path for p in found}
+    shown = [yaml_path(loc) for loc in dropped]
+    out = []
+    for p in semantic_problems(scene, base_dir, source, assets=assets):
+        if p.yaml_path in seen or any(p.yaml_path == d or p.yaml_path.startswith(d + ".") or p.yaml_path.startswith(d + "[") for d in shown):
+            continue
+        out.append(p)
+    return out
 
 
 def deep_merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:

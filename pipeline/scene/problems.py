@@ -114,6 +114,12 @@ def _message(err: Mapping[str, Any], data: Any, loc: Loc, root: type[BaseModel])
     if kind == "union_tag_not_found":
         ctx = err.get("ctx", {})
         return f"missing '{str(ctx.get('discriminator', 'type')).strip(chr(39))}' (it selects the kind)", False
+    if kind == "literal_error":
+        # a misspelt choice gets the same help as a misspelt key
+        options = [o.strip().strip("'") for o in str(err.get("ctx", {}).get("expected", "")).replace(" or ", ", ").split(",")]
+        close = difflib.get_close_matches(str(err.get("input")), [o for o in options if o], n=1, cutoff=0.6)
+        if close:
+            return f"{err['msg']} (got {err.get('input')!r}); did you mean '{close[0]}'?", False
     msg = str(err["msg"])
     if msg.startswith("Value error, "):
         msg = msg[len("Value error, ") :]

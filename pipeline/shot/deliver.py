@@ -168,6 +168,24 @@ def _outputs_present(entry: dict[str, Any], folder: Path) -> bool:
     return True
 
 
+def movie_rate(path: Path, interlaced: bool = False) -> str | None:
+    """The rate a movie plays at, as read back from the file ('23.976 fps (24000/1001)'),
+    for the log and the manifest: a "24p" deliverable plays at the telecine's 23.976."""
+    if path.suffix.lower() not in (".mov", ".mp4"):
+        return None
+    import av
+
+    from ..timeline import rate_label
+
+    try:
+        with av.open(str(path)) as c:
+            stream = c.streams.video[0]
+            rate = stream.average_rate or stream.guessed_rate
+    except Exception:  # an unreadable movie is reported by whoever plays it; the label is a courtesy
+        return None
+    return (rate_label(rate) + (" interlaced, 2 fields a frame" if interlaced else "")) if rate else None
+
+
 def _publish(staged: Path, final: Path) -> None:
     """Move a staged output into place: a file by an atomic rename, a folder by swapping
     it with the old one (which is then removed)."""
@@ -243,7 +261,7 @@ def deliver_and_record(req: RenderRequest, out_dir: Path, frame_paths: list[Path
                 raise
             finally:
                 shutil.rmtree(staging, ignore_errors=True)
-            outputs = [{"name": n, "size": (folder / n).stat().st_size if (folder / n).is_file() else None} for n in names]
+            outputs = [{"name": n, "size": (folder / n).stat().st_size if (folder / n).is_file() else None, "rate": movie_rate(folder / n, fmt in ("60i", "50i"))} for n in names]
             entry = {"frames": format_frames(numbers), "made_from": made_from, "recipe": how, "outputs": outputs,
                      "frame_files": frame_files, "made_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
             manifest.setdefault("formats", {})[fmt] = entry
@@ -252,10 +270,11 @@ def deliver_and_record(req: RenderRequest, out_dir: Path, frame_paths: list[Path
             status[fmt] = "made"
             for n in names:
                 p = folder / n
+                rate = movie_rate(p, fmt in ("60i", "50i"))
                 if p.is_dir():
                     say(f"  {fmt}: {len(list(p.glob('*.exr')))} frames in {p}")
                 else:
-                    say(f"  {fmt}: {p}")
+                    say(f"  {fmt}: {p}" + (f" ({rate})" if rate else ""))
         for n in names:
             p = folder / n
             if p.is_dir():

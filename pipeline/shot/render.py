@@ -282,6 +282,10 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     cfg: FarmConfig = load_farm_config().with_overrides(retries=req.retries, task_timeout_s=req.task_timeout_s, chunk_size=req.chunk_size)
     check_request(req)
     preset, overrides, loaded = load_shot(req)
+    from ..scene.checks import scene_warnings
+
+    for warning in scene_warnings(loaded.scene):
+        logging.getLogger("motion").warning(f"motion: {loaded.path}: warning: {warning}")
     check_denoiser(req, loaded)
     sel = select_frames(req, loaded, preset)
     frames = sel.frames

@@ -174,6 +174,9 @@ def plan(n_frames: int, cadence: Cadence, order: FieldOrder, tail: Tail = "pad")
     return [VideoFrame(k, sources[2 * k], sources[2 * k + 1], order) for k in range(len(sources) // 2)]
 
 
+MAX_FILM_SPEED = 1000  # frames/s
+
+
 def film_rate(film_speed: str | Fraction | int) -> Fraction:
     """The film rate for a --film-speed value: "23.976" means exactly 24000/1001."""
     if isinstance(film_speed, str) and film_speed.strip() in ("23.976", "23.98"):
@@ -183,9 +186,12 @@ def film_rate(film_speed: str | Fraction | int) -> Fraction:
     if isinstance(film_speed, str) and film_speed.strip() in ("59.94",):
         return Fraction(60000, 1001)
     try:
-        return parse_fps(film_speed)
+        rate = parse_fps(film_speed)
     except ValueError as exc:
         raise UsageError(f"--film-speed: {exc}") from None
+    if not 1 <= rate <= MAX_FILM_SPEED:
+        raise UsageError(f"--film-speed {film_speed}: expected a rate from 1 to {MAX_FILM_SPEED} frames/s (timecode counts whole frames a second)")
+    return rate
 
 
 def output_rate(film: Fraction, cadence: Cadence) -> Fraction:

@@ -28,6 +28,9 @@ LABEL_ROWS = 18
 GAP = 4
 
 
+MAX_THUMB_WIDTH = 4096  # pixels
+MAX_SHEET_FRAMES = 1000  # thumbnails on one sheet (and in one row)
+
 def box_resize(image: np.ndarray, height: int, width: int) -> np.ndarray:
     """Area-average downsampling of [H, W, C] to [height, width, C] (no upsampling)."""
     h, w = image.shape[:2]
@@ -89,8 +92,12 @@ def contact_sheet(
     out_path = Path(out_path)
     if out_path.suffix.lower() != ".png":
         raise UsageError(f"{out_path}: the contact sheet is written as PNG (use a .png name)")
-    if thumb_width < 8 or max_frames < 1:
-        raise UsageError("thumbnail width must be >= 8 and max frames >= 1")
+    if not 8 <= thumb_width <= MAX_THUMB_WIDTH:
+        raise UsageError(f"--width {thumb_width}: a thumbnail is 8 to {MAX_THUMB_WIDTH} pixels wide")
+    if not 1 <= max_frames <= MAX_SHEET_FRAMES:
+        raise UsageError(f"--max-frames {max_frames}: a sheet shows 1 to {MAX_SHEET_FRAMES} frames")
+    if columns is not None and not 1 <= columns <= MAX_SHEET_FRAMES:
+        raise UsageError(f"--columns {columns}: expected 1 to {MAX_SHEET_FRAMES} thumbnails a row")
     view = view or ViewTransform()
     seq = in_dir if isinstance(in_dir, Sequence) else discover(in_dir, prefix, require_even_height=False,
                                                                allow_gaps=True)

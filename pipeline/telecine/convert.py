@@ -151,7 +151,10 @@ def telecine_sequence(
     """Pull a progressive EXR sequence down to interlaced (or, for `blend`, blended) frames.
 
     Video frame i is numbered `first + i`, where `first` is the input's first frame
-    number, and gets timecode `timecode(i, rate)`, i.e. 00:00:00:00 at the first frame.
+    number. Its timecode continues the film's: the film's first frame number, counted at
+    the film's nominal rate, is a time (frame 1001 at 24 is 41 s 17 frames), and video frame
+    0 is that time counted at the video's nominal rate, rounded down (frame 1251 at 30 for
+    3:2, 00:00:41:21); 00:00:00:00 for a film starting at frame 0.
     """
     cadence = parse_cadence(pattern) if isinstance(pattern, str) else pattern
     order = check_field_order(field_order)
@@ -164,6 +167,7 @@ def telecine_sequence(
     frames = plan(len(seq), cadence, order, tail)
     if drop_frame:
         _timecode(0, rate, True)
+    start = max(0, seq.first) * round(rate) // max(1, round(film))  # the film's start, in video frames
     ptype = pixel_type or seq.pixel_type
     load = _FrameCache(seq)
     names: list[str] = []
@@ -193,7 +197,7 @@ def telecine_sequence(
             )
             fname = f"{name}.{seq.first + i:0{seq.padding}d}.exr"
             write_frame(
-                staging.dir / fname, rgba, meta, fps=rate, timecode=_timecode(i, rate, drop_frame),
+                staging.dir / fname, rgba, meta, fps=rate, timecode=_timecode(start + i, rate, drop_frame),
                 aovs=aovs or None, pixel_type=ptype, compression=compression,  # type: ignore[arg-type]
             )
             names.append(fname)
@@ -216,7 +220,10 @@ def _sources_from_metadata(seq: Sequence, order: FieldOrder) -> list[int] | None
         meta = read_header_meta(seq, i)
         if "topFieldSource" not in meta or "bottomFieldSource" not in meta:
             return None
-        top, bottom = int(meta["topFieldSource"]), int(meta["bottomFieldSource"])
+        try:
+            top, bottom = int(meta["topFieldSource"]), int(meta["bottomFieldSource"])
+        except (TypeError, ValueError, OverflowError):
+            raise FrameIOError(f"{seq.paths[i]}: field sources {meta['topFieldSource']!r}, {meta['bottomFieldSource']!r} are not frame numbers") from None
         sources += [top, bottom] if order == "tff" else [bottom, top]
     return sources
 

@@ -17,6 +17,8 @@ when no codec is given. Files are encoded to a hidden temporary name and renamed
 
 from __future__ import annotations
 
+import math
+
 import os
 import tempfile
 from dataclasses import dataclass, field
@@ -98,11 +100,19 @@ def builtin_ocio_configs() -> list[str]:
     return list(OCIO.BuiltinConfigRegistry())
 
 
+MAX_EXPOSURE_STOPS = 32  # x 4e9 either way: past that every pixel is black or white
+DEFAULT_VIEW_CONFIG = "ocio://cg-config-latest"  # its default view: ACES 2.0 - SDR 100 nits (Rec.709) on sRGB
+PLAIN_VIEW = ("none", "plain", "srgb")  # --ocio none: the untone-mapped sRGB curve
+
+
 class ViewTransform:
     """Scene-linear RGBA -> display-referred RGB uint16 [H, W, 3].
 
-    Without an OCIO config: x 2**exposure, clip to [0, 1], sRGB curve. With one (a file or
-    a built-in URI such as ``ocio://cg-config-latest``): x 2**exposure, then the config's
+    By default (no config named) OpenColorIO's built-in CG config and its default view,
+    ACES 2.0 SDR on an sRGB display: a tone curve that rolls highlights off instead of
+    clipping them (a bright sky keeps its colour). `ocio_config="none"`: x 2**exposure,
+    clip to [0, 1], sRGB curve. With a config (a file or a built-in URI such as
+    ``ocio://studio-config-latest``): x 2**exposure, then the config's
     DisplayViewTransform from `ocio_colorspace` (default: the config's linear Rec.709
     colour space if it has one, else its ``scene_linear`` role) to `ocio_display` /
     `ocio_view` (defaults: the config's default display and that display's default view),
@@ -117,14 +127,18 @@ class ViewTransform:
         ocio_view: str | None = None,
         ocio_colorspace: str | None = None,
     ) -> None:
+        if not (isinstance(exposure, (int, float)) and math.isfinite(exposure) and abs(exposure) <= MAX_EXPOSURE_STOPS):
+            raise UsageError(f"--exposure {exposure}: expected a finite number of stops from {-MAX_EXPOSURE_STOPS} to {MAX_EXPOSURE_STOPS}")
         self.gain = np.float32(2.0 ** float(exposure))
         self._cpu = None
         self.display = self.view = self.source = None
         self.color_tags = (BT709, TRC_SRGB)  # (primaries, transfer) for the movie's stream
         self.description = f"linear -> sRGB, exposure {float(exposure):+g} stops"
         if ocio_config is None:
+            ocio_config = DEFAULT_VIEW_CONFIG
+        if str(ocio_config).strip().lower() in PLAIN_VIEW:
             if ocio_display or ocio_view or ocio_colorspace:
-                raise UsageError("--ocio-display/--ocio-view/--ocio-colorspace need an OCIO config (--ocio)")
+                raise UsageError("--ocio-display/--ocio-view/--ocio-colorspace need an OCIO config (--ocio), not --ocio none")
             return
         try:
             import PyOpenColorIO as OCIO  # type: ignore[import-not-found]

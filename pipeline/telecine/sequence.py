@@ -18,7 +18,7 @@ from typing import Any, Iterator, Literal
 import numpy as np
 
 from ..errors import FrameIOError
-from ..frame_output import Frame, read_frame, read_header
+from ..frame_output import Frame, check_data_window, read_frame, read_header
 
 PixelType = Literal["half", "float"]
 
@@ -145,11 +145,17 @@ def discover(
     first_meta: dict[str, Any] = {}
     for number, path in items:
         header = read_header(path)
+        check_data_window(path, header)
         this = _size(path, header)
         if size is None:
             size = this
             rate = header.get("framesPerSecond")
-            fps = Fraction(rate) if rate is not None else None
+            try:
+                fps = Fraction(rate) if rate is not None else None
+                if fps is not None and not 0 < fps <= 100_000:
+                    raise ValueError(f"{fps} is out of range")
+            except (TypeError, ValueError, ZeroDivisionError):
+                raise FrameIOError(f"{path}: framesPerSecond {rate!r} is not a frame rate") from None
             first_meta = {k[len("motion:"):]: v for k, v in header.items() if k.startswith("motion:")}
             if require_even_height and this[1] % 2:
                 raise FrameIOError(
