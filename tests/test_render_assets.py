@@ -315,7 +315,7 @@ def _card_reference(tmp_path: Path, holes: str) -> dict[str, Any]:
                      "to_world": T().translate(CARD["translate"]) @ T().rotate([1, 0, 0], CARD["angle"])}}
 
 
-def _gltf_card(tmp_path: Path, images: dict[str, bytes]) -> str:
+def _gltf_card(tmp_path: Path, images: dict[str, bytes], normal_scale: float = 1.0) -> str:
     import sys
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
@@ -328,7 +328,7 @@ def _gltf_card(tmp_path: Path, images: dict[str, bytes]) -> str:
     g["materials"] = [{
         "name": "Card",
         "pbrMetallicRoughness": {"baseColorTexture": {"index": tex["colour_a.png"]}, "metallicFactor": 0.0, "roughnessFactor": 0.6},
-        "normalTexture": {"index": tex["ripple.png"]},
+        "normalTexture": {"index": tex["ripple.png"], "scale": normal_scale},
         "emissiveTexture": {"index": tex["glow.png"]},
         "emissiveFactor": [1.0, 1.0, 1.0],
         "alphaMode": "MASK",
@@ -357,6 +357,7 @@ def _usd_card(tmp_path: Path, images: dict[str, bytes]) -> str:
     surface.CreateIdAttr("UsdPreviewSurface")
     surface.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
     surface.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.6)
+    surface.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(0.5)
 
     def texture(name: str, file: str, output: str, raw: bool, kind: Any) -> None:
         tex = UsdShade.Shader.Define(stage, f"/Looks/Card/{name}")
@@ -416,3 +417,23 @@ def test_slice_normals_follow_the_deformation(tmp_path: Path) -> None:
     assert np.abs(smooth_normals(verts, mesh) - file_n).max() > 1e-3  # the file's, not recomputed
     turn = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
     np.testing.assert_allclose(slice_normals(verts @ turn.T, rest, mesh), file_n @ turn.T, atol=1e-6)
+
+
+def test_gltf_normal_texture_scale_is_baked_into_the_map(tmp_path: Path) -> None:
+    """glTF's normalTexture.scale bends the map's x and y: the imported normal map holds
+    normalize((2c - 1) (s, s, 1)) of the file's texels (to 8-bit rounding)."""
+    activate()
+    from PIL import Image
+
+    images = _write_card_images(tmp_path)
+    _gltf_card(tmp_path, images, normal_scale=0.4)
+    (tmp_path / "shot.yaml").write_text("timeline: {fps: 24, first: 0, last: 1}\ncamera: {position: [0, 1, 9], look_at: [0, 0, 0]}\nimports:\n  - {file: card.glb}\n")
+    from motion.pipeline.scene import load_scene
+
+    (mat,) = load_scene(tmp_path / "shot.yaml").scene.materials
+    ours = np.asarray(Image.open(mat.normal_map.file).convert("RGB"), dtype=np.float64) / 255 * 2 - 1
+    n = np.asarray(Image.open(tmp_path / "ripple.png").convert("RGB"), dtype=np.float64) / 255 * 2 - 1
+    n[:, :, :2] *= 0.4
+    n /= np.linalg.norm(n, axis=2, keepdims=True)
+    assert mat.normal_map.raw
+    np.testing.assert_allclose(ours, n, atol=2.5 / 255)

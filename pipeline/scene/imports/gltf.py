@@ -626,7 +626,8 @@ class GltfReader:
         else:
             rec["metallic"], rec["roughness"] = min(max(metallic, 0.0), 1.0), min(max(roughness, 0.0), 1.0)
         if mat.normalTexture is not None:  # tangent space, +Y up in the image as Mitsuba's normalmap reads it
-            rec["normal_map"] = self._texture(mat.normalTexture.index, f"{where}.normalTexture", scale=np.ones(1), raw=True)
+            bend = float(mat.normalTexture.scale) if mat.normalTexture.scale is not None else 1.0
+            rec["normal_map"] = self._texture(mat.normalTexture.index, f"{where}.normalTexture", scale=np.ones(1), raw=True, normal_scale=None if bend == 1.0 else bend)
         # alphaMode: OPAQUE ignores alpha; MASK cuts at alphaCutoff; BLEND is coverage
         mode = mat.alphaMode or "OPAQUE"
         if mode in ("MASK", "BLEND"):
@@ -661,10 +662,13 @@ class GltfReader:
             self.fail(iwhere, f"texture file not found (relative to {self.path.parent})")
         return file.read_bytes(), iwhere
 
-    def _texture(self, tex: int, where: str, scale: np.ndarray, raw: bool, channel: int | None = None, cutoff: float | None = None, linear: bool = False) -> dict[str, Any]:
+    def _texture(self, tex: int, where: str, scale: np.ndarray, raw: bool, channel: int | None = None, cutoff: float | None = None, linear: bool = False,
+                 normal_scale: float | None = None) -> dict[str, Any]:
         """Texture `tex` in the asset cache as one of our texture records: the image x
         `scale` (colour in linear units), one `channel` of it (3: alpha) as grey, thresholded
-        at `cutoff` (1 at or above, else 0), or (`linear`) as a float EXR of linear RGB."""
+        at `cutoff` (1 at or above, else 0), (`linear`) a float EXR of linear RGB, or a
+        normal map with its x and y scaled by `normal_scale` (normalize((2c - 1) (s, s, 1)),
+        as glTF's normalTexture.scale says)."""
         textures = self.gltf.textures or []
         if not 0 <= tex < len(textures):
             self.fail(where, f"texture {tex} does not exist")
@@ -675,7 +679,7 @@ class GltfReader:
         data, iwhere = self._image_bytes(t.source, f"textures[{tex}].source")
         import hashlib
 
-        key = f"{hashlib.sha256(data).hexdigest()}|{_floats(scale)}|{channel}" + (f"|cut{cutoff}" if cutoff is not None else "") + ("|linear" if linear else "")
+        key = f"{hashlib.sha256(data).hexdigest()}|{_floats(scale)}|{channel}" + (f"|cut{cutoff}" if cutoff is not None else "") + ("|linear" if linear else "") + (f"|bend{normal_scale}" if normal_scale is not None else "")
 
         def write(tmp: Path) -> None:
             import io
@@ -693,6 +697,12 @@ class GltfReader:
                 srgb = np.asarray(im.convert("RGB"), dtype=np.float64) / 255
                 lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4) * scale
                 OpenEXR.File({"type": OpenEXR.scanlineimage}, {"RGB": np.ascontiguousarray(lin, dtype=np.float32)}).write(str(tmp))
+                return
+            if normal_scale is not None:
+                n = np.asarray(im.convert("RGB"), dtype=np.float64) / 255 * 2 - 1
+                n[:, :, :2] *= normal_scale
+                n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-12)
+                Image.fromarray(np.clip(np.rint((n + 1) / 2 * 255), 0, 255).astype(np.uint8)).save(tmp, format="PNG")
                 return
             if channel is None and np.allclose(scale, 1.0):
                 im.save(tmp, format="PNG")

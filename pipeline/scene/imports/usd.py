@@ -245,6 +245,7 @@ class UsdReader:
             emission = self._surface_input(mpath, "emissiveColor")
             glow = self._texture(mpath, "emissiveColor")
             if glow is not None:
+                glow.pop("output")
                 rec["emission"] = {"radiance": glow}
             elif emission is not None and any(v > 0 for v in emission):
                 rec["emission"] = {"radiance": emission}
@@ -291,13 +292,42 @@ class UsdReader:
         if asset is None or not asset.resolvedPath:
             _fail(self.shown, where, f"texture file not found: {asset.path if asset is not None else '(none)'}")
         space = tex.GetInput("sourceColorSpace").Get() if tex.GetInput("sourceColorSpace") else None
-        return {"file": asset.resolvedPath, "raw": space == "raw"}
+        return {"file": asset.resolvedPath, "raw": space == "raw", "output": str(sources[0].sourceName)}
+
+    def _grey_texture(self, mat_path: str, name: str, threshold: float = 0.0) -> dict[str, Any] | None:
+        """A UsdUVTexture's one channel (the output connected to input `name`: r, g, b or a)
+        as a raw grey texture in the asset cache, cut at `threshold` (1 at or above, else 0)
+        when it is positive; the file itself where it is read whole (rgb, no cut)."""
+        texture = self._texture(mat_path, name)
+        if texture is None:
+            return None
+        output = texture.pop("output")
+        if output not in ("r", "g", "b", "a") and threshold <= 0:
+            return {**texture, "raw": True}
+        channel = "rgba".index(output) if output in ("r", "g", "b", "a") else 0
+        source = Path(texture["file"])
+
+        def write(tmp: Path) -> None:
+            from PIL import Image, UnidentifiedImageError
+
+            try:
+                with Image.open(source) as im:
+                    arr = np.asarray(im.convert("RGBA"), dtype=np.float64)[:, :, channel] / 255
+            except (UnidentifiedImageError, OSError) as exc:
+                _fail(self.shown, f"{mat_path}.inputs:{name}", f"cannot decode the texture {source.name}: {exc}")
+            if threshold > 0:
+                arr = (arr >= threshold).astype(np.float64)
+            Image.fromarray(np.rint(arr * 255).astype(np.uint8)).save(tmp, format="PNG")
+
+        key = f"{file_digest(source)}|channel{channel}|cut{threshold}"
+        return {"file": str(cached(f"{source.stem}-{output}", key, ".png", write)), "raw": True}
 
     def _material(self, mat_path: str, name: str) -> dict[str, Any]:
         """UsdPreviewSurface -> principled: diffuseColor, metallic, roughness (constants or
         UsdUVTextures), clearcoat; `normal` (a texture) -> normal_map; `opacity` (constant or
         texture) -> opacity, cut at a positive opacityThreshold (constants only);
-        emissiveColor (constant or texture) -> the object's emission (`_mesh`)."""
+        emissiveColor (constant or texture) -> the object's emission (`_mesh`). A texture read
+        through one channel (outputs:r/g/b/a) becomes that channel as a grey texture."""
         rec: dict[str, Any] = {"name": name, "type": "principled"}
         if self._shader(mat_path) is None:
             return {"name": name, "type": "diffuse"}
@@ -305,25 +335,27 @@ class UsdReader:
         rec["color"] = [min(max(c, 0.0), 1e6) for c in color] if isinstance(color, list) else 0.18
         texture = self._texture(mat_path, "diffuseColor")
         if texture is not None:
+            texture.pop("output")
             rec["color"] = texture
         for key, src in (("metallic", "metallic"), ("roughness", "roughness"), ("clearcoat", "clearcoat")):
             v = self._surface_input(mat_path, src)
             if isinstance(v, float):
                 rec[key] = min(max(v, 0.0), 1.0)
-            texture = self._texture(mat_path, src) if key != "clearcoat" else None
+            texture = self._grey_texture(mat_path, src) if key != "clearcoat" else None
             if texture is not None:
-                rec[key] = {**texture, "raw": True}
+                rec[key] = texture
         normal = self._texture(mat_path, "normal")
         if normal is not None:
+            normal.pop("output")
             rec["normal_map"] = {**normal, "raw": True}
         opacity = self._surface_input(mat_path, "opacity")
         threshold = self._surface_input(mat_path, "opacityThreshold")
-        mask = self._texture(mat_path, "opacity")
+        cut = float(threshold) if isinstance(threshold, float) and threshold > 0 else 0.0
+        mask = self._grey_texture(mat_path, "opacity", cut)
         if mask is not None:
-            rec["opacity"] = {**mask, "raw": True}
+            rec["opacity"] = mask
         elif isinstance(opacity, float) and opacity < 1.0:
-            cut = isinstance(threshold, float) and threshold > 0
-            rec["opacity"] = (1.0 if opacity >= threshold else 0.0) if cut else min(max(opacity, 0.0), 1.0)
+            rec["opacity"] = (1.0 if opacity >= cut else 0.0) if cut else min(max(opacity, 0.0), 1.0)
         return rec
 
     # --- cameras and lights -------------------------------------------------------------
