@@ -230,6 +230,10 @@ MATERIAL_CASES: dict[str, tuple[str, Any]] = {
         "  - {name: m, type: conductor, preset: none, tint: {file: colour.png, filter: nearest}}\n",
         lambda p: {"type": "conductor", "material": "none", "specular_reflectance": {"type": "bitmap", "filename": str(p / "colour.png"), "filter_type": "nearest"}},
     ),
+    "roughness-texture": (
+        "  - {name: m, type: conductor, preset: Au, roughness: {file: rough.png, raw: true, filter: nearest}}\n",
+        lambda p: {"type": "roughconductor", "material": "Au", "distribution": "ggx", "alpha": {"type": "bitmap", "filename": str(p / "alpha.exr"), "filter_type": "nearest"}},
+    ),
     "thin-dielectric": (
         "  - {name: m, type: thindielectric, ior: 1.5}\n",
         lambda p: {"type": "thindielectric", "int_ior": 1.5},
@@ -293,6 +297,11 @@ def _write_card_images(tmp_path: Path) -> dict[str, bytes]:
     glow = np.zeros((8, 8, 3), np.float32)
     glow[2:6, 1:7] = [1.0, 0.6, 0.3]
     mi.Bitmap(glow).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.UInt8, True).write(str(tmp_path / "glow.png"))
+    # roughness 0.2 / 0.8 in a checker, and (for the reference, written here) its GGX alpha
+    rough = np.where((cells[0] + cells[1]) % 2 == 1, 0.2, 0.8).astype(np.float32)[..., None]
+    mi.Bitmap(np.ascontiguousarray(rough)).convert(mi.Bitmap.PixelFormat.Y, mi.Struct.Type.UInt8, False).write(str(tmp_path / "rough.png"))
+    stored = np.array(mi.Bitmap(str(tmp_path / "rough.png")), dtype=np.float32) / 255
+    mi.Bitmap(np.ascontiguousarray(stored**2)).write(str(tmp_path / "alpha.exr"))
     return {n: (tmp_path / n).read_bytes() for n in ("colour.png", "colour_a.png", "ripple.png", "glow.png", "holes64.png")}
 
 

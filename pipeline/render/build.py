@@ -109,8 +109,14 @@ def _diffuse(m: Diffuse, loaded: LoadedScene) -> Dict:
     return {"type": "diffuse", "reflectance": color(m.color, loaded)}
 
 
-def _smooth_or_rough(plugin: str, roughness: float, **params: Any) -> Dict:
-    """Mitsuba's smooth `plugin`, or its GGX `rough<plugin>` when roughness > 0."""
+def _smooth_or_rough(plugin: str, roughness: Any, loaded: LoadedScene | None = None, **params: Any) -> Dict:
+    """Mitsuba's smooth `plugin`, or its GGX `rough<plugin>` when roughness > 0; a
+    roughness texture becomes a cached alpha texture (its square, `assets.alpha_texture`)."""
+    if isinstance(roughness, Texture) and loaded is not None:
+        from .assets import alpha_texture
+
+        alpha = {**color(roughness, loaded, raw=True), "filename": str(alpha_texture(loaded.asset(roughness.file), roughness.raw))}
+        return {"type": f"rough{plugin}", "alpha": alpha, "distribution": "ggx", **params}
     if roughness == 0:
         return {"type": plugin, **params}
     return {"type": f"rough{plugin}", "alpha": _alpha(roughness), "distribution": "ggx", **params}
@@ -123,12 +129,12 @@ def _plastic(m: Plastic, loaded: LoadedScene) -> Dict:
 
 @_material("conductor")
 def _conductor(m: Conductor, loaded: LoadedScene) -> Dict:
-    return _smooth_or_rough("conductor", m.roughness, material=m.preset, specular_reflectance=color(m.tint, loaded))
+    return _smooth_or_rough("conductor", m.roughness, loaded, material=m.preset, specular_reflectance=color(m.tint, loaded))
 
 
 @_material("dielectric")
 def _dielectric(m: Dielectric, loaded: LoadedScene) -> Dict:
-    return _smooth_or_rough("dielectric", m.roughness, int_ior=m.ior, specular_transmittance=color(m.tint, loaded))
+    return _smooth_or_rough("dielectric", m.roughness, loaded, int_ior=m.ior, specular_transmittance=color(m.tint, loaded))
 
 
 @_material("thindielectric")
@@ -144,7 +150,7 @@ def _principled(m: Principled, loaded: LoadedScene) -> Dict:
         "metallic": color(m.metallic, loaded),
         "roughness": color(m.roughness, loaded),
         "specular": m.specular,
-        "clearcoat": m.clearcoat,
+        "clearcoat": color(m.clearcoat, loaded, raw=True),
     }
 
 

@@ -215,7 +215,7 @@ class Conductor(_Material):
 
     type: Literal["conductor"]
     preset: ConductorPreset = "Al"
-    roughness: Annotated[float, Field(ge=0, le=1)] = 0.0
+    roughness: Union[Annotated[float, Field(ge=0, le=1)], Texture] = 0.0  # a texture: grey, GGX alpha = its square
     tint: ColorOrTexture = 1.0  # scales the reflectance; a texture: RGB over the uv
 
 
@@ -225,7 +225,7 @@ class Dielectric(_Material):
 
     type: Literal["dielectric"]
     ior: Annotated[float, Field(gt=1, le=4)] = 1.5
-    roughness: Annotated[float, Field(ge=0, le=1)] = 0.0
+    roughness: Union[Annotated[float, Field(ge=0, le=1)], Texture] = 0.0  # a texture: grey, GGX alpha = its square
     tint: ColorOrTexture = 1.0  # scales the transmittance; a texture: RGB over the uv
 
     @field_validator("two_sided")
@@ -241,7 +241,7 @@ class ThinDielectric(Dielectric):
     without bending the ray (Mitsuba `thindielectric`); smooth only."""
 
     type: Literal["thindielectric"]  # type: ignore[assignment]
-    roughness: Annotated[float, Field(ge=0, le=0)] = 0.0
+    roughness: Annotated[float, Field(ge=0, le=0)] = 0.0  # type: ignore[assignment]
 
 
 class Principled(_Material):
@@ -252,7 +252,7 @@ class Principled(_Material):
     metallic: Union[Annotated[float, Field(ge=0, le=1)], Texture] = 0.0  # a texture: grey, raw
     roughness: Union[Annotated[float, Field(ge=0, le=1)], Texture] = 0.5  # a texture: grey, raw
     specular: Annotated[float, Field(ge=0, le=1)] = 0.5
-    clearcoat: Annotated[float, Field(ge=0, le=1)] = 0.0
+    clearcoat: Union[Annotated[float, Field(ge=0, le=1)], Texture] = 0.0  # a texture: grey, raw
 
 
 Material = Annotated[
