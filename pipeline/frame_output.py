@@ -278,6 +278,15 @@ def inside(folder: str | Path, path: str | Path) -> bool:
     return target.startswith(base.rstrip(os.sep) + os.sep)
 
 
+def confined(folder: str | Path, path: str | Path) -> bool:
+    """Whether `path` stays inside `folder` once every link on the way is followed: a
+    subfolder (or claims folder) pre-placed in the output folder as a link to elsewhere
+    would otherwise carry frames out of it."""
+    base = Path(folder).resolve()
+    target = Path(path).parent.resolve() / Path(path).name
+    return target == base or base in target.parents
+
+
 def read_header(path: str | Path) -> dict[str, Any]:
     """The header of an EXR, or FrameIOError if it is missing or not a readable EXR."""
     path = Path(path)

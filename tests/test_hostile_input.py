@@ -210,7 +210,6 @@ CASES: list[tuple[str, str, dict[str, Any], list[str]]] = [
     ("pattern-absolute", "output", {"scene.yaml": BASE + "output: {filename: '/tmp/motion-escaped/{name}.####.exr'}\n"}, _r()),
     ("pattern-inner-dotdot", "output", {"scene.yaml": BASE + "output: {filename: 'a/../../b/{name}.####.exr'}\n"}, _r()),
     ("pattern-preset", "output", {"scene.yaml": BASE, "p.yaml": "output: {filename: '../../{name}.####.exr'}\n"}, _r("--preset", "p.yaml")),
-    ("pattern-name-dotdot", "output", {"...yaml": BASE + "output: {filename: '{name}/####.exr'}\n"}, ["render", "...yaml", "-o", "out", "--no-progress"]),
     # --- non-finite values ---
     ("ballistic-overflow", "non-finite", {"scene.yaml": BASE.replace("last: 2", "last: 60").replace("radius: 0.5}", "radius: 0.5, motion: {type: procedural, generators: [{type: ballistic, v0: [0, 0, 0], a: [1e308, 0, 0]}]}}")}, _r()),
     ("ballistic-overflow-bake", "non-finite", {"scene.yaml": BASE.replace("last: 2", "last: 60").replace("radius: 0.5}", "radius: 0.5, motion: {type: procedural, generators: [{type: ballistic, v0: [1e308, 0, 0], a: [0, 0, 0]}]}}")}, ["bake", "scene.yaml", "-o", "out/m.json"]),
@@ -255,6 +254,12 @@ CASES: list[tuple[str, str, dict[str, Any], list[str]]] = [
     ("scheduler-file-not-json", "scheduler", {"scene.yaml": BASE, "s.json": "not json"}, _r("--scheduler", "s.json")),
     ("scheduler-file-no-address", "scheduler", {"scene.yaml": BASE, "s.json": '{"id": 1}'}, _r("--scheduler", "s.json")),
     ("scheduler-refused", "scheduler", {"scene.yaml": BASE}, _r("--scheduler", "tcp://127.0.0.1:1", "--dry-run")),
+    # --- round 3: links pre-placed inside the output folder lead nothing out of it ---
+    ("link-frames-subfolder", "links", {"scene.yaml": BASE + "output: {filename: 'sub/{name}.####.exr'}\n", "elsewhere/keep": "", "out/sub": ("link", "../elsewhere")}, _r()),
+    ("link-claims-folder", "links", {"scene.yaml": BASE, "elsewhere/keep": "", "out/.motion-claims": ("link", "../elsewhere")}, _r()),
+    ("link-claims-subfolder", "links", {"scene.yaml": BASE + "output: {filename: 'sub/{name}.####.exr'}\n", "elsewhere/keep": "", "out/sub/.motion-claims": ("link", "../../elsewhere")}, _r()),
+    ("link-deliver", "links", {"scene.yaml": BASE, "elsewhere/keep": "", "out/deliver": ("link", "../elsewhere")}, _r("--deliver", "contact")),
+    ("link-deliver-check", "links", {"scene.yaml": BASE, "elsewhere/keep": "", "out/deliver": ("link", "../elsewhere")}, ["render", "scene.yaml", "-o", "out", "--check", "--deliver", "contact"]),
 ]
 
 DRIVER = r"""
@@ -306,6 +311,8 @@ def results(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, set[str], s
             path.parent.mkdir(parents=True, exist_ok=True)
             if content == "<fifo>":
                 os.mkfifo(path)
+            elif isinstance(content, tuple) and content[0] == "link":
+                path.symlink_to(content[1])
             elif isinstance(content, tuple):
                 with open(path, "wb") as fh:
                     fh.truncate(content[1])  # sparse: size without disk
@@ -350,7 +357,7 @@ def test_hostile_case_is_a_clean_error(results: tuple[Path, set[str], set[str], 
 
 def test_every_class_is_covered() -> None:
     kinds = {c[1] for c in CASES}
-    assert kinds == {"yaml-bomb", "sizes", "render-time", "output", "non-finite", "misreported", "options", "scheduler"}
+    assert kinds == {"yaml-bomb", "sizes", "render-time", "output", "non-finite", "misreported", "options", "scheduler", "links"}
     assert not Path("/tmp/motion-escaped").exists()
 
 
@@ -461,3 +468,42 @@ def test_max_lanes_over_its_limit_is_refused_before_any_work(tmp_path: Path) -> 
     assert "Traceback" not in res.stderr
     assert res.stderr.strip().splitlines()[-1] == f"error: $MOTION_MAX_LANES: {big} is over the limit of {1 << 28}"
     assert not list(out.glob("*.exr"))
+
+
+# --- round 3 (issue 24): claims and names ---------------------------------------------------
+
+
+def test_a_claim_dated_in_the_future_is_stale(tmp_path: Path) -> None:
+    """A claim whose file says it was made a day from now would never age: the job would
+    wait on it forever. Past any clock skew (5 min) it protects nothing."""
+    import socket
+    import time
+
+    from motion.pipeline.farm.claims import MAX_CLOCK_SKEW_S, claim_path, is_stale
+
+    claim = claim_path(tmp_path / "f.0000.exr")
+    claim.parent.mkdir()
+    info = {"run_id": "other", "pid": 1, "host": "another-" + socket.gethostname()}
+    claim.write_text(json.dumps(info))
+    os.utime(claim, (time.time() + 86400, time.time() + 86400))
+    assert is_stale(claim, info, stale_after_s=1800)
+    os.utime(claim, (time.time() + MAX_CLOCK_SKEW_S / 2,) * 2)  # a little skew is trusted
+    assert not is_stale(claim, info, stale_after_s=1800)
+
+
+def test_names_map_to_safe_file_and_object_names(tmp_path: Path) -> None:
+    """An object named `a.b` (or a glTF node named like its file) rendered nothing before:
+    Mitsuba reserves '.' in its object paths; a scene file `.x.yaml` wrote hidden frames."""
+    from farm_util import motion
+
+    (tmp_path / ".x.yaml").write_text(BASE.replace("render: {", "render: {variant: auto, ").replace(", variant: scalar_rgb", "").replace("name: ball", "name: a.b")
+                                     + "  - {name: a_b, shape: cube, size: 0.3, motion: {type: keyframes, channels: {translate: {keys: [{time: 0, value: [0, 0, 0]}, {time: 1, value: [1, 0, 0]}]}}}}\n"
+                                     + "  - {name: c.d, shape: sphere, radius: 0.2, motion: {type: keyframes, channels: {translate: {keys: [{time: 0, value: [0, 1, 0]}, {time: 1, value: [1, 1, 0]}]}}}}\n")
+    res = motion("render", tmp_path / ".x.yaml", "-o", tmp_path / "out", "--no-progress")
+    assert res.returncode == 0, res.stderr
+    assert sorted(p.name for p in (tmp_path / "out").glob("*.exr")) == ["x.0000.exr", "x.0001.exr", "x.0002.exr"]
+    # a file named `...yaml` once made the name '..' and the pattern '{name}/####.exr' escape -o
+    (tmp_path / "...yaml").write_text(BASE + "output: {filename: '{name}/####.exr'}\n")
+    res = motion("render", tmp_path / "...yaml", "-o", tmp_path / "dots", "--no-progress")
+    assert res.returncode == 0, res.stderr
+    assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*.exr") if "dots" in p.parts) == [f"dots/scene/{f:04d}.exr" for f in range(3)]

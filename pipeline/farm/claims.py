@@ -37,6 +37,7 @@ from pathlib import Path
 from ..frame_output import disk_fault
 
 CLAIM_DIR = ".motion-claims"
+MAX_CLOCK_SKEW_S = 300.0  # seconds a claim may be dated ahead of this machine's clock
 WRITE_GRACE_S = 5.0  # an empty claim younger than this may still be being written
 
 
@@ -92,13 +93,17 @@ def _pid_alive(pid: int) -> bool:
 
 def is_stale(path: Path, info: dict, stale_after_s: float) -> bool:
     """A claim that is empty or unreadable (past the write grace), whose process is gone
-    (same host), or that is older than the limit."""
+    (same host), that is older than the limit, or that is dated in the future beyond any
+    clock skew between farm machines (MAX_CLOCK_SKEW_S): such a claim would never age, and
+    a job waiting on it would wait forever."""
     try:
         age = time.time() - path.stat().st_mtime
     except FileNotFoundError:
         return True
     except OSError:
         return True  # cannot even stat it: it protects nothing
+    if age < -MAX_CLOCK_SKEW_S:
+        return True
     if not info.get("run_id") or not isinstance(info.get("pid"), int):
         return age > WRITE_GRACE_S or age < -WRITE_GRACE_S
     if info.get("host") == socket.gethostname():

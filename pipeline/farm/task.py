@@ -9,10 +9,10 @@ from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 from ..errors import DiskFaultError
-from ..frame_output import is_complete
+from ..frame_output import confined, is_complete
 from ..bake import BakedFrame
 from ..render.job import FrameResult, RenderJob, expected_meta, render_frames, worker_id
-from .claims import Claimant, release, remove_partials, try_claim
+from .claims import Claimant, claim_path, release, remove_partials, try_claim
 
 
 @dataclass(frozen=True)
@@ -48,6 +48,10 @@ def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: 
     out = ChunkResult(chunk_id=chunk_id, worker=worker_id())
     for fi in inputs:
         path = ctx.paths[fi.frame]
+        if not (confined(job.output_dir, path) and confined(job.output_dir, claim_path(path))):
+            # a link planted in the output folder after the job's checks: nothing is written through it
+            out.results.append(FrameResult(fi.frame, "", False, worker_id(), error=f"{path}: a link on its way leads outside the output folder {job.output_dir}; not written"))
+            continue
         try:
             ok, holder = try_claim(path, me, ctx.stale_after_s)
         except DiskFaultError as exc:

@@ -39,6 +39,17 @@ Dict = dict[str, Any]
 
 
 
+def mitsuba_id(name: str) -> str:
+    """A scene name as a key of a Mitsuba scene dictionary. Mitsuba reserves '.' as its
+    object-path delimiter (an object 'a.b', or a glTF node named like its file 'walker.glb',
+    failed every frame): such a name becomes 'a_b_<6 hex of the name>', unique and stable."""
+    if "." not in name:
+        return name
+    import hashlib
+
+    return f"{name.replace('.', '_')}_{hashlib.sha1(name.encode()).hexdigest()[:6]}"
+
+
 def trs_matrix(translation: Iterable[float], rotation: Iterable[float], scale: Iterable[float] = (1, 1, 1)) -> np.ndarray:
     """world_from_object = T * R * S as a 4x4 matrix."""
     m = np.eye(4)

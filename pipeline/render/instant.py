@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, Iterable
 import numpy as np
 
 from ..scene.loader import LoadedScene
-from .build import light_dict, object_shapes, sensor_dict, trs_matrix
+from .build import light_dict, mitsuba_id, object_shapes, sensor_dict, trs_matrix
 from .shutter_poses import pose_at
 
 if TYPE_CHECKING:
@@ -29,7 +29,7 @@ def add_shapes(d: dict[str, Any], loaded: LoadedScene, objects: Iterable[Any], f
         t, q, s = fi.objects[obj.name]
         ot, oq = pose_at(t, q, u)
         for k, shape in enumerate(object_shapes(obj, loaded, trs_matrix(ot, oq, s[0]), materials)):
-            d[f"{obj.name}__{k}"] = shape
+            d[f"{mitsuba_id(obj.name)}__{k}"] = shape
 
 
 def light_key(index: int, light: Any) -> str:
@@ -56,7 +56,7 @@ def add_lights(d: dict[str, Any], loaded: LoadedScene, fi: StackedFrame, u: floa
     for i, light in enumerate(loaded.scene.lights):
         if i in skip:
             continue
-        d[light_key(i, light).replace(".", "_")] = light_record(loaded, i, light, fi, u)
+        d[mitsuba_id(light_key(i, light))] = light_record(loaded, i, light, fi, u)
 
 
 def sensor_record(loaded: LoadedScene, spp: int, fi: StackedFrame, u: float | None = None, **extra: Any) -> dict[str, Any]:

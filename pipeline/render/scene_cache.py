@@ -19,7 +19,7 @@ import numpy as np
 from ..motion.pose import quat_mul
 from ..scene.loader import LoadedScene
 from ..variant import load_dict
-from .build import LIGHT_CHANNEL, material_dict, object_shapes, unit_light_dict
+from .build import LIGHT_CHANNEL, material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
 from .instant import add_lights, add_shapes, light_key, light_record, sensor_record
 from .roles import Roles
@@ -86,7 +86,7 @@ class SceneCache:
             t, q, s = fi.objects[name]
             md: dict[str, Any] = {"type": "scene"}
             for k, shape in enumerate(object_shapes(obj, loaded, np.diag([*s[0], 1.0]), materials)):
-                md[f"{name}__{k}"] = shape
+                md[f"{mitsuba_id(name)}__{k}"] = shape
             movers.append(load_dict(md))
             self._mover_scale[name] = np.array(s[0])
             self._mover_params[name] = mi.traverse(movers[-1])
@@ -140,7 +140,7 @@ class SceneCache:
                 record = {k: v for k, v in record.items() if k != "filename"}
                 record["bitmap"] = mi.Bitmap(np.ones((1, 2, 3), dtype=np.float32))
             fresh = mi.traverse(load_dict(record))
-            prefix = light_key(i, light).replace(".", "_")
+            prefix = mitsuba_id(light_key(i, light))
             for k in fresh.keys():
                 target = f"{prefix}.{k}"
                 if target in self._params and not k.endswith("data"):  # never copy an envmap's pixels
@@ -163,8 +163,8 @@ class SceneCache:
             obj = next(o for o in scene.objects if o.name == name)
             params = self._mover_params[name]
             for k, shape in enumerate(object_shapes(obj, self.loaded, np.diag([*s, 1.0]), {})):
-                params[f"{name}__{k}.to_world"] = shape["to_world"]
-                keys.append(f"mover:{name}__{k}.to_world")
+                params[f"{mitsuba_id(name)}__{k}.to_world"] = shape["to_world"]
+                keys.append(f"mover:{mitsuba_id(name)}__{k}.to_world")
             params.update()
             self._mover_scale[name] = s
         return keys

@@ -34,6 +34,7 @@ from ..motion.pose import quat_rotate
 from ..scene.loader import LoadedScene
 from ..scene.schema import Mesh, Particles
 from ..variant import load_dict
+from .build import mitsuba_id
 
 if TYPE_CHECKING:
     from .stacked import StackedFrame
@@ -148,7 +149,7 @@ def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bs
                 mesh: RenderMesh | None = None, smooth: bool = False, rest: np.ndarray | None = None, emitter: dict[str, Any] | None = None) -> SliceGroup:
     """S scenes, each with one mesh of `count` vertices (or particle capacity); a deforming
     mesh's texture coordinates are written once here, its positions and normals per frame."""
-    key = name.replace(".", "_")
+    key = mitsuba_id(name)
     scenes, params = [], []
     uvs = mesh.uvs if mesh is not None else None
     for _ in range(slices):

@@ -35,8 +35,10 @@ class LoadedScene:
 
     @property
     def name(self) -> str:
-        """The scene's name, else the file's stem."""
-        return self.scene.name or self.path.stem
+        """The scene's name, else the file's stem made a safe file name (it names the
+        frames): a stem the `name:` field would refuse keeps its letters, digits, '_', '-'
+        and inner '.', and never starts with '.' (`.x.yaml` wrote hidden frames `.x.0000.exr`)."""
+        return self.scene.name or safe_stem(self.path.stem)
 
     @property
     def base_dir(self) -> Path:
@@ -76,6 +78,18 @@ def load_scene(path: str | Path, overrides: Mapping[str, Any] | None = None, ass
     if problems:
         raise SceneError(in_file_order(problems, file))
     return LoadedScene(scene=scene, path=path.resolve(), source=source, data=data)
+
+
+def safe_stem(stem: str) -> str:
+    """A file's stem as a scene name that is a safe, visible file name.
+
+    >>> safe_stem(".x"), safe_stem("shot 010"), safe_stem("..."), safe_stem("a.b")
+    ('x', 'shot_010', 'scene', 'a.b')
+    """
+    import re
+
+    cleaned = re.sub(r"[^A-Za-z0-9_.\-]", "_", stem).lstrip(".-")
+    return cleaned[:128] or "scene"
 
 
 def in_file_order(problems: list[Problem], file: str) -> list[Problem]:

@@ -138,6 +138,14 @@ def preflight(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: 
             raise UsageError(f"{flag} {value}: the limit is {limit}")
     if frames and not inside(out_dir, frame_path(job, loaded, frames[0])):
         raise OutputConfinementError(f"frame {frames[0]} would be written to {frame_path(job, loaded, frames[0])}, outside the output folder {out_dir}")
+    from ..farm.claims import CLAIM_DIR
+    from ..frame_output import confined
+
+    for folder in sorted({frame_path(job, loaded, f).parent for f in frames}):
+        for target in (folder / "x.exr", folder / CLAIM_DIR / "x.claim"):
+            if not confined(out_dir, target):
+                link = next((p for p in [target.parent, *target.parent.parents] if p.is_symlink()), target.parent)
+                raise OutputConfinementError(f"{link} is a link to {link.resolve()}, outside the output folder {out_dir}: frames and claims are written only inside it")
     if not req.motion_file:
         problems = bake_budget_problems(loaded.scene, loaded.source, len(frames))
         if problems:
