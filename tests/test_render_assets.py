@@ -324,7 +324,7 @@ def _card_reference(tmp_path: Path, holes: str) -> dict[str, Any]:
                      "to_world": T().translate(CARD["translate"]) @ T().rotate([1, 0, 0], CARD["angle"])}}
 
 
-def _gltf_card(tmp_path: Path, images: dict[str, bytes], normal_scale: float = 1.0) -> str:
+def _gltf_card(tmp_path: Path, images: dict[str, bytes], normal_scale: float = 1.0, alpha_mode: str = "MASK", alpha: float = 1.0) -> str:
     import sys
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
@@ -336,11 +336,11 @@ def _gltf_card(tmp_path: Path, images: dict[str, bytes], normal_scale: float = 1
     tex = {n: b.image(images[n]) for n in ("colour_a.png", "ripple.png", "glow.png")}
     g["materials"] = [{
         "name": "Card",
-        "pbrMetallicRoughness": {"baseColorTexture": {"index": tex["colour_a.png"]}, "metallicFactor": 0.0, "roughnessFactor": 0.6},
+        "pbrMetallicRoughness": {"baseColorTexture": {"index": tex["colour_a.png"]}, "baseColorFactor": [1.0, 1.0, 1.0, alpha], "metallicFactor": 0.0, "roughnessFactor": 0.6},
         "normalTexture": {"index": tex["ripple.png"], "scale": normal_scale},
         "emissiveTexture": {"index": tex["glow.png"]},
         "emissiveFactor": [1.0, 1.0, 1.0],
-        "alphaMode": "MASK",
+        "alphaMode": alpha_mode,
         "alphaCutoff": 0.5,
     }]
     g["meshes"].append({"name": "Card", "primitives": [{"attributes": attrs, "indices": b.accessor(QUAD_TRI.ravel(), dtype="uint32", target="index"), "material": 0}]})
@@ -446,3 +446,26 @@ def test_gltf_normal_texture_scale_is_baked_into_the_map(tmp_path: Path) -> None
     n /= np.linalg.norm(n, axis=2, keepdims=True)
     assert mat.normal_map.raw
     np.testing.assert_allclose(ours, n, atol=2.5 / 255)
+
+
+@pytest.mark.parametrize("mode, factor", [("MASK", 0.6), ("BLEND", 0.6), ("OPAQUE", 0.6)])
+def test_gltf_alpha_modes_become_opacity(tmp_path: Path, mode: str, factor: float) -> None:
+    """alphaMode: MASK cuts alpha x factor at alphaCutoff (0.5) into 0/1, BLEND keeps
+    alpha x factor as coverage, OPAQUE ignores alpha."""
+    activate()
+    from PIL import Image
+
+    from motion.pipeline.scene import load_scene
+
+    images = _write_card_images(tmp_path)
+    _gltf_card(tmp_path, images, alpha_mode=mode, alpha=factor)
+    (tmp_path / "shot.yaml").write_text("timeline: {fps: 24, first: 0, last: 1}\ncamera: {position: [0, 1, 9], look_at: [0, 0, 0]}\nimports:\n  - {file: card.glb}\n")
+    (mat,) = load_scene(tmp_path / "shot.yaml").scene.materials
+    alpha = np.asarray(Image.open(tmp_path / "colour_a.png").convert("RGBA"), dtype=np.float64)[:, :, 3] / 255
+    if mode == "OPAQUE":
+        assert mat.opacity == 1.0
+        return
+    assert mat.opacity.raw
+    ours = np.asarray(Image.open(mat.opacity.file), dtype=np.float64) / 255
+    expect = (alpha * factor >= 0.5).astype(float) if mode == "MASK" else alpha * factor
+    np.testing.assert_allclose(ours, expect, atol=0.5 / 255 + 1e-9)
