@@ -196,6 +196,15 @@ def write_frame(
     if rgba.shape[2] == 3:
         rgba = np.concatenate([rgba, np.ones(rgba.shape[:2] + (1,), rgba.dtype)], axis=2)
     dtype = np.float16 if pixel_type == "half" else np.float32
+    clamped = 0
+    if pixel_type == "half":
+        # a half holds at most 65504: brighter pixels (a sun's specular glint) would be inf
+        # in the file; they are clamped to it and counted in the header (motion:clamped_pixels)
+        over = np.abs(np.asarray(rgba, dtype=np.float64)) > 65504.0
+        clamped = int(over.any(axis=2).sum())
+        if clamped:
+            rgba = np.clip(rgba, -65504.0, 65504.0)
+            meta = {**(meta or {}), "clamped_pixels": clamped}
     channels: dict[str, np.ndarray] = {"RGBA": np.ascontiguousarray(rgba, dtype=dtype)}
     for name, layer in (aovs or {}).items():
         layer = np.asarray(layer)

@@ -4,12 +4,15 @@ preset YAML, meshes, images, baked motion) opens its files through here."""
 
 from __future__ import annotations
 
+import math
 import os
 import stat
 import typing
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Iterator
+
+import numpy as np
 
 from .errors import InputFileError, MotionError, UsageError
 
@@ -120,3 +123,27 @@ def check_env_sizes() -> None:
     otherwise fail every frame in the workers)."""
     for name in ENV_SIZES:
         env_size(name)
+
+
+# --- numbers the renderer can hold ------------------------------------------------------------
+# One policy for every number that reaches the renderer, whatever its source (the scene file,
+# an expression, an import, a bake file, a simulation): Mitsuba traces in float32, so a finite
+# float64 past FLOAT32_MAX becomes inf there (the object vanishes, pixels go inf); a half-float
+# EXR holds at most HALF_MAX, so a radiance above it is inf in the frame.
+FLOAT32_MAX = float(np.finfo(np.float32).max)  # 3.4e38
+HALF_MAX = 65504.0
+
+
+def beyond_float32(values: np.ndarray) -> np.ndarray:
+    """Mask of the values a float32 cannot hold (non-finite, or finite past FLOAT32_MAX)."""
+    values = np.asarray(values, dtype=np.float64)
+    return ~np.isfinite(values) | (np.abs(values) > FLOAT32_MAX)
+
+
+def float32_problem(value: float) -> str | None:
+    """Why a single number cannot reach the renderer, or None."""
+    if not math.isfinite(value):
+        return f"{value} is not a finite number"
+    if abs(value) > FLOAT32_MAX:
+        return f"{value:g} is beyond what the renderer holds (float32: at most {FLOAT32_MAX:.3g} in magnitude)"
+    return None

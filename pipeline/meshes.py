@@ -20,6 +20,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .errors import AssetError, MeshFormatError
+from .limits import FLOAT32_MAX, beyond_float32
 
 MAX_MESH_BYTES = 2 * 1024**3  # one mesh file
 MAX_POLYGON = 256  # vertices of one face
@@ -108,10 +109,10 @@ def _check(verts: np.ndarray, tris: np.ndarray, faces: bool = True) -> None:
         raise MeshFormatError("the mesh has no vertices")
     if faces and len(tris) == 0:
         raise MeshFormatError("the mesh has no faces")
-    bad = ~np.isfinite(verts).all(axis=1)
+    bad = beyond_float32(verts).any(axis=1)
     if bad.any():
         i = int(np.argmax(bad))
-        raise MeshFormatError(f"vertex {i} is not finite ({', '.join(f'{c:g}' for c in verts[i])})")
+        raise MeshFormatError(f"vertex {i} is not finite in the renderer's float32 ({', '.join(f'{c:g}' for c in verts[i])})")
     out = (tris < 0) | (tris >= len(verts))
     if out.any():
         t = int(np.argmax(out.any(axis=1)))
@@ -148,7 +149,7 @@ def _parse_obj(data: bytes, attributes: bool = True) -> tuple[np.ndarray, np.nda
                 xyz = [float(c) for c in parts[1:4]]
             except ValueError:
                 raise MeshFormatError(f"line {number}: vertex coordinates are not numbers: {line.strip()[:80]!r}") from None
-            if not all(math.isfinite(c) for c in xyz):
+            if not all(math.isfinite(c) and abs(c) <= FLOAT32_MAX for c in xyz):
                 raise MeshFormatError(f"line {number}: vertex {len(verts)} is not finite: {line.strip()[:80]!r}")
             verts.append(xyz)
         elif parts[0] in counts:

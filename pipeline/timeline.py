@@ -131,12 +131,15 @@ def frame_timecode(frame: int, fps: Fraction, drop_frame: bool = False) -> str |
     """The timecode of frame number `frame` (not of its place in a range): frames are
     counted at the nominal rate from 00:00:00:00 at frame 0, as telecine does, so frame
     1001 of a 24 or 23.976 fps shot is 00:00:41:17 (1001 = 41 x 24 + 17) whatever frame a
-    render starts at. None for a negative frame number (timecode has no sign).
+    render starts at. None for a negative frame number (timecode has no sign) and for a
+    rate under 1 frame a second (its frame field would count nothing: fps 0.001).
 
     >>> frame_timecode(1001, Fraction(24000, 1001))
     '00:00:41:17'
+    >>> frame_timecode(3, Fraction(1, 1000)) is None
+    True
     """
-    return timecode(frame, fps, drop_frame) if frame >= 0 else None
+    return timecode(frame, fps, drop_frame) if frame >= 0 and round(fps) >= 1 else None
 
 
 def timecode(frame: int, fps: Fraction, drop_frame: bool = False) -> str:

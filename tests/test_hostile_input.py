@@ -98,6 +98,8 @@ def _bake_json(mutate: str) -> bytes:
         ball["scale"][1] = [float("inf"), 1.0, 1.0]
     elif mutate == "zero-quaternion":
         ball["rotation"][0] = [0.0, 0.0, 0.0, 0.0]
+    elif mutate == "translation-1e39":
+        ball["translation"][1][0] = 1e39
     elif mutate == "wrong-shape":
         ball["translation"] = [[0.0, 0.0]]
     elif mutate == "no-frames":
@@ -259,6 +261,19 @@ CASES: list[tuple[str, str, dict[str, Any], list[str]]] = [
     ("link-claims-folder", "links", {"scene.yaml": BASE, "elsewhere/keep": "", "out/.motion-claims": ("link", "../elsewhere")}, _r()),
     ("link-claims-subfolder", "links", {"scene.yaml": BASE + "output: {filename: 'sub/{name}.####.exr'}\n", "elsewhere/keep": "", "out/sub/.motion-claims": ("link", "../../elsewhere")}, _r()),
     ("link-deliver", "links", {"scene.yaml": BASE, "elsewhere/keep": "", "out/deliver": ("link", "../elsewhere")}, _r("--deliver", "contact")),
+    # --- round 3: numbers finite in float64 that the renderer (float32) or a half EXR cannot hold ---
+    ("range-translate-1e39", "range", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, transform: {translate: [1e39, 0, 0]}}")}, _r()),
+    ("range-scale-1e39", "range", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, transform: {scale: 1.0e39}}")}, V),
+    ("range-radiance-1e39", "range", {"scene.yaml": BASE.replace("radiance: 0.5", "radiance: 1.0e39")}, _r()),
+    ("range-radiance-half", "range", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, emission: {radiance: 100000}}")}, _r()),
+    ("range-expression-1e48", "range", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, motion: {type: procedural, channels: {translate: ['10**24 * 10**24 * (t + 1)', '0', '0']}}}")}, _r()),
+    ("range-expression-1e179-bake", "range", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, motion: {type: procedural, channels: {translate: ['10**179 * (t + 1)', '0', '0']}}}")}, ["bake", "scene.yaml", "-o", "out/m.json"]),
+    ("range-obj-vertex-1e39", "range", {"scene.yaml": _obj("{name: m, shape: mesh, file: m.obj}"), "m.obj": "v 0 0 0\nv 1e39 1 0\nv 1 0 0\nf 1 2 3\n"}, V),
+    ("range-bake-json-1e39", "range", {"scene.yaml": BASE, "m.json": _bake_json("translation-1e39")}, _r("--motion", "m.json")),
+    # --- round 3: degenerate but valid input is refused at once (or renders: tests below) ---
+    ("ik-zero-length-bones", "degenerate", {"scene.yaml": BASE.replace("  - {name: ball, shape: sphere, radius: 0.5}\n", "  - {name: a, shape: sphere, radius: 0.1}\n  - {name: b, shape: sphere, radius: 0.1, parent: a}\n"
+                                                                       "  - {name: c, shape: sphere, radius: 0.1, parent: b}\n  - {name: tgt, shape: sphere, radius: 0.1, transform: {translate: [1, 0, 0]}}\n")
+                                                          + "ik: [{chain: [a, b, c], target: tgt}]\n"}, _r()),
     ("link-deliver-check", "links", {"scene.yaml": BASE, "elsewhere/keep": "", "out/deliver": ("link", "../elsewhere")}, ["render", "scene.yaml", "-o", "out", "--check", "--deliver", "contact"]),
 ]
 
@@ -357,7 +372,7 @@ def test_hostile_case_is_a_clean_error(results: tuple[Path, set[str], set[str], 
 
 def test_every_class_is_covered() -> None:
     kinds = {c[1] for c in CASES}
-    assert kinds == {"yaml-bomb", "sizes", "render-time", "output", "non-finite", "misreported", "options", "scheduler", "links"}
+    assert kinds == {"yaml-bomb", "sizes", "render-time", "output", "non-finite", "misreported", "options", "scheduler", "links", "range", "degenerate"}
     assert not Path("/tmp/motion-escaped").exists()
 
 
@@ -378,7 +393,13 @@ def test_located_errors_point_at_the_field(results: tuple[Path, set[str], set[st
         "particle-bake-budget": ("scene.yaml:", "particle positions; the limit is"),
         "envmap-huge-header": ("scene.yaml:", "over the limit of"),
         "frames-1e11": ("--frames", "limited to"),
-        "ballistic-overflow": ("scene.yaml:6:", "object 'ball': translation is not finite at t ="),
+        "ballistic-overflow": ("scene.yaml:6:", "generators[0].a[0]: 1e+308 is beyond what the renderer holds (float32"),
+        "ballistic-overflow-bake": ("scene.yaml:6:", "generators[0].v0[0]: 1e+308 is beyond what the renderer holds"),
+        "range-translate-1e39": ("scene.yaml:6:", "objects[0].transform.translate[0]: 1e+39 is beyond what the renderer holds"),
+        "range-radiance-half": ("scene.yaml:6:", "objects[0].emission.radiance: radiance 100000 is beyond what a half-float EXR holds"),
+        "range-expression-1e48": ("scene.yaml:6:", "object 'ball': translation is not finite in the renderer's float32 at t ="),
+        "range-bake-json-1e39": ("m.json", "object 'ball': translation is not finite in the renderer's float32"),
+        "ik-zero-length-bones": ("scene.yaml:", "ik[0].chain: the bone a -> b has no length"),
         "bake-zero-quaternion": ("m.json", "object 'ball': rotation is not a unit quaternion"),
         "motion-empty-json": ("m.json", "empty"),
         "report-unwritable": ("--report", "cannot write"),
@@ -507,3 +528,40 @@ def test_names_map_to_safe_file_and_object_names(tmp_path: Path) -> None:
     res = motion("render", tmp_path / "...yaml", "-o", tmp_path / "dots", "--no-progress")
     assert res.returncode == 0, res.stderr
     assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*.exr") if "dots" in p.parts) == [f"dots/scene/{f:04d}.exr" for f in range(3)]
+
+
+def test_a_frame_at_a_rate_under_one_fps_renders(tmp_path: Path) -> None:
+    """`fps: 0.001` failed every frame (exit 3: timecode divided by its nominal rate, 0)."""
+    from farm_util import motion
+
+    (tmp_path / "slow.yaml").write_text(BASE.replace("fps: 24", "fps: 0.001").replace(", variant: scalar_rgb", ""))
+    res = motion("render", tmp_path / "slow.yaml", "-o", tmp_path / "out", "--no-progress")
+    assert res.returncode == 0, res.stderr
+    assert len(list((tmp_path / "out").glob("*.exr"))) == 3
+
+
+def test_half_float_frames_clamp_what_a_half_cannot_hold(tmp_path: Path) -> None:
+    """A glint brighter than 65504 (a sun's specular) wrote inf pixels in a half EXR."""
+    from motion.pipeline.frame_output import read_frame, write_frame
+
+    rgba = np.ones((4, 4, 4), np.float32)
+    rgba[1, 2, :3] = 1e6
+    write_frame(tmp_path / "f.exr", rgba, {"frame": 0})
+    back = read_frame(tmp_path / "f.exr")
+    assert np.isfinite(back.rgba).all() and back.rgba[1, 2, 0] == 65504 and back.meta["clamped_pixels"] == 1
+
+
+def test_a_plan_with_no_margin_in_a_corridor_is_refused_in_bounded_time() -> None:
+    """margin 0 in a corridor exactly the agent's width: each refinement round doubled the
+    spline's vertices (42 -> 100,904 in 13 rounds) and the bake never finished."""
+    import time
+
+    from motion.pipeline.motion.plan import Grid, _Located, build_path
+
+    wall = np.ones((60, 60), bool)
+    wall[10:15, 5:46] = False
+    wall[10:51, 41:46] = False
+    t0 = time.perf_counter()
+    with pytest.raises(_Located, match="give a larger margin"):
+        build_path(Grid(wall, 0.1, np.array([0.0, 0.0])), [[0.75, 0.0, 1.25], [4.35, 0.0, 4.8]], 0.25, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, "none")
+    assert time.perf_counter() - t0 < 10

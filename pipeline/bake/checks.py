@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import SceneError
+from ..limits import beyond_float32
 
 if TYPE_CHECKING:
     from ..motion import SceneMotion
@@ -27,10 +28,10 @@ def pose_problem(translation: Any, rotation: Any, scale: Any, times: Any) -> str
         a = np.asarray(arr)
         if a.dtype.kind not in "fiu" or a.ndim != 2 or a.shape != (times.size, width):
             return f"{channel} has shape {a.shape} ({a.dtype}), expected [{times.size}, {width}] numbers"
-        bad = ~np.isfinite(a.astype(np.float64)).all(axis=1)
+        bad = beyond_float32(a).any(axis=1)
         if bad.any():
             k = int(np.argmax(bad))
-            return f"{channel} is not finite at t = {times[k]:.6g} s ({', '.join(f'{v:g}' for v in a[k])})"
+            return f"{channel} is not finite in the renderer's float32 at t = {times[k]:.6g} s ({', '.join(f'{v:g}' for v in a[k])})"
     norm = np.linalg.norm(np.asarray(rotation, dtype=np.float64), axis=1)
     off = np.abs(norm - 1.0) > UNIT_TOLERANCE
     if off.any():
@@ -45,9 +46,9 @@ def scalar_problem(name: str, arr: Any, times: Any) -> str | None:
     a = np.asarray(arr)
     if a.dtype.kind not in "fiu" or a.ndim not in (1, 2) or a.shape[0] != times.size:
         return f"{name} has shape {a.shape} ({a.dtype}), expected [{times.size}] or [{times.size}, C] numbers"
-    bad = ~np.isfinite(a.astype(np.float64).reshape(times.size, -1)).all(axis=1)
+    bad = beyond_float32(a.reshape(times.size, -1)).any(axis=1)
     if bad.any():
-        return f"{name} is not finite at t = {times[int(np.argmax(bad))]:.6g} s"
+        return f"{name} is not finite in the renderer's float32 at t = {times[int(np.argmax(bad))]:.6g} s"
     return None
 
 
@@ -76,9 +77,9 @@ def motion_problems(motion: "SceneMotion") -> list[tuple[str, str, str]]:
             problems.append(("deform", name, f"object '{name}': {why}"))
     for name, ps in motion.particles.items():
         pos = np.asarray(ps.positions)
-        if pos.size and not np.isfinite(pos).all():
-            k = int(np.argmax(~np.isfinite(pos.reshape(len(times), -1)).all(axis=1)))
-            problems.append(("emitter", name, f"particles '{name}': positions are not finite at t = {times[k]:.6g} s"))
+        if pos.size and beyond_float32(pos).any():
+            k = int(np.argmax(beyond_float32(pos.reshape(len(times), -1)).any(axis=1)))
+            problems.append(("emitter", name, f"particles '{name}': positions are not finite in the renderer's float32 at t = {times[k]:.6g} s"))
     return problems
 
 

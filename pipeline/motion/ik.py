@@ -203,6 +203,9 @@ def _weights(loaded: "LoadedScene", c: IKConstraint, t: np.ndarray) -> np.ndarra
     return np.clip(np.interp(t, times, values), 0.0, 1.0)  # linear between keys, held outside
 
 
+MIN_BONE_LENGTH = 1e-9  # m: a shorter bone has no direction to turn
+
+
 def apply_ik(loaded: "LoadedScene", t: np.ndarray, world: dict[str, Pose], local: dict[str, Pose]) -> None:
     """Solve every `ik:` constraint in order, in place on `world` (and `local`): each
     chain's joints get their solved rotations blended with the keyed ones, then the
@@ -210,8 +213,16 @@ def apply_ik(loaded: "LoadedScene", t: np.ndarray, world: dict[str, Pose], local
     scene = loaded.scene
     parents = {o.name: o.parent for o in scene.objects}
     order = evaluation_order(parents)
-    for c in scene.ik:
+    for k_ik, c in enumerate(scene.ik):
         chain = c.chain
+        for a, b in zip(chain, chain[1:]):
+            length = np.linalg.norm(world[b].translation - world[a].translation, axis=1)
+            if (length < MIN_BONE_LENGTH).any():
+                from ..errors import SceneError
+
+                when = float(t[int(np.argmax(length < MIN_BONE_LENGTH))])
+                raise SceneError([loaded.source.problem(("ik", k_ik, "chain"), f"the bone {a} -> {b} has no length at t = {when:.6g} s "
+                                                        f"({b} sits at {a}'s origin): IK turns bones, so each needs a length (translate {b} away from {a})")])
         root_parent = parents[chain[0]]
         count = len(t)
         base = world[root_parent] if root_parent is not None else Pose(np.zeros((count, 3)), np.tile(IDENTITY, (count, 1)), np.ones((count, 3)))

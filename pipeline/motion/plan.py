@@ -433,6 +433,9 @@ def _arc_table(vertices: np.ndarray, spacing: float) -> tuple[np.ndarray, np.nda
     return u, s, np.concatenate(dus)
 
 
+MAX_PATH_VERTICES = 4096  # vertices the spline refinement may reach before the plan is refused
+
+
 def build_path(grid: Grid, points: Sequence[Sequence[float]], radius: float, tolerance: float, margin: float,
                speed: float, accel: float, decel: float, start_time: float, facing: str) -> Path:
     """Plan through `points` (start, waypoints..., goal; world x, y, z). Raises _Located."""
@@ -485,9 +488,12 @@ def build_path(grid: Grid, points: Sequence[Sequence[float]], radius: float, tol
         if not bad.any():
             return Path(vertices, u, s, duds, all_cells, costs, speed, accel, decel, start_time, facing, grid, need_path)
         segs = np.unique(np.clip(np.floor(u[bad]).astype(np.int64), 0, len(vertices) - 2))
+        if len(vertices) + len(segs) > MAX_PATH_VERTICES:
+            break  # each round may double the vertices (margin 0 in a corridor did, 42 -> 100,904): stop while it is cheap
         mids = (vertices[segs] + vertices[segs + 1]) / 2
         vertices = np.insert(vertices, segs + 1, mids, axis=0)
-    raise _Located((), f"the smoothed path keeps coming closer than {need_path:.3g} m to a wall; give a larger margin")
+    raise _Located((), f"the smoothed path keeps coming closer than {need_path:.3g} m to a wall; give a larger margin "
+                       f"(now {margin:g} m: the spline needs room beside the polyline to round its corners)")
 
 
 # --- from the scene -----------------------------------------------------------------------

@@ -11,7 +11,7 @@ import math
 import re
 from fractions import Fraction
 from pathlib import Path, PurePosixPath
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..errors import AssetError, Problem
 from ..expr import ExpressionError, parse_expression
@@ -407,3 +407,44 @@ def scene_warnings(scene: Scene) -> list[str]:
     if not scene.lights and not emissive:
         out.append("the scene has no lights and no emissive objects: every frame renders black")
     return out
+
+
+NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
+RADIANCE_KEYS = ("radiance",)  # values a camera ray can meet directly: a frame's pixel value
+
+
+def numeric_range_problems(data: Any, source: "SourceMap", scene: Scene) -> list[Problem]:
+    """The numeric range policy (limits.py) on the scene document as written, imports
+    expanded: every number must be one the renderer's float32 holds, and with half-float
+    output (output.pixel_type: half, the default) every radiance one a half holds, located
+    at the field that says it. Animated, simulated, imported and baked values are checked
+    once more after the bake (shot stage)."""
+    from ..limits import HALF_MAX, float32_problem
+
+    problems: list[Problem] = []
+    half = scene.output.pixel_type == "half"
+
+    def walk(node: Any, loc: tuple, radiance: bool) -> None:
+        if len(problems) >= 20:
+            return
+        if isinstance(node, dict):
+            for k, v in node.items():
+                walk(v, (*loc, k), radiance or k in RADIANCE_KEYS)
+        elif isinstance(node, list):
+            for i, v in enumerate(node):
+                walk(v, (*loc, i), radiance)
+        elif isinstance(node, str) and NUMBER.match(node):
+            walk(float(node), loc, radiance)  # YAML 1.1 reads 1e39 (no dot) as text; the schema reads it as a number
+        elif isinstance(node, (int, float)) and not isinstance(node, bool):
+            try:
+                why = float32_problem(float(node))
+            except OverflowError:  # an int past float64 (10**400)
+                why = f"{str(node)[:12]}... ({len(str(node))} digits) is beyond what the renderer holds"
+            if why is not None:
+                problems.append(source.problem(loc, why))
+            elif radiance and half and abs(node) > HALF_MAX:
+                problems.append(source.problem(loc, f"radiance {node:g} is beyond what a half-float EXR holds ({HALF_MAX:g}): "
+                                                    "its pixels would be inf; use output.pixel_type: float, or lower it"))
+
+    walk(data, (), False)
+    return problems

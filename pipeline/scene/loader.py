@@ -15,7 +15,7 @@ from typing import Any, Mapping
 from pydantic import ValidationError
 
 from ..errors import Problem, SceneError
-from .checks import semantic_problems
+from .checks import numeric_range_problems, semantic_problems
 from .imports import expand_imports
 from .problems import problems_from_validation
 from .schema import Scene
@@ -74,7 +74,7 @@ def load_scene(path: str | Path, overrides: Mapping[str, Any] | None = None, ass
         problems = problems_from_validation(exc, data, source, Scene)
         problems += salvaged_problems(exc, data, source, path.parent, problems, assets)
         raise SceneError(in_file_order(problems, file)) from None
-    problems = semantic_problems(scene, path.parent, source, assets=assets)
+    problems = semantic_problems(scene, path.parent, source, assets=assets) + numeric_range_problems(data, source, scene)
     if problems:
         raise SceneError(in_file_order(problems, file))
     return LoadedScene(scene=scene, path=path.resolve(), source=source, data=data)
