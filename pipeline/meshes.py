@@ -90,18 +90,29 @@ def load_render_mesh(path: Path) -> RenderMesh:
                 uvs = vt[triples[:, 1]] * [1.0, -1.0] + [0.0, 1.0]
             if len(vn) and (triples[:, 2] >= 0).all():
                 normals = vn[triples[:, 2]]
-            return RenderMesh(triples[:, 0], _fan(polygons), uvs, normals)
+            return _checked_attributes(RenderMesh(triples[:, 0], _fan(polygons), uvs, normals))
         columns, tris = _read_ply(data)
         verts = np.stack([columns["x"], columns["y"], columns["z"]], axis=1)
         _check(verts, tris)
+        uv_names = next((pair for pair in (("u", "v"), ("s", "t"), ("texture_u", "texture_v")) if all(n in columns for n in pair)), None)
+        uvs = np.stack([columns[n] for n in uv_names], axis=1) if uv_names else None
+        normals = np.stack([columns[n] for n in ("nx", "ny", "nz")], axis=1) if all(n in columns for n in ("nx", "ny", "nz")) else None
+        return _checked_attributes(RenderMesh(np.arange(len(verts)), tris, uvs, normals))
     except MeshFormatError as exc:
         raise AssetError(f"{path}: {exc}") from None
     except (ValueError, IndexError, KeyError, OverflowError, MemoryError) as exc:
         raise AssetError(f"{path}: cannot read mesh: {exc}") from None
-    uv_names = next((pair for pair in (("u", "v"), ("s", "t"), ("texture_u", "texture_v")) if all(n in columns for n in pair)), None)
-    uvs = np.stack([columns[n] for n in uv_names], axis=1) if uv_names else None
-    normals = np.stack([columns[n] for n in ("nx", "ny", "nz")], axis=1) if all(n in columns for n in ("nx", "ny", "nz")) else None
-    return RenderMesh(np.arange(len(verts)), tris, uvs, normals)
+
+
+def _checked_attributes(mesh: RenderMesh) -> RenderMesh:
+    """The mesh, if its texture coordinates and normals are finite in float32."""
+    for name, values in (("texture coordinate", mesh.uvs), ("normal", mesh.normals)):
+        if values is not None:
+            bad = beyond_float32(values).any(axis=1)
+            if bad.any():
+                i = int(np.argmax(bad))
+                raise MeshFormatError(f"{name} of render vertex {i} is not finite in the renderer's float32 ({', '.join(f'{c:g}' for c in values[i])})")
+    return mesh
 
 
 def _check(verts: np.ndarray, tris: np.ndarray, faces: bool = True) -> None:

@@ -469,3 +469,18 @@ def test_gltf_alpha_modes_become_opacity(tmp_path: Path, mode: str, factor: floa
     ours = np.asarray(Image.open(mat.opacity.file), dtype=np.float64) / 255
     expect = (alpha * factor >= 0.5).astype(float) if mode == "MASK" else alpha * factor
     np.testing.assert_allclose(ours, expect, atol=0.5 / 255 + 1e-9)
+
+
+@pytest.mark.parametrize("line", ["vt nan 0", "vn 0 1e39 0"])
+def test_render_mesh_refuses_non_finite_attributes(tmp_path: Path, line: str) -> None:
+    """A texture coordinate or normal that float32 cannot hold is an AssetError naming the
+    file, not NaN pixels in a worker."""
+    from motion.pipeline.errors import AssetError
+    from motion.pipeline.meshes import load_render_mesh
+
+    path = tmp_path / "bad.obj"
+    vt = line if line.startswith("vt") else "vt 1 0"
+    vn = line if line.startswith("vn") else "vn 0 0 1"
+    path.write_text(f"v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\n{vt}\nvn 0 0 1\n{vn}\nf 1/1/1 2/2/2 3/1/1\n")
+    with pytest.raises(AssetError, match=r"bad\.obj: (texture coordinate|normal) of render vertex 1 is not finite"):
+        load_render_mesh(path)
