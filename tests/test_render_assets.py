@@ -484,3 +484,14 @@ def test_render_mesh_refuses_non_finite_attributes(tmp_path: Path, line: str) ->
     path.write_text(f"v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\n{vt}\nvn 0 0 1\n{vn}\nf 1/1/1 2/2/2 3/1/1\n")
     with pytest.raises(AssetError, match=r"bad\.obj: (texture coordinate|normal) of render vertex 1 is not finite"):
         load_render_mesh(path)
+
+
+def test_bad_attributes_of_a_deforming_mesh_fail_validation(tmp_path: Path) -> None:
+    """The render vertices of a deforming mesh are read at validation, so a texture
+    coordinate float32 cannot hold is a located error before any task."""
+    from motion.pipeline.errors import SceneError
+
+    _write_ball(tmp_path)
+    (tmp_path / "ball.obj").write_text((tmp_path / "ball.obj").read_text().replace("vt 0.000000 1.000000", "vt nan 1", 1))
+    with pytest.raises(SceneError, match=r"objects\[1\]\.file: mesh file ball\.obj: texture coordinate of render vertex \d+ is not finite"):
+        load(tmp_path, light_scene_yaml("  - {type: constant, radiance: 0.3}", _ball_yaml("grey"), resolution=RES, spp=SPP).replace("materials:\n", "materials:\n" + MATERIALS))
