@@ -117,7 +117,7 @@ def principal_inertia(shape: str, mass: float, dims: dict[str, float]) -> np.nda
 
 def tessellate(obj: Any, detail: int = 16) -> Mesh:
     """Object-space vertices and triangles of a primitive shape (cube: 6 grids of detail^2
-    quads; cylinder: open side, detail rings x 2*detail segments; rectangle: an XY grid;
+    quads; cylinder: detail rings x 2*detail segments, closed by two fans; rectangle: an XY grid;
     capsule: 2*(detail+1) rings x 2*detail segments). Raises ShapeNotTessellatedError for
     shapes with no tessellation (sphere, disk, empty, particles) and for mesh files."""
     entry = shape_geometry(obj.shape)
@@ -287,9 +287,20 @@ def _cylinder_primitives(o: Any) -> list[Primitive]:
 
 
 def _cylinder_mesh(o: Any, detail: int) -> Mesh:
-    uv, tri = grid_rect(2 * detail, detail)
+    # the side grid, closed by two fans about the cap centres (outward: +Y on top)
+    segments = 2 * detail
+    uv, tri = grid_rect(segments, detail)
     theta = 2 * np.pi * uv[:, 0]
-    return np.column_stack((o.radius * np.cos(theta), (uv[:, 1] - 0.5) * o.height, -o.radius * np.sin(theta))), tri
+    side = np.column_stack((o.radius * np.cos(theta), (uv[:, 1] - 0.5) * o.height, -o.radius * np.sin(theta)))
+    top, bottom = len(side), len(side) + 1
+    k = np.arange(segments)
+    top_ring, bottom_ring = detail * (segments + 1) + k, k
+    caps = np.concatenate((
+        np.column_stack((np.full(segments, top), top_ring, top_ring + 1)),
+        np.column_stack((np.full(segments, bottom), bottom_ring + 1, bottom_ring)),
+    ))
+    centres = np.array([[0.0, o.height / 2, 0.0], [0.0, -o.height / 2, 0.0]])
+    return np.concatenate((side, centres)), np.concatenate((tri, caps))
 
 
 _register(ShapeGeometry(

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -50,6 +51,70 @@ def load_mesh(path: Path, faces: bool = True) -> tuple[np.ndarray, np.ndarray]:
     return verts, tris
 
 
+class RenderMesh(NamedTuple):
+    """A mesh as the renderer draws it: one render vertex per distinct (position, uv,
+    normal) corner of the file. `index` [R]: the file vertex (position, in `load_mesh`
+    order) of each render vertex, so deformed positions map onto it; `uvs` [R, 2] in
+    Mitsuba's convention (v = 0 at the image's top: an OBJ `vt` is flipped as Mitsuba's own
+    OBJ reader flips it), `normals` [R, 3]: the file's, or None where it has none."""
+
+    index: np.ndarray
+    faces: np.ndarray
+    uvs: np.ndarray | None
+    normals: np.ndarray | None
+
+
+def plain_render_mesh(count: int, faces: np.ndarray) -> RenderMesh:
+    """A mesh without texture coordinates or normals: render vertex i is vertex i."""
+    return RenderMesh(np.arange(count), np.asarray(faces, np.int64).reshape(-1, 3), None, None)
+
+
+def load_render_mesh(path: Path) -> RenderMesh:
+    """The render vertices of an .obj or .ply file (`RenderMesh`); the same checks and
+    errors as `load_mesh`. OBJ corners are welded as Mitsuba's OBJ reader welds them, one
+    render vertex per distinct (v, vt, vn); PLY vertices are render vertices (u, v or s, t
+    and nx, ny, nz properties where present)."""
+    from .limits import read_bounded
+
+    path = Path(path)
+    data = read_bounded(path, MAX_MESH_BYTES, "mesh file", AssetError)
+    try:
+        if path.suffix.lower() == ".obj":
+            verts, vt, vn, corners = _parse_obj(data)
+            _check(verts, _fan([[c[0] for c in face] for face in corners]))
+            weld: dict[tuple[int, int, int], int] = {}
+            polygons = [[weld.setdefault(c, len(weld)) for c in face] for face in corners]
+            triples = np.asarray(list(weld), dtype=np.int64).reshape(-1, 3)
+            uvs = normals = None
+            if len(vt) and (triples[:, 1] >= 0).all():
+                uvs = vt[triples[:, 1]] * [1.0, -1.0] + [0.0, 1.0]
+            if len(vn) and (triples[:, 2] >= 0).all():
+                normals = vn[triples[:, 2]]
+            return _checked_attributes(RenderMesh(triples[:, 0], _fan(polygons), uvs, normals))
+        columns, tris = _read_ply(data)
+        verts = np.stack([columns["x"], columns["y"], columns["z"]], axis=1)
+        _check(verts, tris)
+        uv_names = next((pair for pair in (("u", "v"), ("s", "t"), ("texture_u", "texture_v")) if all(n in columns for n in pair)), None)
+        uvs = np.stack([columns[n] for n in uv_names], axis=1) if uv_names else None
+        normals = np.stack([columns[n] for n in ("nx", "ny", "nz")], axis=1) if all(n in columns for n in ("nx", "ny", "nz")) else None
+        return _checked_attributes(RenderMesh(np.arange(len(verts)), tris, uvs, normals))
+    except MeshFormatError as exc:
+        raise AssetError(f"{path}: {exc}") from None
+    except (ValueError, IndexError, KeyError, OverflowError, MemoryError) as exc:
+        raise AssetError(f"{path}: cannot read mesh: {exc}") from None
+
+
+def _checked_attributes(mesh: RenderMesh) -> RenderMesh:
+    """The mesh, if its texture coordinates and normals are finite in float32."""
+    for name, values in (("texture coordinate", mesh.uvs), ("normal", mesh.normals)):
+        if values is not None:
+            bad = beyond_float32(values).any(axis=1)
+            if bad.any():
+                i = int(np.argmax(bad))
+                raise MeshFormatError(f"{name} of render vertex {i} is not finite in the renderer's float32 ({', '.join(f'{c:g}' for c in values[i])})")
+    return mesh
+
+
 def _check(verts: np.ndarray, tris: np.ndarray, faces: bool = True) -> None:
     if len(verts) == 0:
         raise MeshFormatError("the mesh has no vertices")
@@ -71,9 +136,19 @@ def _fan(polygons: list[list[int]]) -> np.ndarray:
 
 
 def _load_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    verts, _, _, faces = _parse_obj(data, attributes=False)
+    return verts, _fan(faces)  # type: ignore[arg-type]
+
+
+def _parse_obj(data: bytes, attributes: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[list[Any]]]:
+    """Positions [v, 3], texture coordinates [vt, 2], normals [vn, 3] and each polygon's
+    corners as 0-based (v, vt, vn) triples (-1: none given). Without `attributes` (the
+    positions-only readers, twice as fast on a large file): no vt / vn values, and corners
+    as their vertex index alone; the indices are checked either way."""
     verts: list[list[float]] = []
-    faces: list[list[int]] = []
+    faces: list[list[Any]] = []
     counts = {"vt": 0, "vn": 0}
+    extra: dict[str, list[list[float]]] = {"vt": [], "vn": []}
     for number, line in enumerate(data.decode("utf-8", errors="replace").splitlines(), start=1):
         parts = line.split()
         if not parts or parts[0].startswith("#"):
@@ -90,10 +165,18 @@ def _load_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
             verts.append(xyz)
         elif parts[0] in counts:
             counts[parts[0]] += 1
+            if not attributes:
+                continue
+            width = 2 if parts[0] == "vt" else 3
+            try:
+                values = [float(c) for c in parts[1 : 1 + width]]
+            except ValueError:
+                raise MeshFormatError(f"line {number}: {parts[0]} values are not numbers: {line.strip()[:80]!r}") from None
+            extra[parts[0]].append((values + [0.0] * width)[:width])
         elif parts[0] == "f":
             if not 4 <= len(parts) <= MAX_POLYGON + 1:
                 raise MeshFormatError(f"line {number}: a face needs 3 to {MAX_POLYGON} vertices, got {len(parts) - 1}")
-            idx = []
+            idx: list[Any] = []
             for p in parts[1:]:
                 refs = p.split("/")
                 try:
@@ -108,12 +191,26 @@ def _load_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
                 v = nums[0]
                 if v is None:
                     raise MeshFormatError(f"line {number}: face index {p!r} has no vertex")
-                idx.append(v - 1 if v > 0 else len(verts) + v)
+                if not attributes:
+                    idx.append(v - 1 if v > 0 else len(verts) + v)
+                    continue
+                nums += [None] * (3 - len(nums))
+                have = (len(verts), counts["vt"], counts["vn"])
+                corner = tuple(-1 if n is None else (n - 1 if n > 0 else h + n) for n, h in zip(nums, have))
+                idx.append(corner)  # type: ignore[arg-type]
             faces.append(idx)
-    return np.asarray(verts, dtype=np.float64).reshape(-1, 3), _fan(faces)
+    vt = np.asarray(extra["vt"], dtype=np.float64).reshape(-1, 2)
+    vn = np.asarray(extra["vn"], dtype=np.float64).reshape(-1, 3)
+    return np.asarray(verts, dtype=np.float64).reshape(-1, 3), vt, vn, faces
 
 
 def _load_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    columns, tris = _read_ply(data)
+    return np.stack([columns["x"], columns["y"], columns["z"]], axis=1), tris
+
+
+def _read_ply(data: bytes) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """The vertex element's properties by name (float64 columns) and the triangles."""
     end = data.find(b"end_header")
     if not data.startswith(b"ply") or end < 0:
         raise MeshFormatError("not a PLY file (no 'ply' magic or no end_header)")
@@ -154,10 +251,10 @@ def _load_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     return _ply_binary(data, body_start, elements, "<" if fmt == "binary_little_endian" else ">")
 
 
-def _ply_ascii(body: bytes, elements: list[tuple[str, int, list[tuple[str, ...]]]]) -> tuple[np.ndarray, np.ndarray]:
+def _ply_ascii(body: bytes, elements: list[tuple[str, int, list[tuple[str, ...]]]]) -> tuple[dict[str, np.ndarray], np.ndarray]:
     tokens = body.split()
     pos = 0
-    verts = np.zeros((0, 3))
+    verts: dict[str, np.ndarray] = {}
     faces: list[list[int]] = []
 
     def need(n: int, name: str) -> None:
@@ -170,8 +267,7 @@ def _ply_ascii(body: bytes, elements: list[tuple[str, int, list[tuple[str, ...]]
             need(count * width, name)
             block = np.asarray(tokens[pos : pos + count * width], dtype=np.float64).reshape(count, width)
             if name == "vertex":
-                names = [pr[-1] for pr in props]
-                verts = block[:, [names.index("x"), names.index("y"), names.index("z")]]
+                verts = {pr[-1]: block[:, i] for i, pr in enumerate(props)}
             pos += count * width
             continue
         for _ in range(count):
@@ -192,8 +288,8 @@ def _ply_ascii(body: bytes, elements: list[tuple[str, int, list[tuple[str, ...]]
     return verts, _fan(faces)
 
 
-def _ply_binary(data: bytes, offset: int, elements: list[tuple[str, int, list[tuple[str, ...]]]], order: str) -> tuple[np.ndarray, np.ndarray]:
-    verts = np.zeros((0, 3))
+def _ply_binary(data: bytes, offset: int, elements: list[tuple[str, int, list[tuple[str, ...]]]], order: str) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    verts: dict[str, np.ndarray] = {}
     faces: list[list[int]] = []
     size = len(data)
     for name, count, props in elements:
@@ -207,7 +303,7 @@ def _ply_binary(data: bytes, offset: int, elements: list[tuple[str, int, list[tu
             rec = np.frombuffer(data, dtype=dtype, count=count, offset=offset)
             offset += dtype.itemsize * count
             if name == "vertex":
-                verts = np.stack([rec["x"], rec["y"], rec["z"]], axis=1).astype(np.float64)
+                verts = {pr[1]: rec[pr[1]].astype(np.float64) for pr in props}
             continue
         for item in range(count):
             for pr in props:

@@ -155,3 +155,26 @@ def test_a_flock_of_spheres_is_a_located_error(tmp_path: Path) -> None:
     with pytest.raises(SceneError) as err:
         bake(load_scene(path), [0])
     assert "objects[0].deform" in str(err.value) and "sphere is not supported" in str(err.value)
+
+
+AGENT_SHAPES = {
+    "cube": {"shape": "cube", "size": [0.04, 0.02, 0.12]},
+    "cylinder": {"shape": "cylinder", "radius": 0.03, "height": 0.1},
+    "capsule": {"shape": "capsule", "radius": 0.02, "height": 0.08},
+    "mesh": {"shape": "mesh", "file": str(SCENES / "assets" / "dart.obj")},
+}
+
+
+@pytest.mark.parametrize("shape", list(AGENT_SHAPES))
+def test_every_agent_shape_bakes_solid(tmp_path: Path, shape: str) -> None:
+    """Each agent's baked vertices span three dimensions (a cylinder agent is a closed
+    cylinder, not a flat card seen edge-on): the thinnest principal extent of each agent is
+    at least a tenth of its longest (the 0.04 x 0.02 x 0.12 cube: a sixth; a card: 0)."""
+    obj = {**{k: v for k, v in flock_object(count=6).items() if k not in ("shape", "size")}, **AGENT_SHAPES[shape]}
+    loaded = load_scene(write_scene(tmp_path, [obj], last=4))
+    frame = bake(loaded, [2]).frames[0]
+    verts = frame.across_shutter.vertices["birds"]
+    agents = verts.reshape(len(verts), 6, -1, 3)[0]  # [agents, V, 3] at the first sample
+    centred = agents - agents.mean(axis=1, keepdims=True)
+    singular = np.linalg.svd(centred, compute_uv=False)  # [agents, 3]
+    assert (singular[:, 2] > 0.1 * singular[:, 0]).all(), singular

@@ -288,6 +288,24 @@ def test_world_matrices_match_the_specification_at_frames_and_subframes(asset):
             np.testing.assert_allclose(ours[i], spec.world(k, t), atol=1e-5, err_msg=f"{name} at t={t}")
 
 
+def test_units_and_up_axis_override_puts_a_stage_frame_under_the_root(asset, tmp_path):
+    """glTF is metres and +Y up (nothing added); `units: 0.01, up_axis: z` on the entry
+    puts a frame under the import's root that scales by 0.01 and turns +Z up to +Y up."""
+    tmp, g, arrays = asset
+    (tmp_path / "rig.glb").write_bytes((tmp / "rig.glb").read_bytes())
+    loaded = load_scene(scene_yaml(tmp_path, "rig.glb", imports_extra="    units: 0.01\n    up_axis: z"))
+    motion = evaluate(loaded, TIMES)
+    turn = np.eye(4)
+    turn[1:3, 1:3] = [[0, 1], [-1, 0]]  # -90 degrees about X: +Z -> +Y
+    spec = SpecWorld(g, arrays, root_matrix() @ turn @ np.diag([0.01, 0.01, 0.01, 1.0]))
+    for k, name in enumerate(["Root", "Arm", "Hand", "Prop"]):
+        ours = motion.objects[f"a.{name}"].matrices()
+        for i, t in enumerate(TIMES):
+            np.testing.assert_allclose(ours[i], spec.world(k, t), atol=1e-5, err_msg=f"{name} at t={t}")
+    assert "a.rig.stage" in [o.name for o in loaded.scene.objects]
+    assert "a.rig.stage" not in [o.name for o in load_scene(scene_yaml(tmp_path, "rig.glb")).scene.objects]
+
+
 def test_skinned_and_morphed_vertices_match_the_specification(asset):
     tmp, g, arrays = asset
     loaded = load_scene(scene_yaml(tmp, "rig.glb"))

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -171,3 +172,41 @@ def test_textured_usd_card_renders_the_right_way_up(tmp_path):
     UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(mat)
     stage.GetRootLayer().Save()
     assert_card_upright(tmp_path, "card.usda")
+
+
+def _units_stage(path: Path, units: float | None, up: Any) -> None:
+    stage = Usd.Stage.CreateNew(str(path))
+    stage.SetTimeCodesPerSecond(24.0)
+    if units is not None:
+        UsdGeom.SetStageMetersPerUnit(stage, units)
+    UsdGeom.SetStageUpAxis(stage, up)
+    UsdGeom.Xform.Define(stage, "/Box").AddTranslateOp().Set(Gf.Vec3d(100, 0, 50))
+    wheel = UsdGeom.Xform.Define(stage, "/Wheel")
+    spin = wheel.AddRotateXOp()
+    for code, angle in ((0, 0.0), (24, 270.0), (48, 720.0)):
+        spin.Set(angle, code)
+    stage.GetRootLayer().Save()
+
+
+@pytest.mark.parametrize("override, expect", [("", [1.0, 0.5, 0.0]), (", units: 1, up_axis: y", [100.0, 0.0, 50.0])])
+def test_usd_units_and_up_axis_apply_on_import(tmp_path, override, expect):
+    """A centimetre, Z-up stage: an Xform at (100, 0, 50) cm lands at (1, 0.5, 0) m in our
+    +Y-up metres; the import entry's `units:` / `up_axis:` override the stage's."""
+    _units_stage(tmp_path / "cm.usda", 0.01, UsdGeom.Tokens.z)
+    (tmp_path / "shot.yaml").write_text(f"timeline: {{fps: 24, first: 0, last: 2}}\ncamera: {{position: [0, 1, 9], look_at: [0, 0, 0]}}\nimports:\n  - {{file: cm.usda{override}}}\n")
+    motion = evaluate(load_scene(tmp_path / "shot.yaml"), np.zeros(1))
+    np.testing.assert_allclose(motion.objects["Box"].matrices()[0][:3, 3], expect, atol=1e-9)
+
+
+def test_usd_rotate_op_turns_by_its_angle_not_the_shortest_arc(tmp_path):
+    """rotateX keyed 0 -> 270 -> 720 degrees turns the long way, as USD interpolates the
+    angle: at every sub-frame our world matrix is USD's own (135 degrees at code 12, not -45)."""
+    _units_stage(tmp_path / "spin.usda", None, UsdGeom.Tokens.y)
+    (tmp_path / "shot.yaml").write_text("timeline: {fps: 24, first: 0, last: 48}\ncamera: {position: [0, 1, 9], look_at: [0, 0, 0]}\nimports:\n  - {file: spin.usda}\n")
+    codes = np.array([0, 3, 6, 12, 17.5, 24, 30, 36, 41, 47.5])
+    motion = evaluate(load_scene(tmp_path / "shot.yaml"), codes / 24.0)
+    stage = Usd.Stage.Open(str(tmp_path / "spin.usda"))
+    xf = UsdGeom.Xformable(stage.GetPrimAtPath("/Wheel"))
+    for i, code in enumerate(codes):
+        theirs = np.array(xf.ComputeLocalToWorldTransform(Usd.TimeCode(float(code)))).T
+        np.testing.assert_allclose(motion.objects["Wheel"].matrices()[i], theirs, atol=1e-6, err_msg=f"time code {code}")

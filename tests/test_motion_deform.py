@@ -88,7 +88,7 @@ def test_90_degree_bend_moves_only_weighted_vertices(tmp_path: Path) -> None:
 
 def test_weight_rows_must_match_the_mesh(tmp_path: Path) -> None:
     loaded = _load(tmp_path, ARM % "weights: [{upper: 1}, {lower: 1}]")
-    with pytest.raises(SceneError, match=r"objects\[0\]\.deform\.weights.*2 weight rows for a bind mesh of 153"):
+    with pytest.raises(SceneError, match=r"objects\[0\]\.deform\.weights.*2 weight rows for a bind mesh of 155"):
         evaluate(loaded, np.zeros(1))
 
 

@@ -33,6 +33,7 @@ from .collisions import BoxCollider, Collider, PlaneCollider, SphereCollider
 RECORD_BUDGET = 256 * 2**20  # bytes of recorded agent states per flock
 MAX_STEPS = 2_000_000  # steps a flock may be asked to take (t_end - start) / step
 SEPARATION_PASSES = 8  # most projection passes per step
+AGENT_DETAIL = 4  # tessellation of a round agent (cylinder, capsule): 2 * 4 segments
 MAX_INSTANCE_VERTICES = 4_000_000  # rendered vertices of a flock (agents x agent vertices)
 
 
@@ -371,8 +372,10 @@ def instance_vertices(track: FlockTrack, times: np.ndarray, agent: np.ndarray, u
 
 def agent_mesh(loaded: Any, obj: Any) -> tuple[np.ndarray, np.ndarray]:
     """One flock agent (agent space, +Z forward): the object's mesh file or its primitive
-    at the coarsest tessellation (geometry.py), times the object's scale."""
-    verts, faces = load_mesh(loaded.asset(obj.file)) if shape_geometry(obj.shape).file_mesh else tessellate(obj, 1)
+    at the coarsest tessellation that is still solid (geometry.py: a cube at 1, a closed
+    cylinder or a capsule at AGENT_DETAIL, 8 segments round), times the object's scale."""
+    detail = 1 if obj.shape in ("cube", "rectangle") else AGENT_DETAIL
+    verts, faces = load_mesh(loaded.asset(obj.file)) if shape_geometry(obj.shape).file_mesh else tessellate(obj, detail)
     return verts * np.asarray(obj.transform.scale, dtype=np.float64), faces
 
 

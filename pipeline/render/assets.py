@@ -14,6 +14,7 @@ import tempfile
 import threading
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from ..cache import cache_root
 from ..limits import env_size
@@ -41,8 +42,40 @@ def _digest(path: Path, settings: str) -> str:
 def mesh_file(source: Path) -> Path:
     """The cached PLY for a mesh source (.obj or .ply), converting it on first use."""
     source = Path(source)
-    key = _digest(source, f"{CONVERSION_VERSION}|{source.suffix.lower()}")
-    target = assets_dir() / f"{source.stem}-{key}.ply"
+
+    def write(tmp: str) -> None:
+        import mitsuba as mi
+
+        kind = "ply" if source.suffix.lower() == ".ply" else "obj"
+        mi.load_dict({"type": kind, "filename": str(source)}).write_ply(tmp)
+
+    return _converted(source, f"{CONVERSION_VERSION}|{source.suffix.lower()}", ".ply", write)
+
+
+def alpha_texture(source: Path, raw: bool) -> Path:
+    """The cached float EXR of GGX alpha = roughness^2 for a roughness texture (grey; an
+    RGB image by its luminance; sRGB-decoded unless `raw`), made on first use: Mitsuba's
+    rough plugins take alpha, our files perceptual roughness."""
+    source = Path(source)
+
+    def write(tmp: str) -> None:
+        import mitsuba as mi
+        import numpy as np
+
+        image = mi.Bitmap(str(source))
+        # raw: the stored values as they are (keep the file's own gamma flag); else decode sRGB
+        bitmap = image.convert(mi.Bitmap.PixelFormat.Y, mi.Struct.Type.Float32, image.srgb_gamma() if raw else False)
+        rough = np.clip(np.array(bitmap, dtype=np.float32), 0.0, 1.0)
+        mi.Bitmap(np.maximum(rough**2, 1e-4)).write(tmp)
+
+    return _converted(source, f"alpha-v2|{raw}", ".exr", write)
+
+
+def _converted(source: Path, settings: str, suffix: str, write: Callable[[str], None]) -> Path:
+    """The cache file for (`source`'s bytes, `settings`): `write(tmp)` makes it on a miss,
+    then it is renamed into place (concurrent writers: the last rename wins, alike)."""
+    key = _digest(source, settings)
+    target = assets_dir() / f"{source.stem}-{key}{suffix}"
     if target.is_file():
         with _stats_lock:
             STATS["hits"] += 1
@@ -50,15 +83,11 @@ def mesh_file(source: Path) -> Path:
         return target
     with _stats_lock:
         STATS["misses"] += 1
-    import mitsuba as mi
-
     target.parent.mkdir(parents=True, exist_ok=True)
-    kind = "ply" if source.suffix.lower() == ".ply" else "obj"
-    mesh = mi.load_dict({"type": kind, "filename": str(source)})
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp.ply", dir=target.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".tmp{suffix}", dir=target.parent)
     os.close(fd)
     try:
-        mesh.write_ply(tmp)
+        write(tmp)
         os.replace(tmp, target)
     finally:
         Path(tmp).unlink(missing_ok=True)

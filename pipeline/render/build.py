@@ -27,6 +27,7 @@ from ..scene.schema import (
     PointLight,
     Principled,
     SpotLight,
+    ThinDielectric,
 )
 from ..scene.types import Texture
 
@@ -70,8 +71,9 @@ def _xf(matrix: np.ndarray) -> Any:
 # --- colours and textures -----------------------------------------------------------------
 
 
-def color(value: Any, loaded: LoadedScene) -> Any:
-    """A colour field: grey float, RGB triple, or a bitmap texture."""
+def color(value: Any, loaded: LoadedScene, raw: bool = False) -> Any:
+    """A colour field: grey float, RGB triple, or a bitmap texture (`raw`: data, never
+    sRGB-decoded, whatever the texture says: normal and bump maps)."""
     if isinstance(value, Texture):
         tile = value.tile if isinstance(value.tile, tuple) else (value.tile, value.tile)
         return {
@@ -79,7 +81,7 @@ def color(value: Any, loaded: LoadedScene) -> Any:
             "filename": str(loaded.asset(value.file)),
             "filter_type": value.filter,
             "wrap_mode": value.wrap,
-            "raw": value.raw,
+            "raw": value.raw or raw,
             "to_uv": _mi().ScalarTransform4f().scale([tile[0], tile[1], 1.0]),
         }
     if isinstance(value, (tuple, list)):
@@ -118,8 +120,14 @@ def _diffuse(m: Diffuse, loaded: LoadedScene) -> Dict:
     return {"type": "diffuse", "reflectance": color(m.color, loaded)}
 
 
-def _smooth_or_rough(plugin: str, roughness: float, **params: Any) -> Dict:
-    """Mitsuba's smooth `plugin`, or its GGX `rough<plugin>` when roughness > 0."""
+def _smooth_or_rough(plugin: str, roughness: Any, loaded: LoadedScene | None = None, **params: Any) -> Dict:
+    """Mitsuba's smooth `plugin`, or its GGX `rough<plugin>` when roughness > 0; a
+    roughness texture becomes a cached alpha texture (its square, `assets.alpha_texture`)."""
+    if isinstance(roughness, Texture) and loaded is not None:
+        from .assets import alpha_texture
+
+        alpha = {**color(roughness, loaded, raw=True), "filename": str(alpha_texture(loaded.asset(roughness.file), roughness.raw))}
+        return {"type": f"rough{plugin}", "alpha": alpha, "distribution": "ggx", **params}
     if roughness == 0:
         return {"type": plugin, **params}
     return {"type": f"rough{plugin}", "alpha": _alpha(roughness), "distribution": "ggx", **params}
@@ -132,12 +140,17 @@ def _plastic(m: Plastic, loaded: LoadedScene) -> Dict:
 
 @_material("conductor")
 def _conductor(m: Conductor, loaded: LoadedScene) -> Dict:
-    return _smooth_or_rough("conductor", m.roughness, material=m.preset, specular_reflectance=spectrum(m.tint))
+    return _smooth_or_rough("conductor", m.roughness, loaded, material=m.preset, specular_reflectance=color(m.tint, loaded))
 
 
 @_material("dielectric")
 def _dielectric(m: Dielectric, loaded: LoadedScene) -> Dict:
-    return _smooth_or_rough("dielectric", m.roughness, int_ior=m.ior, specular_transmittance=spectrum(m.tint))
+    return _smooth_or_rough("dielectric", m.roughness, loaded, int_ior=m.ior, specular_transmittance=color(m.tint, loaded))
+
+
+@_material("thindielectric")
+def _thindielectric(m: ThinDielectric, loaded: LoadedScene) -> Dict:
+    return {"type": "thindielectric", "int_ior": m.ior, "specular_transmittance": color(m.tint, loaded)}
 
 
 @_material("principled")
@@ -148,16 +161,28 @@ def _principled(m: Principled, loaded: LoadedScene) -> Dict:
         "metallic": color(m.metallic, loaded),
         "roughness": color(m.roughness, loaded),
         "specular": m.specular,
-        "clearcoat": m.clearcoat,
+        "clearcoat": color(m.clearcoat, loaded, raw=True),
     }
 
 
 def material_dict(m: Any, loaded: LoadedScene) -> Dict:
-    """The Mitsuba BSDF of a scene material (two-sided when asked)."""
+    """The Mitsuba BSDF of a scene material, wrapped inside out: its normal or bump map,
+    two-sided when asked, its opacity mask outermost."""
     d = MATERIALS[m.type](m, loaded)
+    if m.normal_map is not None:
+        d = {"type": "normalmap", "normalmap": color(m.normal_map, loaded, raw=True), "bsdf": d}
+    elif m.bump is not None:
+        d = {"type": "bumpmap", "texture": color(m.bump, loaded, raw=True), "scale": float(m.bump_scale), "bsdf": d}
     if m.two_sided:
         d = {"type": "twosided", "material": d}
+    if isinstance(m.opacity, Texture) or m.opacity != 1.0:
+        d = {"type": "mask", "opacity": color(m.opacity, loaded, raw=True), "bsdf": d}
     return d
+
+
+def emitter_dict(emission: Any, loaded: LoadedScene) -> Dict:
+    """The area emitter of an object's `emission:` (a texture: RGB over the surface's uv)."""
+    return {"type": "area", "radiance": color(emission.radiance, loaded)}
 
 
 DEFAULT_MATERIAL: Dict = {"type": "diffuse", "reflectance": 0.5}
@@ -191,7 +216,7 @@ def object_shapes(obj: Any, loaded: LoadedScene, world_from_object: np.ndarray, 
         d["to_world"] = _xf(world_from_object @ object_from_prim)
         d["bsdf"] = materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
         if obj.emission is not None:
-            d["emitter"] = {"type": "area", "radiance": spectrum(obj.emission.radiance)}
+            d["emitter"] = emitter_dict(obj.emission, loaded)
         out.append(d)
     return out
 

@@ -169,6 +169,13 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             value, bsdf_pdf = bsdf.eval_pdf(ctx, si, si.to_local(d), ok)
             mis = dr.select(ds.delta, 1.0, _mis(ds.pdf, bsdf_pdf))
             L += dr.select(ok, mis * value * weight, 0.0)
+        # area emitters on deforming meshes and particles: the slice at the path's time
+        for g in self.world.emissive_slices:
+            ds, weight = self.world.sample_slice_emitter(g, si, sampler.next_2d(), k_slice, active)
+            ok = active & (ds.pdf != 0.0)
+            ok &= ~self.world.occluded(scene, si.spawn_ray_to(ds.p), movers, ok, k_slice)
+            value, bsdf_pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), ok)
+            L += dr.select(ok, _mis(ds.pdf, bsdf_pdf) * value * weight, 0.0)
         return L
 
     def _mover_emitter_pdf(self, ds: Any, ref: Any, hit_mover: Any, movers: MoverTracks, pdf: Any, active: Any) -> Any:
@@ -291,6 +298,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
                 0.0,
             )
             em_pdf = self._mover_emitter_pdf(ds, prev_si, hit_mover, movers, em_pdf, ~prev_bsdf_delta & on_mover)
+            em_pdf = self.world.slice_emitter_pdf(ds, prev_si, hit_mover, k_slice, em_pdf, ~prev_bsdf_delta & on_mover)
             mis_bsdf = dr.select(depth == 0, 1.0, _mis(prev_bsdf_pdf, em_pdf))
             L += beta * mis_bsdf * ds.emitter.eval(si, active & (prev_bsdf_pdf > 0))
 

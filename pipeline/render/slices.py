@@ -10,6 +10,16 @@ intersections per ray and group, and S small BVH builds per frame (docs/renderin
 
 Particles are octahedra (6 vertices, 8 triangles) of the system's radius; a dead or
 unborn particle collapses to a point, which no ray can hit.
+
+A deforming mesh is drawn from its render vertices (`meshes.RenderMesh`: one per distinct
+position/uv/normal corner of the file, as Mitsuba's own readers weld them), so it keeps
+its texture coordinates; deformed positions map onto them through `index`. Its normals
+per slice (`slice_normals`): the file's normals carried, vertex by vertex, by a local
+frame (the welded smooth normal and the edge to one neighbour) from rest to the slice
+(exact when nothing deforms and for any rigid turn; hard edges stay hard); without file
+normals, the smooth normals themselves; `face_normals: true` stays faceted. An emissive object or particle system
+carries its area emitter on every slice: the integrator samples the slice of the path's
+time and weights it by MIS (world.py, integrator.py), as it does emissive movers.
 """
 
 from __future__ import annotations
@@ -19,9 +29,10 @@ from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
+from ..meshes import RenderMesh, load_render_mesh, plain_render_mesh
 from ..motion.pose import quat_rotate
 from ..scene.loader import LoadedScene
-from ..scene.schema import Particles
+from ..scene.schema import Mesh, Particles
 from ..variant import load_dict
 from .build import mitsuba_id
 
@@ -48,6 +59,72 @@ def particle_mesh(positions: np.ndarray, alive: np.ndarray, radius: float, capac
     return verts.reshape(-1, 3), faces.reshape(-1, 3)
 
 
+def smooth_normals(positions: np.ndarray, mesh: RenderMesh, per_file_vertex: bool = False) -> np.ndarray:
+    """Area-weighted vertex normals [R, 3] of the render vertices, welded by file vertex
+    (a uv seam does not crease them): `positions` [V, 3] are the file vertices. With
+    `per_file_vertex`, the welded normals [V, 3] themselves."""
+    p = positions[mesh.index]
+    f = mesh.faces
+    face_n = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])  # |.| = 2 area
+    corners = mesh.index[f].ravel()
+    weights = np.repeat(face_n, 3, axis=0)
+    acc = _unit(np.stack([np.bincount(corners, weights[:, c], minlength=len(positions)) for c in range(3)], axis=1))
+    return acc if per_file_vertex else acc[mesh.index]
+
+
+def neighbours(mesh: RenderMesh, count: int) -> np.ndarray:
+    """For each of the `count` file vertices, one file vertex it shares an edge with (the
+    next corner of a face it is in; itself where it is in none)."""
+    out = np.arange(count)
+    f = mesh.index[mesh.faces]
+    out[f[:, 0]], out[f[:, 1]], out[f[:, 2]] = f[:, 1], f[:, 2], f[:, 0]
+    return out
+
+
+def _frames(positions: np.ndarray, normals: np.ndarray, neighbour: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A frame [V, 3, 3] per file vertex (columns: the edge to its neighbour made normal to
+    n, their cross product, n) and where it is degenerate (an edge along n)."""
+    e = positions[neighbour] - positions
+    t = e - np.sum(e * normals, axis=1, keepdims=True) * normals
+    length = np.linalg.norm(t, axis=1)
+    t = _unit(t)
+    return np.stack([t, np.cross(normals, t), normals], axis=2), length < 1e-12
+
+
+def rest_normals(rest: np.ndarray, mesh: RenderMesh, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """What `slice_normals` needs of the bind mesh under `scale`: the file normals
+    expressed in each file vertex's rest frame [R, 3] (a normal under a scale S is
+    S^-1 n), the rest frames' degeneracy [V] and the neighbours [V]; None where the file
+    has no normals."""
+    if mesh.normals is None:
+        return None
+    neighbour = neighbours(mesh, len(rest))
+    frames, bad = _frames(rest * scale, smooth_normals(rest * scale, mesh, True), neighbour)
+    n = _unit(mesh.normals / scale)
+    local = np.einsum("rji,rj->ri", frames[mesh.index], n)  # F_rest^T n
+    return local, bad, neighbour
+
+
+def slice_normals(positions: np.ndarray, rest: tuple[np.ndarray, np.ndarray, np.ndarray] | None, mesh: RenderMesh) -> np.ndarray:
+    """Object-space normals [R, 3] of a deformed mesh (file vertices [V, 3], scaled): each
+    file normal carried by its vertex's local frame, n' = F_deformed F_rest^T n, the frame
+    being the welded smooth normal and the edge to one neighbour (exact for any rigid
+    turn, and for no deformation: n' = n); the smooth normals themselves where the file
+    has none or a frame is degenerate. `rest`: `rest_normals` under the same scale."""
+    b = smooth_normals(positions, mesh, True)
+    if mesh.normals is None or rest is None:
+        return b[mesh.index]
+    local, bad, neighbour = rest
+    frames, bad_now = _frames(positions, b, neighbour)
+    turned = np.einsum("rij,rj->ri", frames[mesh.index], local)
+    return _unit(np.where((bad | bad_now)[mesh.index][:, None], b[mesh.index], turned))
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(norm > 0, norm, 1.0)
+
+
 @dataclass
 class SliceGroup:
     """The S slice scenes of one deforming object or particle system."""
@@ -56,16 +133,25 @@ class SliceGroup:
     kind: str  # "particles" | "deform"
     scenes: list[Any]
     params: list[Any]
-    capacity: int  # particles (or vertices for a deforming mesh)
+    capacity: int  # particles (or render vertices for a deforming mesh)
     faces: np.ndarray
     radius: float = 0.0
     key: str = field(default="")
+    mesh: RenderMesh | None = None  # a deforming mesh's render vertices
+    smooth: bool = False  # per-slice vertex normals (`slice_normals`)
+    rest: np.ndarray | None = None  # the bind mesh's file vertices [V, 3]
+    emitter: dict[str, Any] | None = None  # the area emitter every slice carries
+    emissive: bool = False
+    rest_cache: dict[tuple[float, ...], Any] = field(default_factory=dict)  # scale -> `rest_normals`
 
 
-def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bsdf: Any, slices: int, radius: float = 0.0) -> SliceGroup:
-    """S scenes, each with one mesh of `count` vertices (or particle capacity)."""
+def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bsdf: Any, slices: int, radius: float = 0.0,
+                mesh: RenderMesh | None = None, smooth: bool = False, rest: np.ndarray | None = None, emitter: dict[str, Any] | None = None) -> SliceGroup:
+    """S scenes, each with one mesh of `count` vertices (or particle capacity); a deforming
+    mesh's texture coordinates are written once here, its positions and normals per frame."""
     key = mitsuba_id(name)
     scenes, params = [], []
+    uvs = mesh.uvs if mesh is not None else None
     for _ in range(slices):
         if kind == "particles":
             verts, fcs = particle_mesh(np.zeros((0, 3)), np.zeros(0, bool), radius, count)
@@ -73,22 +159,44 @@ def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bs
             verts, fcs = np.zeros((count, 3)), faces
         props = mi.Properties()
         props["bsdf"] = bsdf
-        mesh = mi.Mesh(key, len(verts), len(fcs), props, False, False)
-        p = mi.traverse(mesh)
+        if emitter is not None:
+            props["emitter"] = load_dict(emitter)
+        shape = mi.Mesh(key, len(verts), len(fcs), props, smooth, uvs is not None)
+        p = mi.traverse(shape)
         p["vertex_positions"] = mi.Float(np.asarray(verts, np.float32).ravel())
         p["faces"] = mi.UInt32(np.asarray(fcs, np.uint32).ravel())
+        if uvs is not None:
+            p["vertex_texcoords"] = mi.Float(np.asarray(uvs, np.float32).ravel())
         p.update()
-        scene = load_dict({"type": "scene", key: mesh})
+        scene = load_dict({"type": "scene", key: shape})
         scenes.append(scene)
         params.append(mi.traverse(scene))
-    return SliceGroup(name, kind, scenes, params, count, faces, radius, key)
+    return SliceGroup(name, kind, scenes, params, count, faces, radius, key, mesh, smooth, rest, emitter, emitter is not None)
 
 
-def update_group(mi: Any, group: SliceGroup, per_slice_vertices: list[np.ndarray]) -> None:
-    """Write each slice's world-space vertices (rebuilds that slice's small BVH)."""
-    for params, verts in zip(group.params, per_slice_vertices):
+def update_group(mi: Any, group: SliceGroup, per_slice_vertices: list[np.ndarray], per_slice_normals: list[np.ndarray] | None = None) -> None:
+    """Write each slice's world-space vertices (rebuilds that slice's small BVH) and, for a
+    smooth mesh, its world-space normals."""
+    for k, (params, verts) in enumerate(zip(group.params, per_slice_vertices)):
         params[f"{group.key}.vertex_positions"] = mi.Float(np.asarray(verts, np.float32).ravel())
+        if per_slice_normals is not None:
+            params[f"{group.key}.vertex_normals"] = mi.Float(np.asarray(per_slice_normals[k], np.float32).ravel())
         params.update()
+
+
+def render_mesh(loaded: LoadedScene, obj: Any, count: int, faces: np.ndarray) -> tuple[RenderMesh, bool]:
+    """The render vertices of a deforming object whose bind mesh has `count` vertices and
+    `faces`, and whether it is drawn smooth: a mesh file's own corners (uvs, normals;
+    smooth unless `face_normals`), a tessellated sphere or capsule smooth, any other
+    primitive or a flock's agents faceted, without uvs."""
+    from ..scene.motion_schema import Flock
+
+    if isinstance(obj, Mesh) and not isinstance(obj.deform, Flock):
+        mesh = load_render_mesh(loaded.asset(obj.file))
+        if obj.face_normals:
+            mesh = mesh._replace(normals=None)
+        return mesh, not obj.face_normals
+    return plain_render_mesh(count, faces), obj.shape in ("sphere", "capsule") and not isinstance(obj.deform, Flock)
 
 
 def slice_count(loaded: LoadedScene, fi: StackedFrame) -> int:
@@ -122,21 +230,23 @@ class SlicedGeometry:
         on_regroup([g.scenes for g in self.groups])
 
     def _build(self, name: str, fi: StackedFrame, materials: dict[str, Any]) -> SliceGroup:
-        from .build import DEFAULT_MATERIAL
+        from .build import DEFAULT_MATERIAL, emitter_dict
 
         mi = self._mi
         obj = next(o for o in self.loaded.scene.objects if o.name == name)
         material = materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
         bsdf = load_dict(material) if isinstance(material, dict) else material
+        emitter = emitter_dict(obj.emission, self.loaded) if obj.emission is not None else None
         slices = slice_count(self.loaded, fi)
         if isinstance(obj, Particles):
             n = fi.particles[name][0].shape[1] if name in fi.particles else 0
             capacity = max(64, 1 << int(np.ceil(np.log2(max(n, 1) * 1.5))))
-            return build_group(mi, name, "particles", capacity, np.zeros((0, 3)), bsdf, slices, radius=obj.radius)
+            return build_group(mi, name, "particles", capacity, np.zeros((0, 3)), bsdf, slices, radius=obj.radius, emitter=emitter)
         from ..motion.deform import bind_mesh
 
         verts, faces = bind_mesh(self.loaded, obj)
-        return build_group(mi, name, "deform", len(verts), np.asarray(faces, np.uint32), bsdf, slices)
+        mesh, smooth = render_mesh(self.loaded, obj, len(verts), faces)
+        return build_group(mi, name, "deform", len(mesh.index), np.asarray(mesh.faces, np.uint32), bsdf, slices, mesh=mesh, smooth=smooth, rest=verts, emitter=emitter)
 
     def update(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> None:
         """Each slice's geometry at its time (`slice_samples`): particles from their
@@ -145,7 +255,7 @@ class SlicedGeometry:
         n = fi.samples
         index = slice_samples(n, slice_count(self.loaded, fi), mode, u_fixed)
         for g in self.groups:
-            per_slice = []
+            per_slice, normals = [], []
             if g.kind == "particles":
                 positions, alive = fi.particles.get(g.name, (np.zeros((n + 1, 0, 3)), np.zeros((n + 1, 0), bool)))
                 if positions.shape[1] > g.capacity:  # more particles than room: grow (one recompile)
@@ -156,14 +266,22 @@ class SlicedGeometry:
             else:
                 t, q, s = fi.objects[g.name]
                 local = fi.vertices[g.name]
+                mesh = g.mesh if g.mesh is not None else plain_render_mesh(g.capacity, g.faces)
                 for i in index:
-                    per_slice.append(quat_rotate(q[i], local[i] * s[i]) + t[i])
-            update_group(self._mi, g, per_slice)
+                    scaled = local[i] * s[i]
+                    per_slice.append(quat_rotate(q[i], scaled[mesh.index]) + t[i])
+                    if g.smooth and g.rest is not None:
+                        key = tuple(float(c) for c in s[i])
+                        if key not in g.rest_cache:
+                            g.rest_cache.clear()
+                            g.rest_cache[key] = rest_normals(g.rest, mesh, s[i])
+                        normals.append(quat_rotate(q[i], slice_normals(scaled, g.rest_cache[key], mesh)))
+            update_group(self._mi, g, per_slice, normals or None)
 
     def _grow(self, group: SliceGroup, needed: int) -> None:
         """Replace a particle group by one with room for `needed` particles (x1.5)."""
         k = self.groups.index(group)
         capacity = 1 << int(np.ceil(np.log2(needed * 1.5)))
         bsdf = group.scenes[0].shapes()[0].bsdf()
-        self.groups[k] = build_group(self._mi, group.name, "particles", capacity, group.faces, bsdf, len(group.scenes), radius=group.radius)
+        self.groups[k] = build_group(self._mi, group.name, "particles", capacity, group.faces, bsdf, len(group.scenes), radius=group.radius, emitter=group.emitter)
         self._on_regroup([g.scenes for g in self.groups])

@@ -25,6 +25,7 @@ class World:
         self.movers: list[mi.Scene] = []
         self.slices: list[list[mi.Scene]] = []  # per non-rigid object: one scene per shutter sample
         self.emissive: list[int] = []  # indices of movers that carry area emitters
+        self.emissive_slices: list[int] = []  # indices of slice groups that carry area emitters
         self._spheres: tuple[list[tuple[float, ...]], np.ndarray] | None = None  # (boxes, spheres)
 
     def set_movers(self, movers: Sequence[mi.Scene]) -> None:
@@ -45,6 +46,31 @@ class World:
     def set_slices(self, groups: Sequence[Sequence[mi.Scene]]) -> None:
         """For each deforming object or particle system, one world-space scene per slice."""
         self.slices = [list(g) for g in groups]
+        self.emissive_slices = [k for k, g in enumerate(self.slices) if g and len(g[0].emitters()) > 0]
+
+    def slice_hit(self, group: int) -> int:
+        """The `hit_mover` value of a hit on slice group `group`: past the movers' indices
+        and their "none" (len(movers)), so mover tests never match it."""
+        return len(self.movers) + 1 + group
+
+    def sample_slice_emitter(self, group: int, si: Any, sample: Any, k: Any, active: Any) -> tuple[Any, Any]:
+        """An emitter direction sample from the emissive slice group `group` at the path's
+        slice k (slices are in world space): (DirectionSample3f, weight)."""
+        ds, weight = dr.zeros(mi.DirectionSample3f), mi.Spectrum(0.0)
+        for s, slice_scene in enumerate(self.slices[group]):
+            mine = active & (k == s)
+            ds_s, w_s = slice_scene.sample_emitter_direction(si, sample, False, mine)
+            ds, weight = dr.select(mine, ds_s, ds), dr.select(mine, w_s, weight)
+        return ds, weight
+
+    def slice_emitter_pdf(self, ds: Any, ref: Any, hit: Any, k: Any, pdf: Any, active: Any) -> Any:
+        """The solid-angle pdf with which `sample_slice_emitter` would have chosen the
+        emitter a BSDF-sampled ray hit on an emissive slice group (`pdf` elsewhere)."""
+        for group in self.emissive_slices:
+            for s, slice_scene in enumerate(self.slices[group]):
+                mine = active & (hit == self.slice_hit(group)) & (k == s)
+                pdf = dr.select(mine, slice_scene.pdf_emitter_direction(ref, ds, mine), pdf)
+        return pdf
 
     def slice_of(self, u: Any) -> Any:
         """The time slice a path at shutter fraction u sees: the nearest of S slices
@@ -59,13 +85,15 @@ class World:
         si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
         on_mover = mi.Bool(False)
         hit_mover = mi.UInt32(len(self.movers))
-        for group in self.slices:
+        for g, group in enumerate(self.slices):
             for s, slice_scene in enumerate(group):
                 mine = active & (k == s)
                 si_s = slice_scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=mine)
                 closer = mine & si_s.is_valid() & (si_s.t < si.t)
                 si = dr.select(closer, si_s, si)
                 on_mover |= closer
+                if g in self.emissive_slices:
+                    hit_mover = dr.select(closer, mi.UInt32(self.slice_hit(g)), hit_mover)
         # movers: a preliminary hit per mover (traversal only, and only for rays that meet
         # its swept sphere and then its bounding sphere at their time); the surface
         # interaction of the nearest is computed once, in its rest frame, and moved to

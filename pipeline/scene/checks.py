@@ -160,7 +160,7 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
     # each file once however many fields name it (its outcome is reported at each)
     decoded: dict[tuple[Path, str], str | None] = {}
 
-    def check_file(loc: "Loc", rel: str, kind: str) -> None:
+    def check_file(loc: "Loc", rel: str, kind: str, deforming: bool = False) -> None:
         if not (base_dir / rel).is_file():
             if (base_dir / rel).exists():
                 add(loc, f"not a regular file: {rel} (relative to {base_dir})")
@@ -169,14 +169,15 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
             return
         if not assets:
             return
-        key = ((base_dir / rel).resolve(), kind)
+        key = ((base_dir / rel).resolve(), kind + ("-render" if deforming else ""))
         if key not in decoded:
             decoded[key] = None
             try:
                 if kind == "mesh":
-                    from ..meshes import load_mesh
+                    from ..meshes import load_mesh, load_render_mesh
 
-                    load_mesh(key[0])
+                    # a deforming mesh is drawn from its render vertices (uvs, normals)
+                    load_render_mesh(key[0]) if deforming else load_mesh(key[0])
                 else:
                     from ..images import check_image
 
@@ -188,7 +189,7 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
 
     for i, obj in enumerate(scene.objects):
         if isinstance(obj, Mesh):
-            check_file(("objects", i, "file"), obj.file, "mesh")
+            check_file(("objects", i, "file"), obj.file, "mesh", deforming=obj.deform is not None)
         if isinstance(obj.deform, BlendShapes):
             for k, key in enumerate(obj.deform.keys):
                 if key.file is not None:
@@ -198,6 +199,9 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
     for i, light in enumerate(scene.lights):
         if isinstance(light, EnvmapLight):
             check_file(("lights", i, "file"), light.file, "image")
+    for i, obj in enumerate(scene.objects):
+        if obj.emission is not None and isinstance(obj.emission.radiance, Texture):
+            check_file(("objects", i, "emission", "radiance", "file"), obj.emission.radiance.file, "image")
     for i, mat in enumerate(scene.materials):
         for field in type(mat).model_fields:
             tex = getattr(mat, field, None)

@@ -170,8 +170,23 @@ ColorOrTexture = Union[Color, Texture]
 
 
 class _Material(Model):
+    """What every material may carry besides its BSDF: `two_sided` (both faces shade
+    alike), a tangent-space `normal_map` (raw RGB, Mitsuba `normalmap`) or a `bump` height
+    map (grey, `bump_scale`, Mitsuba `bumpmap`), and `opacity` (a cut-out mask: a grey
+    value or texture, Mitsuba `mask`)."""
+
     name: Name
     two_sided: bool = False
+    normal_map: Texture | None = None
+    bump: Texture | None = None
+    bump_scale: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 1.0
+    opacity: Union[Annotated[float, Field(ge=0, le=1)], Texture] = 1.0
+
+    @model_validator(mode="after")
+    def _one_perturbation(self) -> "_Material":
+        if self.normal_map is not None and self.bump is not None:
+            raise ValueError("a material takes a normal_map or a bump map, not both")
+        return self
 
 
 class Diffuse(_Material):
@@ -200,17 +215,33 @@ class Conductor(_Material):
 
     type: Literal["conductor"]
     preset: ConductorPreset = "Al"
-    roughness: Annotated[float, Field(ge=0, le=1)] = 0.0
-    tint: Color = 1.0
+    roughness: Union[Annotated[float, Field(ge=0, le=1)], Texture] = 0.0  # a texture: grey, GGX alpha = its square
+    tint: ColorOrTexture = 1.0  # scales the reflectance; a texture: RGB over the uv
 
 
 class Dielectric(_Material):
-    """Glass-like: reflects and refracts with index `ior`; smooth or rough."""
+    """Glass-like: reflects and refracts with index `ior`; smooth or rough. A solid
+    interface: its two faces are inside and outside, so `two_sided` is refused."""
 
     type: Literal["dielectric"]
     ior: Annotated[float, Field(gt=1, le=4)] = 1.5
-    roughness: Annotated[float, Field(ge=0, le=1)] = 0.0
-    tint: Color = 1.0
+    roughness: Union[Annotated[float, Field(ge=0, le=1)], Texture] = 0.0  # a texture: grey, GGX alpha = its square
+    tint: ColorOrTexture = 1.0  # scales the transmittance; a texture: RGB over the uv
+
+    @field_validator("two_sided")
+    @classmethod
+    def _transmissive(cls, value: bool) -> bool:
+        if value:
+            raise ValueError("a transmissive material has no front and back to make alike (Mitsuba's twosided refuses it); remove two_sided")
+        return value
+
+
+class ThinDielectric(Dielectric):
+    """A thin pane (window glass, a soap film): reflects and transmits with index `ior`
+    without bending the ray (Mitsuba `thindielectric`); smooth only."""
+
+    type: Literal["thindielectric"]  # type: ignore[assignment]
+    roughness: Annotated[float, Field(ge=0, le=0)] = 0.0  # type: ignore[assignment]
 
 
 class Principled(_Material):
@@ -221,11 +252,11 @@ class Principled(_Material):
     metallic: Union[Annotated[float, Field(ge=0, le=1)], Texture] = 0.0  # a texture: grey, raw
     roughness: Union[Annotated[float, Field(ge=0, le=1)], Texture] = 0.5  # a texture: grey, raw
     specular: Annotated[float, Field(ge=0, le=1)] = 0.5
-    clearcoat: Annotated[float, Field(ge=0, le=1)] = 0.0
+    clearcoat: Union[Annotated[float, Field(ge=0, le=1)], Texture] = 0.0  # a texture: grey, raw
 
 
 Material = Annotated[
-    Union[Diffuse, Plastic, Conductor, Dielectric, Principled],
+    Union[Diffuse, Plastic, Conductor, Dielectric, ThinDielectric, Principled],
     Field(discriminator="type"),
 ]
 
@@ -234,9 +265,10 @@ Material = Annotated[
 
 
 class Emission(Model):
-    """Makes the shape an area light; radiance in W sr^-1 m^-2 per channel."""
+    """Makes the shape an area light; radiance in W sr^-1 m^-2 per channel (or an RGB
+    texture over the surface's uv)."""
 
-    radiance: Color = 1.0
+    radiance: ColorOrTexture = 1.0
 
 
 class Collider(Model):

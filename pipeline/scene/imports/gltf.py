@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .records import Expansion, ImportFileError, Origin, SpecError
+from .records import Expansion, ImportFileError, Origin, SpecError, import_frames
 from .cache import cached, file_digest, write_atomic, write_ply
 
 COMPONENTS = {5120: np.dtype("<i1"), 5121: np.dtype("<u1"), 5122: np.dtype("<i2"), 5123: np.dtype("<u2"), 5125: np.dtype("<u4"), 5126: np.dtype("<f4")}
@@ -258,11 +258,11 @@ class GltfReader:
 
         names = _Names()
         prefix = spec.prefix
-        root_name = names.take(spec.root or f"{prefix}{sanitize(self.path.stem)}")
-        node_name = {k: names.take(prefix + sanitize(nodes[k].name or f"node{k}")) for k in order}
         ex = Expansion()
-        root_origin = Origin(self.shown, "<root>", {"transform": ("imports", self.index, "transform")}, ("imports", self.index))
-        ex.objects.append(({"name": root_name, "shape": "empty", "transform": spec.transform.model_dump(mode="json", exclude_defaults=True)}, root_origin))
+        # glTF is metres and +Y up, as we are: a stage frame only where the entry overrides
+        frames, root_name = import_frames(names.take, spec, self.index, self.shown, f"{prefix}{sanitize(self.path.stem)}")
+        node_name = {k: names.take(prefix + sanitize(nodes[k].name or f"node{k}")) for k in order}
+        ex.objects.extend(frames)
         self.names, self.node_name, self.root_name, self.prefix = names, node_name, root_name, prefix
         self.material_names: dict[int | None, str] = {}
         self.motions = self._animations(included)
@@ -595,6 +595,11 @@ class GltfReader:
         strength = float(((mat.extensions or {}).get("KHR_materials_emissive_strength") or {}).get("emissiveStrength", 1.0))
         if not factor.any() or strength <= 0:
             return None
+        if mat.emissiveTexture is not None:
+            # emissiveTexture x emissiveFactor x strength, in linear units: a float EXR
+            # (a strength above 1 does not fit a PNG)
+            where = f"materials[{index}].emissiveTexture"
+            return {"radiance": self._texture(mat.emissiveTexture.index, where, scale=factor * strength, raw=False, linear=True)}
         return {"radiance": _floats(factor * strength)}
 
     def _material(self, index: int | None, name: str) -> dict[str, Any]:
@@ -620,6 +625,18 @@ class GltfReader:
             rec["metallic"] = self._texture(pbr.metallicRoughnessTexture.index, tw, scale=np.array([metallic]), raw=True, channel=2)
         else:
             rec["metallic"], rec["roughness"] = min(max(metallic, 0.0), 1.0), min(max(roughness, 0.0), 1.0)
+        if mat.normalTexture is not None:  # tangent space, +Y up in the image as Mitsuba's normalmap reads it
+            bend = float(mat.normalTexture.scale) if mat.normalTexture.scale is not None else 1.0
+            rec["normal_map"] = self._texture(mat.normalTexture.index, f"{where}.normalTexture", scale=np.ones(1), raw=True, normal_scale=None if bend == 1.0 else bend)
+        # alphaMode: OPAQUE ignores alpha; MASK cuts at alphaCutoff; BLEND is coverage
+        mode = mat.alphaMode or "OPAQUE"
+        if mode in ("MASK", "BLEND"):
+            cutoff = float(mat.alphaCutoff if mat.alphaCutoff is not None else 0.5) if mode == "MASK" else None
+            alpha = float(factor[3]) if len(factor) > 3 else 1.0
+            if pbr is not None and pbr.baseColorTexture is not None:
+                rec["opacity"] = self._texture(pbr.baseColorTexture.index, f"{where}.alphaMode", scale=np.array([alpha]), raw=True, channel=3, cutoff=cutoff)
+            else:
+                rec["opacity"] = (1.0 if alpha >= cutoff else 0.0) if cutoff is not None else min(max(alpha, 0.0), 1.0)
         return rec
 
     def _image_bytes(self, image: int, where: str) -> tuple[bytes, str]:
@@ -645,7 +662,13 @@ class GltfReader:
             self.fail(iwhere, f"texture file not found (relative to {self.path.parent})")
         return file.read_bytes(), iwhere
 
-    def _texture(self, tex: int, where: str, scale: np.ndarray, raw: bool, channel: int | None = None) -> dict[str, Any]:
+    def _texture(self, tex: int, where: str, scale: np.ndarray, raw: bool, channel: int | None = None, cutoff: float | None = None, linear: bool = False,
+                 normal_scale: float | None = None) -> dict[str, Any]:
+        """Texture `tex` in the asset cache as one of our texture records: the image x
+        `scale` (colour in linear units), one `channel` of it (3: alpha) as grey, thresholded
+        at `cutoff` (1 at or above, else 0), (`linear`) a float EXR of linear RGB, or a
+        normal map with its x and y scaled by `normal_scale` (normalize((2c - 1) (s, s, 1)),
+        as glTF's normalTexture.scale says)."""
         textures = self.gltf.textures or []
         if not 0 <= tex < len(textures):
             self.fail(where, f"texture {tex} does not exist")
@@ -656,7 +679,7 @@ class GltfReader:
         data, iwhere = self._image_bytes(t.source, f"textures[{tex}].source")
         import hashlib
 
-        key = f"{hashlib.sha256(data).hexdigest()}|{_floats(scale)}|{channel}"
+        key = f"{hashlib.sha256(data).hexdigest()}|{_floats(scale)}|{channel}" + (f"|cut{cutoff}" if cutoff is not None else "") + ("|linear" if linear else "") + (f"|bend{normal_scale}" if normal_scale is not None else "")
 
         def write(tmp: Path) -> None:
             import io
@@ -668,21 +691,38 @@ class GltfReader:
                 im.load()
             except (UnidentifiedImageError, OSError) as exc:
                 self.fail(iwhere, f"cannot decode the image: {exc}")
+            if linear:
+                import OpenEXR
+
+                srgb = np.asarray(im.convert("RGB"), dtype=np.float64) / 255
+                lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4) * scale
+                OpenEXR.File({"type": OpenEXR.scanlineimage}, {"RGB": np.ascontiguousarray(lin, dtype=np.float32)}).write(str(tmp))
+                return
+            if normal_scale is not None:
+                n = np.asarray(im.convert("RGB"), dtype=np.float64) / 255 * 2 - 1
+                n[:, :, :2] *= normal_scale
+                n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-12)
+                Image.fromarray(np.clip(np.rint((n + 1) / 2 * 255), 0, 255).astype(np.uint8)).save(tmp, format="PNG")
+                return
             if channel is None and np.allclose(scale, 1.0):
                 im.save(tmp, format="PNG")
                 return
-            arr = np.asarray(im.convert("RGB"), dtype=np.float64)
+            arr = np.asarray(im.convert("RGBA" if channel == 3 else "RGB"), dtype=np.float64)
             if channel is not None:
                 arr = arr[:, :, channel]
+            factor = scale
+            if cutoff is not None:
+                arr = np.where(arr / 255 * scale[0] >= cutoff, 255.0, 0.0)
+                factor = np.ones(1)
             # the factor multiplies the texture (in linear units for colour: decode sRGB first)
             if not raw:
-                lin = np.where(arr / 255 <= 0.04045, arr / 255 / 12.92, ((arr / 255 + 0.055) / 1.055) ** 2.4) * scale
+                lin = np.where(arr / 255 <= 0.04045, arr / 255 / 12.92, ((arr / 255 + 0.055) / 1.055) ** 2.4) * factor
                 arr = 255 * np.where(lin <= 0.0031308, 12.92 * lin, 1.055 * np.clip(lin, 0, 1) ** (1 / 2.4) - 0.055)
             else:
-                arr = arr * scale[0]
+                arr = arr * factor[0]
             Image.fromarray(np.clip(np.rint(arr), 0, 255).astype(np.uint8)).save(tmp, format="PNG")
 
-        file = cached(f"{self.path.stem}-tex{tex}", key, ".png", write)
+        file = cached(f"{self.path.stem}-tex{tex}", key, ".exr" if linear else ".png", write)
         out: dict[str, Any] = {"file": str(file), "raw": raw}
         samplers = self.gltf.samplers or []
         if t.sampler is not None and 0 <= t.sampler < len(samplers):

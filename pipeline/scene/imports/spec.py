@@ -11,11 +11,11 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Union
+from typing import Annotated, Any, Literal, Union
 
 from pydantic import Field, field_validator
 
-from ..types import FiniteFloat, Model, NonNegative, Transform
+from ..types import FiniteFloat, Model, NonNegative, Positive, Transform
 
 IMPORT_SUFFIXES = (".gltf", ".glb", ".usd", ".usda", ".usdc")
 PREFIX_PATTERN = r"^([A-Za-z_][A-Za-z0-9_.\-]*)?$"
@@ -39,6 +39,10 @@ class ImportSpec(Model):
     light_scale: NonNegative = 1.0  # multiplies imported light intensities (docs/imports.md, units)
     time_offset: FiniteFloat = 0.0  # seconds: the file's time 0 plays at this scene time
     overrides: dict[str, dict[str, Any]] = {}
+    # metres per file unit and the file's up axis; default: the file's (USD metersPerUnit
+    # and upAxis where authored, else metres and +Y; glTF: metres, +Y)
+    units: Positive | None = None
+    up_axis: Literal["y", "z"] | None = None
 
     @field_validator("file")
     @classmethod

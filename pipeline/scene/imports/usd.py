@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from .records import Expansion, ImportFileError, Origin, SpecError
+from .records import Expansion, ImportFileError, Origin, SpecError, import_frames
 from .cache import cached, file_digest, write_ply
 from .gltf import _Names, sanitize
 
@@ -49,6 +49,29 @@ def _trs(m: np.ndarray, shown: str, where: str) -> dict[str, Any]:
         _fail(shown, where, "a sheared transform is not supported (translate, rotate, scale only)")
     x, y, z, w = Rotation.from_matrix(r).as_quat()
     return {"translate": [float(v) for v in m[:3, 3]], "rotate": {"quaternion": [float(w), float(x), float(y), float(z)]}, "scale": [float(v) for v in s]}
+
+
+TURN_STEP = 90.0  # degrees: the most a rotate op turns between two keys we write
+
+
+def _turn_codes(xf: Any, times: list[float]) -> list[float]:
+    """The time codes to key: the op samples, plus as many evenly spaced codes inside each
+    interval as keep every rotate op's angles (which USD interpolates linearly, so
+    0 -> 270 degrees turns 270 the long way) under TURN_STEP apart: slerp between keys
+    then follows USD's turn instead of the shortest arc, exactly for one-axis ops."""
+    from pxr import Usd, UsdGeom
+
+    rotates = [op for op in xf.GetOrderedXformOps() if str(UsdGeom.XformOp.GetOpTypeToken(op.GetOpType())).startswith("rotate")]
+    codes: list[float] = []
+    for a, b in zip(times[:-1], times[1:]):
+        turn = 0.0
+        for op in rotates:
+            va, vb = op.Get(Usd.TimeCode(a)), op.Get(Usd.TimeCode(b))
+            if va is not None and vb is not None:
+                turn = max(turn, float(np.max(np.abs(np.subtract(np.asarray(vb, dtype=np.float64), np.asarray(va, dtype=np.float64))))))
+        steps = max(1, min(int(math.ceil(turn / TURN_STEP)), MAX_SAMPLES))
+        codes.extend(a + (b - a) * k / steps for k in range(steps))
+    return codes + times[-1:]
 
 
 def _matrix(gf: Any) -> np.ndarray:
@@ -86,8 +109,14 @@ class UsdReader:
 
         spec = self.spec
         ex = Expansion()
-        root = self.names.take(spec.root or f"{spec.prefix}{sanitize(self.path.stem)}")
-        ex.objects.append(({"name": root, "shape": "empty", "transform": spec.transform.model_dump(mode="json", exclude_defaults=True)}, Origin(self.shown, "<root>", {"transform": ("imports", self.index, "transform")}, ("imports", self.index))))
+        # the stage's units and up axis (where authored: USD's own fallback is centimetres,
+        # but a stage without the metadata is taken in the shot's metres; docs/imports.md)
+        units = float(UsdGeom.GetStageMetersPerUnit(self.stage)) if UsdGeom.StageHasAuthoredMetersPerUnit(self.stage) else 1.0
+        if not math.isfinite(units) or units <= 0:
+            _fail(self.shown, "<stage>.metersPerUnit", f"{units} is not a positive number")
+        up = "z" if UsdGeom.GetStageUpAxis(self.stage) == UsdGeom.Tokens.z else "y"
+        frames, root = import_frames(self.names.take, spec, self.index, self.shown, f"{spec.prefix}{sanitize(self.path.stem)}", units, up)
+        ex.objects.extend(frames)
         if spec.nodes is not None:
             starts = []
             for name in spec.nodes:
@@ -144,7 +173,7 @@ class UsdReader:
             rec["transform"] = _trs(_matrix(xf.GetLocalTransformation(code)), self.shown, f"{where}.xformOp")
             return
         keys: dict[str, list[dict[str, Any]]] = {"translate": [], "rotate": [], "scale": []}
-        for code in times:
+        for code in _turn_codes(xf, times):
             trs = _trs(_matrix(xf.GetLocalTransformation(Usd.TimeCode(code))), self.shown, f"{where}.xformOp (time {code})")
             t = self.seconds(code)
             keys["translate"].append({"time": t, "value": trs["translate"]})
@@ -214,7 +243,11 @@ class UsdReader:
                 self.materials[mpath] = self.names.take(self.spec.prefix + sanitize(material.GetPrim().GetName()))
             rec["material"] = self.materials[mpath]
             emission = self._surface_input(mpath, "emissiveColor")
-            if emission is not None and any(v > 0 for v in emission):
+            glow = self._texture(mpath, "emissiveColor")
+            if glow is not None:
+                glow.pop("output")
+                rec["emission"] = {"radiance": glow}
+            elif emission is not None and any(v > 0 for v in emission):
                 rec["emission"] = {"radiance": emission}
 
     def _shader(self, mat_path: str) -> Any:
@@ -259,11 +292,42 @@ class UsdReader:
         if asset is None or not asset.resolvedPath:
             _fail(self.shown, where, f"texture file not found: {asset.path if asset is not None else '(none)'}")
         space = tex.GetInput("sourceColorSpace").Get() if tex.GetInput("sourceColorSpace") else None
-        return {"file": asset.resolvedPath, "raw": space == "raw"}
+        return {"file": asset.resolvedPath, "raw": space == "raw", "output": str(sources[0].sourceName)}
+
+    def _grey_texture(self, mat_path: str, name: str, threshold: float = 0.0) -> dict[str, Any] | None:
+        """A UsdUVTexture's one channel (the output connected to input `name`: r, g, b or a)
+        as a raw grey texture in the asset cache, cut at `threshold` (1 at or above, else 0)
+        when it is positive; the file itself where it is read whole (rgb, no cut)."""
+        texture = self._texture(mat_path, name)
+        if texture is None:
+            return None
+        output = texture.pop("output")
+        if output not in ("r", "g", "b", "a") and threshold <= 0:
+            return {**texture, "raw": True}
+        channel = "rgba".index(output) if output in ("r", "g", "b", "a") else 0
+        source = Path(texture["file"])
+
+        def write(tmp: Path) -> None:
+            from PIL import Image, UnidentifiedImageError
+
+            try:
+                with Image.open(source) as im:
+                    arr = np.asarray(im.convert("RGBA"), dtype=np.float64)[:, :, channel] / 255
+            except (UnidentifiedImageError, OSError) as exc:
+                _fail(self.shown, f"{mat_path}.inputs:{name}", f"cannot decode the texture {source.name}: {exc}")
+            if threshold > 0:
+                arr = (arr >= threshold).astype(np.float64)
+            Image.fromarray(np.rint(arr * 255).astype(np.uint8)).save(tmp, format="PNG")
+
+        key = f"{file_digest(source)}|channel{channel}|cut{threshold}"
+        return {"file": str(cached(f"{source.stem}-{output}", key, ".png", write)), "raw": True}
 
     def _material(self, mat_path: str, name: str) -> dict[str, Any]:
-        """UsdPreviewSurface -> principled: diffuseColor, metallic, roughness, clearcoat
-        (constants; texture-connected inputs take the shader's fallback value)."""
+        """UsdPreviewSurface -> principled: diffuseColor, metallic, roughness (constants or
+        UsdUVTextures), clearcoat; `normal` (a texture) -> normal_map; `opacity` (constant or
+        texture) -> opacity, cut at a positive opacityThreshold (constants only);
+        emissiveColor (constant or texture) -> the object's emission (`_mesh`). A texture read
+        through one channel (outputs:r/g/b/a) becomes that channel as a grey texture."""
         rec: dict[str, Any] = {"name": name, "type": "principled"}
         if self._shader(mat_path) is None:
             return {"name": name, "type": "diffuse"}
@@ -271,11 +335,27 @@ class UsdReader:
         rec["color"] = [min(max(c, 0.0), 1e6) for c in color] if isinstance(color, list) else 0.18
         texture = self._texture(mat_path, "diffuseColor")
         if texture is not None:
+            texture.pop("output")
             rec["color"] = texture
         for key, src in (("metallic", "metallic"), ("roughness", "roughness"), ("clearcoat", "clearcoat")):
             v = self._surface_input(mat_path, src)
             if isinstance(v, float):
                 rec[key] = min(max(v, 0.0), 1.0)
+            texture = self._grey_texture(mat_path, src) if key != "clearcoat" else None
+            if texture is not None:
+                rec[key] = texture
+        normal = self._texture(mat_path, "normal")
+        if normal is not None:
+            normal.pop("output")
+            rec["normal_map"] = {**normal, "raw": True}
+        opacity = self._surface_input(mat_path, "opacity")
+        threshold = self._surface_input(mat_path, "opacityThreshold")
+        cut = float(threshold) if isinstance(threshold, float) and threshold > 0 else 0.0
+        mask = self._grey_texture(mat_path, "opacity", cut)
+        if mask is not None:
+            rec["opacity"] = mask
+        elif isinstance(opacity, float) and opacity < 1.0:
+            rec["opacity"] = (1.0 if opacity >= cut else 0.0) if cut else min(max(opacity, 0.0), 1.0)
         return rec
 
     # --- cameras and lights -------------------------------------------------------------
