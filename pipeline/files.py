@@ -120,3 +120,12 @@ def writing(path: str | Path, doing: str = "writing", suffix: str = ".tmp") -> I
         if fault is not None:
             raise fault from None
         raise
+
+
+def confined(folder: str | Path, path: str | Path) -> bool:
+    """Whether `path` stays inside `folder` once every link on the way is followed: a
+    subfolder (or claims folder) pre-placed in the output folder as a link to elsewhere
+    would otherwise carry frames out of it."""
+    base = Path(folder).resolve()
+    target = Path(path).parent.resolve() / Path(path).name
+    return target == base or base in target.parents

@@ -98,6 +98,10 @@ def _bake_json(mutate: str) -> bytes:
         ball["scale"][1] = [float("inf"), 1.0, 1.0]
     elif mutate == "zero-quaternion":
         ball["rotation"][0] = [0.0, 0.0, 0.0, 0.0]
+    elif mutate == "frame-4000-digits":
+        doc["frames"][0]["frame"] = int("9" * 4000)
+    elif mutate == "samples-infinity":
+        doc["samples_per_frame"] = float("inf")
     elif mutate == "translation-1e39":
         ball["translation"][1][0] = 1e39
     elif mutate == "wrong-shape":
@@ -105,6 +109,35 @@ def _bake_json(mutate: str) -> bytes:
     elif mutate == "no-frames":
         del doc["frames"]
     return json.dumps(doc).replace("Infinity", "1e999").encode()
+
+
+def _npz_bake(mutate: str) -> bytes:
+    """The JSON bake of `_bake_json` as an NPZ (the layout motion bake writes), broken."""
+    import io
+    import tempfile
+
+    from motion.pipeline.bake.files import read_baked, write_baked
+
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "m.json").write_bytes(_bake_json(""))
+        write_baked(read_baked(Path(tmp) / "m.json"), Path(tmp) / "m.npz")
+        arrays = dict(np.load(Path(tmp) / "m.npz", allow_pickle=False))
+    key = next(k for k in arrays if k.startswith("samples/") and k.endswith("/translation"))
+    if mutate == "complex":
+        arrays[key] = arrays[key].astype(np.complex128)
+    elif mutate == "frame-inf":
+        arrays["frames"] = arrays["frames"].astype(np.float64)
+        arrays["frames"][0] = np.inf
+    out = io.BytesIO()
+    np.savez(out, **arrays)
+    return out.getvalue()
+
+
+def _usda(text: str) -> str:
+    return "#usda 1.0\n" + text
+
+
+USD_SCENE = BASE + "imports: [{file: root.usda}]\n"
 
 
 def _exr(meta: dict[str, Any] | None = None, fps: Any = 24, window: tuple[int, int] | None = None) -> bytes:
@@ -274,6 +307,19 @@ CASES: list[tuple[str, str, dict[str, Any], list[str]]] = [
     ("ik-zero-length-bones", "degenerate", {"scene.yaml": BASE.replace("  - {name: ball, shape: sphere, radius: 0.5}\n", "  - {name: a, shape: sphere, radius: 0.1}\n  - {name: b, shape: sphere, radius: 0.1, parent: a}\n"
                                                                        "  - {name: c, shape: sphere, radius: 0.1, parent: b}\n  - {name: tgt, shape: sphere, radius: 0.1, transform: {translate: [1, 0, 0]}}\n")
                                                           + "ik: [{chain: [a, b, c], target: tgt}]\n"}, _r()),
+    # --- round 3: USD layers resolve inside the scene's folder, regular files, no cycles ---
+    ("usd-sublayer-self", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@./root.usda@]\n)\ndef Xform "a" {}\n')}, V),
+    ("usd-sublayer-dev-zero", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@/dev/zero@]\n)\ndef Xform "a" {}\n')}, V),
+    ("usd-sublayer-fifo", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@./f.usda@]\n)\ndef Xform "a" {}\n'), "f.usda": "<fifo>"}, V),
+    ("usd-reference-outside", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('def Xform "a" (\n    references = @/etc/hostname@</x>\n) {}\n')}, V),
+    ("usd-cycle-two", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@./b.usda@]\n)\n'), "b.usda": _usda('(\n    subLayers = [@./root.usda@]\n)\n')}, V),
+    # --- round 3: malformed records in bake files and imports ---
+    ("bake-json-frame-4000-digits", "malformed", {"scene.yaml": BASE, "m.json": _bake_json("frame-4000-digits")}, _r("--motion", "m.json")),
+    ("bake-json-samples-infinity", "malformed", {"scene.yaml": BASE, "m.json": _bake_json("samples-infinity")}, _r("--motion", "m.json")),
+    ("bake-npz-complex", "malformed", {"scene.yaml": BASE, "m.npz": _npz_bake("complex")}, _r("--motion", "m.npz")),
+    ("bake-npz-frame-inf", "malformed", {"scene.yaml": BASE, "m.npz": _npz_bake("frame-inf")}, _r("--motion", "m.npz")),
+    ("gltf-json-deep", "malformed", {"scene.yaml": BASE + "imports: [{file: d.gltf}]\n", "d.gltf": '{"asset": {"version": "2.0"}, "extras": ' + "[" * 100000 + "]" * 100000 + "}"}, V),
+    ("telecine-pattern-20000", "malformed", SEQ, ["telecine", "in", "-o", "out/t", "--pattern", "23" * 10000]),
     ("link-deliver-check", "links", {"scene.yaml": BASE, "elsewhere/keep": "", "out/deliver": ("link", "../elsewhere")}, ["render", "scene.yaml", "-o", "out", "--check", "--deliver", "contact"]),
 ]
 
@@ -372,7 +418,7 @@ def test_hostile_case_is_a_clean_error(results: tuple[Path, set[str], set[str], 
 
 def test_every_class_is_covered() -> None:
     kinds = {c[1] for c in CASES}
-    assert kinds == {"yaml-bomb", "sizes", "render-time", "output", "non-finite", "misreported", "options", "scheduler", "links", "range", "degenerate"}
+    assert kinds == {"yaml-bomb", "sizes", "render-time", "output", "non-finite", "misreported", "options", "scheduler", "links", "range", "degenerate", "usd-layers", "malformed"}
     assert not Path("/tmp/motion-escaped").exists()
 
 

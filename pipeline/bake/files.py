@@ -177,6 +177,8 @@ def _read_npz(fh: Any, path: Path) -> dict[str, Any]:
                 shape, _, dtype = read_header(member)  # the header only, nothing decompressed
             if dtype.hasobject:
                 raise BakeFileError(f"{path}: array {info.filename!r} holds Python objects (refused)")
+            if dtype.kind not in "fiubU":
+                raise BakeFileError(f"{path}: array {info.filename!r} holds {dtype} values; a bake holds real numbers")
             declared += int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
             if declared > MAX_BAKE_ARRAY_BYTES:
                 raise BakeFileError(f"{path}: its arrays declare more than {MAX_BAKE_ARRAY_BYTES} bytes (the limit)")
@@ -190,7 +192,8 @@ def _read_npz(fh: Any, path: Path) -> dict[str, Any]:
     return doc
 
 
-_MALFORMED = (KeyError, TypeError, ValueError, IndexError, AttributeError)
+_MALFORMED = (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError)
+MAX_SAMPLES_PER_FRAME = 4096  # shutter samples a frame may declare
 
 
 def read_baked(path: str | Path) -> BakedMotion:
@@ -208,11 +211,19 @@ def read_baked(path: str | Path) -> BakedMotion:
     except _MALFORMED as exc:
         raise BakeFileError(f"{path}: its header (scene, fps, shutter, samples_per_frame) is malformed: {type(exc).__name__}: {exc}") from None
     scene, fps, angle, position, samples = header
+    if not 1 <= samples <= MAX_SAMPLES_PER_FRAME:
+        raise BakeFileError(f"{path}: samples_per_frame {samples} is not 1 to {MAX_SAMPLES_PER_FRAME}")
     try:
         records = _npz_records(doc["arrays"]) if "arrays" in doc else list(doc["frames"])
         numbers = [int(r["frame"]) for r in records]
     except _MALFORMED as exc:
         raise BakeFileError(f"{path}: the frame list is malformed ({type(exc).__name__}: {exc})") from None
+    from ..timeline import MAX_FRAME_NUMBER
+
+    wild = next((n for n in numbers if abs(n) > MAX_FRAME_NUMBER), None)
+    if wild is not None:
+        shown = str(wild) if len(str(wild)) < 24 else f"{str(wild)[:12]}... ({len(str(wild))} digits)"
+        raise BakeFileError(f"{path}: frame number {shown} is beyond +-{MAX_FRAME_NUMBER}")
     frames = []
     for number, rec in zip(numbers, records):
         try:
@@ -295,7 +306,10 @@ def _npz_records(arrays: dict[str, np.ndarray]) -> list[dict[str, Any]]:
     """The NPZ layout (stacked over frames) as the JSON layout, one record per frame;
     vertices and particles nest like the rest."""
     out = []
-    for k, f in enumerate(arrays["frames"]):
+    frames = np.asarray(arrays["frames"])
+    if frames.dtype.kind == "f" and not (np.isfinite(frames).all() and (frames == np.round(frames)).all()):
+        raise ValueError(f"frame numbers must be whole numbers, got {frames[~(np.isfinite(frames) & (frames == np.round(frames)))][:1]}")
+    for k, f in enumerate(frames):
         rec: dict[str, Any] = {"frame": int(f), "time": float(arrays["times"][k]), "shutter": arrays["shutter"][k], "at_frame": {}, "samples": {}}
         if "sample_times" in arrays:
             rec["sample_times"] = arrays["sample_times"][k]
