@@ -307,6 +307,12 @@ CASES: list[tuple[str, str, dict[str, Any], list[str]]] = [
     ("ik-zero-length-bones", "degenerate", {"scene.yaml": BASE.replace("  - {name: ball, shape: sphere, radius: 0.5}\n", "  - {name: a, shape: sphere, radius: 0.1}\n  - {name: b, shape: sphere, radius: 0.1, parent: a}\n"
                                                                        "  - {name: c, shape: sphere, radius: 0.1, parent: b}\n  - {name: tgt, shape: sphere, radius: 0.1, transform: {translate: [1, 0, 0]}}\n")
                                                           + "ik: [{chain: [a, b, c], target: tgt}]\n"}, _r()),
+    # --- round 3: sizes of imports, bakes, flocks, checked before allocation ---
+    ("keys-300k", "sizes-3", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, motion: {type: keyframes, channels: {translate: {keys: ["
+                                                          + ",".join(f"{{time: {i}e-6, value: [0, 0, 0]}}" for i in range(300_000)) + "]}}}}")}, V),
+    ("flock-160k-agents", "sizes-3", {"scene.yaml": _obj("{name: birds, shape: cube, size: 0.1, deform: {type: flock, count: 160000}}").replace("last: 2", "last: 1200")}, _r()),
+    ("texture-30000-squared", "sizes-3", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, material: t}") + "materials: [{name: t, type: diffuse, color: {file: t.png}}]\n",
+                                          "t.png": _png(1, 1, declared=(30000, 30000))}, _r()),
     # --- round 3: USD layers resolve inside the scene's folder, regular files, no cycles ---
     ("usd-sublayer-self", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@./root.usda@]\n)\ndef Xform "a" {}\n')}, V),
     ("usd-sublayer-dev-zero", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@/dev/zero@]\n)\ndef Xform "a" {}\n')}, V),
@@ -418,7 +424,7 @@ def test_hostile_case_is_a_clean_error(results: tuple[Path, set[str], set[str], 
 
 def test_every_class_is_covered() -> None:
     kinds = {c[1] for c in CASES}
-    assert kinds == {"yaml-bomb", "sizes", "render-time", "output", "non-finite", "misreported", "options", "scheduler", "links", "range", "degenerate", "usd-layers", "malformed"}
+    assert kinds == {"yaml-bomb", "sizes", "render-time", "output", "non-finite", "misreported", "options", "scheduler", "links", "range", "degenerate", "usd-layers", "malformed", "sizes-3"}
     assert not Path("/tmp/motion-escaped").exists()
 
 
@@ -611,3 +617,31 @@ def test_a_plan_with_no_margin_in_a_corridor_is_refused_in_bounded_time() -> Non
     with pytest.raises(_Located, match="give a larger margin"):
         build_path(Grid(wall, 0.1, np.array([0.0, 0.0])), [[0.75, 0.0, 1.25], [4.35, 0.0, 4.8]], 0.25, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, "none")
     assert time.perf_counter() - t0 < 10
+
+
+# --- round 3 (issue 24): caches ---------------------------------------------------------------
+
+
+def test_a_cache_folder_that_is_a_file_is_one_line_before_any_work(tmp_path: Path) -> None:
+    from farm_util import motion  # noqa: F401  (the real command, with its environment)
+
+    (tmp_path / "scene.yaml").write_text(BASE.replace(", variant: scalar_rgb", ""))
+    (tmp_path / "cachefile").write_text("x")
+    env = {**os.environ, "MOTION_CACHE_DIR": str(tmp_path / "cachefile")}
+    res = subprocess.run([str(Path(sys.executable).with_name("motion")), "render", str(tmp_path / "scene.yaml"), "-o", str(tmp_path / "out"), "--no-progress"],
+                         capture_output=True, text=True, env=env, timeout=120)
+    assert res.returncode == 2 and "is a file; point MOTION_CACHE_DIR at a folder" in res.stderr and "Traceback" not in res.stderr, res.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_import_cache_keeps_to_the_asset_cache_cap(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The import cache ignored MOTION_ASSET_CACHE_CAP (it grew without bound); it now
+    evicts its least recently used entries like the converted-asset cache, never the entry
+    just made."""
+    from motion.pipeline.scene.imports import cache
+
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("MOTION_ASSET_CACHE_CAP", "2500")
+    made = [cache.cached(f"m{i}", f"key{i}", ".bin", lambda p: p.write_bytes(b"x" * 1000)) for i in range(5)]
+    held = [p for p in made if p.exists()]
+    assert made[-1] in held and sum(p.stat().st_size for p in held) <= 2500, held

@@ -133,6 +133,9 @@ def preflight(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: 
     from ..scene.checks import bake_budget_problems
 
     check_env_sizes()  # $MOTION_MAX_LANES, $MOTION_ASSET_CACHE_CAP
+    from ..cache import check_cache_root
+
+    check_cache_root()  # $MOTION_CACHE_DIR a file or not writable: one line now, not in every worker
     for flag, value, limit in (("--workers", req.workers, MAX_WORKERS), ("--threads", req.threads, MAX_THREADS), ("--retries", req.retries, MAX_RETRIES)):
         if value is not None and value > limit:
             raise UsageError(f"{flag} {value}: the limit is {limit}")
