@@ -26,6 +26,7 @@ from .cache import cached, file_digest, write_ply
 from .gltf import _Names, sanitize
 
 MAX_SAMPLES = 100_000  # time samples per prim we are willing to key
+MAX_TOTAL_SAMPLES = 500_000  # time samples of all prims of one stage together
 FOV_SUBKEYS = 16  # fov keys per focal-length sample interval (docs/imports.md)
 
 
@@ -100,6 +101,13 @@ class UsdReader:
         self.names = _Names()
         self.at = "<stage>"  # the prim being read: the location of an unforeseen problem
 
+    def _count_samples(self, n: int, where: str) -> None:
+        """The stage's time samples, all prims together, within MAX_TOTAL_SAMPLES (20
+        references of 99,999 samples each passed the per-prim limit and ran out of memory)."""
+        self.samples_total = getattr(self, "samples_total", 0) + n
+        if self.samples_total > MAX_TOTAL_SAMPLES:
+            _fail(self.shown, where, f"the stage's prims hold more than {MAX_TOTAL_SAMPLES} time samples together (the limit)")
+
     def seconds(self, code: float) -> float:
         """Scene seconds of a USD time code (timeCodesPerSecond, plus the import's time_offset)."""
         return code / self.tcps + self.spec.time_offset
@@ -110,6 +118,14 @@ class UsdReader:
 
         spec = self.spec
         ex = Expansion()
+        # every prim's time samples counted before any is read: the budget refuses a stage of
+        # 20 references x 99,999 samples at once, not after reading most of them
+        total = 0
+        for prim in self.stage.Traverse():
+            for attr in prim.GetAttributes():
+                total += attr.GetNumTimeSamples()
+                if total > MAX_TOTAL_SAMPLES:
+                    _fail(self.shown, str(prim.GetPath()), f"the stage's prims hold more than {MAX_TOTAL_SAMPLES} time samples together (the limit)")
         # the stage's units and up axis (where authored: USD's own fallback is centimetres,
         # but a stage without the metadata is taken in the shot's metres; docs/imports.md)
         units = float(UsdGeom.GetStageMetersPerUnit(self.stage)) if UsdGeom.StageHasAuthoredMetersPerUnit(self.stage) else 1.0
@@ -169,6 +185,7 @@ class UsdReader:
         times = sorted(xf.GetTimeSamples())
         if len(times) > MAX_SAMPLES:
             _fail(self.shown, where, f"{len(times)} transform time samples; the limit is {MAX_SAMPLES}")
+        self._count_samples(len(times), where)
         if len(times) <= 1:
             code = Usd.TimeCode(times[0]) if times else Usd.TimeCode.Default()
             rec["transform"] = _trs(_matrix(xf.GetLocalTransformation(code)), self.shown, f"{where}.xformOp")
@@ -229,6 +246,7 @@ class UsdReader:
         if len(times) > 1:
             if len(times) > MAX_SAMPLES:
                 _fail(self.shown, f"{where}.points", f"{len(times)} time samples; the limit is {MAX_SAMPLES}")
+            self._count_samples(len(times), f"{where}.points")
             keys = []
             for code in times:
                 pts = np.asarray(points_attr.Get(Usd.TimeCode(code)), dtype=np.float64).reshape(-1, 3)
