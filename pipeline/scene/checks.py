@@ -398,15 +398,29 @@ def expression_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
 
 
 
+def _dark(value: object) -> bool:
+    """A colour (one number or three) that emits nothing; a texture may emit."""
+    if isinstance(value, (int, float)):
+        return value == 0
+    return isinstance(value, tuple) and all(v == 0 for v in value)
+
+
 def scene_warnings(scene: Scene) -> list[str]:
-    """What is valid but almost surely not meant: a scene with nothing in it, or with no
-    light (no light, no emissive object, no environment), renders black frames."""
+    """What is valid but almost surely not meant: a scene with nothing in it, nothing
+    visible in it, or no light (no light, no emissive object, no environment; lights and
+    emission all of strength 0 and not animated) renders black frames."""
     out = []
+    shown = [o for o in scene.objects if o.visible and o.shape != "empty"]
     if not scene.objects:
         out.append("the scene has no objects: its frames show only the lights' environment")
-    emissive = any(getattr(o, "emission", None) is not None for o in scene.objects)
-    if not scene.lights and not emissive:
-        out.append("the scene has no lights and no emissive objects: every frame renders black")
+    elif not shown:
+        out.append(f"none of the scene's {len(scene.objects)} objects is visible (empty shapes or visible: false): its frames show only the lights' environment")
+    strength = {"constant": "radiance", "point": "intensity", "spot": "intensity", "directional": "irradiance", "envmap": "scale"}
+    lit = [light for light in scene.lights if light.motion.type != "static" or not _dark(getattr(light, strength[light.type]))]
+    emissive = [o for o in shown if o.emission is not None and not _dark(o.emission.radiance)]
+    if not lit and not emissive:
+        what = "no lights" if not scene.lights else "only lights of strength 0"
+        out.append(f"the scene has {what} and no emissive objects: every frame renders black")
     return out
 
 
