@@ -324,9 +324,9 @@ materials:
   - {name: glass, type: dielectirc}
 objects:
   - {name: a, shape: sphere, radius: 0.5, material: rde}
-  - {name: b, shape: shpere, parent: a, material: glass}
+  - {name: b, shape: shpere, parent: a, material: glass, transform: {translate: [0, 1, 0]}}
   - {shape: cube, size: 1, material: blu, transform: {translate: [1.0e39, 0, 0]}}
-  - {name: m, shape: mesh, parent: b}
+  - {name: m, shape: mesh, parent: b, transform: {translate: [0, 1, 0]}}
   - {name: c, shape: sphere, parent: nobody}
 ik: [{chain: [a, b, m], target: c}]
 """

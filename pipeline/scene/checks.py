@@ -134,6 +134,9 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
                 add(("ik", j, "chain", k), f"'{name}' must be a child of '{ik.chain[k - 1]}' (a chain is a run of parents and children)")
             elif objects_by_name[name].motion.type in ("dynamics", "plan"):
                 add(("ik", j, "chain", k), f"'{name}' has {objects_by_name[name].motion.type} motion; IK turns keyed or static joints")
+            elif k > 0 and _fixed_at_parent(objects_by_name[name]):
+                add(("ik", j, "chain", k), f"the bone {ik.chain[k - 1]} -> {name} has no length ({name} sits at {ik.chain[k - 1]}'s origin and nothing "
+                                           f"moves it): IK turns bones, so each needs a length (translate {name} away from {ik.chain[k - 1]})")
         for field in ("target", "pole"):
             name = getattr(ik, field)
             if name is None:
@@ -218,6 +221,15 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
         check_channels(("lights", i, "motion"), light.motion, f"{light.type} light", add)
     problems.extend(expression_problems(scene, source))
     return problems
+
+
+def _fixed_at_parent(obj: object) -> bool:
+    """A chain joint whose translation is zero and not animated: its bone from the parent
+    has no length at any time (motion/ik.py refuses the animated case when it occurs)."""
+    motion = obj.motion  # type: ignore[attr-defined]
+    if any(obj.transform.translate) or motion.type not in ("static", "keyframes"):  # type: ignore[attr-defined]
+        return False
+    return motion.type == "static" or "translate" not in motion.channels
 
 
 def output_pattern_problem(pattern: str) -> str | None:
@@ -425,7 +437,6 @@ def scene_warnings(scene: Scene) -> list[str]:
 
 
 NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
-RADIANCE_KEYS = ("radiance",)  # values a camera ray can meet directly: a frame's pixel value
 
 
 def numeric_range_problems(data: Any, source: "SourceMap", scene: Scene) -> list[Problem]:
@@ -434,7 +445,7 @@ def numeric_range_problems(data: Any, source: "SourceMap", scene: Scene) -> list
     output (output.pixel_type: half, the default) every radiance one a half holds, located
     at the field that says it. Animated, simulated, imported and baked values are checked
     once more after the bake (shot stage)."""
-    from ..limits import HALF_MAX, float32_problem
+    from ..limits import SEEN_RADIANCE, float32_problem, half_problem
 
     problems: list[Problem] = []
     half = scene.output.pixel_type == "half"
@@ -444,7 +455,7 @@ def numeric_range_problems(data: Any, source: "SourceMap", scene: Scene) -> list
             return
         if isinstance(node, dict):
             for k, v in node.items():
-                walk(v, (*loc, k), radiance or k in RADIANCE_KEYS)
+                walk(v, (*loc, k), radiance or k in SEEN_RADIANCE)
         elif isinstance(node, list):
             for i, v in enumerate(node):
                 walk(v, (*loc, i), radiance)
@@ -457,9 +468,8 @@ def numeric_range_problems(data: Any, source: "SourceMap", scene: Scene) -> list
                 why = f"{str(node)[:12]}... ({len(str(node))} digits) is beyond what the renderer holds"
             if why is not None:
                 problems.append(source.problem(loc, why))
-            elif radiance and half and abs(node) > HALF_MAX:
-                problems.append(source.problem(loc, f"radiance {node:g} is beyond what a half-float EXR holds ({HALF_MAX:g}): "
-                                                    "its pixels would be inf; use output.pixel_type: float, or lower it"))
+            elif radiance and half and (why := half_problem(float(node))) is not None:
+                problems.append(source.problem(loc, why))
 
     walk(data, (), False)
     return problems

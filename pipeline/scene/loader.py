@@ -102,6 +102,7 @@ SALVAGE_ROUNDS = 8
 # required field missing) is replaced by a stand-in of the same name at the same index, so
 # that references to it still resolve and the items after it keep their place.
 STAND_INS: dict[str, tuple[str, str]] = {"objects": ("shape", "empty"), "materials": ("type", "diffuse"), "lights": ("type", "constant")}
+KEPT = ("parent", "transform")  # what a stand-in keeps of the item (its name aside)
 UNNAMED = "_unnamed_"  # the prefix of a stand-in name for an item missing its own
 
 
@@ -110,7 +111,7 @@ def salvage(exc: ValidationError, data: dict[str, Any]) -> tuple[Scene, list[tup
     run on the rest and every problem is reported at once: a refused field is dropped (its
     enclosing mapping when a required field is missing; a list item's enclosing list key);
     a named item of `objects`, `materials` or `lights` refused whole keeps its name,
-    parent and place as a stand-in (an unknown kind becomes the closest known one, as the message
+    parent, transform and place as a stand-in (an unknown kind becomes the closest known one, as the message
     suggests; a missing name a unique placeholder). Returns the scene and the dropped
     paths, or None when that does not converge."""
     import copy
@@ -143,8 +144,8 @@ def salvage(exc: ValidationError, data: dict[str, Any]) -> tuple[Scene, list[tup
             if close:
                 item[tag] = close[0]  # checked as the kind the message suggests; what that kind refuses goes next round
                 return True
-        parent = item.get("parent") if isinstance(item, dict) else None
-        items[loc[1]] = {"name": name, tag: fallback, **({"parent": parent} if isinstance(parent, str) else {})}
+        kept = {k: item[k] for k in KEPT if isinstance(item, dict) and k in item}  # what refers across items; a bad one goes next round
+        items[loc[1]] = {**kept, "name": name, tag: fallback}
         dropped.append(loc)
         return True
 
