@@ -397,7 +397,7 @@ def test_located_errors_point_at_the_field(results: tuple[Path, set[str], set[st
         "ballistic-overflow-bake": ("scene.yaml:6:", "generators[0].v0[0]: 1e+308 is beyond what the renderer holds"),
         "range-translate-1e39": ("scene.yaml:6:", "objects[0].transform.translate[0]: 1e+39 is beyond what the renderer holds"),
         "range-radiance-half": ("scene.yaml:6:", "objects[0].emission.radiance: radiance 100000 is beyond what a half-float EXR holds"),
-        "range-expression-1e48": ("scene.yaml:6:", "object 'ball': translation is not finite in the renderer's float32 at t ="),
+        "range-expression-1e48": ("scene.yaml:6:", "objects[0].motion.channels.translate[0]: expression '10**24 * 10**24 * (t + 1)' is 1e+48 at frame 0"),
         "range-bake-json-1e39": ("m.json", "object 'ball': translation is not finite in the renderer's float32"),
         "ik-zero-length-bones": ("scene.yaml:", "ik[0].chain[1]: the bone a -> b has no length"),
         "bake-zero-quaternion": ("m.json", "object 'ball': rotation is not a unit quaternion"),
@@ -668,13 +668,21 @@ def test_malformed_records_are_located_refusals(tmp_path: Path, case: tuple[str,
     _refused(tmp_path, argv, *fragments, capsys=capsys)
 
 
-def test_range_policy_covers_seen_radiance_after_the_bake_and_beside_schema_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """Issue 24, numbers the renderer cannot hold: an environment's radiance animated past
-    what a half-float frame holds rendered (exit 0, pixels clamped); a number past float32
-    was reported only once the scene's other mistakes were fixed; NPZ bakes past float32."""
+def test_range_policy_covers_expressions_at_validation_seen_radiance_and_schema_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 24, numbers the renderer cannot hold: an expression channel reaching 1e48 was
+    found only by the bake (`motion validate` said ok); an environment's radiance animated
+    past what a half-float frame holds rendered (exit 0, pixels clamped); a number past
+    float32 was reported only once the scene's other mistakes were fixed; NPZ bakes."""
     light = "{type: constant, radiance: 0.5}"
     (tmp_path / "scene.yaml").write_text(BASE.replace(light, "{type: constant, radiance: 0.5, motion: {type: procedural, scalars: {radiance: '1e5 * (t + 1)'}}}"))
-    _refused(tmp_path, _render(tmp_path), "scene.yaml:3:", "lights[0].motion: light 'light0': radiance reaches 100000 at t = ", "half-float", capsys=capsys)
+    _refused(tmp_path, ["validate", str(tmp_path / "scene.yaml")], "scene.yaml:3:", "lights[0].motion.scalars.radiance: expression '1e5 * (t + 1)' is 100000 at frame 0",
+             "half-float frame", capsys=capsys)
+    (tmp_path / "scene.yaml").write_text(BASE.replace(light, "{type: constant, radiance: 0.5, motion: {type: keyframes, interpolation: catmull-rom, channels: {radiance: "
+                                        "{keys: [{time: 0, value: 0}, {time: 1, value: 65000}, {time: 2, value: 65000}]}}}}"))
+    # every key holds in a half; the spline overshoots them between frames 1 and 2 (at a shutter sample)
+    _refused(tmp_path, _render(tmp_path), "scene.yaml:3:", "lights[0].motion: light 'light0': radiance reaches 6", "beyond what a half-float EXR holds", capsys=capsys)
+    (tmp_path / "scene.yaml").write_text(BASE.replace(light, "{type: constant, radiance: 0.5, motion: {type: procedural, scalars: {radiance: '10**24 * 10**24'}}}"))
+    _refused(tmp_path, ["validate", str(tmp_path / "scene.yaml")], "scene.yaml:3:", "is 1e+48 at frame 0 (t = 0 s): beyond what the renderer's float32 holds", capsys=capsys)
     (tmp_path / "scene.yaml").write_text(BASE.replace("radius: 0.5}", "radius: 0.5, transform: {translate: [1.0e39, 0, 0]}, radious: 1}"))
     with pytest.raises(SceneError) as err:
         load_scene(tmp_path / "scene.yaml")

@@ -377,14 +377,42 @@ def check_channels(loc: "Loc", motion: object, owner: str, add) -> None:  # type
 
 
 def expression_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
-    """Expressions are parsed (never executed) here, so a bad one fails before the job."""
+    """Expressions are parsed (never executed as Python) here, so a bad one fails before
+    the job; a channel of time alone is also evaluated at every frame time, and a value the
+    renderer cannot hold (limits.py: float32; a radiance seen directly past what a
+    half-float frame holds) is refused at the channel, with the first time it occurs."""
+    import numpy as np
+
+    from ..limits import SEEN_RADIANCE, beyond_float32, beyond_half
+
     problems: list[Problem] = []
+    timeline = scene.timeline.timeline()
+    count = scene.timeline.last - scene.timeline.first + 1
+    # at most MAX_FRAMES frame times (a longer timeline is refused by derived_problems)
+    times = np.arange(scene.timeline.first, scene.timeline.first + min(count, MAX_FRAMES), dtype=np.float64) / float(timeline.fps)
+    half = scene.output.pixel_type == "half"
 
     def check(loc: "Loc", text: str, variables: tuple[str, ...]) -> None:
         try:
-            parse_expression(text, variables)
+            expr = parse_expression(text, variables)
         except ExpressionError as exc:
             problems.append(source.problem(loc, str(exc)))
+            return
+        if variables != ("t",):
+            return  # a field of space and time (wind): evaluated by the simulation
+        try:
+            with np.errstate(all="ignore"):
+                value = np.broadcast_to(np.asarray(expr.evaluate({"t": times}), dtype=np.float64), times.shape)
+        except (ArithmeticError, ValueError) as exc:  # an integer power past float64: OverflowError
+            problems.append(source.problem(loc, f"expression {text!r} cannot be evaluated: {exc}"))
+            return
+        seen = half and loc[-1] in SEEN_RADIANCE
+        bad = beyond_float32(value) | (beyond_half(value) if seen else False)
+        if bad.any():
+            k = int(np.argmax(bad))
+            holds = "a half-float frame (65504)" if seen and np.isfinite(value[k]) and not beyond_float32(value[k]) else "the renderer's float32"
+            problems.append(source.problem(loc, f"expression {text!r} is {float(value[k]):g} at frame {scene.timeline.first + k} (t = {times[k]:.6g} s): "
+                                                f"beyond what {holds} holds"))
 
     blocks: list[tuple["Loc", object]] = [(("camera", "motion"), scene.camera.motion)]
     blocks += [(("objects", i, "motion"), o.motion) for i, o in enumerate(scene.objects)]
