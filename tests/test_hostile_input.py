@@ -98,6 +98,10 @@ def _bake_json(mutate: str) -> bytes:
         ball["scale"][1] = [float("inf"), 1.0, 1.0]
     elif mutate == "zero-quaternion":
         ball["rotation"][0] = [0.0, 0.0, 0.0, 0.0]
+    elif mutate == "frame-4000-digits":
+        doc["frames"][0]["frame"] = int("9" * 4000)
+    elif mutate == "samples-infinity":
+        doc["samples_per_frame"] = float("inf")
     elif mutate == "translation-1e39":
         ball["translation"][1][0] = 1e39
     elif mutate == "wrong-shape":
@@ -105,6 +109,35 @@ def _bake_json(mutate: str) -> bytes:
     elif mutate == "no-frames":
         del doc["frames"]
     return json.dumps(doc).replace("Infinity", "1e999").encode()
+
+
+def _npz_bake(mutate: str) -> bytes:
+    """The JSON bake of `_bake_json` as an NPZ (the layout motion bake writes), broken."""
+    import io
+    import tempfile
+
+    from motion.pipeline.bake.files import read_baked, write_baked
+
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "m.json").write_bytes(_bake_json(""))
+        write_baked(read_baked(Path(tmp) / "m.json"), Path(tmp) / "m.npz")
+        arrays = dict(np.load(Path(tmp) / "m.npz", allow_pickle=False))
+    key = next(k for k in arrays if k.startswith("samples/") and k.endswith("/translation"))
+    if mutate == "complex":
+        arrays[key] = arrays[key].astype(np.complex128)
+    elif mutate == "frame-inf":
+        arrays["frames"] = arrays["frames"].astype(np.float64)
+        arrays["frames"][0] = np.inf
+    out = io.BytesIO()
+    np.savez(out, **arrays)
+    return out.getvalue()
+
+
+def _usda(text: str) -> str:
+    return "#usda 1.0\n" + text
+
+
+USD_SCENE = BASE + "imports: [{file: root.usda}]\n"
 
 
 def _exr(meta: dict[str, Any] | None = None, fps: Any = 24, window: tuple[int, int] | None = None) -> bytes:
@@ -274,6 +307,25 @@ CASES: list[tuple[str, str, dict[str, Any], list[str]]] = [
     ("ik-zero-length-bones", "degenerate", {"scene.yaml": BASE.replace("  - {name: ball, shape: sphere, radius: 0.5}\n", "  - {name: a, shape: sphere, radius: 0.1}\n  - {name: b, shape: sphere, radius: 0.1, parent: a}\n"
                                                                        "  - {name: c, shape: sphere, radius: 0.1, parent: b}\n  - {name: tgt, shape: sphere, radius: 0.1, transform: {translate: [1, 0, 0]}}\n")
                                                           + "ik: [{chain: [a, b, c], target: tgt}]\n"}, _r()),
+    # --- round 3: sizes of imports, bakes, flocks, checked before allocation ---
+    ("keys-300k", "sizes-3", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, motion: {type: keyframes, channels: {translate: {keys: ["
+                                                          + ",".join(f"{{time: {i}e-6, value: [0, 0, 0]}}" for i in range(300_000)) + "]}}}}")}, V),
+    ("flock-160k-agents", "sizes-3", {"scene.yaml": _obj("{name: birds, shape: cube, size: 0.1, deform: {type: flock, count: 160000}}").replace("last: 2", "last: 1200")}, _r()),
+    ("texture-30000-squared", "sizes-3", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, material: t}") + "materials: [{name: t, type: diffuse, color: {file: t.png}}]\n",
+                                          "t.png": _png(1, 1, declared=(30000, 30000))}, _r()),
+    # --- round 3: USD layers resolve inside the scene's folder, regular files, no cycles ---
+    ("usd-sublayer-self", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@./root.usda@]\n)\ndef Xform "a" {}\n')}, V),
+    ("usd-sublayer-dev-zero", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@/dev/zero@]\n)\ndef Xform "a" {}\n')}, V),
+    ("usd-sublayer-fifo", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@./f.usda@]\n)\ndef Xform "a" {}\n'), "f.usda": "<fifo>"}, V),
+    ("usd-reference-outside", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('def Xform "a" (\n    references = @/etc/hostname@</x>\n) {}\n')}, V),
+    ("usd-cycle-two", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@./b.usda@]\n)\n'), "b.usda": _usda('(\n    subLayers = [@./root.usda@]\n)\n')}, V),
+    # --- round 3: malformed records in bake files and imports ---
+    ("bake-json-frame-4000-digits", "malformed", {"scene.yaml": BASE, "m.json": _bake_json("frame-4000-digits")}, _r("--motion", "m.json")),
+    ("bake-json-samples-infinity", "malformed", {"scene.yaml": BASE, "m.json": _bake_json("samples-infinity")}, _r("--motion", "m.json")),
+    ("bake-npz-complex", "malformed", {"scene.yaml": BASE, "m.npz": _npz_bake("complex")}, _r("--motion", "m.npz")),
+    ("bake-npz-frame-inf", "malformed", {"scene.yaml": BASE, "m.npz": _npz_bake("frame-inf")}, _r("--motion", "m.npz")),
+    ("gltf-json-deep", "malformed", {"scene.yaml": BASE + "imports: [{file: d.gltf}]\n", "d.gltf": '{"asset": {"version": "2.0"}, "extras": ' + "[" * 100000 + "]" * 100000 + "}"}, V),
+    ("telecine-pattern-20000", "malformed", SEQ, ["telecine", "in", "-o", "out/t", "--pattern", "23" * 10000]),
     ("link-deliver-check", "links", {"scene.yaml": BASE, "elsewhere/keep": "", "out/deliver": ("link", "../elsewhere")}, ["render", "scene.yaml", "-o", "out", "--check", "--deliver", "contact"]),
 ]
 
@@ -372,7 +424,7 @@ def test_hostile_case_is_a_clean_error(results: tuple[Path, set[str], set[str], 
 
 def test_every_class_is_covered() -> None:
     kinds = {c[1] for c in CASES}
-    assert kinds == {"yaml-bomb", "sizes", "render-time", "output", "non-finite", "misreported", "options", "scheduler", "links", "range", "degenerate"}
+    assert kinds == {"yaml-bomb", "sizes", "render-time", "output", "non-finite", "misreported", "options", "scheduler", "links", "range", "degenerate", "usd-layers", "malformed", "sizes-3"}
     assert not Path("/tmp/motion-escaped").exists()
 
 
@@ -632,11 +684,11 @@ def _render(tmp: Path, *extra: str) -> list[str]:
 
 MALFORMED_RECORDS: list[tuple[str, Any, tuple[str, ...]]] = [
     # (id, how the input is made, fragments of the one line)
-    ("npz-complex-poses", lambda a: a.__setitem__("samples/objects/ball/translation", a["samples/objects/ball/translation"] + 1j), ("m.npz", "complex128", "expected real numbers")),
+    ("npz-complex-poses", lambda a: a.__setitem__("samples/objects/ball/translation", a["samples/objects/ball/translation"] + 1j), ("m.npz", "'samples/objects/ball/translation.npy' holds complex128 values")),
     ("npz-frame-inf", lambda a: a.__setitem__("frames", np.array([0.0, np.inf, 2.0])), ("m.npz", "frames[1].frame is inf, expected a whole number")),
-    ("npz-frame-complex", lambda a: a.__setitem__("frames", a["frames"].astype(complex)), ("m.npz", "frames[0].frame", "expected a whole number")),
+    ("npz-frame-complex", lambda a: a.__setitem__("frames", a["frames"].astype(complex)), ("m.npz", "'frames.npy' holds complex128 values")),
     ("npz-frame-1e12", lambda a: a.__setitem__("frames", a["frames"] * 10**12), ("m.npz", "frames[1].frame is 1e+12, expected -1000000000 to 1000000000")),
-    ("npz-times-complex", lambda a: a.__setitem__("times", a["times"].astype(complex)), ("m.npz", "frame 0 is malformed", "time")),
+    ("npz-times-complex", lambda a: a.__setitem__("times", a["times"].astype(complex)), ("m.npz", "'times.npy' holds complex128 values")),
     ("json-frame-4000-digits", ('"frame": 1,', '"frame": ' + "9" * 4000 + ","), ("m.json", "an integer of 4000 digits (at most 20)")),
     ("json-samples-infinity", ('"samples_per_frame": 2', '"samples_per_frame": Infinity'), ("m.json", "Infinity is not a finite number")),
     ("json-samples-1e9", ('"samples_per_frame": 2', '"samples_per_frame": 1000000000'), ("m.json", "samples_per_frame is 1e+09, expected 1 to 256")),
@@ -706,3 +758,31 @@ def test_a_zero_length_ik_bone_is_refused_at_validation(tmp_path: Path, capsys: 
     # a keyed translation gives the bone its length: valid (the bake refuses it where it is 0)
     (tmp_path / "scene.yaml").write_text((tmp_path / "scene.yaml").read_text().replace("parent: a}", "parent: a, motion: {type: keyframes, channels: {translate: {keys: [{time: 0, value: [0, 1, 0]}]}}}}"))
     assert motion_main(["validate", str(tmp_path / "scene.yaml")]) == 0
+
+
+# --- round 3 (issue 24): caches ---------------------------------------------------------------
+
+
+def test_a_cache_folder_that_is_a_file_is_one_line_before_any_work(tmp_path: Path) -> None:
+    from farm_util import motion  # noqa: F401  (the real command, with its environment)
+
+    (tmp_path / "scene.yaml").write_text(BASE.replace(", variant: scalar_rgb", ""))
+    (tmp_path / "cachefile").write_text("x")
+    env = {**os.environ, "MOTION_CACHE_DIR": str(tmp_path / "cachefile")}
+    res = subprocess.run([str(Path(sys.executable).with_name("motion")), "render", str(tmp_path / "scene.yaml"), "-o", str(tmp_path / "out"), "--no-progress"],
+                         capture_output=True, text=True, env=env, timeout=120)
+    assert res.returncode == 2 and "is a file; point MOTION_CACHE_DIR at a folder" in res.stderr and "Traceback" not in res.stderr, res.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_import_cache_keeps_to_the_asset_cache_cap(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The import cache ignored MOTION_ASSET_CACHE_CAP (it grew without bound); it now
+    evicts its least recently used entries like the converted-asset cache, never the entry
+    just made."""
+    from motion.pipeline.scene.imports import cache
+
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("MOTION_ASSET_CACHE_CAP", "2500")
+    made = [cache.cached(f"m{i}", f"key{i}", ".bin", lambda p: p.write_bytes(b"x" * 1000)) for i in range(5)]
+    held = [p for p in made if p.exists()]
+    assert made[-1] in held and sum(p.stat().st_size for p in held) <= 2500, held

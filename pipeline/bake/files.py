@@ -178,6 +178,8 @@ def _read_npz(fh: Any, path: Path) -> dict[str, Any]:
                 shape, _, dtype = read_header(member)  # the header only, nothing decompressed
             if dtype.hasobject:
                 raise BakeFileError(f"{path}: array {info.filename!r} holds Python objects (refused)")
+            if dtype.kind not in "fiubU":
+                raise BakeFileError(f"{path}: array {info.filename!r} holds {dtype} values; a bake holds real numbers")
             declared += int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
             if declared > MAX_BAKE_ARRAY_BYTES:
                 raise BakeFileError(f"{path}: its arrays declare more than {MAX_BAKE_ARRAY_BYTES} bytes (the limit)")
@@ -191,7 +193,7 @@ def _read_npz(fh: Any, path: Path) -> dict[str, Any]:
     return doc
 
 
-_MALFORMED = (KeyError, TypeError, ValueError, IndexError, AttributeError)
+_MALFORMED = (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError)
 MAX_INT_DIGITS = 20  # an integer in a bake file (a frame number is at most 10^9)
 MAX_SAMPLES_PER_FRAME = 256  # as render.shutter_samples
 

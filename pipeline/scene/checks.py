@@ -24,6 +24,7 @@ from .source import yaml_path
 MAX_SIMULATION_STEPS = 10_000_000  # fixed steps of the dynamics stage (5.8 h of shot at 1/480 s)
 MAX_PARTICLES = 1_000_000  # particles spawned by all emitters together
 MAX_PARTICLE_STEPS = 1_000_000_000  # particles x simulation steps (minutes of simulation)
+MAX_FLOCK_AGENT_STEPS = 50_000_000  # agents x flock steps (minutes of simulation; the example flock is 240 x 360)
 MAX_PARTICLE_SAMPLES = 100_000_000  # particles x baked sample times held by one bake (2.4 GB)
 
 if TYPE_CHECKING:
@@ -287,10 +288,12 @@ def derived_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
             )
             break
 
-    # simulation and particle budgets over the span the dynamics stage would simulate
-    t_lo = min(0.0, float(timeline.shutter(tl.first, angle, scene.camera.shutter.position)[0]))
+    # simulation and particle budgets over the span the dynamics stage would simulate: from
+    # the first frame's shutter open (the dynamics clock, bake.simulation_range)
+    t_lo = float(timeline.shutter(tl.first, angle, scene.camera.shutter.position)[0])
     t_hi = float(timeline.shutter(tl.last, angle, scene.camera.shutter.position)[1])
     span = max(0.0, t_hi - t_lo)
+    clock_end = t_hi - float(timeline.seconds(tl.first))  # the last shutter close on the dynamics clock
     dynamic = [i for i, o in enumerate(scene.objects) if o.motion.type == "dynamics" or isinstance(o, Particles)]
     steps = math.ceil(span / scene.dynamics.step) if dynamic else 0
     if steps > MAX_SIMULATION_STEPS:
@@ -299,7 +302,7 @@ def derived_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
     for i, obj in enumerate(scene.objects):
         if not isinstance(obj, Particles):
             continue
-        spawned = particle_count(obj.emitter, t_hi)
+        spawned = particle_count(obj.emitter, clock_end)
         total += spawned
         if total > MAX_PARTICLES:
             add(("objects", i, "emitter"), f"emitters spawn {total} particles up to t = {t_hi:.6g} s (rate x emission time, capped by max_count); the limit is {MAX_PARTICLES}")
@@ -307,6 +310,14 @@ def derived_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
         if total * max(steps, 1) > MAX_PARTICLE_STEPS:
             add(("objects", i, "emitter"), f"{total} particles x {steps} simulation steps is over the budget of {MAX_PARTICLE_STEPS} particle-steps")
             break
+
+    for i, obj in enumerate(scene.objects):
+        flock = getattr(obj, "deform", None)
+        if getattr(flock, "type", None) == "flock":
+            agent_steps = flock.count * math.ceil(max(0.0, clock_end - flock.start) / flock.step)
+            if agent_steps > MAX_FLOCK_AGENT_STEPS:
+                add(("objects", i, "deform", "count"), f"{flock.count} agents x {agent_steps // flock.count} steps of {flock.step:g} s is over the budget of "
+                                                       f"{MAX_FLOCK_AGENT_STEPS} agent-steps (fewer agents, a larger step or a shorter shot)")
 
     reason = output_pattern_problem(scene.output.filename)
     if reason is not None:

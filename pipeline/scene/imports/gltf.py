@@ -810,8 +810,8 @@ def source_digest(path: Path) -> str:
         else:
             doc = json.loads(raw.decode("utf-8"))
         uris = [item.get("uri") for key in ("buffers", "images") for item in doc.get(key) or [] if isinstance(item, dict)]
-    except (ValueError, struct.error, AttributeError, TypeError):
-        return h.hexdigest()  # the reader reports what is wrong with the file
+    except (ValueError, struct.error, AttributeError, TypeError, RecursionError):
+        return h.hexdigest()  # the reader reports what is wrong with the file (JSON nested 100,000 deep, too)
     for uri in uris:
         if isinstance(uri, str) and not uri.startswith("data:"):
             file = path.parent / unquote(uri)
