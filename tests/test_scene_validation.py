@@ -357,3 +357,20 @@ def test_a_scene_with_nothing_visible_or_lights_of_strength_0_is_warned_about(tm
     assert main(["validate", str(path)]) == 0
     err = capsys.readouterr().err
     assert "warning: none of the scene's 2 objects is visible" in err and "only lights of strength 0" in err
+
+
+def test_choices_match_without_case_and_a_misspelt_kind_keeps_its_fields_checked(tmp_path: Path) -> None:
+    """`CCD` and `HALF` got no suggestion (difflib compares case); the fields of an object
+    whose shape is misspelt (`Sphere`) were never checked, so its bad interpolation showed
+    only after the shape was fixed."""
+    path = tmp_path / "case.yaml"
+    path.write_text(REFUSED_ITEMS.replace("shape: shpere, parent: a,", "shape: Sphere, parent: a, motion: {type: keyframes, interpolation: CatmullRom, "
+                                                                  "channels: {translate: {keys: [{time: 0, value: [0, 1, 0]}]}}},")
+                    + "output: {pixel_type: HALF}\n")
+    with pytest.raises(SceneError) as err:
+        load_scene(path)
+    by_path = {p.yaml_path: p.message for p in err.value.problems}
+    assert "did you mean 'sphere'" in by_path["objects[1]"]
+    assert "did you mean 'catmull-rom'" in by_path["objects[1].motion.interpolation"]
+    assert "did you mean 'half'" in by_path["output.pixel_type"]
+    assert [p.line for p in err.value.problems] == sorted(p.line for p in err.value.problems)

@@ -6,7 +6,6 @@ pattern's confinement checked before any task starts. All problems at once."""
 
 from __future__ import annotations
 
-import difflib
 import math
 import re
 from fractions import Fraction
@@ -16,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 from ..errors import AssetError, Problem
 from ..expr import ExpressionError, parse_expression
 from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
+from .problems import closest
 from .motion_schema import BlendShapes, KeyframeMotion, ProceduralMotion, TRANSFORM_CHANNELS
 from .schema import EnvmapLight, Mesh, Particles, Scene, Texture
 from .source import yaml_path
@@ -46,9 +46,9 @@ NUMBER_CHANNELS = ("fov", "ortho_width")
 
 
 def _suggest(name: str, options: list[str]) -> str:
-    close = difflib.get_close_matches(name, options, n=1, cutoff=0.6)
+    close = closest(name, options)
     if close:
-        return f"; did you mean '{close[0]}'?"
+        return f"; did you mean '{close}'?"
     return f"; defined: {', '.join(options)}" if options else "; none are defined"
 
 

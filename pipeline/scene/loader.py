@@ -106,7 +106,7 @@ KEPT = ("parent", "transform")  # what a stand-in keeps of the item (its name as
 UNNAMED = "_unnamed_"  # the prefix of a stand-in name for an item missing its own
 
 
-def salvage(exc: ValidationError, data: dict[str, Any]) -> tuple[Scene, list[tuple[str | int, ...]]] | None:
+def salvage(exc: ValidationError, data: dict[str, Any], source: SourceMap | None = None) -> tuple[Scene, list[tuple[str | int, ...]], list[Problem]] | None:
     """The scene without the fields the schema refused, so that the semantic checks can
     run on the rest and every problem is reported at once: a refused field is dropped (its
     enclosing mapping when a required field is missing; a list item's enclosing list key);
@@ -115,12 +115,13 @@ def salvage(exc: ValidationError, data: dict[str, Any]) -> tuple[Scene, list[tup
     suggests; a missing name a unique placeholder). Returns the scene and the dropped
     paths, or None when that does not converge."""
     import copy
-    import difflib
 
-    from .problems import _strip_tags
+    from .problems import _strip_tags, closest
 
     doc = copy.deepcopy(data)
     dropped: list[tuple[str | int, ...]] = []
+    guessed: list[tuple[str | int, ...]] = []
+    later: list[Problem] = []
 
     def stand_in(loc: tuple[str | int, ...], err: Any) -> bool:
         """Replace or mend the top-level list item at `loc` (a named kind); False if it is not one."""
@@ -140,9 +141,10 @@ def salvage(exc: ValidationError, data: dict[str, Any]) -> tuple[Scene, list[tup
             return True
         if isinstance(item, dict) and kind == "union_tag_invalid":
             options = [t.strip().strip("'") for t in str(err.get("ctx", {}).get("expected_tags", "")).split(",")]
-            close = difflib.get_close_matches(str(item.get(tag)), options, n=1, cutoff=0.5)
+            close = closest(item.get(tag), options, cutoff=0.5)
             if close:
-                item[tag] = close[0]  # checked as the kind the message suggests; what that kind refuses goes next round
+                item[tag] = close  # checked as the kind the message suggests; what that kind refuses goes next round
+                guessed.append(loc)
                 return True
         kept = {k: item[k] for k in KEPT if isinstance(item, dict) and k in item}  # what refers across items; a bad one goes next round
         items[loc[1]] = {**kept, "name": name, tag: fallback}
@@ -171,25 +173,30 @@ def salvage(exc: ValidationError, data: dict[str, Any]) -> tuple[Scene, list[tup
                 del node[loc[-1]]
                 dropped.append(loc)
         try:
-            return Scene.model_validate(doc), dropped
+            return Scene.model_validate(doc), dropped, later
         except ValidationError as again:
             exc = again
+        if source is not None and guessed:
+            later += [p for p in problems_from_validation(exc, doc, source, Scene)
+                      if any(p.yaml_path.startswith(yaml_path(g) + ".") for g in guessed) and p.yaml_path not in {q.yaml_path for q in later}]
     return None
 
 
 def salvaged_problems(exc: ValidationError, data: dict[str, Any], source: SourceMap, base_dir: Path, found: list[Problem], assets: bool) -> list[Problem]:
     """The semantic and numeric-range problems (unknown material, missing asset, a number
-    float32 cannot hold, ...) of the part of the scene the schema accepted, beside the
-    schema's own: found in one run, not one after the other. Problems at or below a dropped
+    float32 cannot hold, ...) of the part of the scene the schema accepted, and the schema's
+    problems inside an item of a misspelt kind, beside the schema's own: found in one run,
+    not one after the other. Problems at or below a dropped
     field, at a path already reported, or naming a stand-in, are left out (they are about
     what was dropped)."""
-    saved = salvage(exc, data)
+    saved = salvage(exc, data, source)
     if saved is None:
         return []
-    scene, dropped = saved
+    scene, dropped, later = saved
     seen = {p.yaml_path for p in found}
+    out = [p for p in later if p.yaml_path not in seen]  # the fields of an item checked as a suggested kind
+    seen |= {p.yaml_path for p in out}
     shown = [yaml_path(loc) for loc in dropped]
-    out = []
     for p in semantic_problems(scene, base_dir, source, assets=assets) + numeric_range_problems(data, source, scene):
         if p.yaml_path in seen or f"'{UNNAMED}" in p.message or any(p.yaml_path == d or p.yaml_path.startswith(d + ".") or p.yaml_path.startswith(d + "[") for d in shown):
             continue
