@@ -220,7 +220,7 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
         check_channels(("objects", i, "motion"), obj.motion, "object", add)
     for i, light in enumerate(scene.lights):
         check_channels(("lights", i, "motion"), light.motion, f"{light.type} light", add)
-    problems.extend(expression_problems(scene, source))
+    problems.extend(expression_problems(scene, source, evaluate=assets))
     return problems
 
 
@@ -387,11 +387,12 @@ def check_channels(loc: "Loc", motion: object, owner: str, add) -> None:  # type
                 add((*loc, "scalars", name), f"unknown scalar channel '{name}' for a {owner}" + _suggest(name, list(SCALAR_CHANNELS[owner])))
 
 
-def expression_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
+def expression_problems(scene: Scene, source: "SourceMap", evaluate: bool = True) -> list[Problem]:
     """Expressions are parsed (never executed as Python) here, so a bad one fails before
     the job; a channel of time alone is also evaluated at every frame time, and a value the
     renderer cannot hold (limits.py: float32; a radiance seen directly past what a
-    half-float frame holds) is refused at the channel, with the first time it occurs."""
+    half-float frame holds) is refused at the channel, with the first time it occurs.
+    `evaluate` False (a worker reloading a checked scene) parses only."""
     import numpy as np
 
     from ..limits import SEEN_RADIANCE, beyond_float32, beyond_half
@@ -409,8 +410,8 @@ def expression_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
         except ExpressionError as exc:
             problems.append(source.problem(loc, str(exc)))
             return
-        if variables != ("t",):
-            return  # a field of space and time (wind): evaluated by the simulation
+        if variables != ("t",) or not evaluate:
+            return  # a field of space and time (wind) is evaluated by the simulation
         try:
             with np.errstate(all="ignore"):
                 value = np.broadcast_to(np.asarray(expr.evaluate({"t": times}), dtype=np.float64), times.shape)
