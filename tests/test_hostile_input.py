@@ -313,6 +313,8 @@ CASES: list[tuple[str, str, dict[str, Any], list[str]]] = [
     ("flock-160k-agents", "sizes-3", {"scene.yaml": _obj("{name: birds, shape: cube, size: 0.1, deform: {type: flock, count: 160000}}").replace("last: 2", "last: 1200")}, _r()),
     ("texture-30000-squared", "sizes-3", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, material: t}") + "materials: [{name: t, type: diffuse, color: {file: t.png}}]\n",
                                           "t.png": _png(1, 1, declared=(30000, 30000))}, _r()),
+    ("plan-radius-200m", "sizes-3", {"scene.yaml": _obj("{name: bot, shape: sphere, radius: 0.2, motion: {type: plan, grid: {from_scene: true, cell: 2, origin: [-500, -500], size: [1000, 1000]}, "
+                                                     "start: [-400, 0.2, 0], goal: [400, 0.2, 0], radius: 200, speed: 1}}")}, _r("--dry-run")),
     # --- round 3: USD layers resolve inside the scene's folder, regular files, no cycles ---
     ("usd-sublayer-self", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@./root.usda@]\n)\ndef Xform "a" {}\n')}, V),
     ("usd-sublayer-dev-zero", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@/dev/zero@]\n)\ndef Xform "a" {}\n')}, V),
@@ -452,6 +454,7 @@ def test_located_errors_point_at_the_field(results: tuple[Path, set[str], set[st
         "range-expression-1e48": ("scene.yaml:6:", "objects[0].motion.channels.translate[0]: expression '10**24 * 10**24 * (t + 1)' is 1e+48 at frame 0"),
         "range-bake-json-1e39": ("m.json", "object 'ball': translation is not finite in the renderer's float32"),
         "ik-zero-length-bones": ("scene.yaml:", "ik[0].chain[1]: the bone a -> b has no length"),
+        "plan-radius-200m": ("scene.yaml:", "objects[1].motion.radius: bot: an agent of radius 200.0 m"),
         "bake-zero-quaternion": ("m.json", "object 'ball': rotation is not a unit quaternion"),
         "motion-empty-json": ("m.json", "empty"),
         "report-unwritable": ("--report", "cannot write"),
