@@ -747,6 +747,9 @@ def test_range_policy_covers_expressions_at_validation_seen_radiance_and_schema_
                      ("at_frame/light_scalars/light0/radiance", "light 'light0': radiance is not finite in the renderer's float32")):
         path = _bake_npz(tmp_path, lambda a: a[key].__setitem__((1, ...), 1e39))
         _refused(tmp_path, _render(tmp_path, "--motion", str(path)), "m.npz", "frame 1:", why, capsys=capsys)
+    # a bake file's environment radiance past a half (the frames are half-float)
+    path = _bake_npz(tmp_path, lambda a: a["samples/light_scalars/light0/radiance"].__setitem__((1, ...), 1e5))
+    _refused(tmp_path, _render(tmp_path, "--motion", str(path)), "m.npz", "frame 1: light 'light0': radiance reaches 100000", "half-float", capsys=capsys)
 
 
 def test_a_zero_length_ik_bone_is_refused_at_validation(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -242,13 +242,14 @@ def _numbers(value: Any, what: str, dtype: Any = np.float64) -> np.ndarray:
     return a.astype(dtype)
 
 
-def read_baked(path: str | Path) -> BakedMotion:
+def read_baked(path: str | Path, half: bool = False) -> BakedMotion:
     """The one reader of bake files (.json or .npz): the typed `BakedMotion`, every frame
     checked (finite times, poses finite with unit rotations, shapes matching the header's
     samples_per_frame). Raises BakeFileError naming the file (and the frame) on a bad one.
 
     JSON carries no vertices or particles; NPZ carries them at the frame time and across
-    the shutter (docs/bake-format.md)."""
+    the shutter (docs/bake-format.md). `half`: the frames it feeds are half-float, so a
+    light's radiance seen directly must be one a half holds (limits.py)."""
     path = Path(path)
     doc = read_document(path)
     try:
@@ -269,7 +270,7 @@ def read_baked(path: str | Path) -> BakedMotion:
             frame = _frame(rec, number)
         except _MALFORMED as exc:
             raise BakeFileError(f"{path}: frame {number} is malformed ({type(exc).__name__}: {exc})") from None
-        _check_frame(frame, samples, path)
+        _check_frame(frame, samples, path, half)
         frames.append(frame)
     return BakedMotion(scene, fps, angle, position, frames)
 
@@ -320,7 +321,7 @@ def _scene_motion(node: dict[str, Any], times: np.ndarray, single: bool) -> "Sce
     )
 
 
-def _check_frame(frame: BakedFrame, samples: int, path: Path) -> None:
+def _check_frame(frame: BakedFrame, samples: int, path: Path, half: bool = False) -> None:
     """A frame read back: finite times, the header's sample count, every value finite and
     every rotation a unit quaternion; the error names the frame, the owner, the channel
     and the time."""
@@ -329,7 +330,7 @@ def _check_frame(frame: BakedFrame, samples: int, path: Path) -> None:
     if frame.samples != samples:
         raise BakeFileError(f"{path}: frame {frame.frame}: {frame.samples} shutter samples, the header says {samples} (samples_per_frame)")
     for motion in (frame.at_frame, frame.across_shutter):
-        problems = motion_problems(motion)
+        problems = motion_problems(motion, half)
         if problems:
             raise BakeFileError(f"{path}: frame {frame.frame}: {problems[0][2]}")
     # the frame-time geometry must match the shutter samples' (the renderer stacks them)
