@@ -315,6 +315,12 @@ CASES: list[tuple[str, str, dict[str, Any], list[str]]] = [
                                           "t.png": _png(1, 1, declared=(30000, 30000))}, _r()),
     ("plan-radius-200m", "sizes-3", {"scene.yaml": _obj("{name: bot, shape: sphere, radius: 0.2, motion: {type: plan, grid: {from_scene: true, cell: 2, origin: [-500, -500], size: [1000, 1000]}, "
                                                      "start: [-400, 0.2, 0], goal: [400, 0.2, 0], radius: 200, speed: 1}}")}, _r("--dry-run")),
+    ("gltf-300k-nodes", "sizes-3", {"scene.yaml": BASE + "imports: [{file: n.gltf}]\n",
+                                    "n.gltf": json.dumps({"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"name": f"n{i}"} for i in range(300_000)]})}, V),
+    ("gltf-accessor-44m", "sizes-3", {"scene.yaml": BASE + "imports: [{file: a.gltf}]\n",
+                                      "a.gltf": json.dumps({"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+                                                            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+                                                            "accessors": [{"componentType": 5126, "type": "VEC3", "count": 44_000_000}]})}, V),
     # --- round 3: USD layers resolve inside the scene's folder, regular files, no cycles ---
     ("usd-sublayer-self", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@./root.usda@]\n)\ndef Xform "a" {}\n')}, V),
     ("usd-sublayer-dev-zero", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@/dev/zero@]\n)\ndef Xform "a" {}\n')}, V),
