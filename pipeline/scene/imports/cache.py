@@ -15,7 +15,7 @@ import numpy as np
 
 from ...cache import cache_root
 
-CONVERSION_VERSION = "import-v1"
+CONVERSION_VERSION = "import-v2"  # v2: stricter accessor reading (sparse indices); entries made by a laxer reader are not reused
 _lock = threading.Lock()
 STATS = {"hits": 0, "misses": 0, "records": 0}  # converted-file hits / misses; record-set hits
 _DIGESTS: dict[tuple[str, int, int], str] = {}

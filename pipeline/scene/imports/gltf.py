@@ -208,15 +208,21 @@ class GltfReader:
             out = self._strided(a.bufferView, a.byteOffset or 0, a.count, dtype, width, at)
         if a.sparse is not None:
             sp = a.sparse
-            idx_dtype = COMPONENTS.get(sp.indices.componentType)
-            if idx_dtype is None or sp.count > a.count:
-                self.fail(f"{at}.sparse", "bad sparse indices")
-            idx = self._strided(sp.indices.bufferView, sp.indices.byteOffset or 0, sp.count, idx_dtype, 1, f"{at}.sparse.indices")[:, 0]
+            # the specification: unsigned byte/short/int indices, strictly increasing (a signed
+            # -1 would write the last element through numpy's negative indexing)
+            idx_dtype = COMPONENTS.get(sp.indices.componentType) if sp.indices.componentType in (5121, 5123, 5125) else None
+            if idx_dtype is None or not isinstance(sp.count, int) or not 1 <= sp.count <= a.count:
+                self.fail(f"{at}.sparse", f"bad sparse indices (componentType {sp.indices.componentType}, count {sp.count}): "
+                                          "expected 1 to count unsigned byte, short or int indices")
+            idx = self._strided(sp.indices.bufferView, sp.indices.byteOffset or 0, sp.count, idx_dtype, 1, f"{at}.sparse.indices")[:, 0].astype(np.int64)
             vals = self._strided(sp.values.bufferView, sp.values.byteOffset or 0, sp.count, dtype, width, f"{at}.sparse.values")
             if len(idx) and int(idx.max()) >= a.count:
                 self.fail(f"{at}.sparse.indices", f"index {int(idx.max())} is out of range for {a.count} elements")
+            if (np.diff(idx) <= 0).any():
+                k = int(np.argmax(np.diff(idx) <= 0)) + 1
+                self.fail(f"{at}.sparse.indices", f"index {int(idx[k])} at position {k} does not follow {int(idx[k - 1])}: sparse indices must strictly increase")
             out = out.copy()
-            out[idx.astype(np.int64)] = vals
+            out[idx] = vals
         if dtype.kind == "f":
             result = out.astype(np.float64)
             if not np.isfinite(result).all():
