@@ -29,6 +29,50 @@ _PLY_TYPES = {"char": "i1", "uchar": "u1", "short": "i2", "ushort": "u2", "int":
               "int8": "i1", "uint8": "u1", "int16": "i2", "uint16": "u2", "int32": "i4", "uint32": "u4", "float32": "f4", "float64": "f8"}
 
 
+def cache_entry_whole(path: Path, full: bool = False) -> bool:
+    """Whether a cache entry reads back whole: non-empty, and a PLY as a mesh (faces
+    optional: morph targets have none). `full=True` (before an entry is published) reads
+    the whole mesh; otherwise (on every hit) a binary PLY's size must equal what its header
+    declares with triangle faces, as both cache writers write them (a 1M-vertex entry: a
+    header read, not 5 s of parsing). An entry cut short or damaged after it was written (a
+    crash of another tool, a disk that lost it) is then made again instead of failing every
+    later run."""
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        if size == 0:
+            return False
+        if path.suffix.lower() != ".ply":
+            return True
+        if not full:
+            with open(path, "rb") as fh:
+                expected = _binary_ply_size(fh.read(1 << 16))
+            if expected is not None:
+                return expected == size
+        load_mesh(path, faces=False)
+    except (OSError, AssetError):
+        return False
+    return True
+
+
+def _binary_ply_size(head: bytes) -> int | None:
+    """The size in bytes of a binary PLY whose header is in `head`, its lists being
+    triangles; None for an ASCII PLY. MeshFormatError for a header that does not parse."""
+    fmt, elements, body_start = _ply_header(head)
+    if fmt == "ascii":
+        return None
+    size = body_start
+    for _name, count, props in elements:
+        item = 0
+        for pr in props:
+            if pr[0] == "list":
+                item += np.dtype(_PLY_TYPES[pr[1]]).itemsize + 3 * np.dtype(_PLY_TYPES[pr[2]]).itemsize
+            else:
+                item += np.dtype(_PLY_TYPES[pr[0]]).itemsize
+        size += item * count
+    return size
+
+
 def load_mesh(path: Path, faces: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """(vertices, triangles) of an .obj or .ply file; AssetError with the reason if the file
     is unreadable, malformed, truncated, or has non-finite vertices or bad indices.
@@ -209,8 +253,8 @@ def _load_ply(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     return np.stack([columns["x"], columns["y"], columns["z"]], axis=1), tris
 
 
-def _read_ply(data: bytes) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """The vertex element's properties by name (float64 columns) and the triangles."""
+def _ply_header(data: bytes) -> tuple[str, list[tuple[str, int, list[tuple[str, ...]]]], int]:
+    """(format, elements as (name, count, properties), offset of the body) of a PLY file."""
     end = data.find(b"end_header")
     if not data.startswith(b"ply") or end < 0:
         raise MeshFormatError("not a PLY file (no 'ply' magic or no end_header)")
@@ -240,6 +284,12 @@ def _read_ply(data: bytes) -> tuple[dict[str, np.ndarray], np.ndarray]:
             elements[-1][2].append(tuple(p[1:]))
     if fmt is None:
         raise MeshFormatError("the PLY header has no format line")
+    return fmt, elements, body_start
+
+
+def _read_ply(data: bytes) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """The vertex element's properties by name (float64 columns) and the triangles."""
+    fmt, elements, body_start = _ply_header(data)
     vertex = [e for e in elements if e[0] == "vertex"]
     if not vertex:
         raise MeshFormatError("the PLY file has no vertex element")
