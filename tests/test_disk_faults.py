@@ -190,11 +190,14 @@ def test_dead_owner_claim_is_stale(tmp_path: Path) -> None:
     ["view", "SRC", "-o", "DISK/flip/index.html"],
     ["bake", SCENE, "-o", "DISK/motion.json", "--frames", "0-3"],
     ["bake", SCENE, "-o", "DISK/motion.npz", "--frames", "0-3"],
+    ["plot", str(REPO / "scenes" / "cannonball.yaml"), "-o", "DISK/plot.png"],
+    ["telecine", "SRC", "-o", "DISK/60i"],
 ])
 def test_every_writer_reports_a_full_disk_in_one_line(small_disk: Path, tmp_path: Path, command: list[str]) -> None:
     """Issue 24/26: every writer goes through the one write policy (pipeline/files.py):
     on a full disk `export`, `contact-sheet`, `view` and `bake -o` end with one line and
-    exit 4 (tracebacks, exit 1, or exit 2 before), leaving no temporary file."""
+    exit 4 (tracebacks, exit 1, or exit 2 before), leaving no temporary file; `plot`
+    said 'writing ?' and left a partial file (it wrote with savefig in place)."""
     src = tmp_path / "src"
     done = run_motion("render", SCENE, "-o", str(src), "--frames", "0-3", "--resolution", "16x12", "--spp", "1", "--no-progress")
     assert done.returncode == 0, done.stderr
@@ -210,6 +213,7 @@ def test_every_writer_reports_a_full_disk_in_one_line(small_disk: Path, tmp_path
     assert res.returncode == 4, res.stderr
     lines = [line for line in res.stderr.splitlines() if line.strip() and not line.startswith("motion:")]
     assert len(lines) == 1 and lines[0].startswith("error: disk fault: No space left on device") and "Traceback" not in res.stderr, res.stderr
+    assert str(small_disk) in lines[0], res.stderr  # the line names what was being written (a plot said 'writing ?')
     (small_disk / "fill").unlink()
     assert not _leftovers(small_disk), _leftovers(small_disk)
 

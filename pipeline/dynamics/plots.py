@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import UsageError
+from ..files import writing
 
 FORMATS = (".png", ".pdf", ".svg")
 PANELS_MAX = 6  # bodies drawn in panels of their own; more share one panel of totals
@@ -45,8 +46,11 @@ def plot_simulation(loaded: Any, sim: Any, what: str, output: str | Path) -> Pat
             ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
     output.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(output)
-    plt.close(fig)
+    try:
+        with writing(output, "writing the plot", suffix=output.suffix) as tmp:  # a full disk: one line naming it, no partial file
+            fig.savefig(tmp, format=output.suffix[1:].lower())
+    finally:
+        plt.close(fig)
     return output
 
 
