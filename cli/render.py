@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from motion.cli.options import MAX_TASK_TIMEOUT_S, FiniteFloat
 from motion.pipeline.errors import UsageError
 
 
@@ -42,7 +43,7 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--threads", type=click.IntRange(min=1), help="drjit threads per worker (default: cores // workers locally, all cores on a Dask worker).")
 @click.option("--chunk-size", type=click.IntRange(min=1), help="Frames per task (default: from frame and worker count; configs/farm.yaml).")
 @click.option("--retries", type=click.IntRange(min=0), help="Extra attempts for a failed chunk (default: configs/farm.yaml).")
-@click.option("--task-timeout", "task_timeout_s", type=click.FloatRange(min=0, min_open=True), help="Seconds before a chunk is cancelled and retried.")
+@click.option("--task-timeout", "task_timeout_s", type=FiniteFloat(min=0, min_open=True, max=MAX_TASK_TIMEOUT_S), help="Seconds before a chunk is cancelled and retried (at most a week).")
 @click.option("--resume/--no-resume", default=True, show_default=True, help="Skip frames already complete with this scene, motion and settings.")
 @click.option("--overwrite", is_flag=True, help="Re-render every selected frame, replacing complete ones.")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path), help="Where to write the JSON report (default: OUTPUT/render-report.json).")

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from motion.cli.options import FiniteFloat
 from motion.pipeline.errors import UsageError
 from motion.pipeline.progress import count_bar
 
@@ -38,7 +39,7 @@ CODEC_NAMES = ["prores", "prores4444", "h264"]
 @click.option("--tail", type=click.Choice(["pad", "drop"]), default="pad", show_default=True,
               help="An unpaired last field: complete the frame from the same film frame, or drop it (as FFmpeg).")
 @click.option("--drop-frame", is_flag=True, help="Drop-frame timecode (29.97 only).")
-@click.option("--tolerance", type=float, default=0.0, show_default=True,
+@click.option("--tolerance", type=FiniteFloat(min=0), default=0.0, show_default=True,
               help="--inverse detection: mean difference below which two fields count as a repeat.")
 @click.option("--prefix", default=None, help="Which sequence of IN_DIR (prefix of prefix.NNNN.exr).")
 @click.option("--pixel-type", type=click.Choice(["half", "float"]), default=None,

@@ -827,3 +827,40 @@ def test_a_damaged_cache_entry_is_made_again_not_a_hit(tmp_path: Path, monkeypat
             again = entry()
             assert again.read_bytes() == whole, damage
             assert len(load_mesh(again)[0]) == 3
+
+
+@pytest.mark.parametrize("limit", [float("nan"), float("inf"), 1e12])
+def test_claim_staleness_is_bounded_whatever_the_limit(tmp_path: Path, limit: float) -> None:
+    """A NaN or infinite stale limit (`--task-timeout nan` was accepted) made `age > limit`
+    false for ever: a dead host's claim held its frame for good. Staleness is bounded
+    (claims.MAX_STALE_AFTER_S), and the option refuses such values in one line."""
+    import socket
+    import time
+
+    from motion.pipeline.farm.claims import MAX_STALE_AFTER_S, claim_path, is_stale
+
+    claim = claim_path(tmp_path / "f.0000.exr")
+    claim.parent.mkdir()
+    info = {"run_id": "other", "pid": 1, "host": "another-" + socket.gethostname()}
+    claim.write_text(json.dumps(info))
+    old = time.time() - MAX_STALE_AFTER_S - 60
+    os.utime(claim, (old, old))
+    assert is_stale(claim, info, stale_after_s=limit)
+    os.utime(claim, None)  # a fresh claim of a live job still protects its frame
+    assert not is_stale(claim, info, stale_after_s=limit)
+
+
+@pytest.mark.parametrize("argv", [["render", "S", "-o", "O", "--task-timeout", "nan", "--dry-run"],
+                                  ["render", "S", "-o", "O", "--task-timeout", "inf", "--dry-run"],
+                                  ["telecine", "O", "-o", "O/t", "--inverse", "--tolerance", "nan"]])
+def test_float_options_are_finite_and_bounded(tmp_path: Path, argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    """`--task-timeout nan` or `inf` (never times out, and no claim ever stale) and
+    `telecine --tolerance nan` were accepted, exit 0; now one usage line, exit 2."""
+    from motion.cli.main import main as motion_main
+
+    (tmp_path / "scene.yaml").write_text(BASE)
+    argv = [str(tmp_path / "scene.yaml") if a == "S" else a.replace("O", str(tmp_path / "out")) if a.startswith("O") else a for a in argv]
+    code = motion_main(argv)
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert code == 2 and len(err) == 1 and ("not a finite number" in err[0] or "not in the range" in err[0]), err
+    assert not (tmp_path / "out").exists()

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import errno
 import json
+import math
 import os
 import socket
 import time
@@ -39,6 +40,9 @@ from ..frame_output import disk_fault
 CLAIM_DIR = ".motion-claims"
 MAX_CLOCK_SKEW_S = 300.0  # seconds a claim may be dated ahead of this machine's clock
 WRITE_GRACE_S = 5.0  # an empty claim younger than this may still be being written
+# the longest a claim protects its frame whatever the limit asked (a NaN or infinite task
+# timeout made `age > limit` false forever: the job waited on a dead host's claim for good)
+MAX_STALE_AFTER_S = 7 * 24 * 3600.0
 
 
 @dataclass(frozen=True)
@@ -109,7 +113,8 @@ def is_stale(path: Path, info: dict, stale_after_s: float) -> bool:
     if info.get("host") == socket.gethostname():
         if not _pid_alive(info["pid"]):
             return True
-    return age > stale_after_s
+    limit = stale_after_s if math.isfinite(stale_after_s) and stale_after_s > 0 else MAX_STALE_AFTER_S
+    return age > min(limit, MAX_STALE_AFTER_S)
 
 
 def try_claim(frame_file: str | Path, who: Claimant, stale_after_s: float) -> tuple[bool, dict | None]:

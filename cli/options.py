@@ -1,0 +1,30 @@
+"""Option types shared by the commands: numbers that must be finite (click's FloatRange
+lets NaN through, since every comparison with NaN is false)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import click
+
+from motion.pipeline.farm.claims import MAX_STALE_AFTER_S
+
+
+class FiniteFloat(click.FloatRange):
+    """A finite float within [min, max] (either open where asked): NaN and infinities are
+    refused with click's one-line usage error (exit 2)."""
+
+    name = "finite float"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        """The number, or a usage error naming it when it is NaN, infinite or out of range."""
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return number
+
+
+# A chunk's timeout is also how old another host's claim must be to count as stale: at most
+# the claims' own bound (a week), so a claim is never protected forever
+MAX_TASK_TIMEOUT_S = MAX_STALE_AFTER_S
