@@ -22,14 +22,16 @@ from motion.pipeline.render.temporal import RADIUS
 
 pytestmark = pytest.mark.render
 
-# A diffuse plane of albedo 0.5 facing an orthographic camera under a constant environment
-# of radiance 1: every pixel's radiance is 0.5 * 1 (direct light only: max_depth 2). The box
+# A diffuse plane of albedo 0.5 facing an orthographic camera under an environment map of
+# radiance 1 everywhere: every pixel's radiance is 0.5 * 1 (direct light only: max_depth 2).
+# A map, not a `constant` light: a constant sky is reached by BSDF sampling alone, which is
+# exact on a lone diffuse plane (no noise to remove); a map is light-sampled with MIS. The box
 # filter keeps each pixel's noise its own: OIDN removes uncorrelated pixel noise; the
 # gaussian's 5x5 splat correlates it, and OIDN keeps much of it as texture (docs/denoise.md).
 PLANE = """
 timeline: {fps: 24, first: 0, last: 0}
 camera: {type: orthographic, position: [0, 0, -5], look_at: [0, 0, 0], ortho_width: 4}
-lights: [{type: constant, radiance: 1.0}]
+lights: [{type: envmap, file: white.pfm}]
 materials: [{name: m, type: diffuse, color: 0.5}]
 objects:
   - {name: plane, shape: rectangle, width: 10, height: 10, material: m, transform: {rotate: {euler: [0, 180, 0]}}}
@@ -40,6 +42,7 @@ render: {resolution: [64, 48], spp: SPP, max_depth: 2, denoise: oidn, filter: bo
 def test_denoised_flat_plane_converges_to_the_closed_form(tmp_path: Path) -> None:
     from motion.pipeline.render.denoise import denoise_frame
 
+    (tmp_path / "white.pfm").write_bytes(b"PF\n4 2\n-1.0\n" + np.ones((2, 4, 3), "<f4").tobytes())
     errors = {}
     for spp in (1, 8):
         (img,), _, renderer = render(load(tmp_path, PLANE.replace("SPP", str(spp)), f"plane{spp}.yaml"), [0])

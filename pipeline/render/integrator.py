@@ -367,6 +367,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         # the path loop's state holds read-only locals (@dr.syntax passes every local the
         # body reads): with OptimizeLoops drjit would drop them and trace the body again,
         # every frame; LLVM folds them as well
+        self._choice(scene)  # before tracing: it may evaluate (an environment's irradiance)
         with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, False):
             return film.render(self.sample, scene, sensor, seed, spp)
 
