@@ -17,6 +17,8 @@ Mitsuba 3 has no animated shapes, so motion is ours (docs/rendering.md):
 * Lights that move (point, spot, directional: `set_lights`) are Mitsuba's own emitters
   queried in their rest frame at the path's time u, like movers; emitters on movers are
   sampled in the mover's rest frame too, and combined with BSDF sampling by MIS.
+* The static scene's emitters are chosen by estimated contribution at each vertex, and a
+  constant environment is reached by BSDF sampling only (`lights.py`).
 * Per-frame data (poses) are one opaque drjit array of a fixed size, so a new frame
   replays the compiled kernels instead of compiling new ones.
 * The image comes from our deterministic film (`film.py`); the AOV channels follow the
