@@ -21,6 +21,7 @@ from ..scene.loader import LoadedScene
 from ..variant import load_dict
 from .build import LIGHT_CHANNEL, material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
+from .film import stratified_passes
 from .instant import add_lights, add_shapes, light_key, light_record, sensor_record
 from .roles import Roles
 from .shutter_poses import across_shutter
@@ -71,7 +72,9 @@ class SceneCache:
         d: dict[str, Any] = {"type": "scene"}
         aovs = integrator_aovs(scene)  # the user's, plus the denoiser's guides
         d["integrator"] = {"type": "motion_path", "max_depth": self.max_depth, "rr_depth": settings.rr_depth, "aovs": ",".join(aovs)}
-        d["sensor"] = sensor_record(loaded, self.spp, fi, shutter=(0.0, 1.0), sampler="multijitter")
+        # the sampler's count is set per pass by the film (film.stratified_passes); built with
+        # one it takes as it is, so Mitsuba does not warn of a rounding that never happens
+        d["sensor"] = sensor_record(loaded, stratified_passes(self.spp, self.spp)[0], fi, shutter=(0.0, 1.0), sampler="multijitter")
         static = [o for o in scene.objects if o.name in set(self.roles.static_names)]
         add_shapes(d, loaded, static, fi, materials)
         add_lights(d, loaded, fi, skip=frozenset(i for i, _ in self.roles.moving_lights))
