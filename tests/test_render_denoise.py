@@ -154,6 +154,11 @@ def test_denoised_frames_are_bit_identical_across_workers_and_shards(tmp_path: P
     assert meta["denoise_guides"] == "albedo,N"
     # the default RGBA is the denoised image, not the noisy layer
     assert not np.array_equal(frame.rgba[..., :3], frame.aovs["noisy"][..., :3].astype(np.float16).astype(np.float32))
+    # every rendered frame's row of the report says what denoising it cost
+    import json
+
+    rows = [r for r in json.loads((one / "render-report.json").read_text())["frames"] if r["status"] == "rendered"]
+    assert len(rows) == 4 and all(r["denoise_s"] > 0 for r in rows), rows
 
 
 def test_broken_oidn_is_one_line_naming_the_package(tmp_path: Path) -> None:
