@@ -185,6 +185,11 @@ LIGHT_CASES: dict[str, tuple[str, str, Any]] = {
         "",
         "envmap",  # built in the test (needs the image's path)
     ),
+    "envmap-smooth-and-sun": (
+        "  - {type: envmap, file: smooth.exr}\n  - {type: directional, direction: [0.5, -1.0, 0.2], irradiance: 1.0}",
+        "",
+        "envmap-smooth",  # built in the test (needs the image's path); reached by BSDF sampling only
+    ),
     "area-static": (
         "  - {type: constant, radiance: 0.05}",
         "  - {name: lamp, shape: rectangle, width: 1, height: 1, emission: {radiance: 8.0}, material: black, transform: {translate: [-0.5, 2.0, 0], rotate: {euler: [90, 0, 0]}}}\n",
@@ -290,6 +295,14 @@ def test_every_light_agrees_with_mitsuba_path(tmp_path: Path, case: str) -> None
         _env_image(tmp_path)
         env = {"type": "envmap", "filename": str(tmp_path / "sky.exr"), "scale": 1.5, "to_world": _T().rotate([0, 1, 0], 90)}
         reference = lambda f: ({"sky": env}, {})  # noqa: E731
+    if reference == "envmap-smooth":
+        from motion.pipeline.frame_output import write_frame
+
+        smooth = np.linspace(0.5, 0.3, 16, dtype=np.float32)[:, None, None] * np.ones((16, 32, 3), np.float32)  # brighter overhead
+        write_frame(tmp_path / "smooth.exr", smooth, pixel_type="float")
+        env = {"type": "envmap", "filename": str(tmp_path / "smooth.exr")}
+        sun = {"type": "directional", "direction": [0.5, -1.0, 0.2], "irradiance": 1.0}
+        reference = lambda f: ({"sky": env, "sun": sun}, {})  # noqa: E731
     loaded = load(tmp_path, text)
     images, stats, _ = render(loaded, [0, 2])
     assert [s.cold for s in stats] == [True, False]

@@ -5,9 +5,10 @@ Mitsuba's `path` picks one of the scene's emitters uniformly, with the first coo
 the light sample reused, and samples a constant sky over the whole sphere: with a sun and a
 sky, half of the shadow rays go to the sky and half of those below the horizon. Here:
 
-* A **constant environment is never light-sampled**: BSDF sampling reaches it (with
-  MIS weight 1, since no other strategy produces it), which for a diffuse surface is
-  exactly cosine-weighted, the ideal strategy for a uniform sky.
+* A **constant environment is never light-sampled**, nor a smooth map (peak radiance below
+  `SMOOTH_ENV` times the mean): BSDF sampling reaches it (with MIS weight 1, since no
+  other strategy produces it), which for a diffuse surface is exactly cosine-weighted,
+  the ideal strategy for a uniform sky.
 * The other emitters are chosen in proportion to an **estimate of their contribution at
   the shading point**: the luminance of the emitter's own deterministic sample (u = 0.5:
   exact irradiance for a point, spot or directional light; radiance times solid angle of
@@ -34,8 +35,11 @@ import numpy as np
 
 # share of the selection probability spread evenly over the candidates (defensive mixture)
 DEFENSIVE = 0.1
-# directions used once per job to estimate an environment map's irradiance
+# directions used once per job to estimate an environment map's irradiance and peak
 ENV_PROBES = 1024
+# an environment map whose brightest direction is below this many times its mean radiance
+# is smooth: BSDF sampling reaches it better than light samples spread over the sphere
+SMOOTH_ENV = 2.0
 
 
 def _kind(emitter: Any) -> str:
@@ -43,14 +47,19 @@ def _kind(emitter: Any) -> str:
     return str(emitter).split("[", 1)[0].strip()
 
 
-def _env_irradiance(emitter: Any) -> float:
-    """Mean irradiance on a plane from an environment: (1/4) of the integral of its
-    luminance over the sphere (pi times the mean radiance), by its own importance sampling."""
+def _env_stats(emitter: Any) -> tuple[float, float]:
+    """An environment map's mean irradiance on a plane, (1/4) of the integral of its
+    luminance over the sphere (pi times the mean radiance), by its own importance sampling;
+    and its peak-to-mean radiance over the same directions (1 for a uniform map)."""
     it = dr.zeros(mi.Interaction3f)
     sampler = mi.load_dict({"type": "independent"})
     sampler.seed(7, ENV_PROBES)
-    _, weight = emitter.sample_direction(it, sampler.next_2d(), True)
-    return float(np.mean(np.array(mi.luminance(weight)))) / 4.0
+    ds, weight = emitter.sample_direction(it, sampler.next_2d(), True)
+    lum = np.array(mi.luminance(weight))
+    radiance = lum * np.array(ds.pdf)
+    mean = float(np.mean(lum)) / (4.0 * np.pi)  # integral / 4 pi: the mean radiance
+    peak = float(np.max(radiance)) / mean if mean > 0 else 1.0
+    return float(np.mean(lum)) / 4.0, peak
 
 
 class LightChoice:
@@ -59,12 +68,20 @@ class LightChoice:
     def __init__(self, scene: mi.Scene) -> None:
         self.scene = scene
         emitters = list(scene.emitters())
-        # a constant environment is reached by BSDF sampling only
-        chosen = [(i, e) for i, e in enumerate(emitters) if _kind(e) != "ConstantBackgroundEmitter"]
-        self.emitters = [e for _, e in chosen]
-        self.scene_index = [i for i, _ in chosen]
-        self.infinite = [mi.has_flag(e.flags(), mi.EmitterFlags.Infinite) and not mi.has_flag(e.flags(), mi.EmitterFlags.DeltaDirection) for e in self.emitters]
-        self.env_irradiance = [_env_irradiance(e) if inf else 0.0 for e, inf in zip(self.emitters, self.infinite)]
+        # a constant or smooth environment is reached by BSDF sampling only
+        chosen = []
+        for i, e in enumerate(emitters):
+            if _kind(e) == "ConstantBackgroundEmitter":
+                continue
+            env = mi.has_flag(e.flags(), mi.EmitterFlags.Infinite) and not mi.has_flag(e.flags(), mi.EmitterFlags.DeltaDirection)
+            irradiance, peak = _env_stats(e) if env else (0.0, 0.0)
+            if env and peak < SMOOTH_ENV:
+                continue
+            chosen.append((i, e, env, irradiance))
+        self.emitters = [e for _, e, _, _ in chosen]
+        self.scene_index = [i for i, _, _, _ in chosen]
+        self.infinite = [env for _, _, env, _ in chosen]
+        self.env_irradiance = [irr for _, _, _, irr in chosen]
 
     def __len__(self) -> int:
         return len(self.emitters)
