@@ -16,6 +16,50 @@ def cache_root() -> Path:
     return Path(xdg) / "motion"
 
 
+def check_cache_root() -> None:
+    """Before any work: the cache root is a folder or can be made one (a `MOTION_CACHE_DIR`
+    that names a file, or a folder we may not write, is one line, not a failure in every
+    worker's first frame). UsageError naming it."""
+    from .errors import UsageError
+
+    root = cache_root()
+    if root.exists() and not root.is_dir():
+        raise UsageError(f"the cache folder {root} ($MOTION_CACHE_DIR or $XDG_CACHE_HOME/motion) is a file; point MOTION_CACHE_DIR at a folder")
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"the cache folder {root} cannot be made: {exc.strerror} (set MOTION_CACHE_DIR to a writable folder)") from None
+    if not os.access(root, os.W_OK | os.X_OK):
+        raise UsageError(f"the cache folder {root} is not writable (set MOTION_CACHE_DIR to a writable folder)")
+
+
+def enforce_cap(folder: Path, cap_bytes: int, keep: Path | None = None) -> int:
+    """Delete the least recently used files of a cache folder until it holds at most
+    `cap_bytes` ($MOTION_ASSET_CACHE_CAP, for converted assets and imports alike); returns
+    the bytes freed. Temporary files (named .*) are left to their writers, and `keep` (the
+    entry just made, about to be used) stays whatever the cap."""
+    if not folder.is_dir():
+        return 0
+    entries = []
+    for p in folder.iterdir():
+        try:
+            st = p.stat()
+        except OSError:
+            continue
+        if p.is_file() and not p.name.startswith("."):
+            entries.append((st.st_atime, st.st_size, p))
+    entries.sort()
+    total = sum(size for _, size, _ in entries)
+    entries = [e for e in entries if e[2] != keep]
+    freed = 0
+    for _, size, path in entries:
+        if total - freed <= cap_bytes:
+            break
+        path.unlink(missing_ok=True)
+        freed += size
+    return freed
+
+
 def kernels_dir() -> Path:
     """drjit's kernel cache: $DRJIT_CACHE_DIR, else kernels/ under the cache root."""
     return Path(os.environ.get("DRJIT_CACHE_DIR", str(cache_root() / "kernels")))

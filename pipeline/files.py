@@ -72,23 +72,9 @@ def write_atomic(path: str | Path, data: bytes, doing: str = "writing") -> Path:
     """Write `data` to `path` through a temporary file in the same folder and a rename:
     a reader sees the old file or the whole new one. On any failure the temporary file is
     removed (no zero-byte or partial file is left); a disk fault raises DiskFaultError."""
-    path = Path(path)
-    tmp = None
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        publish(tmp, path)
-        tmp = None
-    except BaseException as exc:
-        if tmp is not None:
-            _unlink_quietly(tmp)
-        fault = disk_fault(exc, doing, path)
-        if fault is not None:
-            raise fault from None
-        raise
-    return path
+    with writing(path, doing) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
 
 
 def publish(tmp: str | Path, path: str | Path) -> None:
@@ -108,7 +94,7 @@ def writing(path: str | Path, doing: str = "writing", suffix: str = ".tmp") -> I
     tmp: str | None = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=suffix, dir=path.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
         os.close(fd)
         yield Path(tmp)
         publish(tmp, path)
@@ -120,3 +106,12 @@ def writing(path: str | Path, doing: str = "writing", suffix: str = ".tmp") -> I
         if fault is not None:
             raise fault from None
         raise
+
+
+def confined(folder: str | Path, path: str | Path) -> bool:
+    """Whether `path` stays inside `folder` once every link on the way is followed: a
+    subfolder (or claims folder) pre-placed in the output folder as a link to elsewhere
+    would otherwise carry frames out of it."""
+    base = Path(folder).resolve()
+    target = Path(path).parent.resolve() / Path(path).name
+    return target == base or base in target.parents

@@ -19,7 +19,7 @@ import numpy as np
 import OpenEXR
 
 from .errors import DiskFaultError, FrameIOError
-from .files import DISK_FAULT_ERRNOS, _UMASK, _unlink_quietly, disk_fault, disk_fault_errno, publish, write_atomic, writing  # noqa: F401  (the write policy, re-exported)
+from .files import DISK_FAULT_ERRNOS, _UMASK, _unlink_quietly, confined, disk_fault, disk_fault_errno, publish, write_atomic, writing  # noqa: F401  (the write policy, re-exported)
 
 PixelType = Literal["half", "float"]
 Compression = Literal["zip", "zips", "piz", "zstd", "none"]
@@ -206,15 +206,6 @@ def inside(folder: str | Path, path: str | Path) -> bool:
     base = os.path.normpath(os.path.abspath(folder))
     target = os.path.normpath(os.path.abspath(path))
     return target.startswith(base.rstrip(os.sep) + os.sep)
-
-
-def confined(folder: str | Path, path: str | Path) -> bool:
-    """Whether `path` stays inside `folder` once every link on the way is followed: a
-    subfolder (or claims folder) pre-placed in the output folder as a link to elsewhere
-    would otherwise carry frames out of it."""
-    base = Path(folder).resolve()
-    target = Path(path).parent.resolve() / Path(path).name
-    return target == base or base in target.parents
 
 
 def read_header(path: str | Path) -> dict[str, Any]:

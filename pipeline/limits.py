@@ -147,3 +147,22 @@ def float32_problem(value: float) -> str | None:
     if abs(value) > FLOAT32_MAX:
         return f"{value:g} is beyond what the renderer holds (float32: at most {FLOAT32_MAX:.3g} in magnitude)"
     return None
+
+
+# The light values a camera ray meets directly, so that they are a pixel's value: an
+# emitter's or a constant environment's `radiance` (a point light's intensity is not seen).
+SEEN_RADIANCE = ("radiance",)
+
+
+def beyond_half(values: np.ndarray) -> np.ndarray:
+    """Mask of the values a half-float EXR pixel cannot hold (non-finite, or past HALF_MAX)."""
+    values = np.asarray(values, dtype=np.float64)
+    return ~np.isfinite(values) | (np.abs(values) > HALF_MAX)
+
+
+def half_problem(value: float) -> str | None:
+    """Why a radiance seen directly cannot be a pixel of a half-float frame, or None."""
+    if beyond_half(np.array([value])).any():
+        return (f"radiance {value:g} is beyond what a half-float EXR holds ({HALF_MAX:g}): "
+                "its pixels would be inf; use output.pixel_type: float, or lower it")
+    return None

@@ -98,6 +98,10 @@ def _bake_json(mutate: str) -> bytes:
         ball["scale"][1] = [float("inf"), 1.0, 1.0]
     elif mutate == "zero-quaternion":
         ball["rotation"][0] = [0.0, 0.0, 0.0, 0.0]
+    elif mutate == "frame-4000-digits":
+        doc["frames"][0]["frame"] = int("9" * 4000)
+    elif mutate == "samples-infinity":
+        doc["samples_per_frame"] = float("inf")
     elif mutate == "translation-1e39":
         ball["translation"][1][0] = 1e39
     elif mutate == "wrong-shape":
@@ -105,6 +109,35 @@ def _bake_json(mutate: str) -> bytes:
     elif mutate == "no-frames":
         del doc["frames"]
     return json.dumps(doc).replace("Infinity", "1e999").encode()
+
+
+def _npz_bake(mutate: str) -> bytes:
+    """The JSON bake of `_bake_json` as an NPZ (the layout motion bake writes), broken."""
+    import io
+    import tempfile
+
+    from motion.pipeline.bake.files import read_baked, write_baked
+
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "m.json").write_bytes(_bake_json(""))
+        write_baked(read_baked(Path(tmp) / "m.json"), Path(tmp) / "m.npz")
+        arrays = dict(np.load(Path(tmp) / "m.npz", allow_pickle=False))
+    key = next(k for k in arrays if k.startswith("samples/") and k.endswith("/translation"))
+    if mutate == "complex":
+        arrays[key] = arrays[key].astype(np.complex128)
+    elif mutate == "frame-inf":
+        arrays["frames"] = arrays["frames"].astype(np.float64)
+        arrays["frames"][0] = np.inf
+    out = io.BytesIO()
+    np.savez(out, **arrays)
+    return out.getvalue()
+
+
+def _usda(text: str) -> str:
+    return "#usda 1.0\n" + text
+
+
+USD_SCENE = BASE + "imports: [{file: root.usda}]\n"
 
 
 def _exr(meta: dict[str, Any] | None = None, fps: Any = 24, window: tuple[int, int] | None = None) -> bytes:
@@ -274,6 +307,33 @@ CASES: list[tuple[str, str, dict[str, Any], list[str]]] = [
     ("ik-zero-length-bones", "degenerate", {"scene.yaml": BASE.replace("  - {name: ball, shape: sphere, radius: 0.5}\n", "  - {name: a, shape: sphere, radius: 0.1}\n  - {name: b, shape: sphere, radius: 0.1, parent: a}\n"
                                                                        "  - {name: c, shape: sphere, radius: 0.1, parent: b}\n  - {name: tgt, shape: sphere, radius: 0.1, transform: {translate: [1, 0, 0]}}\n")
                                                           + "ik: [{chain: [a, b, c], target: tgt}]\n"}, _r()),
+    # --- round 3: sizes of imports, bakes, flocks, checked before allocation ---
+    ("keys-300k", "sizes-3", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, motion: {type: keyframes, channels: {translate: {keys: ["
+                                                          + ",".join(f"{{time: {i}e-6, value: [0, 0, 0]}}" for i in range(300_000)) + "]}}}}")}, V),
+    ("flock-160k-agents", "sizes-3", {"scene.yaml": _obj("{name: birds, shape: cube, size: 0.1, deform: {type: flock, count: 160000}}").replace("last: 2", "last: 1200")}, _r()),
+    ("texture-30000-squared", "sizes-3", {"scene.yaml": BASE.replace("radius: 0.5}", "radius: 0.5, material: t}") + "materials: [{name: t, type: diffuse, color: {file: t.png}}]\n",
+                                          "t.png": _png(1, 1, declared=(30000, 30000))}, _r()),
+    ("plan-radius-200m", "sizes-3", {"scene.yaml": _obj("{name: bot, shape: sphere, radius: 0.2, motion: {type: plan, grid: {from_scene: true, cell: 2, origin: [-500, -500], size: [1000, 1000]}, "
+                                                     "start: [-400, 0.2, 0], goal: [400, 0.2, 0], radius: 200, speed: 1}}")}, _r("--dry-run")),
+    ("gltf-300k-nodes", "sizes-3", {"scene.yaml": BASE + "imports: [{file: n.gltf}]\n",
+                                    "n.gltf": json.dumps({"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"name": f"n{i}"} for i in range(300_000)]})}, V),
+    ("gltf-accessor-44m", "sizes-3", {"scene.yaml": BASE + "imports: [{file: a.gltf}]\n",
+                                      "a.gltf": json.dumps({"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+                                                            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+                                                            "accessors": [{"componentType": 5126, "type": "VEC3", "count": 44_000_000}]})}, V),
+    # --- round 3: USD layers resolve inside the scene's folder, regular files, no cycles ---
+    ("usd-sublayer-self", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@./root.usda@]\n)\ndef Xform "a" {}\n')}, V),
+    ("usd-sublayer-dev-zero", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@/dev/zero@]\n)\ndef Xform "a" {}\n')}, V),
+    ("usd-sublayer-fifo", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@./f.usda@]\n)\ndef Xform "a" {}\n'), "f.usda": "<fifo>"}, V),
+    ("usd-reference-outside", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('def Xform "a" (\n    references = @/etc/hostname@</x>\n) {}\n')}, V),
+    ("usd-cycle-two", "usd-layers", {"scene.yaml": USD_SCENE, "root.usda": _usda('(\n    subLayers = [@./b.usda@]\n)\n'), "b.usda": _usda('(\n    subLayers = [@./root.usda@]\n)\n')}, V),
+    # --- round 3: malformed records in bake files and imports ---
+    ("bake-json-frame-4000-digits", "malformed", {"scene.yaml": BASE, "m.json": _bake_json("frame-4000-digits")}, _r("--motion", "m.json")),
+    ("bake-json-samples-infinity", "malformed", {"scene.yaml": BASE, "m.json": _bake_json("samples-infinity")}, _r("--motion", "m.json")),
+    ("bake-npz-complex", "malformed", {"scene.yaml": BASE, "m.npz": _npz_bake("complex")}, _r("--motion", "m.npz")),
+    ("bake-npz-frame-inf", "malformed", {"scene.yaml": BASE, "m.npz": _npz_bake("frame-inf")}, _r("--motion", "m.npz")),
+    ("gltf-json-deep", "malformed", {"scene.yaml": BASE + "imports: [{file: d.gltf}]\n", "d.gltf": '{"asset": {"version": "2.0"}, "extras": ' + "[" * 100000 + "]" * 100000 + "}"}, V),
+    ("telecine-pattern-20000", "malformed", SEQ, ["telecine", "in", "-o", "out/t", "--pattern", "23" * 10000]),
     ("link-deliver-check", "links", {"scene.yaml": BASE, "elsewhere/keep": "", "out/deliver": ("link", "../elsewhere")}, ["render", "scene.yaml", "-o", "out", "--check", "--deliver", "contact"]),
 ]
 
@@ -372,7 +432,7 @@ def test_hostile_case_is_a_clean_error(results: tuple[Path, set[str], set[str], 
 
 def test_every_class_is_covered() -> None:
     kinds = {c[1] for c in CASES}
-    assert kinds == {"yaml-bomb", "sizes", "render-time", "output", "non-finite", "misreported", "options", "scheduler", "links", "range", "degenerate"}
+    assert kinds == {"yaml-bomb", "sizes", "render-time", "output", "non-finite", "misreported", "options", "scheduler", "links", "range", "degenerate", "usd-layers", "malformed", "sizes-3"}
     assert not Path("/tmp/motion-escaped").exists()
 
 
@@ -397,9 +457,10 @@ def test_located_errors_point_at_the_field(results: tuple[Path, set[str], set[st
         "ballistic-overflow-bake": ("scene.yaml:6:", "generators[0].v0[0]: 1e+308 is beyond what the renderer holds"),
         "range-translate-1e39": ("scene.yaml:6:", "objects[0].transform.translate[0]: 1e+39 is beyond what the renderer holds"),
         "range-radiance-half": ("scene.yaml:6:", "objects[0].emission.radiance: radiance 100000 is beyond what a half-float EXR holds"),
-        "range-expression-1e48": ("scene.yaml:6:", "object 'ball': translation is not finite in the renderer's float32 at t ="),
+        "range-expression-1e48": ("scene.yaml:6:", "objects[0].motion.channels.translate[0]: expression '10**24 * 10**24 * (t + 1)' is 1e+48 at frame 0"),
         "range-bake-json-1e39": ("m.json", "object 'ball': translation is not finite in the renderer's float32"),
-        "ik-zero-length-bones": ("scene.yaml:", "ik[0].chain: the bone a -> b has no length"),
+        "ik-zero-length-bones": ("scene.yaml:", "ik[0].chain[1]: the bone a -> b has no length"),
+        "plan-radius-200m": ("scene.yaml:", "objects[1].motion.radius: bot: an agent of radius 200.0 m"),
         "bake-zero-quaternion": ("m.json", "object 'ball': rotation is not a unit quaternion"),
         "motion-empty-json": ("m.json", "empty"),
         "report-unwritable": ("--report", "cannot write"),
@@ -565,3 +626,175 @@ def test_a_plan_with_no_margin_in_a_corridor_is_refused_in_bounded_time() -> Non
     with pytest.raises(_Located, match="give a larger margin"):
         build_path(Grid(wall, 0.1, np.array([0.0, 0.0])), [[0.75, 0.0, 1.25], [4.35, 0.0, 4.8]], 0.25, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, "none")
     assert time.perf_counter() - t0 < 10
+
+
+# --- round 3 (issue 24, worktree validate): malformed records, the range policy, degenerate
+# input refused at validation. Each case runs motion's real main() in process (none is a
+# resource bomb) and must end in exit 2, one line naming the file and what is wrong, and
+# no frame written.
+
+
+def _bake_npz(tmp: Path, mutate: Any) -> Path:
+    """A real NPZ bake of BASE (`motion bake`), with `mutate(arrays)` applied to its arrays."""
+    from motion.cli.main import main as motion_main
+
+    (tmp / "scene.yaml").write_text(BASE)
+    assert motion_main(["-q", "bake", str(tmp / "scene.yaml"), "-o", str(tmp / "good.npz")]) == 0
+    with np.load(tmp / "good.npz") as z:
+        arrays = {k: z[k].copy() for k in z.files}
+    mutate(arrays)
+    path = tmp / "m.npz"
+    np.savez(path, **arrays)
+    return path
+
+
+def _gltf_triangle(path: Path, sparse_indices: np.ndarray | None = None) -> Path:
+    """A one-triangle glTF; `sparse_indices` (their dtype kept) move those vertices by sparse values."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
+    from gltf_writer import GltfBuilder
+
+    b = GltfBuilder()
+    pos = b.accessor(TRI, bounds=True)
+    if sparse_indices is not None:
+        kinds = {np.dtype("int16"): 5122, np.dtype("uint16"): 5123, np.dtype("int8"): 5120}
+        b.gltf["accessors"][pos]["sparse"] = {"count": len(sparse_indices),
+                                              "indices": {"bufferView": b.view(sparse_indices.tobytes()), "componentType": kinds[sparse_indices.dtype]},
+                                              "values": {"bufferView": b.view(np.full((len(sparse_indices), 3), 5.0, np.float32).tobytes())}}
+    b.gltf["meshes"].append({"name": "m", "primitives": [{"attributes": {"POSITION": pos}, "indices": b.accessor(np.array([0, 1, 2]), dtype="uint16")}]})
+    b.gltf["scenes"][0]["nodes"].append(b.node(name="tri", mesh=0))
+    return b.save(path)
+
+
+def _json_bake(tmp: Path, old: str, new: str) -> Path:
+    """_bake_json's file with one piece of its text replaced (a literal JSON's own spelling)."""
+    text = _bake_json("none").decode()
+    assert old in text
+    path = tmp / "m.json"
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+def _refused(tmp: Path, argv: list[str], *fragments: str, capsys: pytest.CaptureFixture[str]) -> str:
+    from motion.cli.main import main as motion_main
+
+    capsys.readouterr()
+    code = motion_main(argv)
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert code == 2 and len(lines) == 1 and "Traceback" not in err, f"{argv}: exit {code}\n{err}"
+    assert all(f in lines[0] for f in fragments), lines[0]
+    assert len(lines[0]) < 400 and not list(tmp.rglob("*.exr")), lines[0]
+    return lines[0]
+
+
+def _render(tmp: Path, *extra: str) -> list[str]:
+    return ["render", str(tmp / "scene.yaml"), "-o", str(tmp / "out"), "--workers", "1", "--no-progress", *extra]
+
+
+MALFORMED_RECORDS: list[tuple[str, Any, tuple[str, ...]]] = [
+    # (id, how the input is made, fragments of the one line)
+    ("npz-complex-poses", lambda a: a.__setitem__("samples/objects/ball/translation", a["samples/objects/ball/translation"] + 1j), ("m.npz", "'samples/objects/ball/translation.npy' holds complex128 values")),
+    ("npz-frame-inf", lambda a: a.__setitem__("frames", np.array([0.0, np.inf, 2.0])), ("m.npz", "frames[1].frame is inf, expected a whole number")),
+    ("npz-frame-complex", lambda a: a.__setitem__("frames", a["frames"].astype(complex)), ("m.npz", "'frames.npy' holds complex128 values")),
+    ("npz-frame-1e12", lambda a: a.__setitem__("frames", a["frames"] * 10**12), ("m.npz", "frames[1].frame is 1e+12, expected -1000000000 to 1000000000")),
+    ("npz-times-complex", lambda a: a.__setitem__("times", a["times"].astype(complex)), ("m.npz", "'times.npy' holds complex128 values")),
+    ("json-frame-4000-digits", ('"frame": 1,', '"frame": ' + "9" * 4000 + ","), ("m.json", "an integer of 4000 digits (at most 20)")),
+    ("json-samples-infinity", ('"samples_per_frame": 2', '"samples_per_frame": Infinity'), ("m.json", "Infinity is not a finite number")),
+    ("json-samples-1e9", ('"samples_per_frame": 2', '"samples_per_frame": 1000000000'), ("m.json", "samples_per_frame is 1e+09, expected 1 to 256")),
+    ("json-frame-fraction", ('"frame": 1,', '"frame": 1.5,'), ("m.json", "frames[1].frame is 1.5, expected a whole number")),
+    ("json-frame-bool", ('"frame": 1,', '"frame": true,'), ("m.json", "frames[1].frame is bool")),
+    ("json-time-text", ('"time": 0.041666666666666664', '"time": "0.04"'), ("m.json", "frame 1 is malformed", "time is '0.04', expected a finite number")),
+    ("json-pose-text", ('"translation": [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]', '"translation": [["0", "0", "0"], [0.0, 0.0, 0.0]]'), ("m.json", "expected real numbers")),
+    ("gltf-sparse-index-minus-1", np.array([-1], np.int16), ("t.gltf", "sparse: bad sparse indices (componentType 5122")),
+    ("gltf-sparse-index-repeated", np.array([1, 1], np.uint16), ("t.gltf", "sparse indices must strictly increase")),
+]
+
+
+@pytest.mark.parametrize("case", MALFORMED_RECORDS, ids=[c[0] for c in MALFORMED_RECORDS])
+def test_malformed_records_are_located_refusals(tmp_path: Path, case: tuple[str, Any, tuple[str, ...]], capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 24, malformed records: each was accepted (a complex pose cast to its real part,
+    a fractional frame number truncated, a sparse index -1 writing the last vertex) or an
+    OverflowError traceback (frame inf, samples_per_frame Infinity)."""
+    case_id, make, fragments = case
+    (tmp_path / "scene.yaml").write_text(BASE)
+    if case_id.startswith("npz"):
+        argv = _render(tmp_path, "--motion", str(_bake_npz(tmp_path, make)))
+    elif case_id.startswith("json"):
+        argv = _render(tmp_path, "--motion", str(_json_bake(tmp_path, *make)))
+    else:
+        _gltf_triangle(tmp_path / "t.gltf", make)
+        (tmp_path / "scene.yaml").write_text(BASE + "imports: [{file: t.gltf}]\n")
+        monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))  # the conversion is cached by content
+        argv = _render(tmp_path)
+    _refused(tmp_path, argv, *fragments, capsys=capsys)
+
+
+def test_range_policy_covers_expressions_at_validation_seen_radiance_and_schema_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 24, numbers the renderer cannot hold: an expression channel reaching 1e48 was
+    found only by the bake (`motion validate` said ok); an environment's radiance animated
+    past what a half-float frame holds rendered (exit 0, pixels clamped); a number past
+    float32 was reported only once the scene's other mistakes were fixed; NPZ bakes."""
+    light = "{type: constant, radiance: 0.5}"
+    (tmp_path / "scene.yaml").write_text(BASE.replace(light, "{type: constant, radiance: 0.5, motion: {type: procedural, scalars: {radiance: '1e5 * (t + 1)'}}}"))
+    _refused(tmp_path, ["validate", str(tmp_path / "scene.yaml")], "scene.yaml:3:", "lights[0].motion.scalars.radiance: expression '1e5 * (t + 1)' is 100000 at frame 0",
+             "half-float frame", capsys=capsys)
+    (tmp_path / "scene.yaml").write_text(BASE.replace(light, "{type: constant, radiance: 0.5, motion: {type: keyframes, interpolation: catmull-rom, channels: {radiance: "
+                                        "{keys: [{time: 0, value: 0}, {time: 1, value: 65000}, {time: 2, value: 65000}]}}}}"))
+    # every key holds in a half; the spline overshoots them between frames 1 and 2 (at a shutter sample)
+    _refused(tmp_path, _render(tmp_path), "scene.yaml:3:", "lights[0].motion: light 'light0': radiance reaches 6", "beyond what a half-float EXR holds", capsys=capsys)
+    (tmp_path / "scene.yaml").write_text(BASE.replace(light, "{type: constant, radiance: 0.5, motion: {type: procedural, scalars: {radiance: '10**24 * 10**24'}}}"))
+    _refused(tmp_path, ["validate", str(tmp_path / "scene.yaml")], "scene.yaml:3:", "is 1e+48 at frame 0 (t = 0 s): beyond what the renderer's float32 holds", capsys=capsys)
+    (tmp_path / "scene.yaml").write_text(BASE.replace("radius: 0.5}", "radius: 0.5, transform: {translate: [1.0e39, 0, 0]}, radious: 1}"))
+    with pytest.raises(SceneError) as err:
+        load_scene(tmp_path / "scene.yaml")
+    assert [p.yaml_path for p in err.value.problems] == ["objects[0].transform.translate[0]", "objects[0].radious"]
+    (tmp_path / "scene.yaml").write_text(BASE)
+    for key, why in (("samples/objects/ball/translation", "object 'ball': translation is not finite in the renderer's float32"),
+                     ("at_frame/light_scalars/light0/radiance", "light 'light0': radiance is not finite in the renderer's float32")):
+        path = _bake_npz(tmp_path, lambda a: a[key].__setitem__((1, ...), 1e39))
+        _refused(tmp_path, _render(tmp_path, "--motion", str(path)), "m.npz", "frame 1:", why, capsys=capsys)
+    # a bake file's environment radiance past a half (the frames are half-float)
+    path = _bake_npz(tmp_path, lambda a: a["samples/light_scalars/light0/radiance"].__setitem__((1, ...), 1e5))
+    _refused(tmp_path, _render(tmp_path, "--motion", str(path)), "m.npz", "frame 1: light 'light0': radiance reaches 100000", "half-float", capsys=capsys)
+
+
+def test_a_zero_length_ik_bone_is_refused_at_validation(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 24, degenerate but valid: a chain joint at its parent's origin that nothing
+    moves was found only by the bake (`motion validate` said ok)."""
+    from motion.cli.main import main as motion_main
+
+    (tmp_path / "scene.yaml").write_text(BASE.replace("  - {name: ball, shape: sphere, radius: 0.5}\n", "  - {name: a, shape: sphere, radius: 0.1}\n  - {name: b, shape: sphere, radius: 0.1, parent: a}\n"
+                                                      "  - {name: c, shape: sphere, radius: 0.1, parent: b, transform: {translate: [0, 1, 0]}}\n  - {name: t, shape: sphere, radius: 0.1, transform: {translate: [1, 0, 0]}}\n")
+                                         + "ik: [{chain: [a, b, c], target: t}]\n")
+    _refused(tmp_path, ["validate", str(tmp_path / "scene.yaml")], "scene.yaml:10:18:", "ik[0].chain[1]: the bone a -> b has no length", capsys=capsys)
+    # a keyed translation gives the bone its length: valid (the bake refuses it where it is 0)
+    (tmp_path / "scene.yaml").write_text((tmp_path / "scene.yaml").read_text().replace("parent: a}", "parent: a, motion: {type: keyframes, channels: {translate: {keys: [{time: 0, value: [0, 1, 0]}]}}}}"))
+    assert motion_main(["validate", str(tmp_path / "scene.yaml")]) == 0
+
+
+# --- round 3 (issue 24): caches ---------------------------------------------------------------
+
+
+def test_a_cache_folder_that_is_a_file_is_one_line_before_any_work(tmp_path: Path) -> None:
+    from farm_util import motion  # noqa: F401  (the real command, with its environment)
+
+    (tmp_path / "scene.yaml").write_text(BASE.replace(", variant: scalar_rgb", ""))
+    (tmp_path / "cachefile").write_text("x")
+    env = {**os.environ, "MOTION_CACHE_DIR": str(tmp_path / "cachefile")}
+    res = subprocess.run([str(Path(sys.executable).with_name("motion")), "render", str(tmp_path / "scene.yaml"), "-o", str(tmp_path / "out"), "--no-progress"],
+                         capture_output=True, text=True, env=env, timeout=120)
+    assert res.returncode == 2 and "is a file; point MOTION_CACHE_DIR at a folder" in res.stderr and "Traceback" not in res.stderr, res.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_import_cache_keeps_to_the_asset_cache_cap(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The import cache ignored MOTION_ASSET_CACHE_CAP (it grew without bound); it now
+    evicts its least recently used entries like the converted-asset cache, never the entry
+    just made."""
+    from motion.pipeline.scene.imports import cache
+
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("MOTION_ASSET_CACHE_CAP", "2500")
+    made = [cache.cached(f"m{i}", f"key{i}", ".bin", lambda p: p.write_bytes(b"x" * 1000)) for i in range(5)]
+    held = [p for p in made if p.exists()]
+    assert made[-1] in held and sum(p.stat().st_size for p in held) <= 2500, held

@@ -314,3 +314,63 @@ def test_an_empty_or_unlit_scene_is_warned_about(tmp_path: Path, capsys: pytest.
     assert main(["validate", str(path)]) == 0
     err = capsys.readouterr().err
     assert "warning: the scene has no objects" in err and "every frame renders black" in err
+
+
+REFUSED_ITEMS = """\
+timeline: {fps: 24, first: 0, last: 2}
+camera: {position: [0, 1, 5], look_at: [0, 0, 0]}
+materials:
+  - {name: red, type: diffuse, color: [0.8, 0.1, 0.1]}
+  - {name: glass, type: dielectirc}
+objects:
+  - {name: a, shape: sphere, radius: 0.5, material: rde}
+  - {name: b, shape: shpere, parent: a, material: glass, transform: {translate: [0, 1, 0]}}
+  - {shape: cube, size: 1, material: blu, transform: {translate: [1.0e39, 0, 0]}}
+  - {name: m, shape: mesh, parent: b, transform: {translate: [0, 1, 0]}}
+  - {name: c, shape: sphere, parent: nobody}
+ik: [{chain: [a, b, m], target: c}]
+"""
+
+
+def test_an_item_refused_whole_keeps_its_name_and_place(tmp_path: Path) -> None:
+    """A list item the schema refuses whole (an unknown kind, a missing name or file) used
+    to stop every semantic check (or report the items that refer to it as unknown): now
+    the rest of the scene is checked in the same run, numbers included, in file order."""
+    path = tmp_path / "items.yaml"
+    path.write_text(REFUSED_ITEMS)
+    with pytest.raises(SceneError) as err:
+        load_scene(path)
+    found = [(p.line, p.yaml_path) for p in err.value.problems]
+    assert found == [(5, "materials[1]"), (7, "objects[0].material"), (8, "objects[1]"), (9, "objects[2].name"), (9, "objects[2].material"),
+                     (9, "objects[2].transform.translate[0]"), (10, "objects[3].file"), (11, "objects[4].parent")], err.value.problems
+    text = str(err.value)
+    assert "did you mean 'dielectric'" in text and "did you mean 'sphere'" in text and "unknown object" not in text
+    assert "_unnamed_" not in text and "defined: a, b, m, c" in text
+
+
+def test_a_scene_with_nothing_visible_or_lights_of_strength_0_is_warned_about(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 23: objects that are all hidden, or lights that all emit 0, render black (or an
+    empty environment) frames as silently as an empty scene did."""
+    path = tmp_path / "dark.yaml"
+    path.write_text("camera: {position: [0, 0, 5], look_at: [0, 0, 0]}\nobjects: [{name: a, shape: sphere, visible: false}, {name: e, shape: empty}]\n"
+                    "lights: [{type: point, position: [0, 1, 0], intensity: 0}, {type: constant, radiance: [0, 0, 0]}]\n")
+    assert main(["validate", str(path)]) == 0
+    err = capsys.readouterr().err
+    assert "warning: none of the scene's 2 objects is visible" in err and "only lights of strength 0" in err
+
+
+def test_choices_match_without_case_and_a_misspelt_kind_keeps_its_fields_checked(tmp_path: Path) -> None:
+    """`CCD` and `HALF` got no suggestion (difflib compares case); the fields of an object
+    whose shape is misspelt (`Sphere`) were never checked, so its bad interpolation showed
+    only after the shape was fixed."""
+    path = tmp_path / "case.yaml"
+    path.write_text(REFUSED_ITEMS.replace("shape: shpere, parent: a,", "shape: Sphere, parent: a, motion: {type: keyframes, interpolation: CatmullRom, "
+                                                                  "channels: {translate: {keys: [{time: 0, value: [0, 1, 0]}]}}},")
+                    + "output: {pixel_type: HALF}\n")
+    with pytest.raises(SceneError) as err:
+        load_scene(path)
+    by_path = {p.yaml_path: p.message for p in err.value.problems}
+    assert "did you mean 'sphere'" in by_path["objects[1]"]
+    assert "did you mean 'catmull-rom'" in by_path["objects[1].motion.interpolation"]
+    assert "did you mean 'half'" in by_path["output.pixel_type"]
+    assert [p.line for p in err.value.problems] == sorted(p.line for p in err.value.problems)

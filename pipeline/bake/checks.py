@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import SceneError
-from ..limits import beyond_float32
+from ..limits import SEEN_RADIANCE, beyond_float32, beyond_half
 
 if TYPE_CHECKING:
     from ..motion import SceneMotion
@@ -52,10 +52,11 @@ def scalar_problem(name: str, arr: Any, times: Any) -> str | None:
     return None
 
 
-def motion_problems(motion: "SceneMotion") -> list[tuple[str, str, str]]:
+def motion_problems(motion: "SceneMotion", half: bool = False) -> list[tuple[str, str, str]]:
     """Every problem of one SceneMotion as (owner, name, message): owner is "camera",
     "objects", "lights", "deform" (an object's vertices) or "emitter" (its particles);
-    the message names the owner, the channel and the first time at fault."""
+    the message names the owner, the channel and the first time at fault. `half`: the
+    frames are half-float, so a light's radiance seen directly must be one a half holds."""
     times = motion.times
     problems: list[tuple[str, str, str]] = []
     poses = [("camera", "", "camera", motion.camera)]
@@ -69,6 +70,10 @@ def motion_problems(motion: "SceneMotion") -> list[tuple[str, str, str]]:
     scalars += [("lights", n, f"light '{n}'", c, arr) for n, d in motion.light_scalars.items() for c, arr in d.items()]
     for owner, name, who, channel, arr in scalars:
         why = scalar_problem(channel, arr, times)
+        if why is None and half and channel in SEEN_RADIANCE and beyond_half(arr).any():
+            rows = np.asarray(arr, dtype=np.float64).reshape(times.size, -1)
+            k = int(np.argmax(beyond_half(rows).any(axis=1)))
+            why = f"{channel} reaches {float(np.max(np.abs(rows[k]))):g} at t = {times[k]:.6g} s, beyond what a half-float EXR holds: use output.pixel_type: float, or lower it"
         if why is not None:
             problems.append((owner, name, f"{who}: {why}"))
     for name, verts in motion.vertices.items():
@@ -97,7 +102,8 @@ def check_motion(loaded: "LoadedScene", motion: "SceneMotion") -> None:
         "deform": lambda n: ("objects", index.get(n, 0), "deform"),
         "emitter": lambda n: ("objects", index.get(n, 0), "emitter"),
     }
-    problems = [loaded.source.problem(where[owner](name), message) for owner, name, message in motion_problems(motion)]
+    half = scene.output.pixel_type == "half"
+    problems = [loaded.source.problem(where[owner](name), message) for owner, name, message in motion_problems(motion, half)]
     if problems:
         raise SceneError(problems)
 

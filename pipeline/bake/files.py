@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import BakeFileError
 from ..files import writing
+from ..timeline import MAX_FRAME_NUMBER
 from .checks import motion_problems
 from .records import BakedFrame, BakedMotion
 
@@ -147,7 +148,7 @@ def read_document(path: str | Path) -> dict[str, Any]:
             if not head:
                 raise BakeFileError(f"{path}: the baked-motion file is empty")
             if path.suffix.lower() == ".json" or head[:1] in (b"{", b"[", b" ", b"\n"):
-                doc = json.loads(fh.read().decode("utf-8"))
+                doc = json.loads(fh.read().decode("utf-8"), parse_constant=_no_constant, parse_int=_bounded_int)
             elif head[:4] == b"PK\x03\x04":
                 doc = _read_npz(fh, path)
             else:
@@ -177,6 +178,8 @@ def _read_npz(fh: Any, path: Path) -> dict[str, Any]:
                 shape, _, dtype = read_header(member)  # the header only, nothing decompressed
             if dtype.hasobject:
                 raise BakeFileError(f"{path}: array {info.filename!r} holds Python objects (refused)")
+            if dtype.kind not in "fiubU":
+                raise BakeFileError(f"{path}: array {info.filename!r} holds {dtype} values; a bake holds real numbers")
             declared += int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
             if declared > MAX_BAKE_ARRAY_BYTES:
                 raise BakeFileError(f"{path}: its arrays declare more than {MAX_BAKE_ARRAY_BYTES} bytes (the limit)")
@@ -190,27 +193,75 @@ def _read_npz(fh: Any, path: Path) -> dict[str, Any]:
     return doc
 
 
-_MALFORMED = (KeyError, TypeError, ValueError, IndexError, AttributeError)
+_MALFORMED = (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError)
+MAX_INT_DIGITS = 20  # an integer in a bake file (a frame number is at most 10^9)
+MAX_SAMPLES_PER_FRAME = 256  # as render.shutter_samples
 
 
-def read_baked(path: str | Path) -> BakedMotion:
+def _no_constant(name: str) -> float:
+    """JSON's NaN / Infinity / -Infinity, refused where the file is parsed (Python's json
+    accepts them; no bake value may be one)."""
+    raise ValueError(f"{name} is not a finite number")
+
+
+def _bounded_int(text: str) -> int:
+    """A JSON integer literal of at most MAX_INT_DIGITS digits (a frame number of 4,000
+    digits is a malformed record, not a number to carry into error messages)."""
+    if len(text.lstrip("-")) > MAX_INT_DIGITS:
+        raise ValueError(f"an integer of {len(text.lstrip('-'))} digits (at most {MAX_INT_DIGITS})")
+    return int(text)
+
+
+def _whole(value: Any, what: str, low: int, high: int) -> int:
+    """A whole number from a record (a JSON int, an integral finite float, a numpy
+    integer) within [low, high]; a bool, text, complex, fractional or non-finite value is
+    a ValueError naming `what`."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{what} is {type(value).__name__} {str(value)[:24]!r}, expected a whole number")
+    if not (np.isfinite(value) and float(value).is_integer()):
+        raise ValueError(f"{what} is {float(value):g}, expected a whole number")
+    if not low <= value <= high:
+        raise ValueError(f"{what} is {float(value):g}, expected {low} to {high}")
+    return int(value)
+
+
+def _real(value: Any, what: str) -> float:
+    """A finite real number from a record (no bool, text or complex value)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)) or not np.isfinite(value):
+        raise ValueError(f"{what} is {str(value)[:24]!r}, expected a finite number")
+    return float(value)
+
+
+def _numbers(value: Any, what: str, dtype: Any = np.float64) -> np.ndarray:
+    """An array of real numbers (or booleans for `dtype=bool`): text, complex or object
+    values are a ValueError naming `what` (np.asarray(..., float) would parse '1' and drop
+    an imaginary part with only a warning)."""
+    a = np.asarray(value)
+    if a.dtype.kind not in ("b" if dtype is bool else "fiu"):
+        raise ValueError(f"{what} holds {a.dtype} values, expected {'booleans' if dtype is bool else 'real numbers'}")
+    return a.astype(dtype)
+
+
+def read_baked(path: str | Path, half: bool = False) -> BakedMotion:
     """The one reader of bake files (.json or .npz): the typed `BakedMotion`, every frame
     checked (finite times, poses finite with unit rotations, shapes matching the header's
     samples_per_frame). Raises BakeFileError naming the file (and the frame) on a bad one.
 
     JSON carries no vertices or particles; NPZ carries them at the frame time and across
-    the shutter (docs/bake-format.md)."""
+    the shutter (docs/bake-format.md). `half`: the frames it feeds are half-float, so a
+    light's radiance seen directly must be one a half holds (limits.py)."""
     path = Path(path)
     doc = read_document(path)
     try:
         shutter = doc["shutter"]
-        header = (str(doc["scene"]), str(doc["fps"]), float(shutter["angle"]), str(shutter["position"]), int(doc["samples_per_frame"]))
+        header = (str(doc["scene"]), str(doc["fps"]), _real(shutter["angle"], "shutter.angle"), str(shutter["position"]),
+                  _whole(doc["samples_per_frame"], "samples_per_frame", 1, MAX_SAMPLES_PER_FRAME))
     except _MALFORMED as exc:
         raise BakeFileError(f"{path}: its header (scene, fps, shutter, samples_per_frame) is malformed: {type(exc).__name__}: {exc}") from None
     scene, fps, angle, position, samples = header
     try:
         records = _npz_records(doc["arrays"]) if "arrays" in doc else list(doc["frames"])
-        numbers = [int(r["frame"]) for r in records]
+        numbers = [_whole(r["frame"], f"frames[{k}].frame", -MAX_FRAME_NUMBER, MAX_FRAME_NUMBER) for k, r in enumerate(records)]
     except _MALFORMED as exc:
         raise BakeFileError(f"{path}: the frame list is malformed ({type(exc).__name__}: {exc})") from None
     frames = []
@@ -219,18 +270,20 @@ def read_baked(path: str | Path) -> BakedMotion:
             frame = _frame(rec, number)
         except _MALFORMED as exc:
             raise BakeFileError(f"{path}: frame {number} is malformed ({type(exc).__name__}: {exc})") from None
-        _check_frame(frame, samples, path)
+        _check_frame(frame, samples, path, half)
         frames.append(frame)
     return BakedMotion(scene, fps, angle, position, frames)
 
 
 def _frame(rec: dict[str, Any], number: int) -> BakedFrame:
     """One frame's record (the JSON layout, or NPZ arrays nested the same way)."""
-    time = float(rec["time"])
-    shutter = (float(rec["shutter"][0]), float(rec["shutter"][1]))
+    time = _real(rec["time"], "time")
+    if len(rec["shutter"]) != 2:
+        raise ValueError(f"shutter has {len(rec['shutter'])} values, expected [open, close]")
+    shutter = (_real(rec["shutter"][0], "shutter[0]"), _real(rec["shutter"][1], "shutter[1]"))
     across = rec["samples"]
     count = np.asarray(across["camera"]["translation"]).shape[0]
-    sample_times = np.asarray(rec.get("sample_times", []), dtype=np.float64).reshape(-1)
+    sample_times = _numbers(rec.get("sample_times", []), "sample_times").reshape(-1)
     if sample_times.size != count:  # no sample times in the file: the shutter's, evenly spaced
         sample_times = np.linspace(shutter[0], shutter[1], count)
     return BakedFrame(
@@ -250,7 +303,7 @@ def _scene_motion(node: dict[str, Any], times: np.ndarray, single: bool) -> "Sce
     from ..motion import Pose, SceneMotion
 
     def arr(value: Any, dtype: Any = np.float64) -> np.ndarray:
-        a = np.asarray(value, dtype=dtype)
+        a = _numbers(value, "a value", dtype)
         return a[None] if single else a
 
     def pose(d: dict[str, Any]) -> Pose:
@@ -264,11 +317,11 @@ def _scene_motion(node: dict[str, Any], times: np.ndarray, single: bool) -> "Sce
         lights={n: pose(d) for n, d in node.get("lights", {}).items()},
         light_scalars={n: {c: arr(v) for c, v in d.items()} for n, d in node.get("light_scalars", {}).items()},
         vertices={n: arr(v) for n, v in node.get("vertices", {}).items()},
-        particles={n: ParticleSamples(ids=np.asarray(d["ids"]), positions=arr(d["positions"]), alive=arr(d["alive"], bool)) for n, d in node.get("particles", {}).items()},
+        particles={n: ParticleSamples(ids=_numbers(d["ids"], f"particle ids of {n!r}", np.int64), positions=arr(d["positions"]), alive=arr(d["alive"], bool)) for n, d in node.get("particles", {}).items()},
     )
 
 
-def _check_frame(frame: BakedFrame, samples: int, path: Path) -> None:
+def _check_frame(frame: BakedFrame, samples: int, path: Path, half: bool = False) -> None:
     """A frame read back: finite times, the header's sample count, every value finite and
     every rotation a unit quaternion; the error names the frame, the owner, the channel
     and the time."""
@@ -277,7 +330,7 @@ def _check_frame(frame: BakedFrame, samples: int, path: Path) -> None:
     if frame.samples != samples:
         raise BakeFileError(f"{path}: frame {frame.frame}: {frame.samples} shutter samples, the header says {samples} (samples_per_frame)")
     for motion in (frame.at_frame, frame.across_shutter):
-        problems = motion_problems(motion)
+        problems = motion_problems(motion, half)
         if problems:
             raise BakeFileError(f"{path}: frame {frame.frame}: {problems[0][2]}")
     # the frame-time geometry must match the shutter samples' (the renderer stacks them)
@@ -296,7 +349,7 @@ def _npz_records(arrays: dict[str, np.ndarray]) -> list[dict[str, Any]]:
     vertices and particles nest like the rest."""
     out = []
     for k, f in enumerate(arrays["frames"]):
-        rec: dict[str, Any] = {"frame": int(f), "time": float(arrays["times"][k]), "shutter": arrays["shutter"][k], "at_frame": {}, "samples": {}}
+        rec: dict[str, Any] = {"frame": f, "time": arrays["times"][k], "shutter": arrays["shutter"][k], "at_frame": {}, "samples": {}}
         if "sample_times" in arrays:
             rec["sample_times"] = arrays["sample_times"][k]
         for key, arr in arrays.items():

@@ -57,7 +57,7 @@ def file_inputs(loaded: LoadedScene, path: str | Path, frames: Sequence[int]) ->
             "whose geometry a JSON bake does not carry; bake to .npz (motion bake SCENE -o motion.npz)"
         )
     try:
-        baked = read_baked(path)
+        baked = read_baked(path, half=loaded.scene.output.pixel_type == "half")
     except BakeFileError as exc:
         raise BakeFileError(f"--motion {exc}") from None
     _check_meta(baked, loaded, path)

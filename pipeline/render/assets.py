@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import hashlib
 import os
-import tempfile
 import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 from ..cache import cache_root
+from ..files import writing
 from ..limits import env_size
 
 CONVERSION_VERSION = "ply-v1"
@@ -83,15 +83,9 @@ def _converted(source: Path, settings: str, suffix: str, write: Callable[[str], 
         return target
     with _stats_lock:
         STATS["misses"] += 1
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".tmp{suffix}", dir=target.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, target)
-    finally:
-        Path(tmp).unlink(missing_ok=True)
-    enforce_cap()
+    with writing(target, "writing the converted asset", suffix=suffix) as tmp:  # a full cache disk: one line, and no partial entry
+        write(str(tmp))
+    enforce_cap(keep=target)
     return target
 
 
@@ -111,21 +105,12 @@ def info(folder: Path | None = None) -> CacheInfo:
     return CacheInfo(folder, len(files), sum(p.stat().st_size for p in files))
 
 
-def enforce_cap(cap_bytes: int | None = None) -> int:
-    """Delete least recently used assets until the folder is under the cap; returns bytes freed."""
-    cap = cap_bytes if cap_bytes is not None else env_size("MOTION_ASSET_CACHE_CAP")
-    folder = assets_dir()
-    if not folder.is_dir():
-        return 0
-    entries = sorted((p.stat().st_atime, p.stat().st_size, p) for p in folder.iterdir() if p.is_file() and not p.name.startswith("."))
-    total = sum(size for _, size, _ in entries)
-    freed = 0
-    for _, size, path in entries:
-        if total - freed <= cap:
-            break
-        path.unlink(missing_ok=True)
-        freed += size
-    return freed
+def enforce_cap(cap_bytes: int | None = None, keep: Path | None = None) -> int:
+    """Delete least recently used assets until the folder is under the cap (never `keep`);
+    returns bytes freed."""
+    from ..cache import enforce_cap as cap_folder
+
+    return cap_folder(assets_dir(), cap_bytes if cap_bytes is not None else env_size("MOTION_ASSET_CACHE_CAP"), keep)
 
 
 def clear(folder: Path) -> int:

@@ -6,7 +6,6 @@ pattern's confinement checked before any task starts. All problems at once."""
 
 from __future__ import annotations
 
-import difflib
 import math
 import re
 from fractions import Fraction
@@ -16,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 from ..errors import AssetError, Problem
 from ..expr import ExpressionError, parse_expression
 from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
+from .problems import closest
 from .motion_schema import BlendShapes, KeyframeMotion, ProceduralMotion, TRANSFORM_CHANNELS
 from .schema import EnvmapLight, Mesh, Particles, Scene, Texture
 from .source import yaml_path
@@ -24,6 +24,7 @@ from .source import yaml_path
 MAX_SIMULATION_STEPS = 10_000_000  # fixed steps of the dynamics stage (5.8 h of shot at 1/480 s)
 MAX_PARTICLES = 1_000_000  # particles spawned by all emitters together
 MAX_PARTICLE_STEPS = 1_000_000_000  # particles x simulation steps (minutes of simulation)
+MAX_FLOCK_AGENT_STEPS = 50_000_000  # agents x flock steps (minutes of simulation; the example flock is 240 x 360)
 MAX_PARTICLE_SAMPLES = 100_000_000  # particles x baked sample times held by one bake (2.4 GB)
 
 if TYPE_CHECKING:
@@ -45,9 +46,9 @@ NUMBER_CHANNELS = ("fov", "ortho_width")
 
 
 def _suggest(name: str, options: list[str]) -> str:
-    close = difflib.get_close_matches(name, options, n=1, cutoff=0.6)
+    close = closest(name, options)
     if close:
-        return f"; did you mean '{close[0]}'?"
+        return f"; did you mean '{close}'?"
     return f"; defined: {', '.join(options)}" if options else "; none are defined"
 
 
@@ -134,6 +135,9 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
                 add(("ik", j, "chain", k), f"'{name}' must be a child of '{ik.chain[k - 1]}' (a chain is a run of parents and children)")
             elif objects_by_name[name].motion.type in ("dynamics", "plan"):
                 add(("ik", j, "chain", k), f"'{name}' has {objects_by_name[name].motion.type} motion; IK turns keyed or static joints")
+            elif k > 0 and _fixed_at_parent(objects_by_name[name]):
+                add(("ik", j, "chain", k), f"the bone {ik.chain[k - 1]} -> {name} has no length ({name} sits at {ik.chain[k - 1]}'s origin and nothing "
+                                           f"moves it): IK turns bones, so each needs a length (translate {name} away from {ik.chain[k - 1]})")
         for field in ("target", "pole"):
             name = getattr(ik, field)
             if name is None:
@@ -216,8 +220,17 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
         check_channels(("objects", i, "motion"), obj.motion, "object", add)
     for i, light in enumerate(scene.lights):
         check_channels(("lights", i, "motion"), light.motion, f"{light.type} light", add)
-    problems.extend(expression_problems(scene, source))
+    problems.extend(expression_problems(scene, source, evaluate=assets))
     return problems
+
+
+def _fixed_at_parent(obj: object) -> bool:
+    """A chain joint whose translation is zero and not animated: its bone from the parent
+    has no length at any time (motion/ik.py refuses the animated case when it occurs)."""
+    motion = obj.motion  # type: ignore[attr-defined]
+    if any(obj.transform.translate) or motion.type not in ("static", "keyframes"):  # type: ignore[attr-defined]
+        return False
+    return motion.type == "static" or "translate" not in motion.channels
 
 
 def output_pattern_problem(pattern: str) -> str | None:
@@ -275,10 +288,12 @@ def derived_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
             )
             break
 
-    # simulation and particle budgets over the span the dynamics stage would simulate
-    t_lo = min(0.0, float(timeline.shutter(tl.first, angle, scene.camera.shutter.position)[0]))
+    # simulation and particle budgets over the span the dynamics stage would simulate: from
+    # the first frame's shutter open (the dynamics clock, bake.simulation_range)
+    t_lo = float(timeline.shutter(tl.first, angle, scene.camera.shutter.position)[0])
     t_hi = float(timeline.shutter(tl.last, angle, scene.camera.shutter.position)[1])
     span = max(0.0, t_hi - t_lo)
+    clock_end = t_hi - float(timeline.seconds(tl.first))  # the last shutter close on the dynamics clock
     dynamic = [i for i, o in enumerate(scene.objects) if o.motion.type == "dynamics" or isinstance(o, Particles)]
     steps = math.ceil(span / scene.dynamics.step) if dynamic else 0
     if steps > MAX_SIMULATION_STEPS:
@@ -287,7 +302,7 @@ def derived_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
     for i, obj in enumerate(scene.objects):
         if not isinstance(obj, Particles):
             continue
-        spawned = particle_count(obj.emitter, t_hi)
+        spawned = particle_count(obj.emitter, clock_end)
         total += spawned
         if total > MAX_PARTICLES:
             add(("objects", i, "emitter"), f"emitters spawn {total} particles up to t = {t_hi:.6g} s (rate x emission time, capped by max_count); the limit is {MAX_PARTICLES}")
@@ -295,6 +310,14 @@ def derived_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
         if total * max(steps, 1) > MAX_PARTICLE_STEPS:
             add(("objects", i, "emitter"), f"{total} particles x {steps} simulation steps is over the budget of {MAX_PARTICLE_STEPS} particle-steps")
             break
+
+    for i, obj in enumerate(scene.objects):
+        flock = getattr(obj, "deform", None)
+        if getattr(flock, "type", None) == "flock":
+            agent_steps = flock.count * math.ceil(max(0.0, clock_end - flock.start) / flock.step)
+            if agent_steps > MAX_FLOCK_AGENT_STEPS:
+                add(("objects", i, "deform", "count"), f"{flock.count} agents x {agent_steps // flock.count} steps of {flock.step:g} s is over the budget of "
+                                                       f"{MAX_FLOCK_AGENT_STEPS} agent-steps (fewer agents, a larger step or a shorter shot)")
 
     reason = output_pattern_problem(scene.output.filename)
     if reason is not None:
@@ -364,15 +387,44 @@ def check_channels(loc: "Loc", motion: object, owner: str, add) -> None:  # type
                 add((*loc, "scalars", name), f"unknown scalar channel '{name}' for a {owner}" + _suggest(name, list(SCALAR_CHANNELS[owner])))
 
 
-def expression_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
-    """Expressions are parsed (never executed) here, so a bad one fails before the job."""
+def expression_problems(scene: Scene, source: "SourceMap", evaluate: bool = True) -> list[Problem]:
+    """Expressions are parsed (never executed as Python) here, so a bad one fails before
+    the job; a channel of time alone is also evaluated at every frame time, and a value the
+    renderer cannot hold (limits.py: float32; a radiance seen directly past what a
+    half-float frame holds) is refused at the channel, with the first time it occurs.
+    `evaluate` False (a worker reloading a checked scene) parses only."""
+    import numpy as np
+
+    from ..limits import SEEN_RADIANCE, beyond_float32, beyond_half
+
     problems: list[Problem] = []
+    timeline = scene.timeline.timeline()
+    count = scene.timeline.last - scene.timeline.first + 1
+    # at most MAX_FRAMES frame times (a longer timeline is refused by derived_problems)
+    times = np.arange(scene.timeline.first, scene.timeline.first + min(count, MAX_FRAMES), dtype=np.float64) / float(timeline.fps)
+    half = scene.output.pixel_type == "half"
 
     def check(loc: "Loc", text: str, variables: tuple[str, ...]) -> None:
         try:
-            parse_expression(text, variables)
+            expr = parse_expression(text, variables)
         except ExpressionError as exc:
             problems.append(source.problem(loc, str(exc)))
+            return
+        if variables != ("t",) or not evaluate:
+            return  # a field of space and time (wind) is evaluated by the simulation
+        try:
+            with np.errstate(all="ignore"):
+                value = np.broadcast_to(np.asarray(expr.evaluate({"t": times}), dtype=np.float64), times.shape)
+        except (ArithmeticError, ValueError) as exc:  # an integer power past float64: OverflowError
+            problems.append(source.problem(loc, f"expression {text!r} cannot be evaluated: {exc}"))
+            return
+        seen = half and loc[-1] in SEEN_RADIANCE
+        bad = beyond_float32(value) | (beyond_half(value) if seen else False)
+        if bad.any():
+            k = int(np.argmax(bad))
+            holds = "a half-float frame (65504)" if seen and np.isfinite(value[k]) and not beyond_float32(value[k]) else "the renderer's float32"
+            problems.append(source.problem(loc, f"expression {text!r} is {float(value[k]):g} at frame {scene.timeline.first + k} (t = {times[k]:.6g} s): "
+                                                f"beyond what {holds} holds"))
 
     blocks: list[tuple["Loc", object]] = [(("camera", "motion"), scene.camera.motion)]
     blocks += [(("objects", i, "motion"), o.motion) for i, o in enumerate(scene.objects)]
@@ -398,20 +450,33 @@ def expression_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
 
 
 
+def _dark(value: object) -> bool:
+    """A colour (one number or three) that emits nothing; a texture may emit."""
+    if isinstance(value, (int, float)):
+        return value == 0
+    return isinstance(value, tuple) and all(v == 0 for v in value)
+
+
 def scene_warnings(scene: Scene) -> list[str]:
-    """What is valid but almost surely not meant: a scene with nothing in it, or with no
-    light (no light, no emissive object, no environment), renders black frames."""
+    """What is valid but almost surely not meant: a scene with nothing in it, nothing
+    visible in it, or no light (no light, no emissive object, no environment; lights and
+    emission all of strength 0 and not animated) renders black frames."""
     out = []
+    shown = [o for o in scene.objects if o.visible and o.shape != "empty"]
     if not scene.objects:
         out.append("the scene has no objects: its frames show only the lights' environment")
-    emissive = any(getattr(o, "emission", None) is not None for o in scene.objects)
-    if not scene.lights and not emissive:
-        out.append("the scene has no lights and no emissive objects: every frame renders black")
+    elif not shown:
+        out.append(f"none of the scene's {len(scene.objects)} objects is visible (empty shapes or visible: false): its frames show only the lights' environment")
+    strength = {"constant": "radiance", "point": "intensity", "spot": "intensity", "directional": "irradiance", "envmap": "scale"}
+    lit = [light for light in scene.lights if light.motion.type != "static" or not _dark(getattr(light, strength[light.type]))]
+    emissive = [o for o in shown if o.emission is not None and not _dark(o.emission.radiance)]
+    if not lit and not emissive:
+        what = "no lights" if not scene.lights else "only lights of strength 0"
+        out.append(f"the scene has {what} and no emissive objects: every frame renders black")
     return out
 
 
 NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
-RADIANCE_KEYS = ("radiance",)  # values a camera ray can meet directly: a frame's pixel value
 
 
 def numeric_range_problems(data: Any, source: "SourceMap", scene: Scene) -> list[Problem]:
@@ -420,7 +485,7 @@ def numeric_range_problems(data: Any, source: "SourceMap", scene: Scene) -> list
     output (output.pixel_type: half, the default) every radiance one a half holds, located
     at the field that says it. Animated, simulated, imported and baked values are checked
     once more after the bake (shot stage)."""
-    from ..limits import HALF_MAX, float32_problem
+    from ..limits import SEEN_RADIANCE, float32_problem, half_problem
 
     problems: list[Problem] = []
     half = scene.output.pixel_type == "half"
@@ -430,7 +495,7 @@ def numeric_range_problems(data: Any, source: "SourceMap", scene: Scene) -> list
             return
         if isinstance(node, dict):
             for k, v in node.items():
-                walk(v, (*loc, k), radiance or k in RADIANCE_KEYS)
+                walk(v, (*loc, k), radiance or k in SEEN_RADIANCE)
         elif isinstance(node, list):
             for i, v in enumerate(node):
                 walk(v, (*loc, i), radiance)
@@ -443,9 +508,8 @@ def numeric_range_problems(data: Any, source: "SourceMap", scene: Scene) -> list
                 why = f"{str(node)[:12]}... ({len(str(node))} digits) is beyond what the renderer holds"
             if why is not None:
                 problems.append(source.problem(loc, why))
-            elif radiance and half and abs(node) > HALF_MAX:
-                problems.append(source.problem(loc, f"radiance {node:g} is beyond what a half-float EXR holds ({HALF_MAX:g}): "
-                                                    "its pixels would be inf; use output.pixel_type: float, or lower it"))
+            elif radiance and half and (why := half_problem(float(node))) is not None:
+                problems.append(source.problem(loc, why))
 
     walk(data, (), False)
     return problems

@@ -8,6 +8,8 @@ YAML reading and source positions are `source.py`, pydantic errors -> problems
 
 from __future__ import annotations
 
+import dataclasses
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
@@ -86,8 +88,6 @@ def safe_stem(stem: str) -> str:
     >>> safe_stem(".x"), safe_stem("shot 010"), safe_stem("..."), safe_stem("a.b")
     ('x', 'shot_010', 'scene', 'a.b')
     """
-    import re
-
     cleaned = re.sub(r"[^A-Za-z0-9_.\-]", "_", stem).lstrip(".-")
     return cleaned[:128] or "scene"
 
@@ -98,26 +98,70 @@ def in_file_order(problems: list[Problem], file: str) -> list[Problem]:
 
 
 SALVAGE_ROUNDS = 8
+# A named item of these lists that the schema refuses whole (an unknown or missing kind, a
+# required field missing) is replaced by a stand-in of the same name at the same index, so
+# that references to it still resolve and the items after it keep their place.
+STAND_INS: dict[str, tuple[str, str]] = {"objects": ("shape", "empty"), "materials": ("type", "diffuse"), "lights": ("type", "constant")}
+KEPT = ("parent", "transform")  # what a stand-in keeps of the item (its name aside)
+UNNAMED = "_unnamed_"  # the prefix of a stand-in name for an item missing its own
 
 
-def salvage(exc: ValidationError, data: dict[str, Any]) -> tuple[Scene, list[tuple[str | int, ...]]] | None:
-    """The scene without the fields the schema refused (each dropped, or its enclosing
-    mapping when a required field is missing), so that the semantic checks can run on the
-    rest and every problem is reported at once. None when that would drop a whole item of a
-    list (later references to it would be reported as unknown) or does not converge."""
+def salvage(exc: ValidationError, data: dict[str, Any], source: SourceMap | None = None) -> tuple[Scene, list[tuple[str | int, ...]], list[Problem]] | None:
+    """The scene without the fields the schema refused, so that the semantic checks can
+    run on the rest and every problem is reported at once: a refused field is dropped (its
+    enclosing mapping when a required field is missing; a list item's enclosing list key);
+    a named item of `objects`, `materials` or `lights` refused whole keeps its name,
+    parent, transform and place as a stand-in (an unknown kind becomes the closest known one, as the message
+    suggests; a missing name a unique placeholder). Returns the scene and the dropped
+    paths, or None when that does not converge."""
     import copy
 
-    from .problems import _strip_tags
+    from .problems import _strip_tags, closest
 
     doc = copy.deepcopy(data)
     dropped: list[tuple[str | int, ...]] = []
+    guessed: list[tuple[str | int, ...]] = []
+    later: list[Problem] = []
+
+    def stand_in(loc: tuple[str | int, ...], err: Any) -> bool:
+        """Replace or mend the top-level list item at `loc` (a named kind); False if it is not one."""
+        if len(loc) != 2 or loc[0] not in STAND_INS or not isinstance(loc[1], int):
+            return False
+        items = doc.get(loc[0])
+        if not isinstance(items, list) or not loc[1] < len(items):
+            return False
+        item = items[loc[1]]
+        tag, fallback = STAND_INS[loc[0]]
+        name = item.get("name") if isinstance(item, dict) else None
+        if not isinstance(name, str):
+            name = f"{UNNAMED}{loc[0]}_{loc[1]}"
+        kind = err["type"]
+        if isinstance(item, dict) and kind == "missing" and tuple(err["loc"])[-1] == "name":
+            item["name"] = name  # keep the item and check the rest of it
+            return True
+        if isinstance(item, dict) and kind == "union_tag_invalid":
+            options = [t.strip().strip("'") for t in str(err.get("ctx", {}).get("expected_tags", "")).split(",")]
+            close = closest(item.get(tag), options, cutoff=0.5)
+            if close:
+                item[tag] = close  # checked as the kind the message suggests; what that kind refuses goes next round
+                guessed.append(loc)
+                return True
+        kept = {k: item[k] for k in KEPT if isinstance(item, dict) and k in item}  # what refers across items; a bad one goes next round
+        items[loc[1]] = {**kept, "name": name, tag: fallback}
+        dropped.append(loc)
+        return True
+
     for _ in range(SALVAGE_ROUNDS):
         for err in exc.errors(include_url=False):
             loc = _strip_tags(tuple(err["loc"]), doc)
-            if err["type"] == "missing" or (loc and isinstance(loc[-1], int)):
+            if err["type"] == "missing" and loc and isinstance(loc[-1], str):
                 loc = loc[:-1]  # the enclosing mapping goes, not the absent key
-            if not loc or isinstance(loc[-1], int):
-                return None  # a whole list item (or the document) would go
+            if stand_in(loc, err):
+                continue
+            while loc and isinstance(loc[-1], int):
+                loc = loc[:-1]  # an item of another list: its list goes (an index would shift the rest)
+            if not loc:
+                return None  # the document itself
             node: Any = doc
             for part in loc[:-1]:
                 try:
@@ -129,28 +173,36 @@ def salvage(exc: ValidationError, data: dict[str, Any]) -> tuple[Scene, list[tup
                 del node[loc[-1]]
                 dropped.append(loc)
         try:
-            return Scene.model_validate(doc), dropped
+            return Scene.model_validate(doc), dropped, later
         except ValidationError as again:
             exc = again
+        if source is not None and guessed:
+            later += [p for p in problems_from_validation(exc, doc, source, Scene)
+                      if any(p.yaml_path.startswith(yaml_path(g) + ".") for g in guessed) and p.yaml_path not in {q.yaml_path for q in later}]
     return None
 
 
 def salvaged_problems(exc: ValidationError, data: dict[str, Any], source: SourceMap, base_dir: Path, found: list[Problem], assets: bool) -> list[Problem]:
-    """The semantic problems (unknown material, missing asset, ...) of the part of the
-    scene the schema accepted, beside the schema's own: found in one run, not one after
-    the other. Problems at or below a dropped field, or at a path already reported, are
-    left out (they are about what was dropped)."""
-    saved = salvage(exc, data)
+    """The semantic and numeric-range problems (unknown material, missing asset, a number
+    float32 cannot hold, ...) of the part of the scene the schema accepted, and the schema's
+    problems inside an item of a misspelt kind, beside the schema's own: found in one run,
+    not one after the other. Problems at or below a dropped
+    field, at a path already reported, or naming a stand-in, are left out (they are about
+    what was dropped)."""
+    saved = salvage(exc, data, source)
     if saved is None:
         return []
-    scene, dropped = saved
+    scene, dropped, later = saved
     seen = {p.yaml_path for p in found}
+    out = [p for p in later if p.yaml_path not in seen]  # the fields of an item checked as a suggested kind
+    seen |= {p.yaml_path for p in out}
     shown = [yaml_path(loc) for loc in dropped]
-    out = []
-    for p in semantic_problems(scene, base_dir, source, assets=assets):
-        if p.yaml_path in seen or any(p.yaml_path == d or p.yaml_path.startswith(d + ".") or p.yaml_path.startswith(d + "[") for d in shown):
+    for p in semantic_problems(scene, base_dir, source, assets=assets) + numeric_range_problems(data, source, scene):
+        if p.yaml_path in seen or f"'{UNNAMED}" in p.message or any(p.yaml_path == d or p.yaml_path.startswith(d + ".") or p.yaml_path.startswith(d + "[") for d in shown):
             continue
-        out.append(p)
+        seen.add(p.yaml_path)
+        # a list of names ("defined: a, b") leaves the placeholders out
+        out.append(dataclasses.replace(p, message=re.sub(rf"{UNNAMED}[a-z]+_\d+(, )?", "", p.message)) if UNNAMED in p.message else p)
     return out
 
 

@@ -14,6 +14,20 @@ from ..errors import Problem
 from .source import Loc, SourceMap, yaml_path
 
 
+def closest(word: object, options: list[str], cutoff: float = 0.6) -> str | None:
+    """The option a misspelt key, kind, choice or name most likely meant, or None: compared
+    without case (`CCD` -> `ccd`, `HALF` -> `half`), as difflib rates them.
+
+    >>> closest("catmul-rom", ["linear", "catmull-rom"]), closest("CCD", ["two-bone", "ccd"])
+    ('catmull-rom', 'ccd')
+    """
+    lowered: dict[str, str] = {}
+    for option in options:
+        lowered.setdefault(option.lower(), option)
+    found = difflib.get_close_matches(str(word).lower(), list(lowered), n=1, cutoff=cutoff)
+    return lowered[found[0]] if found else None
+
+
 def _unwrap(tp: Any) -> list[Any]:
     """The concrete alternatives of a (possibly Annotated / Optional / Union) type."""
     origin = typing.get_origin(tp)
@@ -96,8 +110,8 @@ def _message(err: Mapping[str, Any], data: Any, loc: Loc, root: type[BaseModel])
         hint = ""
         if model is not None:
             names = list(model.model_fields)
-            close = difflib.get_close_matches(str(key), names, n=1, cutoff=0.6)
-            hint = f"; did you mean '{close[0]}'?" if close else f"; expected one of: {', '.join(names)}"
+            close = closest(key, names)
+            hint = f"; did you mean '{close}'?" if close else f"; expected one of: {', '.join(names)}"
         return f"unknown key '{key}'{hint}", True
     if kind == "missing":
         if loc and isinstance(loc[-1], int):
@@ -108,8 +122,8 @@ def _message(err: Mapping[str, Any], data: Any, loc: Loc, root: type[BaseModel])
         tag = ctx.get("tag")
         expected = ctx.get("expected_tags", "")
         options = [t.strip().strip("'") for t in str(expected).split(",")]
-        close = difflib.get_close_matches(str(tag), options, n=1, cutoff=0.5)
-        hint = f"; did you mean '{close[0]}'?" if close else ""
+        close = closest(tag, options, cutoff=0.5)
+        hint = f"; did you mean '{close}'?" if close else ""
         return f"unknown {ctx.get('discriminator', 'type').strip(chr(39))} '{tag}'; expected one of: {expected}{hint}", False
     if kind == "union_tag_not_found":
         ctx = err.get("ctx", {})
@@ -117,9 +131,9 @@ def _message(err: Mapping[str, Any], data: Any, loc: Loc, root: type[BaseModel])
     if kind == "literal_error":
         # a misspelt choice gets the same help as a misspelt key
         options = [o.strip().strip("'") for o in str(err.get("ctx", {}).get("expected", "")).replace(" or ", ", ").split(",")]
-        close = difflib.get_close_matches(str(err.get("input")), [o for o in options if o], n=1, cutoff=0.6)
+        close = closest(err.get("input"), [o for o in options if o])
         if close:
-            return f"{err['msg']} (got {err.get('input')!r}); did you mean '{close[0]}'?", False
+            return f"{err['msg']} (got {err.get('input')!r}); did you mean '{close}'?", False
     msg = str(err["msg"])
     if msg.startswith("Value error, "):
         msg = msg[len("Value error, ") :]

@@ -23,6 +23,7 @@ Loc = tuple[Union[str, int], ...]
 
 MAX_YAML_BYTES = 16 * 1024**2  # a scene or preset file
 MAX_DEPTH = 64  # nesting of mappings and sequences
+MAX_YAML_NODES = 200_000  # values written in one file (PyYAML composes ~50k a second)
 MAX_ALIAS_NODES = 100_000  # nodes aliases may add beyond those written in the file
 MAX_INT_CHARS = 32  # characters of one integer literal (int64 needs 19 digits)
 
@@ -55,7 +56,13 @@ class _Loader(yaml.SafeLoader):
         if self.check_event(yaml.AliasEvent):
             self.alias_marks.append(self.peek_event().start_mark)
         self._depth += 1
+        self._nodes = getattr(self, "_nodes", 0) + 1
         try:
+            if self._nodes > MAX_YAML_NODES:
+                raise yaml.composer.ComposerError(
+                    None, None, f"more than {MAX_YAML_NODES} values in one file (the limit; long data such as keys belongs in an import or a bake file)",
+                    self.peek_event().start_mark,
+                )
             if self._depth > MAX_DEPTH:
                 raise yaml.composer.ComposerError(
                     None, None, f"nesting deeper than {MAX_DEPTH} levels (the limit)", self.peek_event().start_mark

@@ -111,7 +111,8 @@ def plan(req: RenderRequest, loaded: Any, out_dir: Path, selected: list[int], fr
 def plan_text(p: dict[str, Any]) -> str:
     """The plan as a few lines for a person."""
     ex = p["executor"]
-    how = f"dask at {ex['scheduler']}" if ex["kind"] == "dask" else f"local, {ex['workers']} worker processes x {ex['threads']} threads"
+    how = {"dask": f"dask at {ex['scheduler']}", "inline": f"inline (a small job: this process, no worker started) x {ex['threads']} threads"}.get(
+        ex["kind"], f"local, {ex['workers']} worker processes x {ex['threads']} threads")
     lines = [
         f"plan for {p['scene_name']} ({p['scene']}): nothing rendered (--dry-run)",
         f"  frames:    {p['frames'] or 'none'} ({p['frame_count']})" + (f", shard {p['shard']} of {p['selection']}" if p["shard"] else ""),

@@ -3,8 +3,8 @@ frames (and the shard), size the job, check before any work, bake the motion onc
 skip complete frames, run the chunks on the farm, write `render-report.json`, then the
 temporal pass and the deliverables.
 
-drjit is never imported in this process: workers are spawned (or are Dask workers) and
-import it themselves.
+drjit is imported in this process only for a small job rendered inline (farm/inline.py);
+otherwise workers are spawned (or are Dask workers) and import it themselves.
 """
 
 from __future__ import annotations
@@ -133,6 +133,9 @@ def preflight(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: 
     from ..scene.checks import bake_budget_problems
 
     check_env_sizes()  # $MOTION_MAX_LANES, $MOTION_ASSET_CACHE_CAP
+    from ..cache import check_cache_root
+
+    check_cache_root()  # $MOTION_CACHE_DIR a file or not writable: one line now, not in every worker
     for flag, value, limit in (("--workers", req.workers, MAX_WORKERS), ("--threads", req.threads, MAX_THREADS), ("--retries", req.retries, MAX_RETRIES)):
         if value is not None and value > limit:
             raise UsageError(f"{flag} {value}: the limit is {limit}")
@@ -340,8 +343,11 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     shard_spec = sel.shard_spec
     default_name = f"render-report.shard-{shard_spec[0]}-of-{shard_spec[1]}.json" if shard_spec else "render-report.json"
     if req.dry_run:
-        return plan(req, loaded, out_dir, sel.selected, frames, shard_spec, skipped, chunk_list, chunk_size, workers, threads, paths,
-                    Path(req.report or out_dir / default_name), states.stale, wanted, resolved_settings(req, loaded, preset), cost)
+        planned = plan(req, loaded, out_dir, sel.selected, frames, shard_spec, skipped, chunk_list, chunk_size, workers, threads, paths,
+                       Path(req.report or out_dir / default_name), states.stale, wanted, resolved_settings(req, loaded, preset), cost)
+        if inline:
+            planned["executor"]["kind"] = "inline"
+        return planned
 
     out_dir.mkdir(parents=True, exist_ok=True)
     run_id = new_run_id()

@@ -85,6 +85,9 @@ class Cadence:
         return self.counts[frame_index % len(self.counts)]
 
 
+MAX_CADENCE_FRAMES = 64  # film frames in one pulldown cycle (3:2 has 2, 2:3:3:2 has 4)
+
+
 def parse_cadence(text: str) -> Cadence:
     """A cadence from its name ("3:2", "2:3:3:2", "2:2", "blend") or its field counts.
 
@@ -101,6 +104,8 @@ def parse_cadence(text: str) -> Cadence:
         return Cadence(text, NAMED[text])
     if re.fullmatch(r"\d(:\d)*", text) or re.fullmatch(r"\d+", text):
         counts = tuple(int(c) for c in text.replace(":", ""))
+        if len(counts) > MAX_CADENCE_FRAMES:
+            raise UsageError(f"cadence of {len(counts)} field counts: a pulldown cycle has at most {MAX_CADENCE_FRAMES} film frames")
         if sum(counts) == 0:
             raise UsageError(f"cadence {text!r} gives no fields at all")
         return Cadence(text, counts)

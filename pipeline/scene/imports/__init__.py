@@ -61,7 +61,7 @@ def expand_imports(data: dict[str, Any], source: "SourceMap", base_dir: Path) ->
             problems.append(source.problem(("imports", i, "file"), f"file not found: {spec.file} (relative to {base_dir})"))
             continue
         try:
-            expansion = _read(path, shown, spec, i)
+            expansion = _read(path, shown, spec, i, base_dir)
         except SceneError as exc:
             problems.extend(exc.problems)
             continue
@@ -125,8 +125,9 @@ def expand_imports(data: dict[str, Any], source: "SourceMap", base_dir: Path) ->
     return out, ImportedSourceMap(source.file, source.positions, origins, camera_origin)
 
 
-def _read(path: Path, shown: str, spec: Any, index: int) -> Expansion:
-    """Dispatch on the file's suffix to the glTF or USD reader."""
+def _read(path: Path, shown: str, spec: Any, index: int, base_dir: Path) -> Expansion:
+    """Dispatch on the file's suffix to the glTF or USD reader (a USD stage's layers are
+    confined to the scene's folder, `base_dir`)."""
     suffix = path.suffix.lower()
     if suffix in (".gltf", ".glb"):
         from .gltf import read_gltf
@@ -134,4 +135,4 @@ def _read(path: Path, shown: str, spec: Any, index: int) -> Expansion:
         return read_gltf(path, shown, spec, index)
     from .usd import read_usd
 
-    return read_usd(path, shown, spec, index)
+    return read_usd(path, shown, spec, index, root=base_dir)

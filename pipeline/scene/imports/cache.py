@@ -6,9 +6,7 @@ finds it and skips the conversion; writes go to a temporary name and are renamed
 from __future__ import annotations
 
 import hashlib
-import os
 import re
-import tempfile
 import threading
 from pathlib import Path
 from typing import Callable
@@ -17,7 +15,7 @@ import numpy as np
 
 from ...cache import cache_root
 
-CONVERSION_VERSION = "import-v1"
+CONVERSION_VERSION = "import-v2"  # v2: stricter accessor reading (sparse indices); entries made by a laxer reader are not reused
 _lock = threading.Lock()
 STATS = {"hits": 0, "misses": 0, "records": 0}  # converted-file hits / misses; record-set hits
 _DIGESTS: dict[tuple[str, int, int], str] = {}
@@ -57,16 +55,17 @@ def cached(stem: str, key: str, suffix: str, write: Callable[[Path], None]) -> P
 
 
 def write_atomic(target: Path, write: Callable[[Path], None]) -> None:
-    """`write(tmp)` to a temporary name beside `target`, then rename it into place: a
-    concurrent reader sees the whole file or none."""
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".tmp{target.suffix}", dir=target.parent)
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        os.replace(tmp, target)
-    finally:
-        Path(tmp).unlink(missing_ok=True)
+    """`write(tmp)` to a temporary name beside `target`, then rename it into place (the one
+    write policy, pipeline/files.py: a concurrent reader sees the whole file or none, a full
+    cache disk is one line and leaves no partial entry); then the cache is held to
+    $MOTION_ASSET_CACHE_CAP, as the converted-asset cache is."""
+    from ...cache import enforce_cap
+    from ...files import writing
+    from ...limits import env_size
+
+    with writing(target, "writing the import cache", suffix=target.suffix) as tmp:
+        write(tmp)
+    enforce_cap(target.parent, env_size("MOTION_ASSET_CACHE_CAP"), keep=target)
 
 
 def write_ply(path: Path, positions: np.ndarray, faces: np.ndarray | None, normals: np.ndarray | None = None, uvs: np.ndarray | None = None) -> None:

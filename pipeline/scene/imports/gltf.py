@@ -34,7 +34,8 @@ WRAP = {10497: "repeat", 33071: "clamp", 33648: "mirror"}
 MAX_FILE_BYTES = 4 << 30  # refuse absurd files before reading them
 # values one accessor may hold: a buffer view bounds the others by the file's size, but an
 # accessor without one (zeros, then sparse values) would allocate whatever `count` says
-MAX_ACCESSOR_VALUES = 1 << 27
+MAX_ACCESSOR_VALUES = 1 << 25  # numbers in one accessor (11M VEC3 vertices; a 44M-vertex accessor was read whole)
+MAX_NODES = 100_000  # nodes of one file (each becomes a scene record: 300k took minutes)
 
 
 def sanitize(name: str) -> str:
@@ -79,6 +80,7 @@ class GltfReader:
         raw = path.read_bytes()
         if path.suffix.lower() == ".glb" or raw[:4] == b"glTF":
             self._check_glb(raw)
+        self._check_counts(raw)
         try:
             self.gltf = pygltflib.GLTF2.load_from_bytes(raw) if raw[:4] == b"glTF" else pygltflib.GLTF2.from_json(raw.decode("utf-8"))
         except Exception as exc:  # pygltflib raises whatever its parser raised
@@ -101,6 +103,23 @@ class GltfReader:
     def fail(self, where: str, message: str) -> "None":
         """Raise ImportFileError at `where` in the file."""
         raise ImportFileError(self.shown, where, message)
+
+    def _check_counts(self, raw: bytes) -> None:
+        """The document's sizes, from a plain JSON parse (fast), before pygltflib builds an
+        object per element (300,000 nodes took it over a minute)."""
+        import json
+
+        try:
+            text = raw[20 : 20 + struct.unpack_from("<I", raw, 12)[0]] if raw[:4] == b"glTF" else raw
+            doc = json.loads(text)
+        except (ValueError, struct.error, RecursionError) as exc:
+            self.fail("<file>", f"not a readable glTF 2.0 file: {type(exc).__name__}: {str(exc)[:120]}")
+        if not isinstance(doc, dict):
+            self.fail("<file>", "not a readable glTF 2.0 file (the top level is not an object)")
+        for key in ("nodes", "accessors", "meshes", "animations", "materials", "images"):
+            items = doc.get(key)
+            if isinstance(items, list) and len(items) > MAX_NODES:
+                self.fail(key, f"{len(items)} {key}; the limit is {MAX_NODES}")
 
     def _check_glb(self, raw: bytes) -> None:
         if len(raw) < 12:
@@ -189,15 +208,21 @@ class GltfReader:
             out = self._strided(a.bufferView, a.byteOffset or 0, a.count, dtype, width, at)
         if a.sparse is not None:
             sp = a.sparse
-            idx_dtype = COMPONENTS.get(sp.indices.componentType)
-            if idx_dtype is None or sp.count > a.count:
-                self.fail(f"{at}.sparse", "bad sparse indices")
-            idx = self._strided(sp.indices.bufferView, sp.indices.byteOffset or 0, sp.count, idx_dtype, 1, f"{at}.sparse.indices")[:, 0]
+            # the specification: unsigned byte/short/int indices, strictly increasing (a signed
+            # -1 would write the last element through numpy's negative indexing)
+            idx_dtype = COMPONENTS.get(sp.indices.componentType) if sp.indices.componentType in (5121, 5123, 5125) else None
+            if idx_dtype is None or not isinstance(sp.count, int) or not 1 <= sp.count <= a.count:
+                self.fail(f"{at}.sparse", f"bad sparse indices (componentType {sp.indices.componentType}, count {sp.count}): "
+                                          "expected 1 to count unsigned byte, short or int indices")
+            idx = self._strided(sp.indices.bufferView, sp.indices.byteOffset or 0, sp.count, idx_dtype, 1, f"{at}.sparse.indices")[:, 0].astype(np.int64)
             vals = self._strided(sp.values.bufferView, sp.values.byteOffset or 0, sp.count, dtype, width, f"{at}.sparse.values")
             if len(idx) and int(idx.max()) >= a.count:
                 self.fail(f"{at}.sparse.indices", f"index {int(idx.max())} is out of range for {a.count} elements")
+            if (np.diff(idx) <= 0).any():
+                k = int(np.argmax(np.diff(idx) <= 0)) + 1
+                self.fail(f"{at}.sparse.indices", f"index {int(idx[k])} at position {k} does not follow {int(idx[k - 1])}: sparse indices must strictly increase")
             out = out.copy()
-            out[idx.astype(np.int64)] = vals
+            out[idx] = vals
         if dtype.kind == "f":
             result = out.astype(np.float64)
             if not np.isfinite(result).all():
@@ -213,6 +238,8 @@ class GltfReader:
         """The records of the import: objects (meshes, skins, morph targets, animation), materials, lights and cameras."""
         g, spec = self.gltf, self.spec
         nodes = g.nodes or []
+        if len(nodes) > MAX_NODES:
+            self.fail("nodes", f"{len(nodes)} nodes; the limit is {MAX_NODES}")
         scenes = g.scenes or []
         if isinstance(spec.scene, str):
             matches = [k for k, s in enumerate(scenes) if s.name == spec.scene]
@@ -804,8 +831,8 @@ def source_digest(path: Path) -> str:
         else:
             doc = json.loads(raw.decode("utf-8"))
         uris = [item.get("uri") for key in ("buffers", "images") for item in doc.get(key) or [] if isinstance(item, dict)]
-    except (ValueError, struct.error, AttributeError, TypeError):
-        return h.hexdigest()  # the reader reports what is wrong with the file
+    except (ValueError, struct.error, AttributeError, TypeError, RecursionError):
+        return h.hexdigest()  # the reader reports what is wrong with the file (JSON nested 100,000 deep, too)
     for uri in uris:
         if isinstance(uri, str) and not uri.startswith("data:"):
             file = path.parent / unquote(uri)

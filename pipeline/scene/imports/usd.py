@@ -15,6 +15,7 @@ axis; USD lerps multi-axis Euler angles, which slerp only approximates between s
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,7 @@ from .cache import cached, file_digest, write_ply
 from .gltf import _Names, sanitize
 
 MAX_SAMPLES = 100_000  # time samples per prim we are willing to key
+MAX_TOTAL_SAMPLES = 500_000  # time samples of all prims of one stage together
 FOV_SUBKEYS = 16  # fov keys per focal-length sample interval (docs/imports.md)
 
 
@@ -99,6 +101,13 @@ class UsdReader:
         self.names = _Names()
         self.at = "<stage>"  # the prim being read: the location of an unforeseen problem
 
+    def _count_samples(self, n: int, where: str) -> None:
+        """The stage's time samples, all prims together, within MAX_TOTAL_SAMPLES (20
+        references of 99,999 samples each passed the per-prim limit and ran out of memory)."""
+        self.samples_total = getattr(self, "samples_total", 0) + n
+        if self.samples_total > MAX_TOTAL_SAMPLES:
+            _fail(self.shown, where, f"the stage's prims hold more than {MAX_TOTAL_SAMPLES} time samples together (the limit)")
+
     def seconds(self, code: float) -> float:
         """Scene seconds of a USD time code (timeCodesPerSecond, plus the import's time_offset)."""
         return code / self.tcps + self.spec.time_offset
@@ -109,6 +118,14 @@ class UsdReader:
 
         spec = self.spec
         ex = Expansion()
+        # every prim's time samples counted before any is read: the budget refuses a stage of
+        # 20 references x 99,999 samples at once, not after reading most of them
+        total = 0
+        for prim in self.stage.Traverse():
+            for attr in prim.GetAttributes():
+                total += attr.GetNumTimeSamples()
+                if total > MAX_TOTAL_SAMPLES:
+                    _fail(self.shown, str(prim.GetPath()), f"the stage's prims hold more than {MAX_TOTAL_SAMPLES} time samples together (the limit)")
         # the stage's units and up axis (where authored: USD's own fallback is centimetres,
         # but a stage without the metadata is taken in the shot's metres; docs/imports.md)
         units = float(UsdGeom.GetStageMetersPerUnit(self.stage)) if UsdGeom.StageHasAuthoredMetersPerUnit(self.stage) else 1.0
@@ -168,6 +185,7 @@ class UsdReader:
         times = sorted(xf.GetTimeSamples())
         if len(times) > MAX_SAMPLES:
             _fail(self.shown, where, f"{len(times)} transform time samples; the limit is {MAX_SAMPLES}")
+        self._count_samples(len(times), where)
         if len(times) <= 1:
             code = Usd.TimeCode(times[0]) if times else Usd.TimeCode.Default()
             rec["transform"] = _trs(_matrix(xf.GetLocalTransformation(code)), self.shown, f"{where}.xformOp")
@@ -228,6 +246,7 @@ class UsdReader:
         if len(times) > 1:
             if len(times) > MAX_SAMPLES:
                 _fail(self.shown, f"{where}.points", f"{len(times)} time samples; the limit is {MAX_SAMPLES}")
+            self._count_samples(len(times), f"{where}.points")
             keys = []
             for code in times:
                 pts = np.asarray(points_attr.Get(Usd.TimeCode(code)), dtype=np.float64).reshape(-1, 3)
@@ -423,8 +442,61 @@ class UsdReader:
             _fail(self.shown, where, f"light type {prim.GetTypeName()} is not supported (distant, sphere, rect, dome)")
 
 
-def read_usd(path: Path, shown: str, spec: Any, index: int) -> Expansion:
-    """The records of one USD import; ImportFileError (file and prim) otherwise."""
+def check_layers(path: Path, root: Path, shown: str) -> None:
+    """Every layer the stage would load (sublayers, references, payloads, recursively),
+    checked before USD opens any: inside the scene's folder `root`, a regular file (a FIFO
+    as a sublayer hung forever, /dev/zero was read), within the size limit, and no layer
+    within its own chain (a layer that sublayers itself). ImportFileError naming the layer."""
+    import stat as stat_mod
+
+    from pxr import Sdf, Tf
+
+    from ...files import confined
+
+    base = root.resolve()
+    seen: set[Path] = set()
+    stack: list[tuple[Path, tuple[Path, ...]]] = [(path, ())]
+    while stack:
+        layer_path, chain = stack.pop()
+        real = layer_path.resolve()
+        named = layer_path.name if not chain else f"{chain[-1].name} -> {layer_path}"
+        if real in chain:
+            _fail(shown, "<layers>", f"layer cycle: {' -> '.join(p.name for p in (*chain, real))}")
+        if real in seen:
+            continue
+        seen.add(real)
+        if len(seen) > MAX_LAYERS:
+            _fail(shown, "<layers>", f"more than {MAX_LAYERS} layers")
+        if not confined(base, real):
+            _fail(shown, "<layers>", f"layer {named} is outside the scene's folder {base}")
+        try:
+            st = os.stat(real)
+        except OSError as exc:
+            _fail(shown, "<layers>", f"layer {named}: {exc.strerror}")
+        if not stat_mod.S_ISREG(st.st_mode):
+            _fail(shown, "<layers>", f"layer {named} is not a regular file (a device, pipe or folder)")
+        if st.st_size > MAX_LAYER_BYTES:
+            _fail(shown, "<layers>", f"layer {named} is {st.st_size} bytes; the limit is {MAX_LAYER_BYTES}")
+        try:
+            layer = Sdf.Layer.FindOrOpen(str(real))
+        except Tf.ErrorException as exc:
+            _fail(shown, "<stage>", f"cannot open the USD stage: layer {named}: {str(exc).strip().splitlines()[-1]}")
+        if layer is None:
+            _fail(shown, "<layers>", f"layer {named} is not a readable USD layer")
+        for dep in layer.GetCompositionAssetDependencies():
+            if not dep:
+                continue
+            target = Path(dep) if os.path.isabs(dep) else real.parent / dep
+            stack.append((target, (*chain, real)))
+
+
+MAX_LAYERS = 1000  # layers one stage may bring in
+MAX_LAYER_BYTES = 2 * 1024**3  # one layer file
+
+
+def read_usd(path: Path, shown: str, spec: Any, index: int, root: Path | None = None) -> Expansion:
+    """The records of one USD import; ImportFileError (file and prim) otherwise. Its
+    layers are checked first (`check_layers`, confined to `root`, the scene's folder)."""
     try:
         from pxr import Usd  # noqa: F401
     except ImportError as exc:  # pragma: no cover - usd-core is a dependency
@@ -435,6 +507,7 @@ def read_usd(path: Path, shown: str, spec: Any, index: int) -> Expansion:
 
     reader = None
     try:
+        check_layers(path, root if root is not None else path.parent, shown)
         reader = UsdReader(path, shown, spec, index)
         return reader.expand()
     except (SpecError, ImportFileError):
