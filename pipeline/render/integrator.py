@@ -194,7 +194,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
 
     def _choice(self, scene: mi.Scene) -> LightChoice:
         """The light selection of `scene`'s emitters, made once per scene."""
-        if self.choice is None or self.choice.scene is not scene:
+        if self.choice is None or self.choice.scene_id != id(scene):
             self.choice = LightChoice(scene)
         return self.choice
 
@@ -317,7 +317,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             # test across all scenes at time u
             if has_choice:
                 active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-                ds_em, em_weight = choice.sample(si, sampler.next_1d(), sampler.next_2d(), active_em)
+                ds_em, em_weight = choice.sample(scene, si, sampler.next_1d(), sampler.next_2d(), active_em)
                 active_em &= ds_em.pdf != 0.0
                 shadow = si.spawn_ray_to(ds_em.p)
                 occluded = self.world.occluded(scene, shadow, movers, active_em, k_slice)

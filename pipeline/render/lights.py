@@ -66,7 +66,9 @@ class LightChoice:
     """The light-sampled emitters of one static scene and their selection at a vertex."""
 
     def __init__(self, scene: mi.Scene) -> None:
-        self.scene = scene
+        # the scene's id, not the scene: the integrator (which keeps this) is the scene's
+        # own, and a reference back would be a cycle through C++ that keeps scenes alive
+        self.scene_id = id(scene)
         emitters = list(scene.emitters())
         # a constant or smooth environment is reached by BSDF sampling only
         chosen = []
@@ -108,7 +110,7 @@ class LightChoice:
         uniform = dr.select(total > 0, share, 1.0 / k)
         return [dr.detach(uniform + e * scale) for e in estimates]
 
-    def sample(self, si: Any, u: Any, sample2: Any, active: Any) -> tuple[Any, Any]:
+    def sample(self, scene: mi.Scene, si: Any, u: Any, sample2: Any, active: Any) -> tuple[Any, Any]:
         """One emitter sample at si: u (1D) picks the emitter, sample2 (2D) the point on it.
         Returns Mitsuba's (DirectionSample3f, weight = radiance / pdf) with the selection
         folded into both, as `Scene.sample_emitter_direction` returns them (no visibility
@@ -123,7 +125,7 @@ class LightChoice:
             index = dr.select(past, i + 1, index)
             prob = dr.select(past, probs[i + 1], prob)
         table = mi.UInt32(self.scene_index)
-        emitter = dr.gather(mi.EmitterPtr, self.scene.emitters_dr(), dr.gather(mi.UInt32, table, index, active), active)
+        emitter = dr.gather(mi.EmitterPtr, scene.emitters_dr(), dr.gather(mi.UInt32, table, index, active), active)
         ds, weight = emitter.sample_direction(si, sample2, active)
         ds.pdf *= prob
         weight *= dr.select(prob > 0, dr.rcp(prob), 0.0)
