@@ -1,15 +1,17 @@
 """Time to equal error: our warm frame against Blender Cycles at the same relative MSE (issue 27).
 
-    python bench/bench_equal_error.py [--spp 4,8,...,256] [--ref-spp 1024] [--shots bench,walk-cycle]
-                                      [--denoise] [--no-cycles] [--json FILE]
+    python bench/bench_equal_error.py [--spp 1,2,4,...,256] [--ref-spp 1024] [--shots bench,walk-cycle]
+                                      [--denoise] [--no-cycles] [--cycles-python PY] [--json FILE]
 
 Each shot is rendered by our worker (`FrameRenderer`, warm: after one cold frame, stochastic
 motion blur) at every sample count of `--spp`, timed (render only, and the OIDN denoise with
 `--denoise`), and scored by relative MSE, mean((x - ref)^2 / (ref^2 + 0.01)), against our own
 render of the same frame at `--ref-spp`. The time to reach each error level is interpolated
-in log-log between the two counts that bracket it. With `bpy` importable (Blender as a Python
-module, `pip install bpy`: optional, not a dependency of motion) the bench shot is built in
-Cycles from Python (same terrain, balls posed by our own motion evaluation at sub-frame keys,
+in log-log between the two counts that bracket it. With `bpy` importable by `--cycles-python`
+(default: this Python, or $BENCH_CYCLES_PYTHON; Blender as a Python module, `pip install bpy`
+for Python 3.11: optional, not a dependency of motion; bpy 5.0.1 pins numpy < 2, so give it
+an environment of its own, e.g. `python3.11 -m venv .venv/cycles && .venv/cycles/bin/pip
+install bpy`) the bench shot is built in Cycles from Python, in that subprocess (same terrain, balls posed by our own motion evaluation at sub-frame keys,
 sky, sun, camera, 180-degree shutter, CPU, the same threads) and measured the same way against
 Cycles' own reference; the ratio ours / Cycles is printed with the CPU's name.
 
