@@ -13,7 +13,7 @@ import os
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 from .errors import DiskFaultError
 
@@ -85,11 +85,29 @@ def publish(tmp: str | Path, path: str | Path) -> None:
 
 
 
+def lost_write(tmp: str | Path, doing: str, path: str | Path) -> DiskFaultError:
+    """The DiskFaultError for a write a library did not report failing but that did not
+    read back (Mitsuba's PLY writer and OpenEXR leave a short or empty file on a full disk
+    and say nothing): ENOSPC when the file system is full, else EIO."""
+    code = errno.EIO
+    try:
+        st = os.statvfs(os.path.dirname(str(tmp)) or ".")
+        if st.f_bavail == 0 or st.f_favail == 0:
+            code = errno.ENOSPC
+    except OSError:
+        pass
+    err = DiskFaultError(f"disk fault: {os.strerror(code)} ({errno.errorcode[code]}) {doing} {path} (the written file did not read back whole)")
+    err.errno = code  # type: ignore[attr-defined]
+    return err
+
+
 @contextmanager
-def writing(path: str | Path, doing: str = "writing", suffix: str = ".tmp") -> Iterator[Path]:
+def writing(path: str | Path, doing: str = "writing", suffix: str = ".tmp", verify: Callable[[Path], bool] | None = None) -> Iterator[Path]:
     """`with writing(path) as tmp:` write the whole file at `tmp` (any library's own
     writer: PIL, matplotlib, numpy); on leaving, it is published at `path` atomically. On
-    any failure the temporary file is removed and a disk fault becomes DiskFaultError."""
+    any failure the temporary file is removed and a disk fault becomes DiskFaultError.
+    `verify(tmp)` (when given) must say the file reads back before it is published: a cache
+    entry that a full disk left empty would otherwise be a hit in every later run."""
     path = Path(path)
     tmp: str | None = None
     try:
@@ -97,6 +115,8 @@ def writing(path: str | Path, doing: str = "writing", suffix: str = ".tmp") -> I
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
         os.close(fd)
         yield Path(tmp)
+        if verify is not None and not verify(Path(tmp)):
+            raise lost_write(tmp, doing, path)
         publish(tmp, path)
         tmp = None
     except BaseException as exc:

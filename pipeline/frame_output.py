@@ -19,7 +19,7 @@ import numpy as np
 import OpenEXR
 
 from .errors import DiskFaultError, FrameIOError
-from .files import DISK_FAULT_ERRNOS, _UMASK, _unlink_quietly, confined, disk_fault, disk_fault_errno, publish, write_atomic, writing  # noqa: F401  (the write policy, re-exported)
+from .files import DISK_FAULT_ERRNOS, _UMASK, _unlink_quietly, confined, disk_fault, disk_fault_errno, lost_write, publish, write_atomic, writing  # noqa: F401  (the write policy, re-exported)
 
 PixelType = Literal["half", "float"]
 Compression = Literal["zip", "zips", "piz", "zstd", "none"]
@@ -189,16 +189,7 @@ def _verify_written(tmp: str, path: Path) -> None:
             raise fault from None
     except Exception:  # the bindings raise RuntimeError for a short or corrupt file
         pass
-    code = errno.EIO
-    try:
-        st = os.statvfs(os.path.dirname(tmp) or ".")
-        if st.f_bavail == 0 or st.f_favail == 0:
-            code = errno.ENOSPC
-    except OSError:
-        pass
-    err = DiskFaultError(f"disk fault: {os.strerror(code)} ({errno.errorcode[code]}) writing frame {path} (the written file did not read back whole)")
-    err.errno = code  # type: ignore[attr-defined]
-    raise err
+    raise lost_write(tmp, "writing frame", path)
 
 
 def inside(folder: str | Path, path: str | Path) -> bool:

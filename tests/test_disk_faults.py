@@ -212,3 +212,31 @@ def test_every_writer_reports_a_full_disk_in_one_line(small_disk: Path, tmp_path
     assert len(lines) == 1 and lines[0].startswith("error: disk fault: No space left on device") and "Traceback" not in res.stderr, res.stderr
     (small_disk / "fill").unlink()
     assert not _leftovers(small_disk), _leftovers(small_disk)
+
+
+def test_a_full_cache_disk_is_one_line_and_poisons_no_later_run(small_disk: Path, tmp_path: Path) -> None:
+    """Issue 24: the asset cache on a full disk. Mitsuba's PLY writer left an empty file
+    and said nothing; the empty entry was then a cache hit in every later run (each frame
+    failed three times, also after space was freed). Now the write is checked before it is
+    published: one line, exit 4, no entry; and once there is room the same command renders."""
+    (tmp_path / "m.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    scene = tmp_path / "s.yaml"
+    scene.write_text("timeline: {fps: 24, first: 0, last: 1}\ncamera: {position: [0, 0, 5], look_at: [0, 0, 0]}\n"
+                     "lights: [{type: constant, radiance: 1}]\nobjects: [{name: m, shape: mesh, file: m.obj}]\nrender: {resolution: [16, 12], spp: 1}\n")
+    env = {"MOTION_CACHE_DIR": str(small_disk), "DRJIT_CACHE_DIR": str(tmp_path / "kernels")}
+    try:  # fill the cache disk to the last block
+        with open(small_disk / "fill", "wb") as fh:
+            while True:
+                fh.write(b"\0" * 1024)
+                fh.flush()
+    except OSError:
+        pass
+    res = run_motion("render", str(scene), "-o", str(tmp_path / "out"), "--no-progress", env=env)
+    assert res.returncode == 4, res.stderr
+    errors = [line for line in res.stderr.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "disk fault: No space left on device" in errors[0] and "converted asset" in errors[0], res.stderr
+    assert not [p for p in (small_disk / "assets").glob("*") if not p.name.startswith(".")]
+    (small_disk / "fill").unlink()
+    again = run_motion("render", str(scene), "-o", str(tmp_path / "out"), "--no-progress", env=env)
+    assert again.returncode == 0, again.stderr
+    assert len(list((tmp_path / "out").glob("*.exr"))) == 2

@@ -71,19 +71,35 @@ def alpha_texture(source: Path, raw: bool) -> Path:
     return _converted(source, f"alpha-v2|{raw}", ".exr", write)
 
 
+def _reads_back(tmp: Path) -> bool:
+    """A converted asset is published only once it reads back: a PLY as a whole mesh, any
+    other file non-empty (Mitsuba's PLY writer leaves an empty file on a full disk, silently)."""
+    if tmp.stat().st_size == 0:
+        return False
+    if tmp.suffix.lower() == ".ply":
+        from ..errors import AssetError
+        from ..meshes import load_mesh
+
+        try:
+            load_mesh(tmp)
+        except AssetError:
+            return False
+    return True
+
+
 def _converted(source: Path, settings: str, suffix: str, write: Callable[[str], None]) -> Path:
     """The cache file for (`source`'s bytes, `settings`): `write(tmp)` makes it on a miss,
     then it is renamed into place (concurrent writers: the last rename wins, alike)."""
     key = _digest(source, settings)
     target = assets_dir() / f"{source.stem}-{key}{suffix}"
-    if target.is_file():
+    if target.is_file() and target.stat().st_size > 0:  # (an empty entry is a write a full disk lost: made again)
         with _stats_lock:
             STATS["hits"] += 1
         os.utime(target)  # recently used: the cap evicts least recently used first
         return target
     with _stats_lock:
         STATS["misses"] += 1
-    with writing(target, "writing the converted asset", suffix=suffix) as tmp:  # a full cache disk: one line, and no partial entry
+    with writing(target, "writing the converted asset", suffix=suffix, verify=_reads_back) as tmp:  # a full cache disk: one line, and no partial entry
         write(str(tmp))
     enforce_cap(keep=target)
     return target

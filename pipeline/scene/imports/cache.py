@@ -44,7 +44,7 @@ def cached(stem: str, key: str, suffix: str, write: Callable[[Path], None]) -> P
     digest = hashlib.sha256(f"{CONVERSION_VERSION}|{key}".encode()).hexdigest()[:32]
     safe = re.sub(r"[^A-Za-z0-9_.-]", "_", stem)[:48]
     target = cache_dir() / f"{safe}-{digest}{suffix}"
-    if target.is_file():
+    if target.is_file() and target.stat().st_size > 0:  # (an empty entry is a write a full disk lost: made again)
         with _lock:
             STATS["hits"] += 1
         return target
@@ -63,7 +63,7 @@ def write_atomic(target: Path, write: Callable[[Path], None]) -> None:
     from ...files import writing
     from ...limits import env_size
 
-    with writing(target, "writing the import cache", suffix=target.suffix) as tmp:
+    with writing(target, "writing the import cache", suffix=target.suffix, verify=lambda p: p.stat().st_size > 0) as tmp:
         write(tmp)
     enforce_cap(target.parent, env_size("MOTION_ASSET_CACHE_CAP"), keep=target)
 
