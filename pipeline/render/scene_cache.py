@@ -21,7 +21,6 @@ from ..scene.loader import LoadedScene
 from ..variant import load_dict
 from .build import LIGHT_CHANNEL, material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
-from .film import stratified_passes
 from .instant import add_lights, add_shapes, light_key, light_record, sensor_record
 from .roles import Roles
 from .shutter_poses import across_shutter
@@ -74,6 +73,8 @@ class SceneCache:
         d["integrator"] = {"type": "motion_path", "max_depth": self.max_depth, "rr_depth": settings.rr_depth, "aovs": ",".join(aovs)}
         # the sampler's count is set per pass by the film (film.stratified_passes); built with
         # one it takes as it is, so Mitsuba does not warn of a rounding that never happens
+        from .film import stratified_passes  # (film imports drjit: not at module level, which the farm's main process imports)
+
         d["sensor"] = sensor_record(loaded, stratified_passes(self.spp, self.spp)[0], fi, shutter=(0.0, 1.0), sampler="multijitter")
         static = [o for o in scene.objects if o.name in set(self.roles.static_names)]
         add_shapes(d, loaded, static, fi, materials)
