@@ -183,6 +183,17 @@ def test_dead_owner_claim_is_stale(tmp_path: Path) -> None:
     assert ok
 
 
+def _fill(disk: Path) -> None:
+    """Fill `disk` to its last block (a file `fill` that takes every free byte)."""
+    try:
+        with open(disk / "fill", "wb") as fh:
+            while True:
+                fh.write(b"\0" * 1024)
+                fh.flush()
+    except OSError:
+        pass
+
+
 @pytest.mark.parametrize("command", [
     ["export", "SRC", "-o", "DISK/png"],
     ["export", "SRC", "--format", "jpg", "-o", "DISK/jpg"],
@@ -201,13 +212,7 @@ def test_every_writer_reports_a_full_disk_in_one_line(small_disk: Path, tmp_path
     src = tmp_path / "src"
     done = run_motion("render", SCENE, "-o", str(src), "--frames", "0-3", "--resolution", "16x12", "--spp", "1", "--no-progress")
     assert done.returncode == 0, done.stderr
-    try:  # fill the disk to the last block
-        with open(small_disk / "fill", "wb") as fh:
-            while True:
-                fh.write(b"\0" * 1024)
-                fh.flush()
-    except OSError:
-        pass
+    _fill(small_disk)
     argv = [str(src) if a == "SRC" else a.replace("DISK", str(small_disk)) for a in command]
     res = run_motion(*argv)
     assert res.returncode == 4, res.stderr
@@ -228,13 +233,7 @@ def test_a_full_cache_disk_is_one_line_and_poisons_no_later_run(small_disk: Path
     scene.write_text("timeline: {fps: 24, first: 0, last: 1}\ncamera: {position: [0, 0, 5], look_at: [0, 0, 0]}\n"
                      "lights: [{type: constant, radiance: 1}]\nobjects: [{name: m, shape: mesh, file: m.obj}]\nrender: {resolution: [16, 12], spp: 1}\n")
     env = {"MOTION_CACHE_DIR": str(small_disk), "DRJIT_CACHE_DIR": str(tmp_path / "kernels")}
-    try:  # fill the cache disk to the last block
-        with open(small_disk / "fill", "wb") as fh:
-            while True:
-                fh.write(b"\0" * 1024)
-                fh.flush()
-    except OSError:
-        pass
+    _fill(small_disk)
     res = run_motion("render", str(scene), "-o", str(tmp_path / "out"), "--no-progress", env=env)
     assert res.returncode == 4, res.stderr
     errors = [line for line in res.stderr.splitlines() if line.startswith("error:")]

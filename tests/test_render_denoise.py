@@ -22,14 +22,17 @@ from motion.pipeline.render.temporal import RADIUS
 
 pytestmark = pytest.mark.render
 
-# A diffuse plane of albedo 0.5 facing an orthographic camera under a constant environment
-# of radiance 1: every pixel's radiance is 0.5 * 1 (direct light only: max_depth 2). The box
+# A diffuse plane of albedo 0.5 facing an orthographic camera under an environment map of
+# radiance 1 (one pole row aside): every pixel's radiance is 0.5 * 1 (direct light only: max_depth 2).
+# A map, not a `constant` light: a constant (or smooth) sky is reached by BSDF sampling
+# alone, which is exact on a lone diffuse plane (no noise to remove); this map is
+# light-sampled with MIS. The box
 # filter keeps each pixel's noise its own: OIDN removes uncorrelated pixel noise; the
 # gaussian's 5x5 splat correlates it, and OIDN keeps much of it as texture (docs/denoise.md).
 PLANE = """
 timeline: {fps: 24, first: 0, last: 0}
 camera: {type: orthographic, position: [0, 0, -5], look_at: [0, 0, 0], ortho_width: 4}
-lights: [{type: constant, radiance: 1.0}]
+lights: [{type: envmap, file: white.pfm}]
 materials: [{name: m, type: diffuse, color: 0.5}]
 objects:
   - {name: plane, shape: rectangle, width: 10, height: 10, material: m, transform: {rotate: {euler: [0, 180, 0]}}}
@@ -37,9 +40,19 @@ render: {resolution: [64, 48], spp: SPP, max_depth: 2, denoise: oidn, filter: bo
 """
 
 
+def _white_map(folder: Path) -> None:
+    """PLANE's environment: radiance 1, but one pole's row at 4: not smooth, so the map is
+    light-sampled (a smooth one is reached by BSDF sampling alone, exact here); the pole
+    lies in the plane's own plane (cos ~ 0 for its whole row: < 4e-4 of extra radiance)."""
+    white = np.ones((32, 64, 3), "<f4")
+    white[0] = 4.0
+    (folder / "white.pfm").write_bytes(b"PF\n64 32\n-1.0\n" + white.tobytes())
+
+
 def test_denoised_flat_plane_converges_to_the_closed_form(tmp_path: Path) -> None:
     from motion.pipeline.render.denoise import denoise_frame
 
+    _white_map(tmp_path)
     errors = {}
     for spp in (1, 8):
         (img,), _, renderer = render(load(tmp_path, PLANE.replace("SPP", str(spp)), f"plane{spp}.yaml"), [0])
@@ -151,6 +164,11 @@ def test_denoised_frames_are_bit_identical_across_workers_and_shards(tmp_path: P
     assert meta["denoise_guides"] == "albedo,N"
     # the default RGBA is the denoised image, not the noisy layer
     assert not np.array_equal(frame.rgba[..., :3], frame.aovs["noisy"][..., :3].astype(np.float16).astype(np.float32))
+    # every rendered frame's row of the report says what denoising it cost
+    import json
+
+    rows = [r for r in json.loads((one / "render-report.json").read_text())["frames"] if r["status"] == "rendered"]
+    assert len(rows) == 4 and all(r["denoise_s"] > 0 for r in rows), rows
 
 
 def test_broken_oidn_is_one_line_naming_the_package(tmp_path: Path) -> None:
@@ -160,6 +178,7 @@ def test_broken_oidn_is_one_line_naming_the_package(tmp_path: Path) -> None:
     (fake / "__init__.py").write_text("raise ImportError('libmitsuba_oidn_core.so: cannot open shared object file: No such file or directory')\n")
     scene = tmp_path / "plane.yaml"
     scene.write_text(PLANE.replace("SPP", "2"))
+    _white_map(tmp_path)
     proc = run_motion("render", str(scene), "-o", str(tmp_path / "out"), env={"PYTHONPATH": str(fake.parent)})
     assert proc.returncode == 2, proc.stderr
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
@@ -176,6 +195,7 @@ def test_broken_oidn_is_one_line_naming_the_package(tmp_path: Path) -> None:
 def test_temporal_without_denoise_is_a_scene_error(tmp_path: Path) -> None:
     scene = tmp_path / "bad.yaml"
     scene.write_text(PLANE.replace("SPP", "2").replace("denoise: oidn", "denoise: off, temporal: reproject"))
+    _white_map(tmp_path)
     proc = run_motion("validate", str(scene))
     assert proc.returncode == 2
     assert "render" in proc.stderr and "needs denoise: oidn" in proc.stderr and "Traceback" not in proc.stderr

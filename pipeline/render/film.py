@@ -14,6 +14,7 @@ film then traces and returns only that field's rows.
 
 from __future__ import annotations
 
+import math
 from typing import Any, Callable
 
 import drjit as dr
@@ -54,8 +55,7 @@ def render(sample: SampleFn, scene: mi.Scene, sensor: Any, seed: Any, spp: int) 
     per_pass = max(1, min(spp, env_size("MOTION_MAX_LANES") // max(n_px, 1)))
     total: list[Any] = []
     done, index = 0, 0
-    while done < spp:
-        count = min(per_pass, spp - done)
+    for count in stratified_passes(spp, per_pass):
         # pass 0 keeps the frame's seed; later passes derive theirs from it and the pass
         pass_seed = seed if index == 0 else mi.sample_tea_32(int(seed), index)[0]
         acc, used = render_pass(sample, scene, sensor, sampler, pass_seed, count, width, height, (offset, step))
@@ -75,6 +75,35 @@ def render(sample: SampleFn, scene: mi.Scene, sensor: Any, seed: Any, spp: int) 
     return mi.TensorXf(flat, shape=(out_h, width, n_ch))
 
 
+def exact_count(n: int) -> bool:
+    """Whether Mitsuba's `multijitter` sampler traces exactly n samples: it stratifies on
+    a grid of floor(sqrt(n)) rows and rounds n up to fill the last column (32 -> 35)."""
+    return n % math.isqrt(n) == 0
+
+
+def stratified_passes(spp: int, per_pass: int) -> list[int]:
+    """Split `spp` samples per pixel into passes of at most `per_pass` that the sampler
+    traces exactly (`exact_count`): the count asked is the count traced, each pass
+    stratified on its own grid. The fewest equal passes where up to two more than the
+    least will do (32 -> 16 + 16, 96 -> 48 + 48, 192 -> 3 x 64, where one pass had
+    rounded to 35, 99, 195), else the largest exact passes first (37 -> 36 + 1)."""
+    least = -(-spp // per_pass)
+    for k in range(least, least + 3):
+        q, r = divmod(spp, k)
+        counts = [q + 1] * r + [q] * (k - r)
+        if q > 0 and all(exact_count(c) for c in counts):
+            return counts
+    counts = []
+    left = spp
+    while left > 0:
+        c = min(per_pass, left)
+        while not exact_count(c):
+            c -= 1
+        counts.append(c)
+        left -= c
+    return counts
+
+
 def render_pass(sample: SampleFn, scene: mi.Scene, sensor: Any, sampler: Any, seed: Any, spp: int, width: int, height: int, rows: tuple[int, int] = (0, 1)) -> tuple[list[Any], int]:
     """One pass of `spp` samples per pixel: per-pixel filter-weighted sums of every
     channel and of the weights (unnormalised), and the sample count actually used.
@@ -83,7 +112,7 @@ def render_pass(sample: SampleFn, scene: mi.Scene, sensor: Any, sampler: Any, se
     out_h = (height - offset + step - 1) // step
     n_px = width * out_h
     sampler.set_sample_count(spp)
-    spp = int(sampler.sample_count())  # the sampler may round (multijitter)
+    spp = int(sampler.sample_count())  # exact for the counts of `stratified_passes`
     sampler.set_samples_per_wavefront(spp)
     sampler.seed(seed, n_px * spp)
 

@@ -17,6 +17,8 @@ Mitsuba 3 has no animated shapes, so motion is ours (docs/rendering.md):
 * Lights that move (point, spot, directional: `set_lights`) are Mitsuba's own emitters
   queried in their rest frame at the path's time u, like movers; emitters on movers are
   sampled in the mover's rest frame too, and combined with BSDF sampling by MIS.
+* The static scene's emitters are chosen by estimated contribution at each vertex, and a
+  constant environment is reached by BSDF sampling only (`lights.py`).
 * Per-frame data (poses) are one opaque drjit array of a fixed size, so a new frame
   replays the compiled kernels instead of compiling new ones.
 * The image comes from our deterministic film (`film.py`); the AOV channels follow the
@@ -33,6 +35,7 @@ import numpy as np
 
 from . import aovs as aov_table
 from . import film
+from .lights import LightChoice
 from .poses import FrameData, MoverTracks, Pose, eager_movers, swept_spheres
 from .world import World
 
@@ -59,6 +62,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         self.world = World()
         self.frame_data = FrameData()
         self.lights: list[tuple[str, Any]] = []  # moving lights: (kind, emitter in its rest frame)
+        self.choice: LightChoice | None = None  # light selection among the static scene's emitters (lights.py)
 
     # --- per-job and per-frame state --------------------------------------------------
 
@@ -188,6 +192,12 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             pdf = dr.select(mine, self.world.movers[k].pdf_emitter_direction(pose.interaction_to_rest(ref), local, mine), pdf)
         return pdf
 
+    def _choice(self, scene: mi.Scene) -> LightChoice:
+        """The light selection of `scene`'s emitters, made once per scene."""
+        if self.choice is None or self.choice.scene_id != id(scene):
+            self.choice = LightChoice(scene)
+        return self.choice
+
     # --- AOVs of the first hit (the table: aovs.py) ----------------------------------------
 
     def _project(self, p: Any, record: int, active: Any) -> Any:
@@ -256,6 +266,8 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         movers = MoverTracks(data, len(self.world.movers), u, active, self._eager or ())
         light_poses = data.poses("light_t", "light_q", len(self.lights), u, active)
         k_slice = self.world.slice_of(u)
+        choice = self._choice(scene)
+        has_choice = len(choice) > 0  # a Python bool: @dr.syntax keeps it a plain `if`
         bsdf_ctx = mi.BSDFContext()
         L = mi.Spectrum(0.0)
         beta = mi.Spectrum(1.0)
@@ -292,11 +304,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             # emission reached by BSDF sampling, MIS-weighted against emitter sampling of the
             # same emitter: the static scene's, or the emissive mover's in its rest frame
             ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
-            em_pdf = dr.select(
-                ~prev_bsdf_delta & ~on_mover,
-                scene.pdf_emitter_direction(prev_si, ds, ~prev_bsdf_delta & ~on_mover),
-                0.0,
-            )
+            em_pdf = dr.select(~prev_bsdf_delta & ~on_mover, choice.pdf(prev_si, ds, ~prev_bsdf_delta & ~on_mover), 0.0)
             em_pdf = self._mover_emitter_pdf(ds, prev_si, hit_mover, movers, em_pdf, ~prev_bsdf_delta & on_mover)
             em_pdf = self.world.slice_emitter_pdf(ds, prev_si, hit_mover, k_slice, em_pdf, ~prev_bsdf_delta & on_mover)
             mis_bsdf = dr.select(depth == 0, 1.0, _mis(prev_bsdf_pdf, em_pdf))
@@ -305,17 +313,19 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             active_next = active & si.is_valid() & (depth + 1 < self.max_depth)
             bsdf = si.bsdf(ray)
 
-            # emitter sampling (static lights), shadow test across all scenes at time u
-            active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-            ds_em, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), False, active_em)
-            active_em &= ds_em.pdf != 0.0
-            shadow = si.spawn_ray_to(ds_em.p)
-            occluded = self.world.occluded(scene, shadow, movers, active_em, k_slice)
-            active_em &= ~occluded
-            wo = si.to_local(ds_em.d)
-            bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, wo, active_em)
-            mis_em = dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, bsdf_pdf))
-            L += dr.select(active_em, beta * mis_em * bsdf_val * em_weight, 0.0)
+            # emitter sampling (static lights, chosen by contribution: lights.py), shadow
+            # test across all scenes at time u
+            if has_choice:
+                active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+                ds_em, em_weight = choice.sample(scene, si, sampler.next_1d(), sampler.next_2d(), active_em)
+                active_em &= ds_em.pdf != 0.0
+                shadow = si.spawn_ray_to(ds_em.p)
+                occluded = self.world.occluded(scene, shadow, movers, active_em, k_slice)
+                active_em &= ~occluded
+                wo = si.to_local(ds_em.d)
+                bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, wo, active_em)
+                mis_em = dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, bsdf_pdf))
+                L += dr.select(active_em, beta * mis_em * bsdf_val * em_weight, 0.0)
             # moving lights and emitters on movers, each at this path's time u
             lit = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
             L += beta * self._moving_light_terms(scene, sampler, si, bsdf, bsdf_ctx, movers, light_poses, k_slice, lit)
@@ -359,6 +369,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         # the path loop's state holds read-only locals (@dr.syntax passes every local the
         # body reads): with OptimizeLoops drjit would drop them and trace the body again,
         # every frame; LLVM folds them as well
+        self._choice(scene)  # before tracing: it may evaluate (an environment's irradiance)
         with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, False):
             return film.render(self.sample, scene, sensor, seed, spp)
 

@@ -71,7 +71,11 @@ class SceneCache:
         d: dict[str, Any] = {"type": "scene"}
         aovs = integrator_aovs(scene)  # the user's, plus the denoiser's guides
         d["integrator"] = {"type": "motion_path", "max_depth": self.max_depth, "rr_depth": settings.rr_depth, "aovs": ",".join(aovs)}
-        d["sensor"] = sensor_record(loaded, self.spp, fi, shutter=(0.0, 1.0), sampler="multijitter")
+        # the sampler's count is set per pass by the film (film.stratified_passes); built with
+        # one it takes as it is, so Mitsuba does not warn of a rounding that never happens
+        from .film import stratified_passes  # (film imports drjit: not at module level, which the farm's main process imports)
+
+        d["sensor"] = sensor_record(loaded, stratified_passes(self.spp, self.spp)[0], fi, shutter=(0.0, 1.0), sampler="multijitter")
         static = [o for o in scene.objects if o.name in set(self.roles.static_names)]
         add_shapes(d, loaded, static, fi, materials)
         add_lights(d, loaded, fi, skip=frozenset(i for i, _ in self.roles.moving_lights))

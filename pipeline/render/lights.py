@@ -1,0 +1,144 @@
+"""Light selection of the `motion_path` integrator: which emitter of the static scene a path
+vertex samples, and with what probability (docs/rendering.md, "Light selection").
+
+Mitsuba's `path` picks one of the scene's emitters uniformly, with the first coordinate of
+the light sample reused, and samples a constant sky over the whole sphere: with a sun and a
+sky, half of the shadow rays go to the sky and half of those below the horizon. Here:
+
+* A **constant environment is never light-sampled**, nor a smooth map (peak radiance below
+  `SMOOTH_ENV` times the mean): BSDF sampling reaches it (with MIS weight 1, since no
+  other strategy produces it), which for a diffuse surface is exactly cosine-weighted,
+  the ideal strategy for a uniform sky.
+* The other emitters are chosen in proportion to an **estimate of their contribution at
+  the shading point**: the luminance of the emitter's own deterministic sample (u = 0.5:
+  exact irradiance for a point, spot or directional light; radiance times solid angle of
+  the centre for an area light) times the cosine with the shading normal on the side the
+  path came from; an environment map counts its mean irradiance. A defensive share
+  (`DEFENSIVE` of the probability, spread evenly) keeps every emitter's probability above
+  zero wherever it could contribute (normal maps, transmission, parts of a large lamp
+  above the horizon while its centre is below), so the estimator stays unbiased.
+* The choice has its own sampler dimension (`next_1d`), the point on the light its own
+  2D one: the choice never shares a dimension with the light's position, so both stay
+  stratified across a pixel's samples.
+
+The probability is a deterministic function of the shading point, so the BSDF strategy's
+MIS weight at an emitter hit recomputes it at the previous vertex (`pdf`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+# share of the selection probability spread evenly over the candidates (defensive mixture)
+DEFENSIVE = 0.1
+# directions used once per job to estimate an environment map's irradiance and peak
+ENV_PROBES = 1024
+# an environment map whose brightest direction is below this many times its mean radiance
+# is smooth: BSDF sampling reaches it better than light samples spread over the sphere
+SMOOTH_ENV = 2.0
+
+
+def _kind(emitter: Any) -> str:
+    """Mitsuba's class name of an emitter (`ConstantBackgroundEmitter`, `AreaLight` ...)."""
+    return str(emitter).split("[", 1)[0].strip()
+
+
+def _env_stats(emitter: Any) -> tuple[float, float]:
+    """An environment map's mean irradiance on a plane, (1/4) of the integral of its
+    luminance over the sphere (pi times the mean radiance), by its own importance sampling;
+    and its peak-to-mean radiance over the same directions (1 for a uniform map)."""
+    it = dr.zeros(mi.Interaction3f)
+    sampler = mi.load_dict({"type": "independent"})
+    sampler.seed(7, ENV_PROBES)
+    ds, weight = emitter.sample_direction(it, sampler.next_2d(), True)
+    lum = np.array(mi.luminance(weight))
+    radiance = lum * np.array(ds.pdf)
+    mean = float(np.mean(lum)) / (4.0 * np.pi)  # integral / 4 pi: the mean radiance
+    peak = float(np.max(radiance)) / mean if mean > 0 else 1.0
+    return float(np.mean(lum)) / 4.0, peak
+
+
+class LightChoice:
+    """The light-sampled emitters of one static scene and their selection at a vertex."""
+
+    def __init__(self, scene: mi.Scene) -> None:
+        # the scene's id, not the scene: the integrator (which keeps this) is the scene's
+        # own, and a reference back would be a cycle through C++ that keeps scenes alive
+        self.scene_id = id(scene)
+        emitters = list(scene.emitters())
+        # a constant or smooth environment is reached by BSDF sampling only
+        chosen = []
+        for i, e in enumerate(emitters):
+            if _kind(e) == "ConstantBackgroundEmitter":
+                continue
+            env = mi.has_flag(e.flags(), mi.EmitterFlags.Infinite) and not mi.has_flag(e.flags(), mi.EmitterFlags.DeltaDirection)
+            irradiance, peak = _env_stats(e) if env else (0.0, 0.0)
+            if env and peak < SMOOTH_ENV:
+                continue
+            chosen.append((i, e, env, irradiance))
+        self.emitters = [e for _, e, _, _ in chosen]
+        self.scene_index = [i for i, _, _, _ in chosen]
+        self.infinite = [env for _, _, env, _ in chosen]
+        self.env_irradiance = [irr for _, _, _, irr in chosen]
+
+    def __len__(self) -> int:
+        return len(self.emitters)
+
+    def _probabilities(self, si: Any, active: Any) -> list[Any]:
+        """Each candidate's selection probability at si (summing to 1)."""
+        k = len(self.emitters)
+        if k == 1:
+            return [mi.Float(1.0)]
+        n = si.sh_frame.n * dr.select(si.wi.z < 0, -1.0, 1.0)  # the side the path came from
+        estimates = []
+        for emitter, infinite, env in zip(self.emitters, self.infinite, self.env_irradiance):
+            if infinite:
+                estimates.append(mi.Float(env))
+                continue
+            ds, weight = emitter.sample_direction(si, mi.Point2f(0.5), active)
+            cos = dr.maximum(dr.dot(ds.d, n), 0.0)
+            estimates.append(dr.select(ds.pdf > 0, mi.luminance(weight) * cos, 0.0))
+        total = estimates[0]
+        for e in estimates[1:]:
+            total = total + e
+        share = DEFENSIVE / k
+        scale = dr.select(total > 0, (1.0 - DEFENSIVE) / total, 0.0)
+        uniform = dr.select(total > 0, share, 1.0 / k)
+        return [dr.detach(uniform + e * scale) for e in estimates]
+
+    def sample(self, scene: mi.Scene, si: Any, u: Any, sample2: Any, active: Any) -> tuple[Any, Any]:
+        """One emitter sample at si: u (1D) picks the emitter, sample2 (2D) the point on it.
+        Returns Mitsuba's (DirectionSample3f, weight = radiance / pdf) with the selection
+        folded into both, as `Scene.sample_emitter_direction` returns them (no visibility
+        test)."""
+        probs = self._probabilities(si, active)
+        index = mi.UInt32(0)
+        prob = mi.Float(probs[0])
+        cdf = mi.Float(0.0)
+        for i, p in enumerate(probs[:-1]):
+            cdf = cdf + p
+            past = u >= cdf
+            index = dr.select(past, i + 1, index)
+            prob = dr.select(past, probs[i + 1], prob)
+        table = mi.UInt32(self.scene_index)
+        emitter = dr.gather(mi.EmitterPtr, scene.emitters_dr(), dr.gather(mi.UInt32, table, index, active), active)
+        ds, weight = emitter.sample_direction(si, sample2, active)
+        ds.pdf *= prob
+        weight *= dr.select(prob > 0, dr.rcp(prob), 0.0)
+        return ds, weight
+
+    def pdf(self, si: Any, ds: Any, active: Any) -> Any:
+        """The solid-angle pdf with which `sample` at si produces the emitter point of ds
+        (0 for an emitter that is not light-sampled: a constant environment)."""
+        if not self.emitters:
+            return mi.Float(0.0)
+        probs = self._probabilities(si, active)
+        prob = mi.Float(0.0)
+        for emitter, p in zip(self.emitters, probs):
+            prob = dr.select(ds.emitter == mi.EmitterPtr(emitter), p, prob)
+        direction_pdf = ds.emitter.pdf_direction(si, ds, active & (prob > 0))
+        return dr.select(prob > 0, direction_pdf * prob, 0.0)
