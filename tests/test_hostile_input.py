@@ -813,7 +813,7 @@ def test_a_damaged_cache_entry_is_made_again_not_a_hit(tmp_path: Path, monkeypat
     from motion.pipeline.variant import activate
 
     monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
-    activate("scalar_rgb", quiet=True)  # mesh_file converts through Mitsuba
+    activate("auto", quiet=True)  # mesh_file converts through Mitsuba (whatever variant this test process already set)
     src = tmp_path / "tri.obj"
     src.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], dtype=np.float32)
