@@ -282,23 +282,57 @@ def test_cache_warm_makes_a_ci_jobs_first_frame_warm(tmp_path: Path) -> None:
 # --- deliverables a studio accepts --------------------------------------------------------
 
 
-def test_timecode_comes_from_the_frame_number_and_the_rate_is_named(tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def shot_1001(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, subprocess.CompletedProcess]:
+    """A shot numbered 1001-1006 at 24 fps rendered with 24p, 60i and a contact sheet."""
+    folder = tmp_path_factory.mktemp("tc")
+    scene = folder / "tc.yaml"
+    scene.write_text("timeline: {fps: 24, first: 1001, last: 1006}\ncamera: {position: [0, 0, 5], look_at: [0, 0, 0]}\n"
+                     "lights: [{type: constant, radiance: 1}]\nobjects: [{name: b, shape: sphere, radius: 0.5}]\nrender: {resolution: [16, 12], spp: 1}\n")
+    res = motion("render", scene, "-o", folder / "out", "--deliver", "24p,60i,contact", "--no-progress")
+    assert res.returncode == 0, res.stderr
+    return folder / "out", res
+
+
+def test_timecode_comes_from_the_frame_number_and_the_rate_is_named(shot_1001: tuple[Path, subprocess.CompletedProcess]) -> None:
     """A shot numbered 1001-1006 at 24 fps: frame 1001's timecode is 00:00:41:17 in its EXR
     and its 24p movie (it was 00:00:00:00); the 24p movie plays at 23.976 and says so."""
     from motion.pipeline.frame_output import read_header, timecode_str
 
-    scene = tmp_path / "tc.yaml"
-    scene.write_text("timeline: {fps: 24, first: 1001, last: 1006}\ncamera: {position: [0, 0, 5], look_at: [0, 0, 0]}\n"
-                     "lights: [{type: constant, radiance: 1}]\nobjects: [{name: b, shape: sphere, radius: 0.5}]\nrender: {resolution: [16, 12], spp: 1}\n")
-    res = motion("render", scene, "-o", tmp_path / "out", "--deliver", "24p,60i", "--no-progress")
-    assert res.returncode == 0, res.stderr
-    assert timecode_str(read_header(tmp_path / "out" / "tc.1001.exr")["timeCode"]) == "00:00:41:17"
-    with av.open(str(tmp_path / "out" / "deliver" / "tc_24p.mov")) as c:
+    out, res = shot_1001
+    assert timecode_str(read_header(out / "tc.1001.exr")["timeCode"]) == "00:00:41:17"
+    with av.open(str(out / "deliver" / "tc_24p.mov")) as c:
         assert c.streams.video[0].metadata.get("timecode") == "00:00:41:17"
     assert "tc_24p.mov (23.976 fps (24000/1001))" in res.stderr
     assert "tc_60i.mov (29.97 fps (30000/1001) interlaced, 2 fields a frame)" in res.stderr
-    made = json.loads((tmp_path / "out" / "deliver" / "manifest.json").read_text())["formats"]
+    made = json.loads((out / "deliver" / "manifest.json").read_text())["formats"]
     assert made["24p"]["outputs"][0]["rate"] == "23.976 fps (24000/1001)"
+
+
+def test_flipbook_sheet_and_report_name_the_rate_and_the_frames_timecode(shot_1001: tuple[Path, subprocess.CompletedProcess]) -> None:
+    """Wherever else the rate or the timecode is shown it agrees with the frames and the
+    movies: the flipbook of frames 1001.. says 00:00:41:17 (it counted from the folder's
+    first frame: 00:00:00:00) and of their 60i pulldown 00:00:41:21, as that movie's
+    timecode does; the flipbook and the contact sheet name 29.97 fps (30000/1001) (they
+    said '30000/1001 fps'); the report gives each movie's rate as the manifest does."""
+    from motion.pipeline.telecine.contact_sheet import sheet_layout
+    from motion.pipeline.telecine.sequence import discover
+
+    out, _ = shot_1001
+    interlaced = out / "deliver" / "60i"
+    with av.open(str(out / "deliver" / "tc_60i.mov")) as c:
+        assert c.streams.video[0].metadata.get("timecode") == "00:00:41:21"
+    for folder, first, rate in ((out, "00:00:41:17", "24 fps"), (interlaced, "00:00:41:21", "29.97 fps (30000/1001)")):
+        res = motion("view", folder)
+        assert res.returncode == 0, res.stderr
+        page = (folder / "flipbook" / "index.html").read_text()
+        data = json.loads(page.split('id="flipbook-data" type="application/json">', 1)[1].split("</script>", 1)[0])
+        assert data["frames"][0]["frame"] == 1001 and data["frames"][0]["timecode"] == first
+        assert data["fps_text"] == rate
+    assert sheet_layout(discover(interlaced)).header.endswith("  29.97 fps (30000/1001)")
+    rates = report(out)["deliverables"]["rates"]
+    assert rates == {str(out / "deliver" / "tc_24p.mov"): "23.976 fps (24000/1001)",
+                     str(out / "deliver" / "tc_60i.mov"): "29.97 fps (30000/1001) interlaced, 2 fields a frame"}
 
 
 def test_the_default_view_keeps_a_bright_sky_from_clipping() -> None:

@@ -275,12 +275,15 @@ def deliver_and_record(req: RenderRequest, out_dir: Path, frame_paths: list[Path
                     say(f"  {fmt}: {len(list(p.glob('*.exr')))} frames in {p}")
                 else:
                     say(f"  {fmt}: {p}" + (f" ({rate})" if rate else ""))
+        rates = {o.get("name"): o.get("rate") for o in (manifest.get("formats", {}).get(fmt) or {}).get("outputs", []) if isinstance(o, dict)}
         for n in names:
             p = folder / n
             if p.is_dir():
                 record[f"{fmt}_frames"] = [str(p)]
             else:
                 record.setdefault(fmt, []).append(str(p))
+                if rates.get(n):  # a movie's rate as read back: '23.976 fps (24000/1001)'
+                    record.setdefault("rates", {})[str(p)] = rates[n]
     record["status"] = status
     record["frames"] = format_frames(numbers)
     report["deliverables"] = record

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..errors import UsageError
 from ..files import writing
+from ..timeline import rate_label
 from .movie import ViewTransform
 from .sequence import Sequence, discover, read_checked
 
@@ -59,7 +60,7 @@ def sheet_layout(seq: Sequence, max_frames: int = 60) -> SheetLayout:
     span = seq.numbers[-1] - seq.first + 1
     count = f"{len(seq)} frames" if not seq.missing else f"{len(seq)} of {span} frames, {len(seq.missing)} missing"
     header = (f"{seq.prefix}  frames {seq.first}-{seq.numbers[-1]} ({count})  {seq.width}x{seq.height}"
-              f"{f'  {seq.fps} fps' if seq.fps else ''}")
+              f"{f'  {rate_label(seq.fps)}' if seq.fps else ''}")  # '29.97 fps (30000/1001)', as the movies
     return SheetLayout(picked, tuple(seq.numbers[i] for i in picked), step, len(seq.missing), header)
 
 

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..errors import UsageError
 from ..files import writing
-from ..timeline import timecode
+from ..timeline import frame_timecode, rate_label
 from .movie import ViewTransform
 from .sequence import Sequence, discover, read_checked
 
@@ -98,13 +98,17 @@ def export_images(
 
 
 def _frame_info(seq: Sequence, index: int, number: int, fps: Fraction | None) -> dict[str, Any]:
-    from ..frame_output import read_header
+    from ..frame_output import read_header, timecode_str
 
     header = read_header(seq.paths[index])
     meta = {k.split(":", 1)[1]: v for k, v in header.items() if str(k).startswith("motion:")}
     info: dict[str, Any] = {"frame": number, "file": seq.paths[index].name}
-    if fps:
-        info["timecode"] = timecode(number - seq.first, fps) if round(fps) == fps or fps.denominator == 1001 else ""
+    # the frame's own timecode (it follows the frame number, and a pulldown's continues the
+    # film's: docs/telecine.md); a header without one: the frame number at the nominal rate
+    if header.get("timeCode") is not None:
+        info["timecode"] = timecode_str(header["timeCode"])
+    elif fps:
+        info["timecode"] = (frame_timecode(number, fps) or "") if round(fps) == fps or fps.denominator == 1001 else ""
     for key in INFO_KEYS:
         value = meta.get(key)
         if isinstance(value, (int, float, str)) and not isinstance(value, bool):
@@ -126,7 +130,7 @@ def write_flipbook(exported: Exported, path: str | Path, title: str | None = Non
     data = {
         "title": title or seq.prefix,
         "fps": float(fps) if fps else 24.0,
-        "fps_text": str(fps) if fps else "24 (assumed)",
+        "fps_text": rate_label(fps) if fps else "24 fps (assumed)",
         "width": seq.width,
         "height": seq.height,
         "view": exported.view,
@@ -189,7 +193,7 @@ stage.style.width = Math.max(data.width, 640) + "px";
 if (data.width < 320) stage.style.imageRendering = "pixelated";
 document.getElementById("title").textContent = data.title;
 document.getElementById("about").textContent =
-  `${data.frames.length} frames, ${data.width}x${data.height}, ${data.fps_text} fps; ${data.view}` +
+  `${data.frames.length} frames, ${data.width}x${data.height}, ${data.fps_text}; ${data.view}` +
   (data.missing.length ? `; ${data.missing.length} frame numbers missing` : "");
 function show(i) {
   index = Math.max(0, Math.min(data.frames.length - 1, i));
