@@ -7,7 +7,8 @@ cannonball is in frame (issue 23).
 
 - clipped: share of pixels with a channel at the display's maximum, under the default view
   (OCIO ACES 2.0 SDR) and under the plain sRGB curve (`--ocio none`), all frames and the
-  sky's top tenth;
+  sky's top tenth; and the sky's colour on the display (mean of max - min of R, G, B over
+  the top 35% of the image: 0 is grey);
 - shimmer: per-pixel standard deviation (of 255) over the frames before the ball lands
   (nothing moves there but the noise), by band of rows: sky, horizon, open water;
 - the ball: frames in which its centre is inside the image (from the bake and the camera),
@@ -75,7 +76,9 @@ def main() -> None:
     for label, view in (("default view (ACES 2.0 SDR)", ViewTransform()), ("plain sRGB (--ocio none)", ViewTransform(ocio_config="none"))):
         every = np.mean([(view.encode(f) >= 1 - 1e-6).any(axis=-1).mean() for f in frames])
         top = np.mean([(view.encode(f[: max(1, f.shape[0] // 10)]) >= 1 - 1e-6).any(axis=-1).mean() for f in frames])
-        print(f"clipped, {label:28}: {100 * every:5.2f}% of pixels, {100 * top:5.2f}% of the top tenth")
+        # the sky's colour: its chroma on the display, max - min of R, G, B (of 255), top 35%
+        chroma = np.mean([np.ptp(view.encode(f[: int(0.35 * f.shape[0])]), axis=-1).mean() for f in frames]) * 255
+        print(f"clipped, {label:28}: {100 * every:5.2f}% of pixels, {100 * top:5.2f}% of the top tenth; sky chroma {chroma:.1f}/255")
     view = ViewTransform()
     still = np.stack([view.encode(f) for f in frames[: args.landing - 12]]) * 255  # before the ball is near the water
     std = still.std(axis=0).mean(axis=-1)

@@ -102,3 +102,50 @@ def test_sky_renders_with_one_worker_per_core_and_its_sun_is_where_the_tool_says
     assert len(frames) == workers
     rgb = read_frame(frames[0]).rgba[..., :3].sum(axis=-1)
     assert np.unravel_index(np.argmax(rgb), rgb.shape) == (7, 7)
+
+
+def test_the_showcase_keeps_the_cannonball_in_frame_for_its_whole_flight() -> None:
+    """The `make render` shot is framed on its event: the ball's centre is inside the image
+    in every frame of its flight, 0 to 41 (it was in frame for 9 of them, a 6x12 px streak),
+    and its nearest frame shows it at least 8 px across. Camera space is Mitsuba's (looks
+    along +Z, +X is left), the baked camera pose is world_from_camera, fov along x."""
+    from motion.pipeline.bake import bake
+    from motion.pipeline.motion.pose import quat_rotate, quat_normalize
+    from motion.pipeline.scene import load_scene
+
+    loaded = load_scene(SCENES / "cannonball-splash.yaml")
+    w, h = loaded.scene.render.resolution
+    radius = next(o.radius for o in loaded.scene.objects if o.name == "ball")
+    assert loaded.scene.camera.fov_axis == "x"
+    baked = bake(loaded, list(range(42)))
+    inside, across = [], []
+    for k in range(42):
+        at = baked.frame(k).at_frame
+        cam = at.camera
+        conj = quat_normalize(cam.rotation[0] * np.array([1.0, -1.0, -1.0, -1.0]))
+        x, y, z = quat_rotate(conj, at.objects["ball"].translation[0] - cam.translation[0])  # camera_from_world
+        f = (w / 2) / np.tan(np.radians(float(at.camera_scalars["fov"][0])) / 2)  # pixels at distance 1
+        u, v = w / 2 - f * x / z, h / 2 - f * y / z
+        inside.append(bool(z > 0 and 0 <= u < w and 0 <= v < h))
+        across.append(2 * radius * f / z)
+    assert all(inside), [k for k, seen in enumerate(inside) if not seen]
+    assert max(across) >= 8.0
+
+
+@pytest.mark.render
+def test_the_showcase_sky_keeps_its_colour_under_the_default_view(tmp_path: Path) -> None:
+    """A frame of the `make render` shot (64x36) through the deliverables' default view
+    (OCIO ACES 2.0 SDR): under 1% of its pixels clipped (the plain sRGB curve clipped 29%
+    of the showcase frames) and the sky, the top 35% of the image, still blue: a display
+    chroma (max - min of R, G, B) of at least 35/255 on average (the paler, wider haze
+    of the earlier sky map came out grey through the tone curve, 21/255)."""
+    from motion.pipeline.telecine.movie import ViewTransform
+
+    proc = run_motion("render", str(SCENES / "cannonball-splash.yaml"), "-o", str(tmp_path), "--frames", "10",
+                      "--resolution", "64x36", "--spp", "2", "--deliver", "none", "--no-progress")
+    assert proc.returncode == 0, proc.stderr
+    shown = ViewTransform().encode(read_frame(tmp_path / "cannonball-splash.0010.exr").rgba)
+    assert (shown >= 1 - 1e-6).any(axis=-1).mean() < 0.01
+    sky = shown[: int(0.35 * shown.shape[0])]
+    assert np.ptp(sky, axis=-1).mean() * 255 >= 35
+    assert (sky[..., 2] > sky[..., 0]).mean() > 0.9  # blue, not the grey or the cyan of a clipped blue
