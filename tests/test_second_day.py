@@ -309,12 +309,13 @@ def test_timecode_comes_from_the_frame_number_and_the_rate_is_named(shot_1001: t
     assert made["24p"]["outputs"][0]["rate"] == "23.976 fps (24000/1001)"
 
 
-def test_flipbook_sheet_and_report_name_the_rate_and_the_frames_timecode(shot_1001: tuple[Path, subprocess.CompletedProcess]) -> None:
+def test_movies_flipbook_sheet_and_report_name_the_rate_and_the_frames_timecode(shot_1001: tuple[Path, subprocess.CompletedProcess]) -> None:
     """Wherever else the rate or the timecode is shown it agrees with the frames and the
     movies: the flipbook of frames 1001.. says 00:00:41:17 (it counted from the folder's
     first frame: 00:00:00:00) and of their 60i pulldown 00:00:41:21, as that movie's
     timecode does; the flipbook and the contact sheet name 29.97 fps (30000/1001) (they
-    said '30000/1001 fps'); the report gives each movie's rate as the manifest does."""
+    said '30000/1001 fps'); each movie's comment names its rate, scan and view; the report
+    gives each movie's rate as the manifest does."""
     from motion.pipeline.telecine.contact_sheet import sheet_layout
     from motion.pipeline.telecine.sequence import discover
 
@@ -322,6 +323,9 @@ def test_flipbook_sheet_and_report_name_the_rate_and_the_frames_timecode(shot_10
     interlaced = out / "deliver" / "60i"
     with av.open(str(out / "deliver" / "tc_60i.mov")) as c:
         assert c.streams.video[0].metadata.get("timecode") == "00:00:41:21"
+        assert c.metadata.get("comment", "").startswith("29.97 fps (30000/1001), interlaced tff; view: OCIO")
+    with av.open(str(out / "deliver" / "tc_24p.mov")) as c:
+        assert c.metadata.get("comment", "").startswith("23.976 fps (24000/1001), progressive; view: OCIO")
     for folder, first, rate in ((out, "00:00:41:17", "24 fps"), (interlaced, "00:00:41:21", "29.97 fps (30000/1001)")):
         res = motion("view", folder)
         assert res.returncode == 0, res.stderr

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..errors import FrameIOError, UsageError
 from ..frame_output import publish
+from ..timeline import rate_label
 from .fields import FieldOrder, check_field_order
 from .sequence import Sequence, discover, read_checked
 
@@ -201,7 +202,7 @@ class _Encoder:
 
     def __init__(self, path: Path, container: str, codec: Codec, width: int, height: int, rate: Fraction,
                  field_order: FieldOrder | None, timecode: str | None,
-                 color_tags: tuple[int, int] = (BT709, TRC_SRGB)) -> None:
+                 color_tags: tuple[int, int] = (BT709, TRC_SRGB), comment: str | None = None) -> None:
         import av
 
         self.av = av
@@ -210,6 +211,8 @@ class _Encoder:
         self.out = av.open(str(path), "w", format=container)
         if timecode:
             self.out.metadata["timecode"] = timecode
+        if comment:
+            self.out.metadata["comment"] = comment  # what a player's info panel shows
         options = dict(codec.options)
         if field_order and codec.encoder == "libx264":
             options["x264-params"] = f"{field_order}=1"  # x264 takes the field order at open
@@ -299,8 +302,11 @@ def write_movie(
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix + ".part", dir=path.parent)
     os.close(fd)
     try:
+        # the rate named as it plays ('23.976 fps (24000/1001)'), the scan and the view, in the file
+        scan = f"interlaced {order}" if order else "progressive"
+        comment = f"{rate_label(Fraction(rate))}, {scan}; view: {view.description}"
         encoder = _Encoder(Path(tmp), container, chosen, width, height, Fraction(rate), order, timecode,
-                           view.color_tags)
+                           view.color_tags, comment)
         for i, rgba in enumerate(frames):
             encoder.add(view(rgba))
             if progress:
