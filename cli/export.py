@@ -17,7 +17,10 @@ _VIEW_OPTIONS = [
 ]
 
 
-def _view_options(f):  # type: ignore[no-untyped-def]
+def view_options(f):  # type: ignore[no-untyped-def]
+    """The view-transform options of every command that shows frames (export, view,
+    contact-sheet): --exposure, --ocio (default: OCIO's ACES 2.0 SDR; none: plain sRGB),
+    --ocio-display, --ocio-view, --ocio-colorspace, --prefix."""
     for option in reversed(_VIEW_OPTIONS):
         f = option(f)
     return f
@@ -28,7 +31,7 @@ def _view_options(f):  # type: ignore[no-untyped-def]
 @click.option("--format", "fmt", type=click.Choice(["png", "jpg"]), default="png", show_default=True, help="Image format (8 bits per channel).")
 @click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), help="Folder for the images (default: IN_DIR/png or IN_DIR/jpg).")
 @click.option("--quality", type=click.IntRange(1, 95), default=92, show_default=True, help="JPEG quality.")
-@_view_options
+@view_options
 def export(in_dir: Path, fmt: str, out_dir: Path | None, quality: int, exposure: float, ocio_config: str | None,
            ocio_display: str | None, ocio_view: str | None, ocio_colorspace: str | None, prefix: str | None) -> None:
     """Write each EXR frame of IN_DIR as a PNG or JPEG, with the movies' view transform."""
@@ -46,7 +49,7 @@ def export(in_dir: Path, fmt: str, out_dir: Path | None, quality: int, exposure:
 @click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), help="The flipbook page (default: IN_DIR/flipbook/index.html; its images go beside it).")
 @click.option("--format", "fmt", type=click.Choice(["jpg", "png"]), default="jpg", show_default=True, help="Image format of the flipbook's frames.")
 @click.option("--open", "open_browser", is_flag=True, help="Open the page in the default web browser.")
-@_view_options
+@view_options
 def view(in_dir: Path, out_path: Path | None, fmt: str, open_browser: bool, exposure: float, ocio_config: str | None,
          ocio_display: str | None, ocio_view: str | None, ocio_colorspace: str | None, prefix: str | None) -> None:
     """An HTML flipbook of IN_DIR's frames: scrubber, play/pause, frame info."""

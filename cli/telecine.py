@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from motion.cli.export import view_options
 from motion.cli.options import FiniteFloat
 from motion.pipeline.errors import UsageError
 from motion.pipeline.progress import count_bar
@@ -82,7 +83,7 @@ def telecine(in_dir: Path, out_dir: Path, pattern: str | None, field_order: str 
         with count_bar("movie") as progress:
             path = sequence_movie(result.out_dir, movie, rate=result.rate, codec=codec, view=view,
                                   prefix=result.paths[0].name.rsplit(".", 2)[0], progress=progress)
-        click.echo(f"wrote {path}")
+        click.echo(f"wrote {path} ({rate_label(result.rate)}{', interlaced' if result.field_order and not inverse else ''})")
 
 
 @click.command("contact-sheet")
@@ -92,13 +93,7 @@ def telecine(in_dir: Path, out_dir: Path, pattern: str | None, field_order: str 
 @click.option("--width", "thumb_width", type=int, default=240, show_default=True, help="Thumbnail width in pixels.")
 @click.option("--columns", type=int, default=None, help="Thumbnails per row (default: about 16:9 overall).")
 @click.option("--max-frames", type=int, default=60, show_default=True, help="Sample every k-th frame above this.")
-@click.option("--exposure", type=float, default=0.0, show_default=True, help="Exposure in stops.")
-@click.option("--ocio", "ocio_config", default=None,
-              help="OCIO config for the view transform: a .ocio file or ocio://cg-config-latest etc.")
-@click.option("--ocio-display", default=None, help="OCIO display (default: the config's).")
-@click.option("--ocio-view", default=None, help="OCIO view (default: the display's).")
-@click.option("--ocio-colorspace", default=None, help="OCIO colour space of the frames.")
-@click.option("--prefix", default=None, help="Which sequence of IN_DIR.")
+@view_options
 def contact_sheet(in_dir: Path, out_path: Path, thumb_width: int, columns: int | None, max_frames: int,
                   exposure: float, ocio_config: str | None, ocio_display: str | None, ocio_view: str | None,
                   ocio_colorspace: str | None, prefix: str | None) -> None:

@@ -122,6 +122,7 @@ def test_cli_telecine_inverse_and_errors(tmp_path: Path, capsys: pytest.CaptureF
                               "--field-order", "bff", "--movie", str(tmp_path / "v.mov")], catch_exceptions=False)
     assert out.exit_code == 0, out.output
     assert "wrote 6 frames" in out.output and (tmp_path / "v.mov").is_file()
+    assert f"wrote {tmp_path / 'v.mov'} (29.97 fps (30000/1001), interlaced)" in out.output  # the rate it plays at
     assert read_frame(tmp_path / "60i" / "shot.0001.exr").meta["fieldOrder"] == "bff"
     out = runner.invoke(cli, ["telecine", str(tmp_path / "60i"), "-o", str(tmp_path / "back"), "--inverse"],
                         catch_exceptions=False)
