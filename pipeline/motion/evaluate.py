@@ -15,15 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import MotionError, SceneError
-from ..scene.schema import (
-    Camera,
-    ConstantLight,
-    DirectionalLight,
-    EnvmapLight,
-    Particles,
-    PointLight,
-    SpotLight,
-)
+from ..scene.schema import Camera, Particles
 from .graph import evaluation_order
 from .local import broadcast, local_pose, object_base, vec3
 from .pose import Pose, compose
@@ -102,33 +94,28 @@ def _camera_base(cam: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _light_base(light: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The light's own frame from its fields, by the record's `placement` (scene/schema.py)."""
     identity = np.array([1.0, 0.0, 0.0, 0.0])
-    if isinstance(light, SpotLight):
+    if light.placement == "aim":
         up = (0.0, 1.0, 0.0)
         d = np.subtract(light.look_at, light.position)
         if np.linalg.norm(np.cross(d, up)) < 1e-9 * max(np.linalg.norm(d), 1e-300):
             up = (0.0, 0.0, 1.0)
         return np.asarray(light.position, dtype=np.float64), look_at_quat(light.position, light.look_at, up), np.ones(3)
-    if isinstance(light, PointLight):
+    if light.placement == "position":
         return np.asarray(light.position, dtype=np.float64), identity, np.ones(3)
-    if isinstance(light, DirectionalLight):
+    if light.placement == "direction":
         return np.zeros(3), direction_quat(light.direction), np.ones(3)
-    if isinstance(light, EnvmapLight) and light.transform is not None:
+    if light.placement == "transform" and light.transform is not None:
         return object_base(light)
     return np.zeros(3), identity, np.ones(3)
 
 
 def _light_scalar_bases(light: Any) -> dict[str, np.ndarray]:
-    """The light's own (unkeyed) scalars: colours as [3], the envmap's scale as [1]."""
-    if isinstance(light, (PointLight, SpotLight)):
-        return {"intensity": vec3(light.intensity)}
-    if isinstance(light, ConstantLight):
-        return {"radiance": vec3(light.radiance)}
-    if isinstance(light, DirectionalLight):
-        return {"irradiance": vec3(light.irradiance)}
-    if isinstance(light, EnvmapLight):
-        return {"scale": np.array([light.scale])}
-    return {}
+    """The light's own (unkeyed) emission channel: a colour as [3], a number as [1]."""
+    if light.channel_size == 3:
+        return {light.channel: vec3(light.emission)}
+    return {light.channel: np.array([float(light.emission)])}
 
 
 # --- the whole scene ----------------------------------------------------------------------
@@ -196,9 +183,7 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
     light_scalars: dict[str, dict[str, np.ndarray]] = {}
     for i, light in enumerate(scene.lights):
         bases = _light_scalar_bases(light)
-        dims = {name: (1 if name == "scale" else 3) for name in ("intensity", "radiance", "irradiance")}
-        if isinstance(light, EnvmapLight):
-            dims["scale"] = 1
+        dims = {light.channel: light.channel_size}
         local = local_pose(loaded, ("lights", i), light.motion, _light_base(light), t, dims)
         pose = Pose(local.translation, local.rotation, local.scale)
         name = light_name(light, i)

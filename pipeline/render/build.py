@@ -18,15 +18,11 @@ from ..scene.loader import LoadedScene
 from ..scene.schema import (
     Camera,
     Conductor,
-    ConstantLight,
+    RIGID_PLACEMENTS,
     Dielectric,
     Diffuse,
-    DirectionalLight,
-    EnvmapLight,
     Plastic,
-    PointLight,
     Principled,
-    SpotLight,
     ThinDielectric,
 )
 from ..scene.types import Texture
@@ -224,49 +220,40 @@ def object_shapes(obj: Any, loaded: LoadedScene, world_from_object: np.ndarray, 
 # --- lights -------------------------------------------------------------------------------
 
 
-# Each light's animatable colour channel (`scalars` key), in the light's own units.
-LIGHT_CHANNEL = {"constant": "radiance", "envmap": "scale", "point": "intensity", "spot": "intensity", "directional": "irradiance"}
-
-
-def light_dict(light: Any, loaded: LoadedScene, world_from_light: np.ndarray | None, scalars: dict[str, Any]) -> Dict:
-    """One light at one time, placed by its frame exactly once.
+def light_dict(light: Any, loaded: LoadedScene | None, world_from_light: np.ndarray | None, scalars: dict[str, Any]) -> Dict:
+    """One light at one time, placed by its frame exactly once: the light record's own
+    `emitter` (scene/schema.py LIGHT_TYPES), with its matrix and colour in Mitsuba's terms.
 
     `world_from_light` is the light's pose from the motion stage (None = identity): its
     origin is the light's position and its +Z axis the direction it shines (spot axis,
     directional travel direction), as in Mitsuba's emitters; the record's `position`,
     `look_at` and `direction` are already folded into it (motion/evaluate.py). `scalars`
-    holds the light's colour channel at that time (LIGHT_CHANNEL), from its keys or record.
+    holds the light's emission channel at that time (`light.channel`), from its keys; the
+    record's own value otherwise. `loaded` resolves asset files (None: a light with none).
     """
     m = np.eye(4) if world_from_light is None else np.asarray(world_from_light, dtype=float)
-    value = scalars.get(LIGHT_CHANNEL[light.type])
-    if isinstance(light, ConstantLight):
-        return {"type": "constant", "radiance": spectrum(light.radiance if value is None else value)}
-    if isinstance(light, EnvmapLight):
-        scale = float(light.scale if value is None else value)
-        return {"type": "envmap", "filename": str(loaded.asset(light.file)), "scale": scale, "to_world": _xf(m)}
-    rigid = _rigid(m)
-    if isinstance(light, PointLight):
-        return {"type": "point", "to_world": _xf(rigid), "intensity": spectrum(light.intensity if value is None else value)}
-    if isinstance(light, SpotLight):
-        d = {"type": "spot", "to_world": _xf(rigid), "intensity": spectrum(light.intensity if value is None else value), "cutoff_angle": light.cutoff_angle}
-        if light.beam_width is not None:
-            d["beam_width"] = min(light.beam_width, light.cutoff_angle)
-        return d
-    if isinstance(light, DirectionalLight):
-        return {"type": "directional", "to_world": _xf(rigid), "irradiance": spectrum(light.irradiance if value is None else value)}
-    raise RendererError(f"no builder for light type {light.type!r}")
+    if light.placement in RIGID_PLACEMENTS:
+        m = _rigid(m)
+    value = scalars.get(light.channel)
+    value = light.emission if value is None else value
+    value = spectrum(value) if light.channel_size == 3 else float(value)
+
+    def asset(name: str) -> str:
+        if loaded is None:
+            raise RendererError(f"a {light.type} light's file {name!r} needs the scene to resolve it")
+        return str(loaded.asset(name))
+
+    d = dict(light.emitter(value, m, asset))
+    if "to_world" in d:
+        d["to_world"] = _xf(d["to_world"])
+    return d
 
 
 def unit_light_dict(light: Any) -> Dict:
-    """A moving point, spot or directional light in its own frame (at the origin, shining
-    along +Z) with unit intensity: the integrator poses it per path and scales its colour."""
-    d: Dict = {"type": light.type, "to_world": _xf(np.eye(4))}
-    d["irradiance" if light.type == "directional" else "intensity"] = 1.0
-    if isinstance(light, SpotLight):
-        d["cutoff_angle"] = light.cutoff_angle
-        if light.beam_width is not None:
-            d["beam_width"] = min(light.beam_width, light.cutoff_angle)
-    return d
+    """A moving light that is posed per path (`posed_per_path`) in its own frame (at the
+    origin, shining along +Z) with unit emission: the integrator poses it per path and
+    scales its colour."""
+    return light_dict(light, None, None, {light.channel: 1.0})
 
 
 def _rigid(m: np.ndarray) -> np.ndarray:

@@ -61,7 +61,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         self._eager: list[bool] | None = None  # movers posed once per path (poses.eager_movers), chosen on the first frame
         self.world = World()
         self.frame_data = FrameData()
-        self.lights: list[tuple[str, Any]] = []  # moving lights: (kind, emitter in its rest frame)
+        self.lights: list[tuple[bool, Any]] = []  # moving lights: (at infinity, emitter in its rest frame)
         self.choice: LightChoice | None = None  # light selection among the static scene's emitters (lights.py)
 
     # --- per-job and per-frame state --------------------------------------------------
@@ -73,11 +73,12 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         self.frame_data.n_samples = max(2, int(n_samples))
         self._eager = None
 
-    def set_lights(self, lights: Sequence[tuple[str, Any]]) -> None:
-        """The lights that move (fixed for a job): (kind, emitter) with kind `point`, `spot` or
-        `directional` and the emitter built in the light's own frame (at the origin, shining
-        along +Z) with unit intensity; poses and colours come per frame (`set_frame`)."""
-        self.lights = list(lights)
+    def set_lights(self, lights: Sequence[Any]) -> None:
+        """The lights that move (fixed for a job): delta emitters (point, spot, directional)
+        built in the light's own frame (at the origin, shining along +Z) with unit intensity;
+        poses and colours come per frame (`set_frame`). One at infinity (directional) casts
+        its shadow ray along the sampled direction, the others to the sampled point."""
+        self.lights = [(mi.has_flag(e.flags(), mi.EmitterFlags.Infinite), e) for e in lights]
 
     def set_projection(self, kind: str, scale: float, width: int, height: int) -> None:
         """Camera projection for the motion AOV: perspective scale = (W/2) / tan(xfov/2),
@@ -153,11 +154,11 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         space; the shadow ray is tested against every scene at the same time."""
         L = mi.Spectrum(0.0)
         # delta lights (point, spot, directional): one deterministic sample each, no MIS
-        for index, (kind, emitter) in enumerate(self.lights):
+        for index, (at_infinity, emitter) in enumerate(self.lights):
             pose = light_poses[index]
             ds, weight = emitter.sample_direction(pose.interaction_to_rest(si), mi.Point2f(0.5), active)
             d = pose.vector_to_world(ds.d)
-            shadow = si.spawn_ray(d) if kind == "directional" else si.spawn_ray_to(pose.point_to_world(ds.p))
+            shadow = si.spawn_ray(d) if at_infinity else si.spawn_ray_to(pose.point_to_world(ds.p))
             ok = active & (ds.pdf != 0.0)
             ok &= ~self.world.occluded(scene, shadow, movers, ok, k_slice)
             rgb = self.frame_data.vec("light_rgb", 3, mi.UInt32(index), ok)

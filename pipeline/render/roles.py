@@ -2,9 +2,9 @@
 
 An object is static (in the static set, built once, its BVH never rebuilt), a rigid mover
 (its own rest-frame scene, posed per path: render/poses.py) or time-sliced geometry
-(particle systems and deforming meshes: render/slices.py). A light is static, moving
-(point, spot or directional, posed per path by the integrator) or animated in another
-way (an environment light: its parameters are updated per frame).
+(particle systems and deforming meshes: render/slices.py). A light is static, moving (a
+record that is `posed_per_path`: point, spot, directional; posed per path by the
+integrator) or animated in another way (an environment light: updated per frame).
 """
 
 from __future__ import annotations
@@ -14,10 +14,6 @@ from typing import Any
 
 from ..scene.loader import LoadedScene
 from ..scene.schema import Empty, Particles
-
-# light types the integrator poses per path at the path's own time
-PATH_POSED_LIGHTS = ("point", "spot", "directional")
-
 
 def is_static(loaded: LoadedScene, name: str) -> bool:
     """An object is static iff neither it nor any ancestor moves."""
@@ -63,6 +59,6 @@ def sort_scene(loaded: LoadedScene) -> Roles:
         static_names=static_names,
         mover_names=mover_names,
         slice_names=slice_names,
-        moving_lights=[(i, light) for i, light in animated if light.type in PATH_POSED_LIGHTS],
-        animated_lights=[(i, light) for i, light in animated if light.type not in PATH_POSED_LIGHTS],
+        moving_lights=[(i, light) for i, light in animated if light.posed_per_path],
+        animated_lights=[(i, light) for i, light in animated if not light.posed_per_path],
     )

@@ -19,7 +19,7 @@ import numpy as np
 from ..motion.pose import quat_mul
 from ..scene.loader import LoadedScene
 from ..variant import load_dict
-from .build import LIGHT_CHANNEL, material_dict, mitsuba_id, object_shapes, unit_light_dict
+from .build import material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
 from .instant import add_lights, add_shapes, light_key, light_record, sensor_record
 from .roles import Roles
@@ -97,7 +97,7 @@ class SceneCache:
         self._movers = movers
         integrator = self.integrator
         integrator.set_movers(movers, fi.samples)
-        integrator.set_lights([(light.type, load_dict(unit_light_dict(light))) for _, light in self.roles.moving_lights])
+        integrator.set_lights([load_dict(unit_light_dict(light)) for _, light in self.roles.moving_lights])
         w, h = settings.resolution
         if scene.camera.type == "orthographic":
             integrator.set_projection("orthographic", w / scene.camera.ortho_width, w, h)
@@ -203,8 +203,8 @@ class SceneCache:
             key = light_key(i, light)
             t, q, _ = fi.lights[key]
             lt[k], lq[k] = across_shutter(t, q, n, mode, u_fixed)
-            value = fi.light_scalars.get(key, {}).get(LIGHT_CHANNEL[light.type])
-            rgb[k] = np.asarray(value[0] if value is not None else getattr(light, LIGHT_CHANNEL[light.type]), dtype=float)
+            value = fi.light_scalars.get(key, {}).get(light.channel)
+            rgb[k] = np.asarray(value[0] if value is not None else light.emission, dtype=float)
         return lt, lq, rgb
 
     def render(self, seed: int, spp: int) -> Any:

@@ -17,7 +17,7 @@ from ..expr import ExpressionError, parse_expression
 from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
 from .problems import closest
 from .motion_schema import BlendShapes, KeyframeMotion, ProceduralMotion, TRANSFORM_CHANNELS
-from .schema import EnvmapLight, Mesh, Particles, Scene, Texture
+from .schema import LIGHT_TYPES, Mesh, Particles, Scene, Texture
 from .source import yaml_path
 
 # Budgets (docs/scene-format.md, "Limits"), checked over the whole timeline before any work.
@@ -34,12 +34,8 @@ if TYPE_CHECKING:
 SCALAR_CHANNELS = {
     "camera": ("fov", "ortho_width"),
     "object": (),
-    # each light's own emission quantity (render/build.py LIGHT_CHANNEL); a keyed value replaces it
-    "point light": ("intensity",),
-    "spot light": ("intensity",),
-    "directional light": ("irradiance",),
-    "constant light": ("radiance",),
-    "envmap light": ("scale",),
+    # each light's own emission quantity (its record's `channel`); a keyed value replaces it
+    **{f"{name} light": (record.channel,) for name, record in LIGHT_TYPES.items()},
 }
 # Channels keyed with exactly one number (lights' channels also take colours).
 NUMBER_CHANNELS = ("fov", "ortho_width")
@@ -201,8 +197,8 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
         if obj.motion.type == "plan" and obj.motion.grid.image is not None:
             check_file(("objects", i, "motion", "grid", "image"), obj.motion.grid.image, "image")
     for i, light in enumerate(scene.lights):
-        if isinstance(light, EnvmapLight):
-            check_file(("lights", i, "file"), light.file, "image")
+        for field in light.image_files:
+            check_file(("lights", i, field), getattr(light, field), "image")
     for i, obj in enumerate(scene.objects):
         if obj.emission is not None and isinstance(obj.emission.radiance, Texture):
             check_file(("objects", i, "emission", "radiance", "file"), obj.emission.radiance.file, "image")
@@ -467,8 +463,7 @@ def scene_warnings(scene: Scene) -> list[str]:
         out.append("the scene has no objects: its frames show only the lights' environment")
     elif not shown:
         out.append(f"none of the scene's {len(scene.objects)} objects is visible (empty shapes or visible: false): its frames show only the lights' environment")
-    strength = {"constant": "radiance", "point": "intensity", "spot": "intensity", "directional": "irradiance", "envmap": "scale"}
-    lit = [light for light in scene.lights if light.motion.type != "static" or not _dark(getattr(light, strength[light.type]))]
+    lit = [light for light in scene.lights if light.motion.type != "static" or not _dark(light.emission)]
     emissive = [o for o in shown if o.emission is not None and not _dark(o.emission.radiance)]
     if not lit and not emissive:
         what = "no lights" if not scene.lights else "only lights of strength 0"
