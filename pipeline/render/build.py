@@ -11,7 +11,6 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from ..errors import RendererError
 from ..geometry import scale_matrix, shape_geometry
 from ..motion.pose import quat_normalize, quat_to_matrix
 from ..scene.loader import LoadedScene
@@ -220,7 +219,7 @@ def object_shapes(obj: Any, loaded: LoadedScene, world_from_object: np.ndarray, 
 # --- lights -------------------------------------------------------------------------------
 
 
-def light_dict(light: Any, loaded: LoadedScene | None, world_from_light: np.ndarray | None, scalars: dict[str, Any]) -> Dict:
+def light_dict(light: Any, loaded: LoadedScene, world_from_light: np.ndarray | None, scalars: dict[str, Any]) -> Dict:
     """One light at one time, placed by its frame exactly once: the light record's own
     `emitter` (scene/schema.py LIGHT_TYPES), with its matrix and colour in Mitsuba's terms.
 
@@ -229,7 +228,7 @@ def light_dict(light: Any, loaded: LoadedScene | None, world_from_light: np.ndar
     directional travel direction), as in Mitsuba's emitters; the record's `position`,
     `look_at` and `direction` are already folded into it (motion/evaluate.py). `scalars`
     holds the light's emission channel at that time (`light.channel`), from its keys; the
-    record's own value otherwise. `loaded` resolves asset files (None: a light with none).
+    record's own value otherwise. `loaded` resolves the light's files.
     """
     m = np.eye(4) if world_from_light is None else np.asarray(world_from_light, dtype=float)
     if light.placement in RIGID_PLACEMENTS:
@@ -238,22 +237,17 @@ def light_dict(light: Any, loaded: LoadedScene | None, world_from_light: np.ndar
     value = light.emission if value is None else value
     value = spectrum(value) if light.channel_size == 3 else float(value)
 
-    def asset(name: str) -> str:
-        if loaded is None:
-            raise RendererError(f"a {light.type} light's file {name!r} needs the scene to resolve it")
-        return str(loaded.asset(name))
-
-    d = dict(light.emitter(value, m, asset))
+    d = dict(light.emitter(value, m, lambda name: str(loaded.asset(name))))
     if "to_world" in d:
         d["to_world"] = _xf(d["to_world"])
     return d
 
 
-def unit_light_dict(light: Any) -> Dict:
+def unit_light_dict(light: Any, loaded: LoadedScene) -> Dict:
     """A moving light that is posed per path (`posed_per_path`) in its own frame (at the
     origin, shining along +Z) with unit emission: the integrator poses it per path and
     scales its colour."""
-    return light_dict(light, None, None, {light.channel: 1.0})
+    return light_dict(light, loaded, None, {light.channel: 1.0})
 
 
 def _rigid(m: np.ndarray) -> np.ndarray:

@@ -97,7 +97,7 @@ class SceneCache:
         self._movers = movers
         integrator = self.integrator
         integrator.set_movers(movers, fi.samples)
-        integrator.set_lights([load_dict(unit_light_dict(light)) for _, light in self.roles.moving_lights])
+        integrator.set_lights([load_dict(unit_light_dict(light, loaded)) for _, light in self.roles.moving_lights])
         w, h = settings.resolution
         if scene.camera.type == "orthographic":
             integrator.set_projection("orthographic", w / scene.camera.ortho_width, w, h)
