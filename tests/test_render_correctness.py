@@ -141,6 +141,28 @@ def _lamp_ref(x: float) -> dict[str, Any]:
     return {"lamp": {**_LAMP, "to_world": _T().translate([x, 2.0, 0]) @ _T().rotate([1, 0, 0], 90) @ _T().scale([0.5, 0.5, 1])}}
 
 
+SLIDE = "slide.exr"  # the projector's image, written into the test's folder by _slide_image
+
+
+def _slide_image(folder: Path) -> None:
+    from motion.pipeline.frame_output import write_frame
+
+    img = np.full((12, 16, 3), 0.3, np.float32)
+    img[2:6, 2:7] = [3.0, 2.0, 1.0]  # a bright patch in one corner: a flip or a roll of the slide shows
+    write_frame(folder / SLIDE, img, pixel_type="float")
+
+
+def _projector_ref(origin: list[float], target: list[float], scale: float) -> dict[str, Any]:
+    """Mitsuba's `projector` by hand; the image's path is filled in by the test ("@slide")."""
+    return {"type": "projector", "to_world": _spot_to_world(origin, target), "irradiance": {"type": "bitmap", "filename": "@slide"}, "fov": 40.0, "scale": scale}
+
+
+def _fill_slide(d: Any, path: str) -> Any:
+    if isinstance(d, dict):
+        return {k: _fill_slide(v, path) for k, v in d.items()}
+    return path if d == "@slide" else d
+
+
 # id -> (lights YAML, extra objects YAML, reference at f = frame / 2 in [0, 1]: (emitters, shapes))
 LIGHT_CASES: dict[str, tuple[str, str, Any]] = {
     "directional-down": (
@@ -272,6 +294,20 @@ LIGHT_CASES: dict[str, tuple[str, str, Any]] = {
         _lamp_yaml(_KEYED % ("translate", "[-1.5, 2.0, 0]", "[0.5, 2.0, 0]")),
         lambda f: ({"sky": {"type": "constant", "radiance": 0.1}, "sun": {"type": "directional", "direction": [0.5, -1.0, 0.2], "irradiance": 1.0}}, _lamp_ref(-1.5 + 2 * f)),
     ),
+    # a light type added as one record (scene/schema.py ProjectorLight): still, and keyed
+    "projector": (
+        f"  - {{type: projector, position: [1.5, 3, 1.5], look_at: [0, 0, 0], file: {SLIDE}, fov: 40, scale: 6}}",
+        "",
+        lambda f: ({"slide": _projector_ref([1.5, 3, 1.5], [0, 0, 0], 6.0)}, {}),
+    ),
+    "projector-keyed": (
+        f"  - {{type: projector, position: [0, 3, 1.5], look_at: [0, 0, 0], file: {SLIDE}, fov: 40, scale: 6, "
+        + _KEYED % ("translate", "[-1.5, 3, 1.5]", "[1.5, 3, 1.5]")
+        + "}",
+        "",
+        # a keyed translate moves the frame: the aim (its rotation) stays the record's
+        lambda f: ({"slide": {**_projector_ref([0, 3, 1.5], [0, 0, 0], 6.0), "to_world": _T().translate([-1.5 + 3 * f, 0, 0]) @ _spot_to_world([0, 3, 1.5], [0, 0, 0])}}, {}),
+    ),
     "point-on-moving-parent": (
         "  - {type: point, parent: rig, position: [0, 3, 0], intensity: 10}",
         "  - {name: rig, shape: empty, " + _KEYED % ("translate", "[-1, 0, 0]", "[1, 0, 0]") + "}\n",
@@ -303,12 +339,15 @@ def test_every_light_agrees_with_mitsuba_path(tmp_path: Path, case: str) -> None
         env = {"type": "envmap", "filename": str(tmp_path / "smooth.exr")}
         sun = {"type": "directional", "direction": [0.5, -1.0, 0.2], "irradiance": 1.0}
         reference = lambda f: ({"sky": env, "sun": sun}, {})  # noqa: E731
+    if case.startswith("projector"):
+        _slide_image(tmp_path)
     loaded = load(tmp_path, text)
     images, stats, _ = render(loaded, [0, 2])
     assert [s.cold for s in stats] == [True, False]
     for frame, image in zip((0, 2), images):
         ours = image[..., :3]
         emitters, shapes = reference(frame / 2)
+        emitters = _fill_slide(emitters, str(tmp_path / SLIDE))
         scene = _reference_scene(emitters, shapes)
         ref_a = np.array(mi.render(scene, seed=21, spp=LIGHT_SPP))[..., :3]
         ref_b = np.array(mi.render(scene, seed=22, spp=LIGHT_SPP))[..., :3]
@@ -325,7 +364,7 @@ def test_every_light_agrees_with_mitsuba_path(tmp_path: Path, case: str) -> None
 SHUTTER_SUBFRAMES = 32
 
 
-@pytest.mark.parametrize("kind", ["point", "directional"])
+@pytest.mark.parametrize("kind", ["point", "directional", "projector"])
 def test_light_moving_within_the_shutter_is_placed_at_each_paths_time(tmp_path: Path, kind: str) -> None:
     """A light that moves a long way while the shutter is open: our stochastic frame equals
     the average of Mitsuba `path` renders at 32 instants across the shutter (light posed
@@ -342,6 +381,14 @@ def test_light_moving_within_the_shutter_is_placed_at_each_paths_time(tmp_path: 
 
         def emitter(s: float) -> dict[str, Any]:
             return {"bulb": {"type": "point", "position": [-3 + 6 * s, 2, 0], "intensity": 10.0}}
+
+    elif kind == "projector":  # the slide sweeps 1.5 m across the floor during frame 1's shutter
+        _slide_image(tmp_path)
+        lights = f"  - {{type: projector, position: [0, 3, 1.5], look_at: [0, 0, 0], file: {SLIDE}, fov: 40, scale: 6, " + _KEYED % ("translate", "[-3, 3, 1.5]", "[3, 3, 1.5]") + "}"
+
+        def emitter(s: float) -> dict[str, Any]:
+            ref = _projector_ref([0, 3, 1.5], [0, 0, 0], 6.0)
+            return {"slide": _fill_slide({**ref, "to_world": _T().translate([-3 + 6 * s, 0, 0]) @ _spot_to_world([0, 3, 1.5], [0, 0, 0])}, str(tmp_path / SLIDE))}
 
     else:  # the sun swings 100 degrees while frame 1's shutter is open (frames 0.75 to 1.25)
         keyed = _KEYED.replace("time: 0,", "time: 0.75,").replace("time: 2,", "time: 1.25,")

@@ -245,6 +245,30 @@ class DirectionalLight(_Light):
         return {"type": "directional", "to_world": to_world, "irradiance": value}
 
 
+@light_type
+class ProjectorLight(_Light):
+    """A slide projector at `position` aimed at `look_at`: the image `file` spread over a
+    frustum `fov` degrees wide (the image's width), its irradiance in W m^-2 per channel on
+    a surface facing it 1 m away, the image's value times `scale` (Mitsuba `projector`)."""
+
+    channel = "scale"
+    channel_size = 1
+    placement = "aim"
+    posed_per_path = True
+    image_files = ("file",)
+
+    type: Literal["projector"]
+    position: Vec3
+    look_at: Vec3
+    file: str
+    fov: Annotated[float, Field(gt=0, lt=180)] = 30.0  # degrees, horizontal
+    scale: NonNegative = 1.0
+
+    def emitter(self, value: Any, to_world: Any, asset: Callable[[str], str]) -> dict[str, Any]:
+        """Mitsuba `projector` with the image as its irradiance texture."""
+        return {"type": "projector", "to_world": to_world, "irradiance": {"type": "bitmap", "filename": asset(self.file)}, "fov": self.fov, "scale": value}
+
+
 Light = Annotated[Union[tuple(LIGHT_TYPES.values())], Field(discriminator="type")]  # type: ignore[valid-type]
 
 
