@@ -159,7 +159,7 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0, on_progr
         systems[obj.name] = ParticleSystem(obj.name, spawns, run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard, on_progress))
     flocks: dict[str, object] = {}
     for i, obj in enumerate(loaded.scene.objects):
-        if getattr(getattr(obj, "deform", None), "type", None) == "flock":
+        if obj.is_flock:
             from .flock import FlockParams, check_instance_budget, simulate_flock
 
             check_instance_budget(loaded, i)

@@ -49,7 +49,7 @@ def file_inputs(loaded: LoadedScene, path: str | Path, frames: Sequence[int]) ->
     from .frames import format_frames
 
     path = Path(path)
-    nonrigid = [o.name for o in loaded.scene.objects if o.shape == "particles" or getattr(o, "deform", None) is not None]
+    nonrigid = [o.name for o in loaded.scene.objects if o.is_nonrigid]
     if nonrigid and path.suffix.lower() != ".npz":
         # JSON carries rigid poses only (docs/bake-format.md)
         raise UsageError(

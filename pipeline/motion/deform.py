@@ -16,7 +16,7 @@ from ..dynamics.flock import agent_mesh
 from ..errors import AssetError, NotAMeshError, SceneError, ShapeGeometryError
 from ..geometry import tessellate
 from ..meshes import load_mesh
-from ..scene.motion_schema import BlendShapes, Flock, JointSkin, MorphTargets, Skinning
+from ..scene.motion_schema import BlendShapes, JointSkin, MorphTargets, Skinning
 from ..scene.schema import Mesh
 from .keyframes import MODES, VectorTrack, _catmull_rom_tangents
 from .pose import Pose, compose
@@ -30,7 +30,7 @@ MAX_INFLUENCES = 4
 def bind_mesh(loaded: "LoadedScene", obj: Any, detail: int = 16) -> tuple[np.ndarray, np.ndarray]:
     """The undeformed mesh of an object: its .obj/.ply file, or its tessellated primitive
     (a flock: `count` copies of its agent mesh, pipeline/dynamics/flock.py)."""
-    if isinstance(getattr(obj, "deform", None), Flock):
+    if obj.is_flock:
         verts, faces = agent_mesh(loaded, obj)
         count = obj.deform.count
         offsets = (np.arange(count) * len(verts))[:, None, None]
@@ -186,8 +186,8 @@ def deformed_vertices(loaded: "LoadedScene", t: np.ndarray, world: dict[str, Pos
     """Object-space vertices [T, V, 3] of every object with a `deform:` block."""
     out: dict[str, np.ndarray] = {}
     for i, obj in enumerate(loaded.scene.objects):
-        deform = getattr(obj, "deform", None)
-        if deform is None or isinstance(deform, Flock):  # flocks: evaluate.py, from the simulation
+        deform = obj.deform
+        if deform is None or obj.is_flock:  # flocks: evaluate.py, from the simulation
             continue
         loc = ("objects", i, "deform")
         try:

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import MotionError, SceneError
-from ..scene.schema import Camera, Particles
+from ..scene.schema import Camera
 from .graph import evaluation_order
 from .local import broadcast, local_pose, object_base, vec3
 from .pose import Pose, compose
@@ -71,15 +71,7 @@ def light_name(light: Any, index: int) -> str:
 
 def has_dynamics(loaded: "LoadedScene") -> bool:
     """True when evaluation needs a simulation (dynamics bodies or particle systems)."""
-    return any(o.motion.type == "dynamics" or isinstance(o, Particles) or _is_flock(o) or _has_follower(o) for o in loaded.scene.objects)
-
-
-def _has_follower(obj: Any) -> bool:
-    return obj.motion.type == "plan" and obj.motion.follower is not None
-
-
-def _is_flock(obj: Any) -> bool:
-    return getattr(getattr(obj, "deform", None), "type", None) == "flock"
+    return any(o.needs_simulation for o in loaded.scene.objects)
 
 
 # --- local poses --------------------------------------------------------------------------
@@ -133,7 +125,7 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
         raise MotionError("times must be finite")
     count = len(t)
     if has_dynamics(loaded) and simulation is None:
-        bodies = [o.name for o in scene.objects if o.motion.type == "dynamics" or isinstance(o, Particles) or _is_flock(o) or _has_follower(o)]
+        bodies = [o.name for o in scene.objects if o.needs_simulation]
         raise SimulationRequiredError(
             f"{loaded.path}: scene has dynamics ({', '.join(bodies)}); run motion.pipeline.dynamics.simulate "
             "first and pass its result as simulation="
@@ -194,14 +186,14 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
 
     particles: dict[str, Any] = {}
     for obj in scene.objects:
-        if isinstance(obj, Particles):
+        if obj.is_particles:
             particles[obj.name] = simulation.particles(obj.name, t)  # type: ignore[union-attr]
 
     from .deform import deformed_vertices
 
     vertices = deformed_vertices(loaded, t, world)
     for i, obj in enumerate(scene.objects):
-        if _is_flock(obj):  # agents simulated by the dynamics stage (dynamics/flock.py)
+        if obj.is_flock:  # agents simulated by the dynamics stage (dynamics/flock.py)
             from ..dynamics.flock import object_vertices
 
             try:

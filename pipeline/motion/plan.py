@@ -134,7 +134,7 @@ def _static_world(loaded: "LoadedScene", skip: str) -> list[tuple[Any, np.ndarra
     objects = {o.name: o for o in loaded.scene.objects}
     out = []
     for obj in loaded.scene.objects:
-        if obj.name == skip or getattr(obj, "deform", None) is not None:
+        if obj.name == skip or obj.deform is not None:
             continue
         m, node, still = np.eye(4), obj, True
         while node is not None:

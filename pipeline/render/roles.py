@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene.loader import LoadedScene
-from ..scene.schema import Empty, Particles
+
 
 def is_static(loaded: LoadedScene, name: str) -> bool:
     """An object is static iff neither it nor any ancestor moves."""
@@ -42,12 +42,12 @@ def sort_scene(loaded: LoadedScene) -> Roles:
     """The roles of every object and light of `loaded`."""
     objects = loaded.scene.objects
     # non-rigid geometry: particle systems and deforming meshes render as time slices
-    slice_names = [o.name for o in objects if o.visible and (isinstance(o, Particles) or getattr(o, "deform", None) is not None)]
+    slice_names = [o.name for o in objects if o.visible and o.is_nonrigid]
     static_names = [o.name for o in objects if is_static(loaded, o.name) and o.name not in slice_names]
     mover_names = [
         o.name
         for o in objects
-        if o.name not in static_names and o.name not in slice_names and not isinstance(o, (Empty, Particles)) and o.visible
+        if o.name not in static_names and o.name not in slice_names and o.shape != "empty" and not o.is_particles and o.visible
     ]
     # lights whose pose can change (their own motion or a moving parent)
     animated = [

@@ -290,13 +290,13 @@ def derived_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
     t_hi = float(timeline.shutter(tl.last, angle, scene.camera.shutter.position)[1])
     span = max(0.0, t_hi - t_lo)
     clock_end = t_hi - float(timeline.seconds(tl.first))  # the last shutter close on the dynamics clock
-    dynamic = [i for i, o in enumerate(scene.objects) if o.motion.type == "dynamics" or isinstance(o, Particles)]
+    dynamic = [i for i, o in enumerate(scene.objects) if o.motion.type == "dynamics" or o.is_particles]
     steps = math.ceil(span / scene.dynamics.step) if dynamic else 0
     if steps > MAX_SIMULATION_STEPS:
         add(("dynamics", "step"), f"simulating {span:.6g} s at a step of {scene.dynamics.step:g} s takes {steps} steps; the limit is {MAX_SIMULATION_STEPS}")
     total = 0
     for i, obj in enumerate(scene.objects):
-        if not isinstance(obj, Particles):
+        if not obj.is_particles:
             continue
         spawned = particle_count(obj.emitter, clock_end)
         total += spawned
@@ -308,8 +308,8 @@ def derived_problems(scene: Scene, source: "SourceMap") -> list[Problem]:
             break
 
     for i, obj in enumerate(scene.objects):
-        flock = getattr(obj, "deform", None)
-        if getattr(flock, "type", None) == "flock":
+        if obj.is_flock:
+            flock = obj.deform
             agent_steps = flock.count * math.ceil(max(0.0, clock_end - flock.start) / flock.step)
             if agent_steps > MAX_FLOCK_AGENT_STEPS:
                 add(("objects", i, "deform", "count"), f"{flock.count} agents x {agent_steps // flock.count} steps of {flock.step:g} s is over the budget of "

@@ -388,6 +388,11 @@ class Collider(Model):
 
 
 class _Object(Model):
+    """What every object has; the properties below say what kind of thing it is, so no
+    stage asks `getattr(o, "deform", ...)` or tests classes itself."""
+
+    spawned: ClassVar[bool] = False  # its geometry is spawned by the simulation (a particle system)
+
     name: Name
     transform: Transform = Transform()
     material: Name | None = None
@@ -397,6 +402,33 @@ class _Object(Model):
     collider: Collider | None = None
     visible: bool = True
     deform: Deformation | None = None
+
+    @property
+    def is_particles(self) -> bool:
+        """A particle system: particles spawned and moved by the dynamics stage."""
+        return self.spawned
+
+    @property
+    def is_flock(self) -> bool:
+        """A flock (`deform: {type: flock}`): its agents are simulated by the dynamics stage."""
+        return self.deform is not None and self.deform.type == "flock"
+
+    @property
+    def is_nonrigid(self) -> bool:
+        """Its vertices move relative to each other (a particle system or any `deform`): it
+        renders as time slices, not as a rigid mover."""
+        return self.spawned or self.deform is not None
+
+    @property
+    def has_follower(self) -> bool:
+        """It follows a planned path as a simulated vehicle (`motion: plan` with `follower`)."""
+        return self.motion.type == "plan" and self.motion.follower is not None
+
+    @property
+    def needs_simulation(self) -> bool:
+        """Its motion or geometry comes from the dynamics stage: a dynamics body, a particle
+        system, a flock or a path follower."""
+        return self.motion.type == "dynamics" or self.spawned or self.is_flock or self.has_follower
 
 
 class Sphere(_Object):
@@ -470,6 +502,8 @@ class Empty(_Object):
 class Particles(_Object):
     """A particle system: particles spawned by `emitter`, simulated by the dynamics stage,
     rendered as spheres of `radius`."""
+
+    spawned = True
 
     shape: Literal["particles"]
     radius: Positive = 0.02
