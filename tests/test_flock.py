@@ -15,7 +15,8 @@ from _dynamics_scenes import write_scene
 from _support import SCENES, run_motion
 from motion.pipeline.bake import bake
 from motion.pipeline.dynamics import simulate
-from motion.pipeline.dynamics.flock import FlockParams, facing_frames, simulate_flock
+from motion.pipeline.dynamics.flock import FlockParams, simulate_flock
+from motion.pipeline.motion.instances import facing_frames
 from motion.pipeline.scene import load_scene
 
 

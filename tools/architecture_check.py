@@ -23,7 +23,8 @@ STAGES: list[tuple[str, ...]] = [
     ("motion.pipeline", "motion.pipeline.errors", "motion.pipeline.limits", "motion.pipeline.files", "motion.pipeline.cache", "motion.pipeline.progress"),
     ("motion.pipeline.timeline", "motion.pipeline.meshes", "motion.pipeline.images", "motion.pipeline.expr", "motion.pipeline.geometry"),
     ("motion.pipeline.scene",),
-    ("motion.pipeline.motion", "motion.pipeline.dynamics"),
+    ("motion.pipeline.motion",),  # evaluation takes a simulation's records as arguments, never imports dynamics
+    ("motion.pipeline.dynamics",),  # simulates on top of motion's poses and keyframes
     ("motion.pipeline.bake",),
     ("motion.pipeline.variant", "motion.pipeline.presets", "motion.pipeline.frame_output"),
     ("motion.pipeline.render",),

@@ -13,7 +13,8 @@ One step (fixed dt, the flock's own `step`), every stage over all agents at once
   record     -> x, v (float32) at every step, or every k-th for big flocks
 Between records positions interpolate linearly (the step is small; linear keeps the
 separation of two recorded states up to O(dt^2)); the facing direction is the
-interpolated velocity.
+interpolated velocity. The agents become vertices (each a copy of the agent mesh facing
+along its velocity) in the motion stage: pipeline/motion/instances.py.
 """
 
 from __future__ import annotations
@@ -25,16 +26,13 @@ from typing import Any, Sequence
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..errors import FlockTooLargeError, SceneError, ShapeGeometryError, SimulationError
-from ..geometry import shape_geometry, tessellate
-from ..meshes import load_mesh
+from ..errors import SimulationError
+from ..motion.instances import unit
 from .collisions import BoxCollider, Collider, PlaneCollider, SphereCollider
 
 RECORD_BUDGET = 256 * 2**20  # bytes of recorded agent states per flock
 MAX_STEPS = 2_000_000  # steps a flock may be asked to take (t_end - start) / step
 SEPARATION_PASSES = 8  # most projection passes per step
-AGENT_DETAIL = 4  # tessellation of a round agent (cylinder, capsule): 2 * 4 segments
-MAX_INSTANCE_VERTICES = 4_000_000  # rendered vertices of a flock (agents x agent vertices)
 
 
 @dataclass(frozen=True)
@@ -191,11 +189,6 @@ def obstacle_distance(col: Collider, x: np.ndarray) -> tuple[np.ndarray, np.ndar
 # --- the step -----------------------------------------------------------------------------
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.maximum(n, 1e-12)
-
-
 def steering(p: FlockParams, x: np.ndarray, v: np.ndarray, colliders: Sequence[Collider]) -> np.ndarray:
     """The steering acceleration [n, 3] of every agent (the `steer` stage)."""
     n = len(x)
@@ -213,7 +206,7 @@ def steering(p: FlockParams, x: np.ndarray, v: np.ndarray, colliders: Sequence[C
     d = np.where(valid, dist, np.inf)
     away = x[:, None, :] - xj
     near = valid & (d < p.separation_range)
-    push = np.where(near, 1.0 - d / p.separation_range, 0.0)[..., None] * _unit(away)
+    push = np.where(near, 1.0 - d / p.separation_range, 0.0)[..., None] * unit(away)
     s_sep = p.max_speed * push.sum(axis=1)
     # alignment: towards the neighbours' mean velocity
     mean_v = (vj * vf).sum(axis=1) * inv_count[:, None]
@@ -223,20 +216,20 @@ def steering(p: FlockParams, x: np.ndarray, v: np.ndarray, colliders: Sequence[C
     s_coh = np.where(has[:, None], (centroid - x) * (p.max_speed / p.neighbour_radius), 0.0)
     total = p.w_sep * s_sep + p.w_ali * s_ali + p.w_coh * s_coh
     if p.goal is not None and p.w_goal > 0:
-        total += p.w_goal * (p.max_speed * _unit(p.goal - x) - v)
+        total += p.w_goal * (p.max_speed * unit(p.goal - x) - v)
     if colliders and p.w_avoid > 0:
         # near a surface: straight away from it; where the agent will be in look_ahead
         # seconds: sideways (the part of the surface normal across the heading), so it
         # turns past the obstacle instead of braking in front of it
         ahead = x + v * p.look_ahead
-        heading = _unit(v)
+        heading = unit(v)
         s_avoid = np.zeros_like(x)
         for col in colliders:
             dc, nc = obstacle_distance(col, x)
             s_avoid += p.max_speed * np.clip(1.0 - dc / p.avoid_distance, 0.0, 1.0)[:, None] * nc
             dc, nc = obstacle_distance(col, ahead)
             across = nc - np.einsum("ij,ij->i", nc, heading)[:, None] * heading
-            s_avoid += p.max_speed * np.clip(1.0 - dc / p.avoid_distance, 0.0, 1.0)[:, None] * _unit(across)
+            s_avoid += p.max_speed * np.clip(1.0 - dc / p.avoid_distance, 0.0, 1.0)[:, None] * unit(across)
         total += p.w_avoid * s_avoid
     if p.bounds is not None:
         lo, hi = p.bounds
@@ -341,68 +334,3 @@ def simulate_flock(p: FlockParams, colliders: Sequence[Collider], t_start: float
             xs.append(x.astype(np.float32))
             vs.append(v.astype(np.float32))
     return FlockTrack(np.asarray(times), np.stack(xs), np.stack(vs))
-
-
-# --- oriented instances -------------------------------------------------------------------
-
-
-def facing_frames(v: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """world_from_agent rotations [..., 3, 3]: local +Z along v, local +Y towards `up`
-    (columns x, y, z). A velocity along `up` keeps +Z along v with +Y from world +Z."""
-    f = _unit(v)
-    side = np.cross(up, f)
-    norm = np.linalg.norm(side, axis=-1, keepdims=True)
-    alt = np.cross(np.array([0.0, 0.0, 1.0]) if abs(up[2]) < 0.9 else np.array([1.0, 0.0, 0.0]), f)
-    side = np.where(norm > 1e-9, side / np.maximum(norm, 1e-12), _unit(alt))
-    upv = np.cross(f, side)
-    still = np.linalg.norm(v, axis=-1, keepdims=True) <= 1e-12
-    eye = np.broadcast_to(np.eye(3), v.shape[:-1] + (3, 3))
-    frames = np.stack((side, upv, f), axis=-1)
-    return np.where(still[..., None], eye, frames)
-
-
-def instance_vertices(track: FlockTrack, times: np.ndarray, agent: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """World-space vertices [T, n * V, 3] of every agent's copy of the `agent` mesh
-    ([V, 3], agent space) at `times`, each turned to face along its velocity."""
-    x, v = track.at(times)
-    frames = facing_frames(v, up)  # [T, n, 3, 3]
-    verts = np.einsum("tnij,vj->tnvi", frames, agent) + x[:, :, None, :]
-    return verts.reshape(len(x), -1, 3)
-
-
-def agent_mesh(loaded: Any, obj: Any) -> tuple[np.ndarray, np.ndarray]:
-    """One flock agent (agent space, +Z forward): the object's mesh file or its primitive
-    at the coarsest tessellation that is still solid (geometry.py: a cube at 1, a closed
-    cylinder or a capsule at AGENT_DETAIL, 8 segments round), times the object's scale."""
-    detail = 1 if obj.shape in ("cube", "rectangle") else AGENT_DETAIL
-    verts, faces = load_mesh(loaded.asset(obj.file)) if shape_geometry(obj.shape).file_mesh else tessellate(obj, detail)
-    return verts * np.asarray(obj.transform.scale, dtype=np.float64), faces
-
-
-def check_instance_budget(loaded: Any, index: int) -> None:
-    """A located error, before any simulation, when the flock's rendered vertices (agents x
-    agent vertices) exceed MAX_INSTANCE_VERTICES or its agent shape cannot be instanced."""
-    obj = loaded.scene.objects[index]
-    try:
-        agent, _ = agent_mesh(loaded, obj)
-    except ShapeGeometryError as exc:
-        raise SceneError([loaded.source.problem(("objects", index, "deform"), str(exc))]) from None
-    if obj.deform.count * len(agent) > MAX_INSTANCE_VERTICES:
-        raise SceneError([loaded.source.problem(("objects", index, "deform", "count"),
-                         f"{obj.deform.count} agents x {len(agent)} vertices is more than {MAX_INSTANCE_VERTICES} vertices; use fewer agents or a simpler agent mesh")])
-
-
-def object_vertices(loaded: Any, obj: Any, track: FlockTrack, times: np.ndarray, world: Any) -> np.ndarray:
-    """Object-space vertices [T, n * V, 3] of a flock object: the agents' world vertices
-    mapped through the inverse of the object's own world pose (the renderer maps them
-    back), so the object's transform does not move the agents; its scale sizes the agent."""
-    from ..motion.pose import quat_conj, quat_rotate
-
-    agent, _ = agent_mesh(loaded, obj)
-    if obj.deform.count * len(agent) > MAX_INSTANCE_VERTICES:
-        raise FlockTooLargeError(f"{obj.deform.count} agents x {len(agent)} vertices is more than {MAX_INSTANCE_VERTICES} vertices; use fewer agents or a simpler agent mesh")
-    up = np.asarray(obj.deform.up, dtype=np.float64)
-    verts = instance_vertices(track, times, agent, up / np.linalg.norm(up))
-    t, q, s = (np.asarray(a, dtype=np.float64) for a in world)
-    local = quat_rotate(quat_conj(q)[:, None, :], verts - t[:, None, :])
-    return local / s[:, None, :]

@@ -160,7 +160,8 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0, on_progr
     flocks: dict[str, object] = {}
     for i, obj in enumerate(loaded.scene.objects):
         if obj.is_flock:
-            from .flock import FlockParams, check_instance_budget, simulate_flock
+            from ..motion.instances import check_instance_budget
+            from .flock import FlockParams, simulate_flock
 
             check_instance_budget(loaded, i)
             flocks[obj.name] = simulate_flock(FlockParams.from_spec(obj.deform, shot_start(loaded)), colliders, t_start, t_end, obj.name)

@@ -12,12 +12,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..dynamics.flock import agent_mesh
 from ..errors import AssetError, NotAMeshError, SceneError, ShapeGeometryError
 from ..geometry import tessellate
 from ..meshes import load_mesh
 from ..scene.motion_schema import BlendShapes, JointSkin, MorphTargets, Skinning
 from ..scene.schema import Mesh
+from .instances import agent_mesh
 from .keyframes import MODES, VectorTrack, _catmull_rom_tangents
 from .pose import Pose, compose
 

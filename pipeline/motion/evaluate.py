@@ -194,7 +194,7 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
     vertices = deformed_vertices(loaded, t, world)
     for i, obj in enumerate(scene.objects):
         if obj.is_flock:  # agents simulated by the dynamics stage (dynamics/flock.py)
-            from ..dynamics.flock import object_vertices
+            from .instances import object_vertices
 
             try:
                 vertices[obj.name] = object_vertices(loaded, obj, simulation.flock(obj.name), t, world[obj.name])  # type: ignore[union-attr]
