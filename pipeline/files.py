@@ -2,14 +2,16 @@
 folder and an atomic rename, so a reader sees the old file or the whole new one; on any
 failure the temporary file goes; a disk that refuses the write (full, over quota,
 read-only, not ours) is one `DiskFaultError` line naming what was being written and where.
-Every writer uses it: frames (frame_output), reports, claims, deliverables, exports, sheets,
-flipbooks, bake files.
+Every writer uses it: frames and the temporal pass (frame_output.write_exr), movies,
+telecine sequences and deliverables (`staging` + `publish_path`), reports, claims
+(`create_exclusive`), exports, sheets, flipbooks, bake files, the caches.
 """
 
 from __future__ import annotations
 
 import errno
 import os
+import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -61,6 +63,19 @@ def disk_fault(exc: BaseException, doing: str, path: str | Path) -> DiskFaultErr
     return err
 
 
+@contextmanager
+def disk_faults(doing: str, path: str | Path) -> Iterator[None]:
+    """Inside, an exception that is a disk fault becomes the one DiskFaultError line
+    (`disk_fault`) naming what was being done and where; any other passes unchanged."""
+    try:
+        yield
+    except BaseException as exc:
+        fault = disk_fault(exc, doing, path)
+        if fault is not None:
+            raise fault from None
+        raise
+
+
 def _unlink_quietly(path: str | Path) -> None:
     try:
         os.unlink(path)
@@ -82,6 +97,96 @@ def publish(tmp: str | Path, path: str | Path) -> None:
     `open` would have given it (mkstemp makes 0600 files; outputs are shared on a farm)."""
     os.chmod(tmp, 0o666 & ~_UMASK)
     os.replace(tmp, path)
+
+
+def publish_path(staged: str | Path, final: str | Path) -> None:
+    """Move a staged output into place: a file by an atomic rename, a folder by swapping it
+    with the old one (renamed aside first, then removed), so a reader sees the old whole or
+    the new whole."""
+    staged, final = Path(staged), Path(final)
+    if not staged.is_dir():
+        os.replace(staged, final)
+        return
+    old = None
+    if final.exists() or final.is_symlink():
+        old = final.with_name(f".{final.name}.old-{os.getpid()}")
+        os.replace(final, old)
+    os.replace(staged, final)
+    if old is not None:
+        if old.is_dir() and not old.is_symlink():
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            old.unlink()
+
+
+@contextmanager
+def staging(folder: str | Path, doing: str = "staging in", prefix: str = ".staging-") -> Iterator[Path]:
+    """`with staging(folder) as tmp:` build several outputs in a hidden folder inside
+    `folder` (same file system: publishing them is a rename), move the finished ones out
+    with `publish_path`; the folder and whatever is left in it go on leaving. A disk fault
+    on the way becomes DiskFaultError naming `folder`."""
+    folder = Path(folder)
+    tmp: Path | None = None
+    try:
+        with disk_faults(doing, folder):
+            folder.mkdir(parents=True, exist_ok=True)
+            tmp = Path(tempfile.mkdtemp(prefix=prefix, dir=folder))
+            yield tmp
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+# errors of os.link on file systems without hard links (some network and FUSE mounts)
+_NO_LINKS = (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EMLINK, errno.ENOSYS)
+
+
+def create_exclusive(path: str | Path, data: bytes, doing: str = "creating") -> bool:
+    """Make `path` hold `data` if no file is there yet; False if one is (whoever made it
+    first wins, on one machine or across a farm's shared disk). The data is written whole
+    under a temporary name and hard-linked into place, one atomic step, so no reader sees
+    a partial file; where the file system has no hard links, an exclusive create and a
+    write (a reader may then briefly see it empty). A disk fault raises DiskFaultError."""
+    path = Path(path)
+    tmp: str | None = None
+    try:
+        with disk_faults(doing, path):
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
+            os.chmod(tmp, 0o666 & ~_UMASK)
+            try:
+                os.link(tmp, path)
+                return True
+            except FileExistsError:
+                return False
+            except OSError as exc:
+                if exc.errno not in _NO_LINKS:
+                    raise
+            try:
+                fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
+            except FileExistsError:
+                return False
+            try:
+                with os.fdopen(fd, "wb") as fh:
+                    fh.write(data)
+            except BaseException:
+                _unlink_quietly(path)
+                raise
+            return True
+    finally:
+        if tmp is not None:
+            _unlink_quietly(tmp)
+
+
+def write_best_effort(path: str | Path, data: bytes) -> bool:
+    """`write_atomic` for a file whose loss costs only recomputation (a probe cache, the
+    cost history): False instead of an error when the disk refuses it."""
+    try:
+        write_atomic(path, data)
+        return True
+    except (OSError, DiskFaultError):
+        return False
 
 
 

@@ -7,9 +7,7 @@ or absent; never half-written, whatever kills the process.
 
 from __future__ import annotations
 
-import errno
 import os
-import tempfile
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -152,44 +150,34 @@ def write_frame(
     for key, value in (meta or {}).items():
         header[META_PREFIX + key] = _header_value(value)
 
-    tmp = None
+    return write_exr(path, header, channels)
+
+
+def write_exr(path: str | Path, header: Mapping[str, Any], channels: Mapping[str, np.ndarray], doing: str = "writing frame") -> Path:
+    """The one EXR writer (frames, the temporal pass): `header` and `channels` as OpenEXR's
+    binding takes them, written through the write policy (files.writing: a temporary file
+    and an atomic rename) and read back whole before it is published."""
+    with writing(path, doing, verify=_reads_back) as tmp:
+        OpenEXR.File(dict(header), dict(channels)).write(str(tmp))
+    return Path(path)
+
+
+def _reads_back(tmp: Path) -> bool:
+    """Whether the temporary file decodes whole. OpenEXR does not always report a failed
+    write (a full tmpfs gave a zero-byte file and no error), so a frame is published only
+    once it decodes; one that does not is the disk losing our write (files.lost_write).
+    An OSError reading it is raised (the write policy turns a disk's into a disk fault)."""
+    if os.stat(tmp).st_size == 0:
+        return False
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        os.close(fd)
-        OpenEXR.File(header, channels).write(tmp)
-        _verify_written(tmp, path)
-        publish(tmp, path)
-    except BaseException as exc:
-        if tmp is not None:
-            _unlink_quietly(tmp)
-        fault = disk_fault(exc, "writing frame", path)
-        if fault is not None:
-            raise fault from None
+        with OpenEXR.File(str(tmp)) as f:
+            for ch in f.channels().values():
+                np.asarray(ch.pixels)
+    except OSError:
         raise
-    return path
-
-
-def _verify_written(tmp: str, path: Path) -> None:
-    """Read the temporary file back whole before it is renamed into place.
-
-    OpenEXR does not always report a failed write (a full tmpfs gave a zero-byte file and
-    no error), so a frame is published only once it decodes; a file that does not is the
-    disk losing our write: a DiskFaultError (ENOSPC when the file system is full)."""
-    try:
-        size = os.stat(tmp).st_size
-        if size > 0:
-            with OpenEXR.File(tmp) as f:
-                for ch in f.channels().values():
-                    np.asarray(ch.pixels)
-            return
-    except OSError as exc:
-        fault = disk_fault(exc, "writing frame", path)
-        if fault is not None:
-            raise fault from None
     except Exception:  # the bindings raise RuntimeError for a short or corrupt file
-        pass
-    raise lost_write(tmp, "writing frame", path)
+        return False
+    return True
 
 
 def inside(folder: str | Path, path: str | Path) -> bool:

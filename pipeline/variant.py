@@ -26,6 +26,7 @@ from typing import Any, Literal
 
 from .cache import cache_root
 from .errors import RendererError
+from .files import write_best_effort
 
 VariantName = Literal["auto", "llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb"]
 
@@ -133,14 +134,8 @@ def _load_probe_cache() -> dict[str, bool]:
 def _store_probe(key: str, ok: bool) -> None:
     cache = _load_probe_cache()
     cache[key] = ok
-    path = _probe_cache_file()
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        tmp.write_text(json.dumps(cache, indent=1, sort_keys=True))
-        os.replace(tmp, path)
-    except OSError:
-        pass  # a read-only cache only costs a re-probe next time
+    # a read-only or full cache only costs a re-probe next time
+    write_best_effort(_probe_cache_file(), json.dumps(cache, indent=1, sort_keys=True).encode())
 
 
 def probe(variant: str, lib: str | None = None, use_cache: bool = True) -> bool:

@@ -203,6 +203,7 @@ def _fill(disk: Path) -> None:
     ["bake", SCENE, "-o", "DISK/motion.npz", "--frames", "0-3"],
     ["plot", str(REPO / "scenes" / "cannonball.yaml"), "-o", "DISK/plot.png"],
     ["telecine", "SRC", "-o", "DISK/60i"],
+    ["telecine", "SRC", "-o", "TMP/60i", "--movie", "DISK/60i.mov"],
 ])
 def test_every_writer_reports_a_full_disk_in_one_line(small_disk: Path, tmp_path: Path, command: list[str]) -> None:
     """Issue 24/26: every writer goes through the one write policy (pipeline/files.py):
@@ -213,7 +214,7 @@ def test_every_writer_reports_a_full_disk_in_one_line(small_disk: Path, tmp_path
     done = run_motion("render", SCENE, "-o", str(src), "--frames", "0-3", "--resolution", "16x12", "--spp", "1", "--no-progress")
     assert done.returncode == 0, done.stderr
     _fill(small_disk)
-    argv = [str(src) if a == "SRC" else a.replace("DISK", str(small_disk)) for a in command]
+    argv = [str(src) if a == "SRC" else a.replace("DISK", str(small_disk)).replace("TMP", str(tmp_path)) for a in command]
     res = run_motion(*argv)
     assert res.returncode == 4, res.stderr
     lines = [line for line in res.stderr.splitlines() if line.strip() and not line.startswith("motion:")]
@@ -221,6 +222,40 @@ def test_every_writer_reports_a_full_disk_in_one_line(small_disk: Path, tmp_path
     assert str(small_disk) in lines[0], res.stderr  # the line names what was being written (a plot said 'writing ?')
     (small_disk / "fill").unlink()
     assert not _leftovers(small_disk), _leftovers(small_disk)
+
+
+def test_the_writers_inside_a_render_report_a_full_disk_in_one_line(small_disk: Path, tmp_path: Path) -> None:
+    """Issue 26: the writers a render calls after its frames, each fed a full disk through
+    the write policy: the temporal pass's EXR (it wrote with its own temporary file and
+    said nothing of the disk), a frame claim, a deliverable's staging folder; each ends in
+    one DiskFaultError line naming the file or folder, and leaves nothing behind. The
+    caches whose loss costs only recomputation (the variant probe, the cost history) say
+    nothing and leave nothing."""
+    from motion.pipeline.errors import DiskFaultError
+    from motion.pipeline.files import staging, write_best_effort
+    from motion.pipeline.render.temporal import process_frame
+
+    src = tmp_path / "src"
+    done = run_motion("render", SCENE, "-o", str(src), "--frames", "0-2", "--resolution", "16x12", "--spp", "1", "--no-progress", "--denoise", "--temporal", "reproject")
+    assert done.returncode == 0, done.stderr
+    frames = sorted(src.glob("*.exr"))
+    for f in frames:
+        (small_disk / f.name).write_bytes(f.read_bytes())
+    _fill(small_disk)
+    target = small_disk / frames[1].name
+    before = target.read_bytes()
+    with pytest.raises(DiskFaultError, match=f"No space left on device.*{target}"):
+        process_frame(str(target), [(-1, str(small_disk / frames[0].name)), (1, str(small_disk / frames[2].name))])
+    assert target.read_bytes() == before  # the frame is untouched: the new one was never published
+    with pytest.raises(DiskFaultError, match="No space left on device.*claiming frame"):
+        try_claim(small_disk / "x.0001.exr", Claimant.here("run"), 60.0)
+    with pytest.raises(DiskFaultError, match=f"No space left on device.*{small_disk}"):
+        with staging(small_disk, "making the 24p deliverable in") as staged:
+            (staged / "movie.mov").write_bytes(b"\0" * 65536)
+    assert write_best_effort(small_disk / "probe.json", b"{}" * 10000) is False
+    (small_disk / "fill").unlink()
+    assert not _leftovers(small_disk), _leftovers(small_disk)
+    assert sorted(p.name for p in small_disk.iterdir() if p.is_file()) == sorted(f.name for f in frames)
 
 
 def test_a_full_cache_disk_is_one_line_and_poisons_no_later_run(small_disk: Path, tmp_path: Path) -> None:

@@ -4,7 +4,8 @@ Before a worker renders a frame it creates `<output>/.motion-claims/<frame file>
 holding JSON with its owner: run id, host, pid and time. The claim is written whole to a
 temporary file first and then hard-linked to its name (`link` fails if the name exists:
 atomic on local file systems and on NFS), so a claim is never seen empty or half-written;
-where the file system has no hard links, `O_CREAT | O_EXCL` and a write are used instead.
+where the file system has no hard links, `O_CREAT | O_EXCL` and a write are used instead
+(both are the write policy's `files.create_exclusive`).
 While the claim exists no other render touches the frame; the worker removes it once the
 frame has been renamed into place (or has failed).
 
@@ -25,7 +26,6 @@ stale).
 
 from __future__ import annotations
 
-import errno
 import json
 import math
 import os
@@ -35,7 +35,7 @@ import uuid
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from ..frame_output import disk_fault
+from ..files import create_exclusive, disk_faults, write_atomic
 
 CLAIM_DIR = ".motion-claims"
 MAX_CLOCK_SKEW_S = 300.0  # seconds a claim may be dated ahead of this machine's clock
@@ -119,21 +119,20 @@ def is_stale(path: Path, info: dict, stale_after_s: float) -> bool:
 
 def try_claim(frame_file: str | Path, who: Claimant, stale_after_s: float) -> tuple[bool, dict | None]:
     """Claim a frame. Returns (True, None) when we hold it, else (False, holder info).
-    Raises DiskFaultError when the disk refuses the claim."""
+    Raises DiskFaultError when the disk refuses the claim (files.create_exclusive: the
+    claim appears whole or not at all)."""
     path = claim_path(frame_file)
     body = json.dumps({**asdict(who), "time": time.time()}).encode()
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    try:
+    with disk_faults("claiming frame", path):
         path.parent.mkdir(parents=True, exist_ok=True)
-        _write_whole(tmp, body)
         for _ in range(5):
-            if _create(tmp, path, body):
+            if create_exclusive(path, body, "claiming frame"):
                 return True, None
             info = read_claim(path)
             if info is None:
                 continue  # released between our attempt and our read: try again
             if info.get("run_id") == who.run_id:
-                os.replace(tmp, path)  # our own earlier attempt (its worker died): take over
+                write_atomic(path, body, "claiming frame")  # our own earlier attempt (its worker died): take over
                 return True, None
             if is_stale(path, info, stale_after_s):
                 # break it atomically: only one breaker's rename succeeds
@@ -147,57 +146,6 @@ def try_claim(frame_file: str | Path, who: Claimant, stale_after_s: float) -> tu
             return False, info
         info = read_claim(path)
         return False, info or {}
-    except OSError as exc:
-        fault = disk_fault(exc, "claiming frame", path)
-        if fault is not None:
-            raise fault from None
-        raise
-    finally:
-        try:
-            tmp.unlink(missing_ok=True)
-        except OSError:
-            pass
-
-
-def _write_whole(tmp: Path, body: bytes) -> None:
-    """The claim's content, complete, under a temporary name (removed if the write fails)."""
-    _fill(os.open(tmp, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666), tmp, body)
-
-
-def _fill(fd: int, path: Path, body: bytes) -> None:
-    """Write `body` through `fd` (just created for `path`); remove `path` if that fails."""
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(body)
-    except BaseException:
-        try:
-            path.unlink(missing_ok=True)
-        except OSError:
-            pass
-        raise
-
-
-_NO_LINKS = (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EMLINK, errno.ENOSYS)
-
-
-def _create(tmp: Path, path: Path, body: bytes) -> bool:
-    """Make `path` hold `body` if it does not exist yet; False if it exists."""
-    try:
-        os.link(tmp, path)
-        return True
-    except FileExistsError:
-        return False
-    except OSError as exc:
-        if exc.errno not in _NO_LINKS:
-            raise
-    # no hard links here: exclusive create, then write (an empty claim is stale only
-    # after WRITE_GRACE_S, so a reader between the two steps leaves it alone)
-    try:
-        fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
-    except FileExistsError:
-        return False
-    _fill(fd, path, body)
-    return True
 
 
 def release(frame_file: str | Path, run_id: str) -> bool:

@@ -25,8 +25,6 @@ p + d * motion(p) / s.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 from pathlib import Path
@@ -155,9 +153,7 @@ def _meta(header: dict[str, Any], key: str) -> Any:
 def process_frame(path: str, neighbours: list[tuple[int, str]]) -> dict[str, Any]:
     """Blend, denoise and rewrite one frame (RGBA only; every layer and attribute kept).
     `neighbours`: (frame offset, path) of its complete timeline neighbours."""
-    from ..frame_output import META_PREFIX, publish
-
-    import OpenEXR
+    from ..frame_output import META_PREFIX, write_exr
 
     header, channels = _read(Path(path))
     cur = _layers(channels)
@@ -181,15 +177,7 @@ def process_frame(path: str, neighbours: list[tuple[int, str]]) -> dict[str, Any
     header[META_PREFIX + "denoise_seconds"] = meta["denoise_seconds"]
     for key in ("channels", "dataWindow", "displayWindow"):
         header.pop(key, None)
-    target = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    os.close(fd)
-    try:
-        OpenEXR.File(header, channels).write(tmp)
-        publish(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_exr(path, header, channels)
     return {"frame": int(_meta(header, "frame")), "blended": float((count > 1).mean())}
 
 

@@ -15,9 +15,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
-import shutil
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,6 +23,7 @@ from typing import Any, Callable
 from ..errors import FrameIOError, UsageError
 from ..farm.frames import format_frames
 from ..farm.report import write_report
+from ..files import publish_path, staging
 from ..frame_output import disk_fault, inside, write_atomic
 from .request import RenderRequest
 
@@ -186,21 +184,6 @@ def movie_rate(path: Path, interlaced: bool = False) -> str | None:
     return (rate_label(rate) + (" interlaced, 2 fields a frame" if interlaced else "")) if rate else None
 
 
-def _publish(staged: Path, final: Path) -> None:
-    """Move a staged output into place: a file by an atomic rename, a folder by swapping
-    it with the old one (which is then removed)."""
-    if staged.is_dir():
-        old = None
-        if final.exists() or final.is_symlink():
-            old = final.with_name(f".{final.name}.old-{os.getpid()}")
-            os.replace(final, old)
-        os.replace(staged, final)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True) if old.is_dir() and not old.is_symlink() else old.unlink()
-    else:
-        os.replace(staged, final)
-
-
 def deliver_and_record(req: RenderRequest, out_dir: Path, frame_paths: list[Path], wanted: tuple[str, ...], report: dict[str, Any],
                        report_path: Path | None, say: Callable[[str], None]) -> dict[str, Any]:
     """Assemble the deliverables from `frame_paths` (the run's selection, in order), each
@@ -244,23 +227,15 @@ def deliver_and_record(req: RenderRequest, out_dir: Path, frame_paths: list[Path
             status[fmt] = "up to date"
             say(f"  {fmt}: up to date (frames {format_frames(numbers)} unchanged): " + ", ".join(str(folder / n) for n in names))
         else:
-            staging = Path(tempfile.mkdtemp(prefix=f".staging-{fmt}-", dir=folder))
-            try:
-                done = deliver(seq.directory, staging, (fmt,), view=view, sequence=seq)[fmt]
+            with staging(folder, f"making the {fmt} deliverable in", prefix=f".staging-{fmt}-") as staged:
+                done = deliver(seq.directory, staged, (fmt,), view=view, sequence=seq)[fmt]
                 names = []
                 for p in done:
-                    top = Path(p).relative_to(staging).parts[0]
+                    top = Path(p).relative_to(staged).parts[0]
                     if top not in names:
                         names.append(top)
                 for name in names:
-                    _publish(staging / name, folder / name)
-            except BaseException as exc:
-                fault = disk_fault(exc, f"making the {fmt} deliverable in", folder)
-                if fault is not None:
-                    raise fault from None
-                raise
-            finally:
-                shutil.rmtree(staging, ignore_errors=True)
+                    publish_path(staged / name, folder / name)
             outputs = [{"name": n, "size": (folder / n).stat().st_size if (folder / n).is_file() else None, "rate": movie_rate(folder / n, fmt in ("60i", "50i"))} for n in names]
             entry = {"frames": format_frames(numbers), "made_from": made_from, "recipe": how, "outputs": outputs,
                      "frame_files": frame_files, "made_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}

@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import statistics
-import tempfile
 from pathlib import Path
 from typing import Any
+
+from ..files import write_best_effort
 
 HISTORY_FILE = "estimates.json"
 MAX_SCENES = 200  # scenes kept (the oldest go first)
@@ -79,15 +79,7 @@ def record(scene_name: str, settings_hash: str, samples: int, report: dict[str, 
     data["scenes"][scene_name] = runs[-MAX_RUNS:]
     while len(data["scenes"]) > MAX_SCENES:
         data["scenes"].pop(next(iter(data["scenes"])))
-    try:
-        path = history_path()
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-        with os.fdopen(fd, "w") as fh:
-            json.dump(data, fh, indent=1)
-        os.replace(tmp, path)
-    except OSError:
-        pass
+    write_best_effort(history_path(), json.dumps(data, indent=1).encode())  # lost: the next estimate uses older runs
 
 
 def machine_rate(scenes: dict[str, Any]) -> float:

@@ -13,9 +13,6 @@ Metadata on every telecined frame (besides the source frame's own `motion:` attr
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -24,6 +21,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import FrameIOError, UsageError
+from ..files import publish_path, staging
 from ..frame_output import Frame, read_header, write_frame
 from ..timeline import timecode
 from .cadence import Cadence, Tail, film_rate, output_rate, parse_cadence, plan
@@ -87,11 +85,11 @@ def _blend_layers(a: Frame, b: Frame) -> tuple[np.ndarray, dict[str, np.ndarray]
 
 
 class _Staging:
-    """A hidden folder inside `out_dir`; `publish` moves its files into `out_dir`."""
+    """A hidden folder inside `out_dir` (the write policy's `files.staging`); `publish` moves
+    its files into `out_dir` (files.publish_path) and removes the old sequence's others."""
 
     def __init__(self, out_dir: Path, prefix: str, overwrite: bool) -> None:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        existing = find_sequences(out_dir).get(prefix, [])
+        existing = find_sequences(out_dir).get(prefix, []) if out_dir.is_dir() else []
         if existing and not overwrite:
             raise UsageError(
                 f"{out_dir} already holds {len(existing)} frames named {prefix}.NNNN.exr; "
@@ -99,24 +97,28 @@ class _Staging:
             )
         self.out_dir, self.prefix = out_dir, prefix
         self.old = [p for _, p in existing]
-        self.dir = Path(tempfile.mkdtemp(prefix=".telecine-", dir=out_dir))
+        self._folder = staging(out_dir, "writing the telecine frames in", prefix=".telecine-")
+        self.dir = Path()
 
     def __enter__(self) -> "_Staging":
+        self.dir = self._folder.__enter__()
         return self
 
     def publish(self, names: list[str]) -> tuple[Path, ...]:
+        """Move the staged frames `names` into the output folder; the old sequence's frames
+        that are not among them go."""
         keep = set(names)
         for path in self.old:
             if path.name not in keep:
                 path.unlink(missing_ok=True)
         out = []
         for name in names:
-            os.replace(self.dir / name, self.out_dir / name)
+            publish_path(self.dir / name, self.out_dir / name)
             out.append(self.out_dir / name)
         return tuple(out)
 
-    def __exit__(self, *exc: object) -> None:
-        shutil.rmtree(self.dir, ignore_errors=True)
+    def __exit__(self, *exc: Any) -> bool | None:
+        return self._folder.__exit__(*exc)
 
 
 def _check_dirs(in_dir: Path, out_dir: Path, in_prefix: str, out_prefix: str) -> None:

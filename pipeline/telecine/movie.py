@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import math
 
-import os
-import tempfile
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -29,7 +27,7 @@ from typing import Callable, Iterable, Mapping
 import numpy as np
 
 from ..errors import FrameIOError, UsageError
-from ..frame_output import publish
+from ..files import writing
 from ..timeline import rate_label
 from .fields import FieldOrder, check_field_order
 from .sequence import Sequence, discover, read_checked
@@ -292,30 +290,24 @@ def write_movie(
 ) -> Path:
     """Encode linear RGBA frames into a movie at `rate`; interlaced when `field_order` is given.
 
-    Written to a hidden temporary file next to `path` and renamed when complete.
+    Written through the write policy (files.writing): a hidden temporary file next to `path`,
+    renamed when complete; a full disk is one DiskFaultError line.
     """
     path = Path(path)
     chosen, container = choose_codec(path, codec)
     order = check_field_order(field_order) if field_order else None
     view = view or ViewTransform()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix + ".part", dir=path.parent)
-    os.close(fd)
-    try:
+    with writing(path, "writing the movie", suffix=path.suffix + ".part") as tmp:
         # the rate named as it plays ('23.976 fps (24000/1001)'), the scan and the view, in the file
         scan = f"interlaced {order}" if order else "progressive"
         comment = f"{rate_label(Fraction(rate))}, {scan}; view: {view.description}"
-        encoder = _Encoder(Path(tmp), container, chosen, width, height, Fraction(rate), order, timecode,
+        encoder = _Encoder(tmp, container, chosen, width, height, Fraction(rate), order, timecode,
                            view.color_tags, comment)
         for i, rgba in enumerate(frames):
             encoder.add(view(rgba))
             if progress:
                 progress(i + 1, total)
         encoder.close()
-        publish(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
     return path
 
 
