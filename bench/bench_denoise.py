@@ -60,8 +60,8 @@ class Shot:
 
     def render(self, frame: int) -> tuple[np.ndarray, dict[str, np.ndarray], float]:
         t0 = time.perf_counter()
-        rgba, _ = self.renderer.render(self._inputs[frame])
-        return rgba, dict(self.renderer.last_aovs), time.perf_counter() - t0
+        rgba, aovs, _ = self.renderer.render_layers(self._inputs[frame])
+        return rgba, aovs, time.perf_counter() - t0
 
     def shutter_fraction(self) -> float:
         fi = self._inputs[0]

@@ -112,14 +112,14 @@ def ours(path: Path, spps: list[int], ref_spp: int, denoise: bool) -> dict[str, 
         renderer.render(fi)  # compiles this count's film kernels (a job keeps one count)
         best = math.inf
         for _ in range(2):
-            image, stats = renderer.render(fi)
+            image, aovs, stats = renderer.render_layers(fi)
             best = min(best, stats.render_s)
         row = {"spp": spp, "seconds": best, "rel_mse": rel_mse(image, reference)}
         if denoise:
             from motion.pipeline.render.denoise import denoise_frame
 
             t0 = time.perf_counter()
-            clean, _, _ = denoise_frame(image, renderer.last_aovs)
+            clean, _, _ = denoise_frame(image, aovs)
             row["denoise_s"] = time.perf_counter() - t0
             row["denoised_rel_mse"] = rel_mse(clean, reference)
         rows.append(row)

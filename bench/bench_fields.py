@@ -1,7 +1,7 @@
 """Field rendering cost (not a timed test): `python bench/bench_fields.py [WxH] [spp]`.
 
 One process renders frames of scenes/stairs-walk.yaml progressively and the same frames
-as single fields (the film's FIELD_ROWS: only every other row), alternating, after
+as single fields (`render_layers(field=)`: only every other row), alternating, after
 a warm-up of each kind (kernels compiled). A 60i field should cost about half a
 progressive frame: half the pixels, the same scene. Prints the median seconds of each and
 the ratio, with the CPU model.
@@ -28,25 +28,22 @@ def main(resolution: tuple[int, int] = (320, 180), spp: int = 16, frames: int = 
     from motion.pipeline.render.frame_renderer import FrameRenderer
     from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.scene import load_scene
-    from motion.pipeline.render.fields import rendering_field
 
     loaded = load_scene(REPO / "scenes" / "stairs-walk.yaml", {"render": {"resolution": list(resolution), "spp": spp}})
     inputs = evaluate_frames(loaded, list(range(20, 20 + frames)))
     renderer = FrameRenderer(loaded)
     renderer.render(inputs[0])  # warm-up: build and compile (progressive)
-    with rendering_field("top"):
-        renderer.render(inputs[0])  # and the field kernels
+    renderer.render_layers(inputs[0], field="top")  # and the field kernels
     full, field, full_r, field_r = [], [], [], []
     for fi in inputs:
         t0 = time.perf_counter()
         img, st = renderer.render(fi)
         full.append(time.perf_counter() - t0)
         full_r.append(st.render_s)
-        with rendering_field("bottom" if fi.frame % 2 else "top"):
-            t0 = time.perf_counter()
-            half, st = renderer.render(fi)
-            field.append(time.perf_counter() - t0)
-            field_r.append(st.render_s)
+        t0 = time.perf_counter()
+        half, _, st = renderer.render_layers(fi, field="bottom" if fi.frame % 2 else "top")
+        field.append(time.perf_counter() - t0)
+        field_r.append(st.render_s)
         assert half.shape[0] == img.shape[0] // 2
     a, b = float(np.median(full)), float(np.median(field))
     ar, br = float(np.median(full_r)), float(np.median(field_r))

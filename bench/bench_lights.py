@@ -173,8 +173,8 @@ def examples(spp: int) -> list[dict[str, Any]]:
         gc.collect()
         renderer = FrameRenderer(loaded)
         (fi,) = evaluate_frames(loaded, [frame])
-        ours, _ = renderer.render(fi)
-        up = renderer.last_aovs["N"][..., 1] > 0.9
+        ours, aovs, _ = renderer.render_layers(fi)
+        up = aovs["N"][..., 1] > 0.9
         ref = np.array(mi.render(renderer._full_scene(stack_frame(fi), None), seed=7, spp=spp))[..., :3]
         o_mean, o_contrast = ground_stats(ours[..., :3], up)
         r_mean, r_contrast = ground_stats(ref, up)

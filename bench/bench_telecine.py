@@ -25,7 +25,7 @@ import numpy as np
 from motion.pipeline.frame_output import read_frame, write_frame
 from motion.pipeline.telecine.cadence import parse_cadence, plan
 from motion.pipeline.telecine.convert import telecine_sequence
-from motion.pipeline.telecine.fields import weave_frames
+from motion.pipeline.field_model import weave_frames
 from motion.pipeline.telecine.movie import write_movie
 from motion.pipeline.telecine.reference import ffmpeg_telecine
 from motion.pipeline.telecine.sequence import discover

@@ -45,6 +45,20 @@ def render(loaded: Any, frames: list[int], mode: str | None = None, renderer: An
     return images, stats, renderer
 
 
+def render_layers(loaded: Any, frame: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """One frame's RGBA and its AOV layers by name (a fresh renderer, like `render`)."""
+    activate()
+    import gc
+
+    from motion.pipeline.bake import evaluate_frames
+    from motion.pipeline.render.frame_renderer import FrameRenderer
+
+    gc.collect()
+    (fi,) = evaluate_frames(loaded, [frame])
+    rgba, aovs, _ = FrameRenderer(loaded).render_layers(fi)
+    return rgba, aovs
+
+
 def column_x(width: int, ortho_width: float) -> np.ndarray:
     """World x of each pixel column's centre for the tests' orthographic camera (at -z
     looking +z, up +y): camera +X is image left, so x falls from left to right."""

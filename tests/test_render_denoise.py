@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from _render_support import column_x, load, render
+from _render_support import column_x, load, render_layers
 from _support import run_motion
 from motion.pipeline.frame_output import read_frame
 from motion.pipeline.render.temporal import RADIUS
@@ -55,10 +55,10 @@ def test_denoised_flat_plane_converges_to_the_closed_form(tmp_path: Path) -> Non
     _white_map(tmp_path)
     errors = {}
     for spp in (1, 8):
-        (img,), _, renderer = render(load(tmp_path, PLANE.replace("SPP", str(spp)), f"plane{spp}.yaml"), [0])
-        assert set(renderer.last_aovs) == {"albedo", "N"}  # the guides come with denoise: oidn
-        assert np.allclose(renderer.last_aovs["albedo"], 0.5, atol=1e-5)
-        out, layers, meta = denoise_frame(img, renderer.last_aovs)
+        img, aovs = render_layers(load(tmp_path, PLANE.replace("SPP", str(spp)), f"plane{spp}.yaml"), 0)
+        assert set(aovs) == {"albedo", "N"}  # the guides come with denoise: oidn
+        assert np.allclose(aovs["albedo"], 0.5, atol=1e-5)
+        out, layers, meta = denoise_frame(img, aovs)
         noisy, clean = img[..., :3], out[..., :3]
         assert np.array_equal(layers["noisy"], img) and meta["rgba"] == "denoised"
         # no bias beyond 1% on the mean; per pixel far closer than the noisy image
@@ -101,10 +101,10 @@ def _trapezoid(x_open: float, x_close: float) -> np.ndarray:
 
 
 def test_guides_are_motion_blurred_like_the_beauty(tmp_path: Path) -> None:
-    _, _, renderer = render(load(tmp_path, BAR, "bar.yaml"), [0])
+    _, aovs = render_layers(load(tmp_path, BAR, "bar.yaml"), 0)
     cover = _trapezoid(-1.0, 0.0)  # shutter centred on t = 0: the centre moves -1 -> 0
-    albedo = renderer.last_aovs["albedo"][..., 0].mean(axis=0)
-    normal_z = renderer.last_aovs["N"][..., 2].mean(axis=0)
+    albedo = aovs["albedo"][..., 0].mean(axis=0)
+    normal_z = aovs["N"][..., 2].mean(axis=0)
     expected = 0.3 + (0.8 - 0.3) * cover
     err = np.abs(albedo - expected)
     assert err.mean() < 0.005 and err.max() < 0.04, (err.mean(), err.max())

@@ -15,7 +15,7 @@ import yaml
 from _support import run_motion
 from motion.pipeline.frame_output import read_frame
 from motion.pipeline.telecine.cadence import parse_cadence, plan
-from motion.pipeline.render.fields import parity_of
+from motion.pipeline.field_model import parity_of
 from motion.pipeline.telecine.interlace import field_range
 
 SPEED = 3.0  # m/s downwards

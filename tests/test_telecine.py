@@ -16,7 +16,7 @@ from motion.pipeline.errors import FrameIOError, UsageError
 from motion.pipeline.frame_output import read_frame, read_header, timecode_str, write_frame
 from motion.pipeline.telecine.cadence import field_sources, output_rate, parse_cadence, plan
 from motion.pipeline.telecine.convert import inverse_sequence, telecine_sequence
-from motion.pipeline.telecine.fields import field, split, weave, weave_frames
+from motion.pipeline.field_model import field, split, weave, weave_frames
 from motion.pipeline.telecine.inverse import inverse_frames
 from motion.pipeline.telecine.reference import ffmpeg_telecine
 from motion.pipeline.telecine.sequence import discover

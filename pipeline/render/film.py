@@ -8,7 +8,7 @@ samples are consecutive lanes, so for each reconstruction-filter offset a row ga
 those sums offset by offset, also in a fixed order: no atomics anywhere. Large sample
 counts run as passes (at most $MOTION_MAX_LANES lanes each), summed in pass order.
 
-Field rendering (render/fields.py) sets `FIELD_ROWS` while a field renders: the
+Field rendering (`motion render --fields`) passes a field's `rows` (offset, step 2): the
 film then traces and returns only that field's rows.
 """
 
@@ -29,18 +29,15 @@ from ..limits import env_size
 # about 80 bytes a lane (~0.7 GB a pass). A 1080p frame at 256 spp is 531M lanes: it runs
 # as passes of fewer samples per pixel. A lower value: less memory per worker, more passes.
 
-# (row offset, row step) while a field is rendered (render/fields.py sets it);
-# None: every row
-FIELD_ROWS: tuple[int, int] | None = None
-
 # sample(scene, sampler, ray, medium, active) -> (radiance, valid, AOV channels)
 SampleFn = Callable[..., tuple[Any, Any, list[Any]]]
 
 
-def render(sample: SampleFn, scene: mi.Scene, sensor: Any, seed: Any, spp: int) -> Any:
+def render(sample: SampleFn, scene: mi.Scene, sensor: Any, seed: Any, spp: int, rows: tuple[int, int] = (0, 1)) -> Any:
     """Render `sensor`'s image of `scene`, every sample's value from `sample` (the
     integrator's path). Returns a mi.TensorXf [H, W, 4 + AOV channels] (RGBA, alpha = the
-    pixel's coverage); H counts only the field's rows while FIELD_ROWS is set."""
+    pixel's coverage); `rows` (offset, step): only rows offset, offset + step, ... (a
+    field: step 2), H counting only those."""
     film = sensor.film()
     sampler = sensor.sampler()
     spp = int(spp) if spp else int(sampler.sample_count())
@@ -48,8 +45,7 @@ def render(sample: SampleFn, scene: mi.Scene, sensor: Any, seed: Any, spp: int) 
         raise SampleCountError(f"the film needs at least 1 sample per pixel, got {spp}")
     size = film.crop_size()
     width, height = int(size[0]), int(size[1])
-    # field rendering (render/fields.py): only the rows offset, offset + 2, ...
-    offset, step = FIELD_ROWS if FIELD_ROWS is not None else (0, 1)
+    offset, step = rows
     out_h = (height - offset + step - 1) // step
     n_px = width * out_h
     per_pass = max(1, min(spp, env_size("MOTION_MAX_LANES") // max(n_px, 1)))

@@ -21,6 +21,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..bake import BakedFrame
+from ..field_model import Parity, row_offset
 from ..scene.loader import LoadedScene
 from .aovs import split_layers
 from .roles import sort_scene
@@ -96,7 +97,6 @@ class FrameRenderer:
         self.moving_lights = roles.moving_lights
         self.cache = SceneCache(mi, dr, loaded, roles, self.spp, self.max_depth)
         self.fallback = ScalarFallback(mi, loaded, self.spp, self.max_depth)
-        self.last_aovs: dict[str, np.ndarray] = {}
         self._last_history: list[dict[str, Any]] = []
         dr.set_flag(dr.JitFlag.KernelHistory, True)
 
@@ -124,21 +124,40 @@ class FrameRenderer:
             return self.fallback.render_at(fi, None, seed, self.spp)
         return accumulate_subframes(lambda u, s, n: self.fallback.render_at(fi, u, s, n), self.settings.subframes, self.spp, seed)
 
-    def _render_cached(self, fi: StackedFrame, mode: str, seed: int) -> Any:
+    def _render_cached(self, fi: StackedFrame, mode: str, seed: int, rows: tuple[int, int] = (0, 1)) -> Any:
         """A frame with the cached motion_path scene (built or updated already)."""
         if mode == "subframes":
 
             def render_at(u: float, s: int, n: int) -> Any:
                 self.cache.set_frame(fi, mode, u_fixed=u)
-                return self.cache.render(s, n)
+                return self.cache.render(s, n, rows)
 
             return accumulate_subframes(render_at, self.settings.subframes, self.spp, seed)
         self.cache.set_frame(fi, mode)
-        return self.cache.render(seed, self.spp)
+        return self.cache.render(seed, self.spp, rows)
 
     def render(self, frame: BakedFrame, mode: str | None = None) -> tuple[np.ndarray, FrameStats]:
-        """Render one baked frame; returns RGBA float32 [H, W, 4] and its stats (the AOV
-        layers, if any, in `last_aovs`)."""
+        """Render one baked frame; returns RGBA float32 [H, W, 4] and its stats
+        (`render_layers` returns its AOV layers too)."""
+        rgba, _, stats = self.render_layers(frame, mode)
+        return rgba, stats
+
+    def render_layers(self, frame: BakedFrame, mode: str | None = None, field: Parity | None = None) -> tuple[np.ndarray, dict[str, np.ndarray], FrameStats]:
+        """Render one baked frame: RGBA float32 [H, W, 4], its AOV layers by name ([H, W, C]
+        each; none unless the scene asks for them or denoises) and its stats. With `field`,
+        only that field's rows (H / 2 of them): `motion render --fields`."""
+        if field is None:
+            return self._render(frame, mode)
+        rgba, aovs, stats = self._render(frame, mode, (row_offset(field), 2))
+        height = self.settings.resolution[1]
+
+        def rows(image: np.ndarray) -> np.ndarray:
+            # the scalar fallback renders every row: take the field's
+            return image[row_offset(field) :: 2] if image.shape[0] == height else image
+
+        return rows(rgba), {k: rows(v) for k, v in aovs.items()}, stats
+
+    def _render(self, frame: BakedFrame, mode: str | None = None, rows: tuple[int, int] = (0, 1)) -> tuple[np.ndarray, dict[str, np.ndarray], FrameStats]:
         fi = stack_frame(frame)
         from . import assets
 
@@ -150,7 +169,7 @@ class FrameRenderer:
             rgba = _with_alpha(np.array(self._render_scalar(fi, mode, seed), dtype=np.float32))
             cold = self._frames_done == 0
             self._frames_done += 1
-            return rgba, FrameStats(fi.frame, cold, 0.0, time.perf_counter() - t0, 0, 0, 0, False)
+            return rgba, {}, FrameStats(fi.frame, cold, 0.0, time.perf_counter() - t0, 0, 0, 0, False)
         hits0 = assets.STATS["hits"]
         t0 = time.perf_counter()
         cold = self.cache.scene is None
@@ -163,19 +182,19 @@ class FrameRenderer:
         dr.kernel_history()  # clear
         setup_s = time.perf_counter() - t0
         t1 = time.perf_counter()
-        img = self._render_cached(fi, mode, seed)
+        img = self._render_cached(fi, mode, seed, rows)
         dr.eval(img)
         dr.sync_thread()
         rgba = np.array(img, dtype=np.float32)
         render_s = time.perf_counter() - t1
-        rgba, self.last_aovs = split_layers(rgba, self.cache.integrator.aovs)
+        rgba, aovs = split_layers(rgba, self.cache.integrator.aovs)
         history = dr.kernel_history()
         self._last_history = [h for h in history if h.get("type") == dr.KernelType.JIT]
         compiled = sum(1 for h in history if h.get("type") == dr.KernelType.JIT and not h.get("cache_hit", False))
         reused = sum(1 for h in history if h.get("type") == dr.KernelType.JIT and h.get("cache_hit", False))
         rgba = _with_alpha(rgba)
         self._frames_done += 1
-        return rgba, FrameStats(
+        return rgba, aovs, FrameStats(
             frame=fi.frame,
             cold=cold,
             setup_s=setup_s,

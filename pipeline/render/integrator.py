@@ -63,6 +63,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         self.frame_data = FrameData()
         self.lights: list[tuple[bool, Any]] = []  # moving lights: (at infinity, emitter in its rest frame)
         self.choice: LightChoice | None = None  # light selection among the static scene's emitters (lights.py)
+        self.rows: tuple[int, int] = (0, 1)  # (offset, step) of the image rows drawn: a field's with --fields (set_rows)
 
     # --- per-job and per-frame state --------------------------------------------------
 
@@ -79,6 +80,11 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         poses and colours come per frame (`set_frame`). One at infinity (directional) casts
         its shadow ray along the sampled direction, the others to the sampled point."""
         self.lights = [(mi.has_flag(e.flags(), mi.EmitterFlags.Infinite), e) for e in lights]
+
+    def set_rows(self, rows: tuple[int, int]) -> None:
+        """The image rows the next renders draw (offset, step): (0, 1) every row, (0, 2) the
+        top field, (1, 2) the bottom field (film.render)."""
+        self.rows = (int(rows[0]), int(rows[1]))
 
     def set_projection(self, kind: str, scale: float, width: int, height: int) -> None:
         """Camera projection for the motion AOV: perspective scale = (W/2) / tan(xfov/2),
@@ -372,7 +378,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         # every frame; LLVM folds them as well
         self._choice(scene)  # before tracing: it may evaluate (an environment's irradiance)
         with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, False):
-            return film.render(self.sample, scene, sensor, seed, spp)
+            return film.render(self.sample, scene, sensor, seed, spp, self.rows)
 
     def aov_names(self) -> list[str]:
         """The EXR channel names of the AOV channels after RGBA (`aovs.channel_names`)."""

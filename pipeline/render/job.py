@@ -23,6 +23,7 @@ from typing import Any, Sequence
 
 
 from ..bake import BakedFrame, fingerprint
+from ..field_model import parity_of
 from ..frame_output import write_frame
 from ..scene.loader import LoadedScene, load_scene
 from ..timeline import frame_timecode
@@ -184,19 +185,9 @@ def _render_one(job: RenderJob, fi: BakedFrame) -> FrameResult:
     try:
         renderer, loaded, variant = _renderer(job)  # a fresh one every frame without the cache
         extra_setup = time.perf_counter() - t_setup
-        parity = None
-        if job.fields:  # a field: its own instant and shutter (the timeline), only its rows
-            from .fields import field_rows, parity_of, rendering_field
-
-            parity = parity_of(fi.frame, job.fields)  # type: ignore[arg-type]
-            with rendering_field(parity):
-                rgba, stats = renderer.render(fi)
-            height = loaded.scene.render.resolution[1]
-            rgba = field_rows(rgba, parity, height)
-            renderer.last_aovs = {k: field_rows(v, parity, height) for k, v in renderer.last_aovs.items()}
-        else:
-            rgba, stats = renderer.render(fi)
-        aovs = dict(renderer.last_aovs)
+        # a field (--fields): its own instant and shutter (the timeline), only its rows
+        parity = parity_of(fi.frame, job.fields) if job.fields else None
+        rgba, aovs, stats = renderer.render_layers(fi, field=parity)
         scene = loaded.scene
         # the denoiser: right after the render, on the frame's own buffers (docs/denoise.md)
         denoise_meta: dict[str, Any] = {}

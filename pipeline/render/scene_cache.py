@@ -207,6 +207,8 @@ class SceneCache:
             rgb[k] = np.asarray(value[0] if value is not None else light.emission, dtype=float)
         return lt, lq, rgb
 
-    def render(self, seed: int, spp: int) -> Any:
-        """The image of the frame last given to `set_frame` (RGBA + AOV channels)."""
+    def render(self, seed: int, spp: int, rows: tuple[int, int] = (0, 1)) -> Any:
+        """The image of the frame last given to `set_frame` (RGBA + AOV channels); `rows`
+        (offset, step): the image rows drawn, a field's with `--fields` (film.render)."""
+        self.integrator.set_rows(rows)
         return self._mi.render(self.scene, seed=seed, spp=spp)

@@ -12,7 +12,7 @@ from ..errors import UsageError
 from ..farm.frames import parse_frames
 from ..presets import load_preset, overrides_from, spread
 from ..scene.loader import load_scene
-from ..telecine.fields import check_field_order
+from ..field_model import check_field_order
 from ..telecine.interlace import field_range, field_rate, weave_fields
 from .render import run_render
 from .request import RenderRequest

@@ -37,7 +37,7 @@ from typing import Literal
 
 from ..errors import UsageError
 from ..timeline import parse_fps
-from .fields import FieldOrder, Parity, check_field_order, first_parity, second_parity
+from ..field_model import FieldOrder, Parity, check_field_order, first_parity, second_parity
 
 Tail = Literal["pad", "drop"]
 

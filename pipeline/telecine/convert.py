@@ -25,7 +25,7 @@ from ..files import publish_path, staging
 from ..frame_output import Frame, read_header, write_frame
 from ..timeline import timecode
 from .cadence import Cadence, Tail, film_rate, output_rate, parse_cadence, plan
-from .fields import FieldOrder, check_field_order, weave_frames
+from ..field_model import FieldOrder, check_field_order, weave_frames
 from .inverse import Detection, detect_pulldown, recovery_map
 from .sequence import Sequence, discover, find_sequences, read_checked
 

@@ -3,7 +3,7 @@
 A field is a timeline instant of its own: at 60i the fields are the frames of a
 60000/1001 fields/s timeline, each with the scene's shutter angle of its own field
 duration. `field_range` says which fields cover a shot's frames; the renderer draws only a
-field's rows (render/fields.py); `weave_fields` pairs fields 2k (the field order's first
+field's rows (FrameRenderer.render_layers(field=...)); `weave_fields` pairs fields 2k (the field order's first
 parity) and 2k + 1 into interlaced frame k at half the field rate, with the field order
 and each field's time in the header, and an interlaced movie. Compare 3:2 pulldown
 (telecine_sequence), whose fields repeat 24p film frames: a frame there shows at most two
@@ -24,8 +24,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import FrameIOError, UsageError
-from ..render.fields import parity_of
-from .fields import FieldOrder, check_field_order
+from ..field_model import FieldOrder, check_field_order, parity_of
 
 FIELD_RATES: dict[str, Fraction] = {"60i": Fraction(60000, 1001), "50i": Fraction(50)}
 
@@ -66,7 +65,7 @@ def weave_fields(
     source in the header; and an interlaced movie `{name}_{rate}i.mov` when asked."""
     from ..frame_output import read_frame, write_frame
     from ..timeline import timecode
-    from .fields import weave
+    from ..field_model import weave
     from .movie import write_movie
     from .sequence import find_sequences
 

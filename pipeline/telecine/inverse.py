@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import FrameIOError
 from .cadence import Cadence, parse_cadence
-from .fields import FieldOrder, Parity, first_parity, second_parity, weave_frames
+from ..field_model import FieldOrder, Parity, first_parity, second_parity, weave_frames
 
 CANDIDATES: tuple[str, ...] = ("3:2", "2:3:3:2", "2:2")
 

@@ -29,7 +29,7 @@ import numpy as np
 from ..errors import FrameIOError, UsageError
 from ..files import writing
 from ..timeline import rate_label
-from .fields import FieldOrder, check_field_order
+from ..field_model import FieldOrder, check_field_order
 from .sequence import Sequence, discover, read_checked
 
 Progress = Callable[[int, int], None]

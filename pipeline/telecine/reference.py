@@ -16,7 +16,7 @@ from typing import Iterable, Iterator
 import numpy as np
 
 from .cadence import Cadence, parse_cadence
-from .fields import FieldOrder, check_field_order
+from ..field_model import FieldOrder, check_field_order
 
 
 def ffmpeg_telecine(

@@ -1,4 +1,5 @@
-"""The field model: an interlaced frame is two fields of alternate rows.
+"""The field model: an interlaced frame is two fields of alternate rows (the one home of
+field parity: the renderer's `--fields` and telecine both read it here).
 
 The top field is rows 0, 2, 4, ... and the bottom field rows 1, 3, 5, ... (row 0 is the
 top of the image). The field order (`tff`: top field first, `bff`: bottom field first)
@@ -15,6 +16,8 @@ two fields into a frame is two slice assignments.
 [0, 1, 2, 3, 4, 5]
 >>> first_parity("bff"), second_parity("bff")
 ('bottom', 'top')
+>>> parity_of(0, "tff"), parity_of(1, "tff"), parity_of(0, "bff")
+('top', 'bottom', 'bottom')
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from typing import Literal
 
 import numpy as np
 
-from ..errors import UsageError
+from .errors import UsageError
 
 Parity = Literal["top", "bottom"]
 FieldOrder = Literal["tff", "bff"]
@@ -52,6 +55,18 @@ def first_parity(order: FieldOrder) -> Parity:
 def second_parity(order: FieldOrder) -> Parity:
     """The parity of the temporally second field of each frame."""
     return "bottom" if order == "tff" else "top"
+
+
+def parity_of(field: int, order: str) -> Parity:
+    """The parity of field number `field` of a field sequence: field 2k has the order's
+    first parity (tff: top, bff: bottom), 2k + 1 the second."""
+    return first_parity(order) if field % 2 == 0 else second_parity(order)  # type: ignore[arg-type]
+
+
+def row_offset(parity: Parity) -> int:
+    """The first row of a field: 0 for the top field, 1 for the bottom (every second row
+    from there)."""
+    return 0 if parity == "top" else 1
 
 
 def field(frame: np.ndarray, parity: Parity) -> np.ndarray:
