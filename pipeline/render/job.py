@@ -21,6 +21,7 @@ from fractions import Fraction
 from pathlib import Path
 from typing import Any, Sequence
 
+import numpy as np
 
 from ..bake import BakedFrame, fingerprint
 from ..field_model import parity_of
@@ -180,61 +181,99 @@ def render_frames(job: RenderJob, inputs: Sequence[BakedFrame]) -> list[FrameRes
     return results
 
 
+@dataclass
+class _Drawn:
+    """One frame between the worker's steps: its pixels and layers, the renderer's stats,
+    its field's parity (--fields) and what denoising recorded."""
+
+    rgba: np.ndarray
+    aovs: dict[str, np.ndarray]
+    stats: Any
+    parity: str | None
+    denoise_meta: dict[str, Any]
+
+
+def _draw(renderer: FrameRenderer, job: RenderJob, fi: BakedFrame) -> _Drawn:
+    """Step 1, render: the frame (or with --fields its field: its own instant and shutter
+    from the field timeline, only its rows) and its AOV layers."""
+    parity = parity_of(fi.frame, job.fields) if job.fields else None
+    rgba, aovs, stats = renderer.render_layers(fi, field=parity)
+    return _Drawn(rgba, aovs, stats, parity, {})
+
+
+def _denoise(drawn: _Drawn, scene: Any) -> _Drawn:
+    """Step 2, denoise: right after the render, on the frame's own buffers (docs/denoise.md);
+    with a temporal pass to come the frame says it is pending (render/temporal.py)."""
+    if scene.render.denoise != "off":
+        from .denoise import denoise_frame
+
+        rgba, aovs, meta = denoise_frame(drawn.rgba, drawn.aovs)
+        drawn = _Drawn(rgba, aovs, drawn.stats, drawn.parity, meta)
+    if scene.render.temporal != "off":
+        drawn.denoise_meta["temporal"] = "pending"
+    return drawn
+
+
+def _header(job: RenderJob, fi: BakedFrame, loaded: LoadedScene, variant: str, drawn: _Drawn, out: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Step 3, header: motion's attributes (what `--resume` and stale-frame checks compare,
+    docs/architecture.md) and the standard ones (capDate, owner, comments)."""
+    scene = loaded.scene
+    meta = {
+        **expected_meta(job, fi),
+        "time": float(fi.time),
+        "shutter_open": float(fi.shutter[0]),
+        "shutter_close": float(fi.shutter[1]),
+        "spp": int(scene.render.spp),
+        "seed": frame_seed(scene.render.seed, fi.frame, scene.render.seed_policy),
+        "seed_policy": scene.render.seed_policy,
+        "motion_blur": scene.render.motion_blur,
+        "variant": variant,
+        "scene_hash": job.scene_hash,
+        "scene": scene_reference(loaded.path, out),
+        "render_seconds": float(drawn.stats.render_s),
+        "renderer": RENDERER_VERSION,
+        "render_settings": json.dumps(render_settings(scene), sort_keys=True),
+        **drawn.denoise_meta,
+        **({"field": drawn.parity, "fieldOrder": job.fields} if drawn.parity else {}),
+    }
+    standard = {
+        "capDate": _dt.datetime.now().strftime("%Y:%m:%d %H:%M:%S"),
+        "owner": scene.output.owner or getpass.getuser(),
+        "comments": scene.output.comments or f"motion render of {loaded.name}",
+    }
+    return meta, standard
+
+
+def _write(out: Path, fi: BakedFrame, scene: Any, drawn: _Drawn, meta: dict[str, Any], standard: dict[str, Any]) -> None:
+    """Step 4, write: the EXR through the write policy, its timecode from the frame number
+    (1001 at 24 fps is 00:00:41:17; drop-frame at 29.97 and 59.94)."""
+    fps = scene.timeline.rate
+    drop = fps.denominator == 1001 and round(fps) in (30, 60)
+    write_frame(
+        out,
+        drawn.rgba,
+        meta,
+        fps=Fraction(fps),
+        timecode=frame_timecode(fi.frame, fps, drop_frame=drop),
+        pixel_type=scene.output.pixel_type,
+        compression=scene.output.compression,
+        standard=standard,
+        aovs=drawn.aovs or None,
+    )
+
+
 def _render_one(job: RenderJob, fi: BakedFrame) -> FrameResult:
+    """One frame through the worker's named steps: render, denoise, header, write."""
     t_setup = time.perf_counter()
     try:
         renderer, loaded, variant = _renderer(job)  # a fresh one every frame without the cache
         extra_setup = time.perf_counter() - t_setup
-        # a field (--fields): its own instant and shutter (the timeline), only its rows
-        parity = parity_of(fi.frame, job.fields) if job.fields else None
-        rgba, aovs, stats = renderer.render_layers(fi, field=parity)
-        scene = loaded.scene
-        # the denoiser: right after the render, on the frame's own buffers (docs/denoise.md)
-        denoise_meta: dict[str, Any] = {}
-        if scene.render.denoise != "off":
-            from .denoise import denoise_frame
-
-            rgba, aovs, denoise_meta = denoise_frame(rgba, aovs)
-        if scene.render.temporal != "off":
-            denoise_meta["temporal"] = "pending"  # until the temporal pass (render/temporal.py)
+        drawn = _denoise(_draw(renderer, job, fi), loaded.scene)
         out = frame_path(job, loaded, fi.frame)
         t_write = time.perf_counter()
-        fps = scene.timeline.rate
-        meta = {
-            **expected_meta(job, fi),
-            "time": float(fi.time),
-            "shutter_open": float(fi.shutter[0]),
-            "shutter_close": float(fi.shutter[1]),
-            "spp": int(scene.render.spp),
-            "seed": frame_seed(scene.render.seed, fi.frame, scene.render.seed_policy),
-            "seed_policy": scene.render.seed_policy,
-            "motion_blur": scene.render.motion_blur,
-            "variant": variant,
-            "scene_hash": job.scene_hash,
-            "scene": scene_reference(loaded.path, out),
-            "render_seconds": float(stats.render_s),
-            "renderer": RENDERER_VERSION,
-            "render_settings": json.dumps(render_settings(scene), sort_keys=True),
-            **denoise_meta,
-            **({"field": parity, "fieldOrder": job.fields} if parity else {}),
-        }
-        standard = {
-            "capDate": _dt.datetime.now().strftime("%Y:%m:%d %H:%M:%S"),
-            "owner": scene.output.owner or getpass.getuser(),
-            "comments": scene.output.comments or f"motion render of {loaded.name}",
-        }
-        drop = fps.denominator == 1001 and round(fps) in (30, 60)
-        write_frame(
-            out,
-            rgba,
-            meta,
-            fps=Fraction(fps),
-            timecode=frame_timecode(fi.frame, fps, drop_frame=drop),  # from the frame number: 1001 at 24 fps is 00:00:41:17
-            pixel_type=scene.output.pixel_type,
-            compression=scene.output.compression,
-            standard=standard,
-            aovs=aovs or None,
-        )
+        meta, standard = _header(job, fi, loaded, variant, drawn, out)
+        _write(out, fi, loaded.scene, drawn, meta, standard)
+        stats = drawn.stats
         return FrameResult(
             frame=fi.frame,
             path=str(out),
@@ -244,7 +283,7 @@ def _render_one(job: RenderJob, fi: BakedFrame) -> FrameResult:
             setup_s=stats.setup_s + extra_setup,
             render_s=stats.render_s,
             write_s=time.perf_counter() - t_write,
-            denoise_s=float(denoise_meta.get("denoise_seconds", 0.0)),
+            denoise_s=float(drawn.denoise_meta.get("denoise_seconds", 0.0)),
             kernels_compiled=stats.kernels_compiled,
             asset_cache_hits=stats.asset_cache_hits,
         )
