@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path, PurePosixPath
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 from ..errors import AssetError, Problem
 from ..expr import ExpressionError, parse_expression
@@ -50,36 +51,70 @@ def _suggest(name: str, options: list[str]) -> str:
 
 
 
-def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets: bool = True) -> list[Problem]:
-    """Every problem a schema cannot see. `assets`: also open and decode every mesh and
-    image (the validation stage; a worker that reloads a checked scene skips it)."""
-    problems: list[Problem] = []
+@dataclass
+class _Check:
+    """What every semantic check sees: the scene, where its files are, whether assets are
+    opened, and `add(loc, message)` for a located problem (`problems` keeps them in order)."""
 
-    def add(loc: "Loc", message: str) -> None:
-        problems.append(source.problem(loc, message))
+    scene: Scene
+    base_dir: Path
+    source: "SourceMap"
+    assets: bool
+    problems: list[Problem] = field(default_factory=list)
 
-    # names: objects and lights share one namespace (parents and springs refer to them)
+    def add(self, loc: "Loc", message: str) -> None:
+        """A problem located at the YAML path `loc`."""
+        self.problems.append(self.source.problem(loc, message))
+
+
+def _first_names(scene: Scene) -> dict[str, "Loc"]:
+    """Objects' and lights' names (one namespace: parents and springs refer to them), each
+    at its first use."""
     names: dict[str, "Loc"] = {}
     for kind, items in (("objects", scene.objects), ("lights", scene.lights)):
         for i, item in enumerate(items):
-            name = getattr(item, "name", None)
-            if name is None:
-                continue
-            if name in names:
-                add((kind, i, "name"), f"duplicate name '{name}' (first used at {yaml_path(names[name])})")
-            else:
-                names[name] = (kind, i, "name")
-    materials: dict[str, int] = {}
-    for i, mat in enumerate(scene.materials):
-        if mat.name in materials:
-            add(("materials", i, "name"), f"duplicate material name '{mat.name}'")
-        materials.setdefault(mat.name, i)
+            if item.name is not None:
+                names.setdefault(item.name, (kind, i, "name"))
+    return names
 
-    # references
+
+def _parents(scene: Scene) -> dict[str, str]:
+    """Each named thing's parent, where the parent is an object other than itself."""
+    names = _first_names(scene)
+    out = {}
+    for item in [*scene.objects, *scene.lights]:
+        parent = item.parent
+        if item.name is not None and parent is not None and parent != item.name and names.get(parent, ("",))[0] == "objects":
+            out[item.name] = parent
+    return out
+
+
+def check_names(c: _Check) -> None:
+    """No two objects or lights share a name, nor two materials."""
+    names: dict[str, "Loc"] = {}
+    for kind, items in (("objects", c.scene.objects), ("lights", c.scene.lights)):
+        for i, item in enumerate(items):
+            if item.name is None:
+                continue
+            if item.name in names:
+                c.add((kind, i, "name"), f"duplicate name '{item.name}' (first used at {yaml_path(names[item.name])})")
+            else:
+                names[item.name] = (kind, i, "name")
+    materials: set[str] = set()
+    for i, mat in enumerate(c.scene.materials):
+        if mat.name in materials:
+            c.add(("materials", i, "name"), f"duplicate material name '{mat.name}'")
+        materials.add(mat.name)
+
+
+def check_references(c: _Check) -> None:
+    """Materials and parents named exist; nothing is its own parent."""
+    scene = c.scene
+    materials = [m.name for m in scene.materials]
     for i, obj in enumerate(scene.objects):
         if obj.material is not None and obj.material not in materials:
-            add(("objects", i, "material"), f"unknown material '{obj.material}'" + _suggest(obj.material, list(materials)))
-    parents: dict[str, str] = {}
+            c.add(("objects", i, "material"), f"unknown material '{obj.material}'" + _suggest(obj.material, list(dict.fromkeys(materials))))
+    names = _first_names(scene)
     owners: list[tuple["Loc", str | None, str | None]] = [(("camera",), None, scene.camera.parent)]
     owners += [(("objects", i), o.name, o.parent) for i, o in enumerate(scene.objects)]
     owners += [(("lights", i), light.name, light.parent) for i, light in enumerate(scene.lights)]
@@ -88,14 +123,16 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
             continue
         if parent not in names or names[parent][0] != "objects":
             objects = [o.name for o in scene.objects]
-            add((*loc, "parent"), f"unknown parent '{parent}' (parents are objects)" + _suggest(parent, objects))
-        elif name is not None:
-            if parent == name:
-                add((*loc, "parent"), f"'{name}' cannot be its own parent")
-            parents[name] = parent
-    # cycles: follow each chain; report each cycle once, at its first member in file order
+            c.add((*loc, "parent"), f"unknown parent '{parent}' (parents are objects)" + _suggest(parent, objects))
+        elif name is not None and parent == name:
+            c.add((*loc, "parent"), f"'{name}' cannot be its own parent")
+
+
+def check_parent_cycles(c: _Check) -> None:
+    """No cycle of parents: each reported once, at its first member in file order."""
+    parents = _parents(c.scene)
     reported: set[frozenset[str]] = set()
-    for i, obj in enumerate(scene.objects):
+    for i, obj in enumerate(c.scene.objects):
         chain = [obj.name]
         node = parents.get(obj.name)
         while node is not None and node not in chain:
@@ -107,67 +144,84 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
             cycle = frozenset(chain)
             if cycle not in reported:
                 reported.add(cycle)
-                add(("objects", i, "parent"), "parent cycle: " + " -> ".join([*chain, obj.name]))
+                c.add(("objects", i, "parent"), "parent cycle: " + " -> ".join([*chain, obj.name]))
 
-    # dynamics bodies are simulated in world space; a parent would fight the simulation
+
+def check_world_space_motion(c: _Check) -> None:
+    """Dynamics bodies and planned paths live in world space: no parent; a planned path
+    moves objects only."""
+    scene = c.scene
+    # a parent would fight the simulation
     for i, obj in enumerate(scene.objects):
         if obj.motion.type == "dynamics" and obj.parent is not None:
-            add(("objects", i, "parent"), "a dynamics body cannot have a parent (it is simulated in world space)")
-    # planned paths are in world space on the floor plane: objects only, no parent
+            c.add(("objects", i, "parent"), "a dynamics body cannot have a parent (it is simulated in world space)")
+    # planned paths are in world space on the floor plane
     for i, obj in enumerate(scene.objects):
         if obj.motion.type == "plan" and obj.parent is not None:
-            add(("objects", i, "parent"), "an object with a planned path cannot have a parent (the path is in world space)")
+            c.add(("objects", i, "parent"), "an object with a planned path cannot have a parent (the path is in world space)")
     for loc, owner in [(("camera", "motion"), scene.camera)] + [(("lights", i, "motion"), light) for i, light in enumerate(scene.lights)]:
         if owner.motion.type == "plan":
-            add((*loc, "type"), "a planned path moves objects only (parent the camera or light to a planned object)")
-    # inverse kinematics: chains of parented objects, targets and poles that are objects
-    # outside the chain's own subtree (they are read before the chain is solved)
-    objects_by_name = {o.name: o for o in scene.objects}
-    for j, ik in enumerate(scene.ik):
+            c.add((*loc, "type"), "a planned path moves objects only (parent the camera or light to a planned object)")
+
+
+def check_ik(c: _Check) -> None:
+    """Inverse kinematics: chains of parented objects with bones of some length; targets
+    and poles that are objects outside the chain's own subtree (they are read before the
+    chain is solved)."""
+    objects_by_name = {o.name: o for o in c.scene.objects}
+    for j, ik in enumerate(c.scene.ik):
         for k, name in enumerate(ik.chain):
             if name not in objects_by_name:
-                add(("ik", j, "chain", k), f"unknown object '{name}'" + _suggest(name, list(objects_by_name)))
+                c.add(("ik", j, "chain", k), f"unknown object '{name}'" + _suggest(name, list(objects_by_name)))
             elif k > 0 and objects_by_name[name].parent != ik.chain[k - 1]:
-                add(("ik", j, "chain", k), f"'{name}' must be a child of '{ik.chain[k - 1]}' (a chain is a run of parents and children)")
+                c.add(("ik", j, "chain", k), f"'{name}' must be a child of '{ik.chain[k - 1]}' (a chain is a run of parents and children)")
             elif objects_by_name[name].motion.type in ("dynamics", "plan"):
-                add(("ik", j, "chain", k), f"'{name}' has {objects_by_name[name].motion.type} motion; IK turns keyed or static joints")
+                c.add(("ik", j, "chain", k), f"'{name}' has {objects_by_name[name].motion.type} motion; IK turns keyed or static joints")
             elif k > 0 and _fixed_at_parent(objects_by_name[name]):
-                add(("ik", j, "chain", k), f"the bone {ik.chain[k - 1]} -> {name} has no length ({name} sits at {ik.chain[k - 1]}'s origin and nothing "
-                                           f"moves it): IK turns bones, so each needs a length (translate {name} away from {ik.chain[k - 1]})")
-        for field in ("target", "pole"):
-            name = getattr(ik, field)
+                c.add(("ik", j, "chain", k), f"the bone {ik.chain[k - 1]} -> {name} has no length ({name} sits at {ik.chain[k - 1]}'s origin and nothing "
+                                             f"moves it): IK turns bones, so each needs a length (translate {name} away from {ik.chain[k - 1]})")
+        for role in ("target", "pole"):
+            name = getattr(ik, role)
             if name is None:
                 continue
             if name not in objects_by_name:
-                add(("ik", j, field), f"unknown object '{name}'" + _suggest(name, list(objects_by_name)))
+                c.add(("ik", j, role), f"unknown object '{name}'" + _suggest(name, list(objects_by_name)))
                 continue
             node = name
             while node is not None:
                 if node in ik.chain:
-                    add(("ik", j, field), f"'{name}' moves with the chain ('{node}'); a {field} must not depend on the joints it drives")
+                    c.add(("ik", j, role), f"'{name}' moves with the chain ('{node}'); a {role} must not depend on the joints it drives")
                     break
                 node = objects_by_name[node].parent if node in objects_by_name else None
-    bodies = {o.name for o in scene.objects if o.motion.type == "dynamics"}
-    for j, spring in enumerate(scene.dynamics.springs):
+
+
+def check_springs(c: _Check) -> None:
+    """A spring joins two different dynamics bodies."""
+    bodies = {o.name for o in c.scene.objects if o.motion.type == "dynamics"}
+    for j, spring in enumerate(c.scene.dynamics.springs):
         for end in ("a", "b"):
             target = getattr(spring, end)
             if target not in bodies:
-                add(("dynamics", "springs", j, end), f"spring end '{target}' is not a dynamics body" + _suggest(target, sorted(bodies)))
+                c.add(("dynamics", "springs", j, end), f"spring end '{target}' is not a dynamics body" + _suggest(target, sorted(bodies)))
         if spring.a == spring.b:
-            add(("dynamics", "springs", j), "a spring needs two different bodies")
+            c.add(("dynamics", "springs", j), "a spring needs two different bodies")
 
-    # asset files: present, and (when `assets`) opened and decoded as the renderer will,
-    # each file once however many fields name it (its outcome is reported at each)
+
+def check_asset_files(c: _Check) -> None:
+    """Every file the scene names is there, and (with `assets`) opens and decodes as the
+    renderer will read it, each file once however many fields name it (its outcome is
+    reported at each)."""
+    scene, base_dir = c.scene, c.base_dir
     decoded: dict[tuple[Path, str], str | None] = {}
 
     def check_file(loc: "Loc", rel: str, kind: str, deforming: bool = False) -> None:
         if not (base_dir / rel).is_file():
             if (base_dir / rel).exists():
-                add(loc, f"not a regular file: {rel} (relative to {base_dir})")
+                c.add(loc, f"not a regular file: {rel} (relative to {base_dir})")
             else:
-                add(loc, f"file not found: {rel} (relative to {base_dir})")
+                c.add(loc, f"file not found: {rel} (relative to {base_dir})")
             return
-        if not assets:
+        if not c.assets:
             return
         key = ((base_dir / rel).resolve(), kind + ("-render" if deforming else ""))
         if key not in decoded:
@@ -185,7 +239,7 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
             except AssetError as exc:
                 decoded[key] = str(exc).split(": ", 1)[-1]
         if decoded[key] is not None:
-            add(loc, f"{kind} file {rel}: {decoded[key]}")
+            c.add(loc, f"{kind} file {rel}: {decoded[key]}")
 
     for i, obj in enumerate(scene.objects):
         if isinstance(obj, Mesh):
@@ -197,27 +251,61 @@ def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets:
         if obj.motion.type == "plan" and obj.motion.grid.image is not None:
             check_file(("objects", i, "motion", "grid", "image"), obj.motion.grid.image, "image")
     for i, light in enumerate(scene.lights):
-        for field in light.image_files:
-            check_file(("lights", i, field), getattr(light, field), "image")
+        for name in light.image_files:
+            check_file(("lights", i, name), getattr(light, name), "image")
     for i, obj in enumerate(scene.objects):
         if obj.emission is not None and isinstance(obj.emission.radiance, Texture):
             check_file(("objects", i, "emission", "radiance", "file"), obj.emission.radiance.file, "image")
     for i, mat in enumerate(scene.materials):
-        for field in type(mat).model_fields:
-            tex = getattr(mat, field, None)
+        for name in type(mat).model_fields:
+            tex = getattr(mat, name, None)
             if isinstance(tex, Texture):
-                check_file(("materials", i, field, "file"), tex.file, "image")
+                check_file(("materials", i, name, "file"), tex.file, "image")
 
-    problems.extend(derived_problems(scene, source))
 
-    # motion channels
-    check_channels(("camera", "motion"), scene.camera.motion, "camera", add)
-    for i, obj in enumerate(scene.objects):
-        check_channels(("objects", i, "motion"), obj.motion, "object", add)
-    for i, light in enumerate(scene.lights):
-        check_channels(("lights", i, "motion"), light.motion, f"{light.type} light", add)
-    problems.extend(expression_problems(scene, source, evaluate=assets))
-    return problems
+def check_derived(c: _Check) -> None:
+    """What follows from several fields together: the timeline's and the simulation's
+    budgets, the output pattern (`derived_problems`)."""
+    c.problems.extend(derived_problems(c.scene, c.source))
+
+
+def check_motion_channels(c: _Check) -> None:
+    """Each motion block keys only channels its owner has (a light its own emission)."""
+    check_channels(("camera", "motion"), c.scene.camera.motion, "camera", c.add)
+    for i, obj in enumerate(c.scene.objects):
+        check_channels(("objects", i, "motion"), obj.motion, "object", c.add)
+    for i, light in enumerate(c.scene.lights):
+        check_channels(("lights", i, "motion"), light.motion, f"{light.type} light", c.add)
+
+
+def check_expressions(c: _Check) -> None:
+    """Procedural expressions parse, use known names and (with `assets`) evaluate finite."""
+    c.problems.extend(expression_problems(c.scene, c.source, evaluate=c.assets))
+
+
+# The semantic checks, in the order their problems are reported (file order within each).
+SEMANTIC_CHECKS: tuple[Callable[[_Check], None], ...] = (
+    check_names,
+    check_references,
+    check_parent_cycles,
+    check_world_space_motion,
+    check_ik,
+    check_springs,
+    check_asset_files,
+    check_derived,
+    check_motion_channels,
+    check_expressions,
+)
+
+
+def semantic_problems(scene: Scene, base_dir: Path, source: "SourceMap", assets: bool = True) -> list[Problem]:
+    """Every problem a schema cannot see: each of SEMANTIC_CHECKS in turn. `assets`: also
+    open and decode every mesh and image (the validation stage; a worker that reloads a
+    checked scene skips it)."""
+    c = _Check(scene, base_dir, source, assets)
+    for check in SEMANTIC_CHECKS:
+        check(c)
+    return c.problems
 
 
 def _fixed_at_parent(obj: object) -> bool:
