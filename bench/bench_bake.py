@@ -32,7 +32,7 @@ def bake_seconds(path: Path, repeat: int) -> tuple[float, float, int]:
     frames = list(loaded.scene.timeline.timeline().frames)
     best_sim, best_bake, steps = float("inf"), float("inf"), 0
     for _ in range(repeat):
-        from motion.pipeline.farm.motion_source import simulation_for
+        from motion.pipeline.farm.frame_inputs import simulation_for
 
         t0 = time.process_time()
         sim = simulation_for(loaded, frames)

@@ -242,7 +242,7 @@ def test_read_baked_refuses_a_broken_frame(tmp_path: Path) -> None:
 def test_farm_motion_file_takes_nonrigid_scenes_from_npz_only(tmp_path: Path) -> None:
     from motion.pipeline.bake import fingerprint
     from motion.pipeline.errors import UsageError
-    from motion.pipeline.farm.motion_source import file_inputs
+    from motion.pipeline.farm.frame_inputs import file_inputs
 
     flock = load_scene(SCENES / "flock.yaml", {"render": {"shutter_samples": 3}})
     baked = bake(flock, [2, 3])

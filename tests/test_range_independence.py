@@ -12,7 +12,7 @@ import yaml
 
 from farm_util import TINY, frames_in, motion, report
 from motion.pipeline.bake import BakedFrame, bake, leaves, simulation_range
-from motion.pipeline.farm.motion_source import baked_inputs, simulation_for
+from motion.pipeline.farm.frame_inputs import baked_inputs, simulation_for
 from motion.pipeline.frame_output import read_frame
 from motion.pipeline.scene import load_scene
 

@@ -46,11 +46,11 @@ def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: 
     t0 = time.perf_counter()
     me = Claimant.here(ctx.run_id)
     out = ChunkResult(chunk_id=chunk_id, worker=worker_id())
-    for fi in inputs:
-        path = ctx.paths[fi.frame]
+    for baked in inputs:
+        path = ctx.paths[baked.frame]
         if not (confined(job.output_dir, path) and confined(job.output_dir, claim_path(path))):
             # a link planted in the output folder after the job's checks: nothing is written through it
-            out.results.append(FrameResult(fi.frame, "", False, worker_id(), error=f"{path}: a link on its way leads outside the output folder {job.output_dir}; not written"))
+            out.results.append(FrameResult(baked.frame, "", False, worker_id(), error=f"{path}: a link on its way leads outside the output folder {job.output_dir}; not written"))
             continue
         try:
             ok, holder = try_claim(path, me, ctx.stale_after_s)
@@ -59,21 +59,21 @@ def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: 
             break
         if not ok:
             owner = holder or {}
-            out.held_elsewhere[fi.frame] = f"{owner.get('host', '?')}:{owner.get('pid', '?')} (run {owner.get('run_id', '?')})"
+            out.held_elsewhere[baked.frame] = f"{owner.get('host', '?')}:{owner.get('pid', '?')} (run {owner.get('run_id', '?')})"
             continue
         try:
             remove_partials(path)
-            if ctx.resume and is_complete(path, expected_meta(job, fi)):
-                out.already_done.append(fi.frame)
+            if ctx.resume and is_complete(path, expected_meta(job, baked)):
+                out.already_done.append(baked.frame)
                 continue
-            results = render_frames(job, [fi])
+            results = render_frames(job, [baked])
             out.results.extend(results)
             fault = next((r.error for r in results if getattr(r, "disk_fault", False)), None)
             if fault:
                 out.disk_fault = fault
                 break
             if on_frame is not None and all(r.ok for r in results):
-                on_frame(fi.frame, sum(r.setup_s + r.render_s + r.denoise_s + r.write_s for r in results))
+                on_frame(baked.frame, sum(r.setup_s + r.render_s + r.denoise_s + r.write_s for r in results))
         finally:
             release(path, ctx.run_id)
     out.seconds = time.perf_counter() - t0

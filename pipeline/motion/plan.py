@@ -304,7 +304,7 @@ def catmull_rom(points: np.ndarray, u: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Path:
+class PlannedPath:
     """A planned root-motion path: spline vertices [n, 3], the arc-length table
     (u [K], s [K]), the A* legs' cells and costs, and the speed profile."""
 
@@ -438,7 +438,7 @@ MAX_PATH_VERTICES = 4096  # vertices the spline refinement may reach before the 
 
 
 def build_path(grid: Grid, points: Sequence[Sequence[float]], radius: float, tolerance: float, margin: float,
-               speed: float, accel: float, decel: float, start_time: float, facing: str) -> Path:
+               speed: float, accel: float, decel: float, start_time: float, facing: str) -> PlannedPath:
     """Plan through `points` (start, waypoints..., goal; world x, y, z). Raises _Located."""
     need_plan = radius + tolerance + margin
     need_path = radius + tolerance
@@ -493,7 +493,7 @@ def build_path(grid: Grid, points: Sequence[Sequence[float]], radius: float, tol
         slack = np.maximum(gaps, np.roll(gaps, -1)) / 2
         bad = grid.clearance(p[:, [0, 2]], need_path + spacing) < need_path + slack
         if not bad.any():
-            return Path(vertices, u, s, duds, all_cells, costs, speed, accel, decel, start_time, facing, grid, need_path)
+            return PlannedPath(vertices, u, s, duds, all_cells, costs, speed, accel, decel, start_time, facing, grid, need_path)
         segs = np.unique(np.clip(np.floor(u[bad]).astype(np.int64), 0, len(vertices) - 2))
         if len(vertices) + len(segs) > MAX_PATH_VERTICES:
             break  # each round may double the vertices (margin 0 in a corridor did, 42 -> 100,904): stop while it is cheap
@@ -513,10 +513,10 @@ def _grid(loaded: "LoadedScene", name: str, spec: Any) -> Grid:
     return grid_from_scene(loaded, name, g.cell, g.origin, g.size, g.band)
 
 
-_PLANS: dict[tuple[str, int, str, int], Path] = {}
+_PLANS: dict[tuple[str, int, str, int], PlannedPath] = {}
 
 
-def plan_for(loaded: "LoadedScene", index: int) -> Path:
+def plan_for(loaded: "LoadedScene", index: int) -> PlannedPath:
     """The planned path of object `index` (a SceneError, located, when there is none).
     Cached per (scene file, object, motion block, grid image mtime)."""
     obj = loaded.scene.objects[index]
@@ -579,7 +579,7 @@ def kinematic_pose(loaded: "LoadedScene", index: int, t: np.ndarray) -> Pose:
     return _pose(obj, path, t, x, path.tangent(t), lateral, loaded)
 
 
-def _pose(obj: Any, path: Path, t: np.ndarray, x: np.ndarray, forward: np.ndarray, lateral: np.ndarray | None, loaded: "LoadedScene") -> Pose:
+def _pose(obj: Any, path: PlannedPath, t: np.ndarray, x: np.ndarray, forward: np.ndarray, lateral: np.ndarray | None, loaded: "LoadedScene") -> Pose:
     own = np.broadcast_to(transform_quat(obj.transform.rotate), (len(t), 4))
     if path.facing == "none":
         q = own.copy()

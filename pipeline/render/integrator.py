@@ -36,7 +36,7 @@ import numpy as np
 from . import aovs as aov_table
 from . import film
 from .lights import LightChoice
-from .poses import FrameData, MoverTracks, Pose, eager_movers, swept_spheres
+from .poses import FrameData, KernelPose, MoverTracks, eager_movers, swept_spheres
 from .world import World
 
 
@@ -150,7 +150,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         bsdf: Any,
         ctx: Any,
         movers: MoverTracks,
-        light_poses: list[Pose],
+        light_poses: list[KernelPose],
         k_slice: Any,
         active: Any,
     ) -> Any:

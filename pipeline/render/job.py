@@ -115,11 +115,11 @@ def scene_reference(scene_path: str | Path, frame_path: str | Path) -> str:
     return os.path.relpath(scene, folder).replace(os.sep, "/")
 
 
-def expected_meta(job: RenderJob, fi: BakedFrame) -> dict[str, Any]:
+def expected_meta(job: RenderJob, baked: BakedFrame) -> dict[str, Any]:
     """The attributes a complete frame of this job carries (what --resume compares): the
     frame, the settings hash and the hash of this frame's own baked motion (`fingerprint`,
     every animated value)."""
-    return {"frame": fi.frame, "settings_hash": job.settings_hash, "motion_hash": fingerprint([fi])[:16]}
+    return {"frame": baked.frame, "settings_hash": job.settings_hash, "motion_hash": fingerprint([baked])[:16]}
 
 
 
@@ -176,8 +176,8 @@ def render_frames(job: RenderJob, inputs: Sequence[BakedFrame]) -> list[FrameRes
     """Render and write each frame; a frame's failure is reported, not raised, so the
     others of the task still finish."""
     results = []
-    for fi in inputs:
-        results.append(_render_one(job, fi))
+    for baked in inputs:
+        results.append(_render_one(job, baked))
     return results
 
 
@@ -193,11 +193,11 @@ class _Drawn:
     denoise_meta: dict[str, Any]
 
 
-def _draw(renderer: FrameRenderer, job: RenderJob, fi: BakedFrame) -> _Drawn:
+def _draw(renderer: FrameRenderer, job: RenderJob, baked: BakedFrame) -> _Drawn:
     """Step 1, render: the frame (or with --fields its field: its own instant and shutter
     from the field timeline, only its rows) and its AOV layers."""
-    parity = parity_of(fi.frame, job.fields) if job.fields else None
-    rgba, aovs, stats = renderer.render_layers(fi, field=parity)
+    parity = parity_of(baked.frame, job.fields) if job.fields else None
+    rgba, aovs, stats = renderer.render_layers(baked, field=parity)
     return _Drawn(rgba, aovs, stats, parity, {})
 
 
@@ -214,17 +214,17 @@ def _denoise(drawn: _Drawn, scene: Any) -> _Drawn:
     return drawn
 
 
-def _header(job: RenderJob, fi: BakedFrame, loaded: LoadedScene, variant: str, drawn: _Drawn, out: Path) -> tuple[dict[str, Any], dict[str, Any]]:
+def _header(job: RenderJob, baked: BakedFrame, loaded: LoadedScene, variant: str, drawn: _Drawn, out: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     """Step 3, header: motion's attributes (what `--resume` and stale-frame checks compare,
     docs/architecture.md) and the standard ones (capDate, owner, comments)."""
     scene = loaded.scene
     meta = {
-        **expected_meta(job, fi),
-        "time": float(fi.time),
-        "shutter_open": float(fi.shutter[0]),
-        "shutter_close": float(fi.shutter[1]),
+        **expected_meta(job, baked),
+        "time": float(baked.time),
+        "shutter_open": float(baked.shutter[0]),
+        "shutter_close": float(baked.shutter[1]),
         "spp": int(scene.render.spp),
-        "seed": frame_seed(scene.render.seed, fi.frame, scene.render.seed_policy),
+        "seed": frame_seed(scene.render.seed, baked.frame, scene.render.seed_policy),
         "seed_policy": scene.render.seed_policy,
         "motion_blur": scene.render.motion_blur,
         "variant": variant,
@@ -244,7 +244,7 @@ def _header(job: RenderJob, fi: BakedFrame, loaded: LoadedScene, variant: str, d
     return meta, standard
 
 
-def _write(out: Path, fi: BakedFrame, scene: Any, drawn: _Drawn, meta: dict[str, Any], standard: dict[str, Any]) -> None:
+def _write(out: Path, baked: BakedFrame, scene: Any, drawn: _Drawn, meta: dict[str, Any], standard: dict[str, Any]) -> None:
     """Step 4, write: the EXR through the write policy, its timecode from the frame number
     (1001 at 24 fps is 00:00:41:17; drop-frame at 29.97 and 59.94)."""
     fps = scene.timeline.rate
@@ -254,7 +254,7 @@ def _write(out: Path, fi: BakedFrame, scene: Any, drawn: _Drawn, meta: dict[str,
         drawn.rgba,
         meta,
         fps=Fraction(fps),
-        timecode=frame_timecode(fi.frame, fps, drop_frame=drop),
+        timecode=frame_timecode(baked.frame, fps, drop_frame=drop),
         pixel_type=scene.output.pixel_type,
         compression=scene.output.compression,
         standard=standard,
@@ -262,20 +262,20 @@ def _write(out: Path, fi: BakedFrame, scene: Any, drawn: _Drawn, meta: dict[str,
     )
 
 
-def _render_one(job: RenderJob, fi: BakedFrame) -> FrameResult:
+def _render_one(job: RenderJob, baked: BakedFrame) -> FrameResult:
     """One frame through the worker's named steps: render, denoise, header, write."""
     t_setup = time.perf_counter()
     try:
         renderer, loaded, variant = _renderer(job)  # a fresh one every frame without the cache
         extra_setup = time.perf_counter() - t_setup
-        drawn = _denoise(_draw(renderer, job, fi), loaded.scene)
-        out = frame_path(job, loaded, fi.frame)
+        drawn = _denoise(_draw(renderer, job, baked), loaded.scene)
+        out = frame_path(job, loaded, baked.frame)
         t_write = time.perf_counter()
-        meta, standard = _header(job, fi, loaded, variant, drawn, out)
-        _write(out, fi, loaded.scene, drawn, meta, standard)
+        meta, standard = _header(job, baked, loaded, variant, drawn, out)
+        _write(out, baked, loaded.scene, drawn, meta, standard)
         stats = drawn.stats
         return FrameResult(
-            frame=fi.frame,
+            frame=baked.frame,
             path=str(out),
             ok=True,
             worker=worker_id(),
@@ -291,6 +291,6 @@ def _render_one(job: RenderJob, fi: BakedFrame) -> FrameResult:
         from ..errors import DiskFaultError
 
         if isinstance(exc, DiskFaultError):  # the renderer is fine; the disk is not
-            return FrameResult(frame=fi.frame, path="", ok=False, worker=worker_id(), error=str(exc), disk_fault=True)
+            return FrameResult(frame=baked.frame, path="", ok=False, worker=worker_id(), error=str(exc), disk_fault=True)
         _WORKER.clear()  # rebuild from scratch for the next frame rather than trust this state
-        return FrameResult(frame=fi.frame, path="", ok=False, worker=worker_id(), error=_root_cause(exc))
+        return FrameResult(frame=baked.frame, path="", ok=False, worker=worker_id(), error=_root_cause(exc))

@@ -7,7 +7,7 @@ offsets, fixed for a job, so a new frame replays the compiled kernels instead of
 compiling new ones. At shutter fraction u a pose is interpolated between the two samples
 around u: translation linearly, rotation by shortest-arc slerp (never a matrix lerp).
 
-A `Pose` (world_from_object as translation t and unit quaternion q) maps rays, points,
+A `KernelPose` (world_from_object as translation t and unit quaternion q) maps rays, points,
 vectors and interactions between world space and the body's rest frame, the one place
 where the inverse rigid transform is written (docs/rendering.md, "Time per sample").
 """
@@ -61,9 +61,10 @@ def slerp(q0: Any, q1: Any, f: Any) -> Any:
     return dr.normalize(w0 * q0 + w1 * q1)
 
 
-class Pose(NamedTuple):
-    """A rigid world_from_object transform: translation t (mi.Vector3f) and unit quaternion q
-    (mi.Vector4f). Rigid maps keep lengths, so ray parameters and local BSDF directions are
+class KernelPose(NamedTuple):
+    """A rigid world_from_object transform inside the render kernel (drjit values; the motion
+    stage's numpy `motion.pose.Pose` is the CPU side): translation t (mi.Vector3f) and unit
+    quaternion q (mi.Vector4f). Rigid maps keep lengths, so ray parameters and local BSDF directions are
     the same in both frames."""
 
     t: Any
@@ -159,7 +160,7 @@ class FrameData:
         comps = [dr.gather(mi.Float, self.array, base + c, active) for c in range(width)]
         return mi.Vector3f(*comps) if width == 3 else mi.Vector4f(*comps)
 
-    def pose(self, t_block: str, q_block: str, record: int, i: Any, f: Any, active: Any) -> Pose:
+    def pose(self, t_block: str, q_block: str, record: int, i: Any, f: Any, active: Any) -> KernelPose:
         """The pose of the track starting at sample `record` of the blocks, at position f
         of segment i: translation lerped, rotation slerped."""
         j = record + i
@@ -167,14 +168,14 @@ class FrameData:
         t1 = self.vec(t_block, 3, j + 1, active)
         q0 = self.vec(q_block, 4, j, active)
         q1 = self.vec(q_block, 4, j + 1, active)
-        return Pose(dr.lerp(t0, t1, f), slerp(q0, q1, f))
+        return KernelPose(dr.lerp(t0, t1, f), slerp(q0, q1, f))
 
-    def sample_pose(self, t_block: str, q_block: str, record: Any, active: Any) -> Pose:
+    def sample_pose(self, t_block: str, q_block: str, record: Any, active: Any) -> KernelPose:
         """The baked sample `record` (an int, or a mi.UInt32 per lane) of the blocks, as it
         is (no interpolation)."""
-        return Pose(self.vec(t_block, 3, mi.UInt32(record), active), self.vec(q_block, 4, mi.UInt32(record), active))
+        return KernelPose(self.vec(t_block, 3, mi.UInt32(record), active), self.vec(q_block, 4, mi.UInt32(record), active))
 
-    def poses(self, t_block: str, q_block: str, count: int, u: Any, active: Any) -> list[Pose]:
+    def poses(self, t_block: str, q_block: str, count: int, u: Any, active: Any) -> list[KernelPose]:
         """The poses at shutter fraction u of `count` tracks of N samples each."""
         i, f = self.segment(u)
         return [self.pose(t_block, q_block, k * self.n_samples, i, f, active) for k in range(count)]
@@ -265,16 +266,16 @@ class MoverTracks:
         self.count = count
         self.active = active
         self.segment = data.segment(u)
-        self._poses: dict[int, Pose] = {k: self._pose(k) for k in range(count) if k < len(eager) and eager[k]}
+        self._poses: dict[int, KernelPose] = {k: self._pose(k) for k in range(count) if k < len(eager) and eager[k]}
 
     def __len__(self) -> int:
         return self.count
 
-    def _pose(self, index: Any) -> Pose:
+    def _pose(self, index: Any) -> KernelPose:
         i, f = self.segment
         return self.data.pose("mover_t", "mover_q", index * self.data.n_samples, i, f, self.active)
 
-    def pose(self, index: Any) -> Pose:
+    def pose(self, index: Any) -> KernelPose:
         """Mover `index` (an int, or a mi.UInt32 per lane below the count) at the path's time."""
         if isinstance(index, int) and index in self._poses:
             return self._poses[index]
@@ -285,7 +286,7 @@ class MoverTracks:
         s = self.data.vec("mover_swept", 4, mi.UInt32(index), self.active)
         return mi.Vector3f(s.x, s.y, s.z), dr.square(s.w)
 
-    def posed_sphere(self, index: int, pose: Pose) -> tuple[Any, Any]:
+    def posed_sphere(self, index: int, pose: KernelPose) -> tuple[Any, Any]:
         """Mover `index`'s bounding sphere at the path's time (world centre, squared radius)."""
         s = self.data.vec("mover_sphere", 4, mi.UInt32(index), self.active)
         return qrot(pose.q, mi.Vector3f(s.x, s.y, s.z)) + pose.t, dr.square(s.w)

@@ -3,13 +3,13 @@
 `run_render` (render.py) runs the named steps: load the scene with its preset and flags,
 select frames (and the shard), size the job, check before any work, bake the motion once
 here, skip complete frames, run the chunks on the farm, write the report, then the temporal
-pass and the deliverables. `plan.py` is `--dry-run` and `--check`, `deliver.py` the
+pass and the deliverables. `dry_run.py` is `--dry-run` and `--check`, `deliver.py` the
 deliverables (checked before the first frame, assembled after the last), `fields.py`
 `--fields 60i` (the fields rendered as frames of a field timeline, then woven).
 """
 
 from .fields import run_field_render
-from .plan import plan_text
+from .dry_run import plan_text
 from .render import run_render
 from .request import RenderRequest
 

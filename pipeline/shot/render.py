@@ -34,7 +34,7 @@ from ..scene.loader import LoadedScene, load_scene
 from .deliver import DeliverPlan, check_deliver, deliver_and_record, deliver_plan
 from .estimate import estimate, samples_of
 from .estimate import record as record_cost
-from .plan import check_only, plan, resolved_settings
+from .dry_run import check_only, plan, resolved_settings
 from .stale import FrameStates, frame_states
 from .request import RenderRequest
 
@@ -175,7 +175,7 @@ def warn_variant(req: RenderRequest, loaded: LoadedScene) -> None:
 def motion_inputs(req: RenderRequest, loaded: LoadedScene, sel: Selection) -> list[BakedFrame]:
     """The worker input of every frame of this shard: simulated over the whole selection
     and baked for the shard here, or read from the --motion file."""
-    from ..farm.motion_source import baked_inputs, file_inputs, simulation_for
+    from ..farm.frame_inputs import baked_inputs, file_inputs, simulation_for
 
     if req.motion_file:
         return file_inputs(loaded, req.motion_file, sel.frames)
@@ -317,7 +317,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     t0 = time.perf_counter()
     inputs = motion_inputs(req, loaded, sel)
     bake_s = time.perf_counter() - t0
-    by_frame = {fi.frame: fi for fi in inputs}
+    by_frame = {baked.frame: baked for baked in inputs}
     paths = {f: str(frame_path(job, loaded, f)) for f in frames}
 
     states = complete_frames(req, job, loaded.scene, out_dir, frames, paths, by_frame)
