@@ -158,3 +158,25 @@ def test_a_worker_refuses_a_scene_edited_after_the_job_started(tmp_path) -> None
     (result,) = render_frames(job, [frame])
     assert not result.ok and "changed after this render started" in (result.error or ""), result
     assert not (tmp_path / "out").exists()
+
+
+def test_the_task_path_is_where_the_frame_is_written(tmp_path: Path) -> None:
+    """Issue 26: the worker writes a frame where the task claimed and checked it
+    (TaskContext.paths), not at a path it computes again: a task given another name
+    inside the output folder gets its frame there, and nothing at the default name."""
+    from motion.pipeline.bake import evaluate_frames
+    from motion.pipeline.farm.claims import new_run_id
+    from motion.pipeline.farm.task import TaskContext, run_chunk
+    from motion.pipeline.render.job import RenderJob, frame_path, scene_hashes
+
+    loaded = load(tmp_path, STILL % "fixed")
+    out = tmp_path / "out"
+    job = RenderJob(str(loaded.path), {}, str(out), *scene_hashes(loaded))
+    inputs = evaluate_frames(loaded, [0])
+    chosen = out / "shots" / "renamed.0000.exr"
+    chosen.parent.mkdir(parents=True)
+    result = run_chunk(0, job, inputs, TaskContext(new_run_id(), {0: str(chosen)}))
+    assert [r.ok for r in result.results] == [True], result
+    assert result.results[0].path == str(chosen)
+    assert read_frame(chosen).meta["frame"] == 0
+    assert not frame_path(job, loaded, 0).exists()

@@ -66,7 +66,7 @@ def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: 
             if ctx.resume and is_complete(path, expected_meta(job, baked)):
                 out.already_done.append(baked.frame)
                 continue
-            results = render_frames(job, [baked])
+            results = render_frames(job, [baked], {baked.frame: path})  # the path claimed and checked above
             out.results.extend(results)
             fault = next((r.error for r in results if getattr(r, "disk_fault", False)), None)
             if fault:

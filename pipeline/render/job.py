@@ -19,7 +19,7 @@ import time
 from dataclasses import asdict, dataclass
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -172,12 +172,13 @@ def _root_cause(exc: BaseException) -> str:
     return message if inner is exc else f"{type(exc).__name__}: {message}"
 
 
-def render_frames(job: RenderJob, inputs: Sequence[BakedFrame]) -> list[FrameResult]:
+def render_frames(job: RenderJob, inputs: Sequence[BakedFrame], paths: Mapping[int, str] | None = None) -> list[FrameResult]:
     """Render and write each frame; a frame's failure is reported, not raised, so the
-    others of the task still finish."""
+    others of the task still finish. `paths`: where each frame goes, as the task claimed
+    and checked it (farm/task.py); without it, `frame_path`."""
     results = []
     for baked in inputs:
-        results.append(_render_one(job, baked))
+        results.append(_render_one(job, baked, Path(paths[baked.frame]) if paths else None))
     return results
 
 
@@ -262,14 +263,15 @@ def _write(out: Path, baked: BakedFrame, scene: Any, drawn: _Drawn, meta: dict[s
     )
 
 
-def _render_one(job: RenderJob, baked: BakedFrame) -> FrameResult:
-    """One frame through the worker's named steps: render, denoise, header, write."""
+def _render_one(job: RenderJob, baked: BakedFrame, out: Path | None = None) -> FrameResult:
+    """One frame through the worker's named steps: render, denoise, header, write (to
+    `out`, the task's path for it, else `frame_path`)."""
     t_setup = time.perf_counter()
     try:
         renderer, loaded, variant = _renderer(job)  # a fresh one every frame without the cache
         extra_setup = time.perf_counter() - t_setup
         drawn = _denoise(_draw(renderer, job, baked), loaded.scene)
-        out = frame_path(job, loaded, baked.frame)
+        out = out or frame_path(job, loaded, baked.frame)
         t_write = time.perf_counter()
         meta, standard = _header(job, baked, loaded, variant, drawn, out)
         _write(out, baked, loaded.scene, drawn, meta, standard)
