@@ -69,7 +69,7 @@ def cache_warm(scene: Path, preset: str | None) -> None:
     before = info(kernels_dir()).files
     first = load_scene(scene).scene.timeline.first
     with tempfile.TemporaryDirectory(prefix="motion-warm-") as tmp:
-        rep = run_render(RenderRequest(scene=scene, output_dir=Path(tmp), frames_spec=str(first), preset=preset, deliver="none",
+        rep = run_render(RenderRequest(scene=scene, output_dir=Path(tmp), frames=(first,), preset=preset, deliver="none",
                                        progress=False, report=Path(tmp) / "report.json"))
     compiled = sum(int(r.get("kernels_compiled") or 0) for r in rep.get("frames", []))
     after = info(kernels_dir()).files

@@ -44,7 +44,8 @@ def run_field_render(req: RenderRequest, fields: str, order: str) -> dict[str, A
     sub = dataclasses.replace(
         req,
         output_dir=out_dir / "fields",
-        frames_spec=",".join(str(f) for f in selected),
+        frames_spec=None,
+        frames=tuple(selected),
         fields=fo,
         scene_overrides={"timeline": {"fps": str(rate), "first": f0, "last": f1}},
     )

@@ -86,7 +86,12 @@ def select_frames(req: RenderRequest, loaded: LoadedScene, preset: Preset | None
     """The selection (--frames, else the preset's spread of the timeline), then this shard of it."""
     scene = loaded.scene
     timeline_frames = list(scene.timeline.timeline().frames)
-    if req.frames_spec:
+    if req.frames is not None:
+        selected = sorted(set(req.frames))
+        outside = [f for f in selected if not scene.timeline.first <= f <= scene.timeline.last]
+        if outside:
+            raise UsageError(f"frames {format_frames(outside)} are outside the timeline {scene.timeline.first}-{scene.timeline.last}")
+    elif req.frames_spec:
         selected = parse_frames(req.frames_spec, scene.timeline.first, scene.timeline.last)
     else:
         selected = spread(timeline_frames, preset.frame_count if preset else None)

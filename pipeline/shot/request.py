@@ -13,7 +13,8 @@ class RenderRequest:
 
     scene: Path
     output_dir: Path | None = None
-    frames_spec: str | None = None
+    frames_spec: str | None = None  # --frames as typed: '0-119x2'
+    frames: tuple[int, ...] | None = None  # frames already chosen by the caller (--fields, cache warm): no text round trip
     preset: str | None = None
     render_overrides: dict[str, Any] = field(default_factory=dict)
     output_overrides: dict[str, Any] = field(default_factory=dict)  # e.g. aovs (--aov)
