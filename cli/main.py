@@ -1,8 +1,10 @@
 """`motion` console entry point.
 
 Commands live one module per concern in this package; each module exposes `commands`,
-a list of click commands. Modules import their heavy dependencies (mitsuba, av,
-matplotlib) inside the command body so `motion --help` stays fast.
+a list of click commands, and COMMANDS below says which module holds each, so a command's
+module is imported only when it runs (LazyGroup): `motion validate` loads the scene stage
+and nothing of the renderer, the farm or the movies. Modules also import their heavy
+dependencies (mitsuba, av, matplotlib) inside the command body.
 
 `main()` is the one place that turns a `MotionError` into one line per problem on stderr
 and its exit code (2 for bad input, 3 for an incomplete job, 4 for a disk fault that
@@ -18,20 +20,46 @@ import click
 
 from motion.pipeline.errors import MotionError, SceneError
 
-# Order is the order of `motion --help`.
-COMMAND_MODULES = [
-    "render",
-    "validate",
-    "bake",
-    "plot",
-    "telecine",
-    "export",
-    "cache",
-    "info",
-]
+# Each command and the module of motion.cli that defines it (in its `commands` list), in
+# the order of `motion --help`. A command's module is imported only when that command runs
+# (or for --help): `motion validate` never imports the renderer's, the farm's or the
+# movies' stack (tests/test_cli_startup.py checks this table against the modules).
+COMMANDS: dict[str, str] = {
+    "render": "render",
+    "validate": "validate",
+    "bake": "bake",
+    "plot": "plot",
+    "telecine": "telecine",
+    "contact-sheet": "telecine",
+    "export": "export",
+    "view": "export",
+    "cache": "cache",
+    "info": "info",
+}
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+class LazyGroup(click.Group):
+    """A click group whose commands are imported on first use (COMMANDS)."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        """Every command, in COMMANDS order, that this build has."""
+        return [name for name in COMMANDS if self.get_command(ctx, name) is not None]
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        """The command `name`, importing its module now; None if unknown or not installed."""
+        module_name = COMMANDS.get(name)
+        if module_name is None:
+            return super().get_command(ctx, name)
+        try:
+            module = importlib.import_module(f"motion.cli.{module_name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"motion.cli.{module_name}":
+                return None  # that capability is not installed in this build
+            raise
+        return next((c for c in getattr(module, "commands", []) if c.name == name), None)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
 @click.version_option(package_name="motion-farm", prog_name="motion")
 @click.option("-v", "--verbose", count=True, help="More detail on stderr (-v: each frame as workers report it).")
 @click.option("-q", "--quiet", count=True, help="Less on stderr (-q: warnings and errors only, no progress; -qq: errors only).")
@@ -55,21 +83,6 @@ def configure_logging(verbose: int = 0, quiet: int = 0) -> None:
     logger.addHandler(handler)
     logger.setLevel(level)
     logger.propagate = False
-
-
-def _register() -> None:
-    for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(f"motion.cli.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name == f"motion.cli.{name}":
-                continue  # that capability is not installed in this build
-            raise
-        for command in getattr(module, "commands", []):
-            cli.add_command(command)
-
-
-_register()
 
 
 def main(argv: list[str] | None = None) -> int:
