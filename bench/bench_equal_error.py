@@ -242,6 +242,9 @@ def cycles_worker(spec_file: Path) -> None:
         bpy.ops.render.render(write_still=True)
         return time.perf_counter() - t0
 
+    if spec.get("one"):  # bench_startup.py: one frame in a fresh process, as a CI job renders it
+        render("one", int(spec["one"]), False)
+        return
     timings: dict[str, float] = {}
     render("warmup", 4, False)
     timings["reference"] = render("reference", spec["ref_spp"], False)

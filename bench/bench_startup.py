@@ -8,7 +8,12 @@ Jobs (each a fresh process, alternating, medians, with the CPU named):
   same job of bouncing-balls against the plain-Mitsuba script of its frames
   (bench/plain/bouncing_balls_smoke.py: import mitsuba, load_dict, render x3, write EXR);
 - a one-frame preview render of bouncing-balls;
-- `motion validate` of every example, `--dry-run` of bouncing-balls, `motion --help`.
+- `motion validate` of every example, `--dry-run` of bouncing-balls, `motion --help`;
+- with a Python that has `bpy` (`--cycles-python PY` or $BENCH_CYCLES_PYTHON; skipped
+  otherwise): one frame of the bench shot of bench_equal_error.py (100k-triangle terrain,
+  4 moving balls, sky + sun, 320x180, 16 spp, 180-degree shutter) in a fresh process, ours
+  (`motion -q render`) against Blender Cycles' (`bpy`, built from Python by
+  bench_equal_error's worker, CPU, 2 threads).
 With an empty kernel cache (a fresh DRJIT_CACHE_DIR and MOTION_CACHE_DIR for each run) the
 smoke job is measured again, with and without `motion cache warm` first.
 """
@@ -49,6 +54,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--no-cold", action="store_true", help="skip the empty-kernel-cache runs")
+    ap.add_argument("--cycles-python", default=os.environ.get("BENCH_CYCLES_PYTHON"), help="a Python with bpy: also time Cycles' one frame of the bench shot")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench-startup-"))
     env = dict(os.environ)
@@ -63,6 +69,17 @@ def main() -> None:
         jobs[f"validate {name}"] = [MOTION, "validate", str(ROOT / "scenes" / f"{name}.yaml")]
     jobs["--dry-run bouncing-balls"] = [MOTION, "-q", "render", str(ROOT / "scenes" / "bouncing-balls.yaml"), "--dry-run", "-o", str(tmp / "dry")]
     jobs["--help"] = [MOTION, "--help"]
+    if args.cycles_python:
+        import json
+
+        from bench_equal_error import FRAME, bench_shot, cycles_spec
+
+        (tmp / "shot").mkdir()
+        path = bench_shot(tmp / "shot", denoise=False)
+        spec = tmp / "shot" / "spec.json"
+        spec.write_text(json.dumps({**cycles_spec(path), "one": 16}))
+        jobs["one bench-shot frame, ours (16 spp)"] = [MOTION, "-q", "render", str(path), "--frames", str(FRAME), "-o", str(tmp / "shot-ours"), "--overwrite"]
+        jobs["one bench-shot frame, Cycles (16 spp)"] = [args.cycles_python, str(ROOT / "bench" / "bench_equal_error.py"), "--cycles-worker", str(spec)]
     for cmd in jobs.values():  # once, untimed: kernels compiled, files cached
         timed(cmd, env)
     times: dict[str, list[float]] = {k: [] for k in jobs}
@@ -77,6 +94,8 @@ def main() -> None:
     for name in jobs:
         med = statistics.median(times[name])
         ratio = f"  {med / anchor:5.2f}x plain" if name.startswith("ci-smoke bouncing-balls") or name.startswith("plain") else ""
+        if name == "one bench-shot frame, ours (16 spp)":
+            ratio = f"  {med / statistics.median(times['one bench-shot frame, Cycles (16 spp)']):5.2f}x Cycles"
         print(f"{name:42} {med:7.3f} s  {statistics.median(rss[name]):6.0f} MB{ratio}")
     if args.no_cold:
         return
