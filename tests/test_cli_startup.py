@@ -46,3 +46,13 @@ def test_the_command_table_names_every_command_of_every_module() -> None:
         for command in module.commands:
             assert COMMANDS.get(command.name) == module_name, f"{command.name} (motion.cli.{module_name}) is missing from cli/main.py COMMANDS"
     assert list(cli.list_commands(None)) == list(COMMANDS)  # type: ignore[arg-type]
+
+
+def test_a_smoke_render_imports_no_scipy(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A ci-smoke render of a scene with keyframed rotations, a look-at camera and rigid-body
+    dynamics (bouncing-balls, rendered inline) never imports scipy: rotations convert with
+    numpy, the follower's k-d tree is imported only by followers (scipy.spatial cost each
+    process about 0.15 s, most of a smoke job's start-up)."""
+    mods = _imported_after(["-q", "render", str(REPO / "scenes" / "bouncing-balls.yaml"), "--preset", "ci-smoke", "-o", str(tmp_path), "--no-progress"])
+    assert "scipy" not in mods
+    assert "motion.pipeline.render.job" in mods  # it did render in this process

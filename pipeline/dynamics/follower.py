@@ -9,10 +9,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..errors import SceneError
-from ..motion.plan import plan_for
 from .forces import drag
 
 if TYPE_CHECKING:
@@ -55,6 +53,8 @@ def simulate_follower(loaded: "LoadedScene", index: int, t_start: float, t_end: 
     it strays more than `tolerance` from the path."""
     obj = loaded.scene.objects[index]
     spec = obj.motion.follower
+    from ..motion.plan import plan_for  # here: planning imports scipy (0.15+ s), which only planned paths need
+
     path = plan_for(loaded, index)
     d = loaded.scene.dynamics
     dt = float(d.step)
@@ -88,6 +88,8 @@ def simulate_follower(loaded: "LoadedScene", index: int, t_start: float, t_end: 
     # deviation: distance to the nearest dense path sample (an upper bound of the distance
     # to the path, off by at most half the sample spacing)
     dense = path.samples()
+    from scipy.spatial import cKDTree  # here: scipy.spatial costs a process ~0.15 s to import, and only followers need it
+
     dev, _ = cKDTree(dense).query(xs)
     worst = int(np.argmax(dev))
     if dev[worst] > spec.tolerance:

@@ -1,7 +1,9 @@
 """Rotations from the scene file's forms to unit quaternions, and rotation segments.
 
-scipy's `Rotation` serves for the conversions (Euler in any order, axis-angle, matrices);
-segment interpolation is written with `quat_exp`/`quat_log` (pose.py) because scipy's
+The conversions (Euler in any order, axis-angle, matrices) follow scipy's `Rotation`
+exactly (same convention, composition order and sign; tests compare them to 1 ulp) but are
+written with numpy: importing scipy.spatial costs every process about 0.15 s (scipy.sparse
+and the k-d tree come with it), most of a small job's start-up. Segment interpolation is written with `quat_exp`/`quat_log` (pose.py) because scipy's
 `Slerp` cannot represent multi-turn segments (`turns:`) nor the cumulative spherical
 Bezier we use for catmull-rom and bezier keys (docs/motion.md, "Rotations").
 """
@@ -9,19 +11,54 @@ Bezier we use for catmull-rom and bezier keys (docs/motion.md, "Rotations").
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation as R
 
 from ..errors import RotationValueError
 from ..scene.motion_schema import Key
 from ..scene.types import AxisAngleRotation, EulerRotation, QuaternionRotation, Transform
-from .pose import quat_log, quat_mul, quat_conj, quat_normalize, quat_to_matrix
+from .pose import quat_conj, quat_log, quat_mul, quat_normalize, quat_rotate, quat_to_matrix
 
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 
 
+_AXIS = {"x": 1, "y": 2, "z": 3}  # the component of a (w, x, y, z) quaternion along each axis
+
+
 def euler_quat(angles_deg, order: str = "xyz") -> np.ndarray:  # type: ignore[no-untyped-def]
-    """Euler angles in degrees -> (w, x, y, z); lowercase order = extrinsic, uppercase = intrinsic."""
-    return R.from_euler(order, np.asarray(angles_deg, dtype=np.float64), degrees=True).as_quat(scalar_first=True)
+    """Euler angles in degrees -> (w, x, y, z); lowercase order = extrinsic (about the fixed
+    axes, the first letter first), uppercase = intrinsic (about the turning axes): scipy's
+    `Rotation.from_euler` convention and composition order, so the same quaternion, sign
+    included (tests/test_motion_rotation.py compares every order). Written with numpy
+    because importing scipy.spatial costs every process about 0.15 s (docs/motion.md)."""
+    half = np.radians(np.asarray(angles_deg, dtype=np.float64)) / 2.0
+    out = None
+    for i, axis in enumerate(order):
+        q = np.zeros(half.shape[:-1] + (4,))
+        q[..., 0] = np.cos(half[..., i])
+        q[..., _AXIS[axis.lower()]] = np.sin(half[..., i])
+        out = q if out is None else (quat_mul(q, out) if order.islower() else quat_mul(out, q))
+    return out  # type: ignore[return-value]
+
+
+def matrix_quat(m: np.ndarray) -> np.ndarray:
+    """The unit quaternion (w, x, y, z) of a 3x3 rotation matrix, by the largest of its
+    trace and diagonal (scipy's `Rotation.from_matrix` method and sign)."""
+    m = np.asarray(m, dtype=np.float64)
+    decision = (m[0, 0], m[1, 1], m[2, 2], m[0, 0] + m[1, 1] + m[2, 2])
+    choice = int(np.argmax(decision))
+    q = np.empty(4)  # x, y, z, w as scipy computes them
+    if choice != 3:
+        i, j, k = choice, (choice + 1) % 3, (choice + 2) % 3
+        q[i] = 1.0 - decision[3] + 2.0 * m[i, i]
+        q[j] = m[j, i] + m[i, j]
+        q[k] = m[k, i] + m[i, k]
+        q[3] = m[k, j] - m[j, k]
+    else:
+        q[0] = m[2, 1] - m[1, 2]
+        q[1] = m[0, 2] - m[2, 0]
+        q[2] = m[1, 0] - m[0, 1]
+        q[3] = 1.0 + decision[3]
+    q /= np.linalg.norm(q)
+    return np.array([q[3], q[0], q[1], q[2]])
 
 
 def axis_angle_quat(axis, angle_deg: float) -> np.ndarray:  # type: ignore[no-untyped-def]
@@ -104,7 +141,7 @@ def segment_rotvecs(quats: np.ndarray, turns: np.ndarray, axes: list[np.ndarray 
             axis = w[i] / angle
         elif axes[i + 1] is not None:
             # the key's axis is in the parent frame; at a zero arc q_i = q_{i+1}, so map it into the body frame
-            axis = R.from_quat(quats[i], scalar_first=True).inv().apply(axes[i + 1])
+            axis = quat_rotate(quat_conj(quat_normalize(quats[i])), np.asarray(axes[i + 1], dtype=np.float64))
         else:
             raise RotationValueError(f"keys[{i + 1}]: turns on a segment with no rotation needs an axis: give the key as axis + angle")
         w[i] = w[i] + 2.0 * np.pi * turns[i + 1] * axis
@@ -132,7 +169,7 @@ def look_at_quat(origin, target, up) -> np.ndarray:  # type: ignore[no-untyped-d
         left = np.cross(np.array([1.0, 0.0, 0.0]) if abs(forward[0]) < 0.9 else np.array([0.0, 0.0, 1.0]), forward)
     left /= np.linalg.norm(left)
     new_up = np.cross(forward, left)
-    return R.from_matrix(np.column_stack((left, new_up, forward))).as_quat(scalar_first=True)
+    return matrix_quat(np.column_stack((left, new_up, forward)))
 
 
 def direction_quat(direction) -> np.ndarray:  # type: ignore[no-untyped-def]
