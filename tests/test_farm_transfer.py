@@ -66,8 +66,8 @@ def test_cache_keeps_by_hash_refuses_damaged_bytes_and_reuses(tmp_path: Path) ->
 
     first = check_out([asset], fetch, tmp_path)
     again = check_out([asset], fetch, tmp_path)
-    assert first == again == {"tex.png": tmp_path / sha} and fetched == [sha]  # sent once, then a hit
-    assert (tmp_path / sha).read_bytes() == data
+    assert first == again == {"tex.png": tmp_path / f"{sha}.png"} and fetched == [sha]  # sent once, then a hit
+    assert (tmp_path / f"{sha}.png").read_bytes() == data
     with pytest.raises(AssetError, match="expected the file with hash"):
         store(hashlib.sha256(b"other").hexdigest(), data, tmp_path / "b")
     assert not (tmp_path / "b").exists() or not any((tmp_path / "b").iterdir())
@@ -77,12 +77,13 @@ def test_cache_is_held_to_its_cap_least_recently_used_first(tmp_path: Path, monk
     monkeypatch.setenv("MOTION_ASSET_CACHE_CAP", "2500")
     blobs = [bytes([i]) * 1000 for i in range(3)]
     assets = [ShippedAsset(f"{i}.bin", hashlib.sha256(b).hexdigest(), len(b)) for i, b in enumerate(blobs)]
-    store(assets[0].sha256, blobs[0], tmp_path)
-    store(assets[1].sha256, blobs[1], tmp_path)
-    old = os.stat(tmp_path / assets[1].sha256).st_atime - 100
-    os.utime(tmp_path / assets[1].sha256, (old, old))  # 1 used long ago; 0 used just now
+    store(assets[0].sha256, blobs[0], tmp_path, "0.bin")
+    store(assets[1].sha256, blobs[1], tmp_path, "1.bin")
+    entry = tmp_path / f"{assets[1].sha256}.bin"
+    old = os.stat(entry).st_atime - 100
+    os.utime(entry, (old, old))  # 1 used long ago; 0 used just now
     assert cached(assets[0], tmp_path) is not None
-    store(assets[2].sha256, blobs[2], tmp_path)
+    store(assets[2].sha256, blobs[2], tmp_path, "2.bin")
     assert cached(assets[1], tmp_path) is None and cached(assets[0], tmp_path) is not None and cached(assets[2], tmp_path) is not None
 
 
@@ -100,3 +101,38 @@ def test_full_cache_disk_is_one_line(tmp_path: Path) -> None:
         assert list(disk.iterdir()) == []  # no partial entry left to be a hit later
     finally:
         subprocess.run(["umount", str(disk)], check=True)
+
+
+def test_a_shipped_job_renders_the_same_pixels_without_the_scene_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The worker gets the parsed scene and the assets' bytes, not the folder: with the
+    scene's folder gone, the frame is bit-identical to the one rendered from the folder."""
+    import numpy as np
+    from PIL import Image
+
+    from motion.pipeline.bake import evaluate_frames
+    from motion.pipeline.farm.transfer import BytesByHash, ShippedScene
+    from motion.pipeline.frame_output import read_frame
+    from motion.pipeline.render import job as job_mod
+    from motion.pipeline.render.job import RenderJob, render_frames, scene_hashes
+
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "worker-cache"))
+    path = _scene(tmp_path / "shot", "sub/tex.png")
+    (tmp_path / "shot" / "sub").mkdir()
+    checker = (np.indices((8, 8)).sum(axis=0) % 2 * 200 + 30).astype(np.uint8)
+    Image.fromarray(np.stack([checker, checker[::-1], 255 - checker], axis=-1)).save(tmp_path / "shot" / "sub" / "tex.png")
+    text = path.read_text().replace("position: [0, 1, 9]", "position: [0.3, 0.3, 2.5], look_at: [0.3, 0.3, 0]").replace(", look_at: [0, 0, 0]}", "}")
+    path.write_text(text + "lights: [{type: constant, radiance: 1.0}]\nrender: {resolution: [32, 18], spp: 2, max_depth: 2, seed: 3}\n")
+    loaded = load_scene(path)
+    inputs = evaluate_frames(loaded, [0])
+    hashes = scene_hashes(loaded)
+    local = RenderJob(str(path), {}, str(tmp_path / "local"), *hashes, cache=False)
+    (a,) = render_frames(local, inputs)
+    assets = tuple(asset_manifest(loaded.scene, loaded.base_dir, path))
+    source = BytesByHash({x.sha256: (loaded.base_dir / x.rel).read_bytes() for x in assets})
+    (tmp_path / "shot").rename(tmp_path / "hidden")  # the worker cannot see the folder now
+    job_mod._WORKER.clear()
+    shipped = RenderJob(str(path), {}, str(tmp_path / "shipped"), *hashes, shipped=ShippedScene(loaded, assets, source))
+    (b,) = render_frames(shipped, inputs)
+    assert a.ok and b.ok, (a.error, b.error)
+    pa, pb = read_frame(a.path).rgba, read_frame(b.path).rgba
+    assert np.array_equal(pa, pb) and float(pa[..., :3].std()) > 0.01  # the texture is really seen

@@ -9,15 +9,16 @@ from __future__ import annotations
 
 import hashlib
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Sequence
 
 from ..cache import cache_root, enforce_cap
 from ..errors import AssetError
 from ..files import confined, write_atomic
 from ..limits import env_size
 from ..scene.checks import named_files
+from ..scene.loader import LoadedScene
 from ..scene.schema import Scene
 from ..scene.source import yaml_path
 
@@ -63,8 +64,15 @@ def shipped_cache_dir() -> Path:
     return cache_root() / "shipped"
 
 
-def store(sha256: str, data: bytes, folder: Path | None = None) -> Path:
-    """Keep `data` in the content-addressed cache as `<folder>/<sha256>` and return its path.
+def _entry(folder: Path, sha256: str, rel: str) -> Path:
+    """A cache entry's path: the hash, with the suffix the scene's file had (the mesh and
+    image loaders choose their reader by it)."""
+    return folder / (sha256 + Path(rel).suffix.lower())
+
+
+def store(sha256: str, data: bytes, folder: Path | None = None, rel: str = "") -> Path:
+    """Keep `data` in the content-addressed cache as `<folder>/<sha256><suffix of rel>` and
+    return its path.
     Bytes that do not hash to `sha256` (damaged in transit) raise AssetError and are not
     kept; a full cache disk raises the one-line DiskFaultError (pipeline/files.py); the cache
     is then held to $MOTION_ASSET_CACHE_CAP, least recently used first, keeping this entry."""
@@ -72,7 +80,7 @@ def store(sha256: str, data: bytes, folder: Path | None = None) -> Path:
     got = hashlib.sha256(data).hexdigest()
     if got != sha256:
         raise AssetError(f"shipped asset {sha256[:16]}: received {len(data)} bytes hashing to {got[:16]}; expected the file with hash {sha256[:16]}")
-    target = folder / sha256
+    target = _entry(folder, sha256, rel)
     write_atomic(target, data, "caching a shipped asset")
     enforce_cap(folder, env_size("MOTION_ASSET_CACHE_CAP"), keep=target)
     return target
@@ -81,7 +89,7 @@ def store(sha256: str, data: bytes, folder: Path | None = None) -> Path:
 def cached(asset: ShippedAsset, folder: Path | None = None) -> Path | None:
     """The cached copy of `asset` when this worker already holds it whole (marked as just
     used, so the cap evicts others first), else None."""
-    path = (folder if folder is not None else shipped_cache_dir()) / asset.sha256
+    path = _entry(folder if folder is not None else shipped_cache_dir(), asset.sha256, asset.rel)
     try:
         if path.stat().st_size != asset.size:
             return None
@@ -98,5 +106,63 @@ def check_out(assets: Iterable[ShippedAsset], fetch: Callable[[str], bytes], fol
     out: dict[str, Path] = {}
     for asset in assets:
         path = cached(asset, folder)
-        out[asset.rel] = path if path is not None else store(asset.sha256, fetch(asset.sha256), folder)
+        out[asset.rel] = path if path is not None else store(asset.sha256, fetch(asset.sha256), folder, asset.rel)
     return out
+
+
+def checkout_folder(assets: Iterable[ShippedAsset], folder: Path | None = None) -> Path:
+    """Where a job's checkout lives on this worker: one folder per manifest (the same
+    assets by the same names share it across jobs), beside the cached entries."""
+    h = hashlib.sha256("\n".join(sorted(f"{a.rel}\0{a.sha256}" for a in assets)).encode()).hexdigest()[:24]
+    return (folder if folder is not None else shipped_cache_dir()) / "checkouts" / h
+
+
+def localize(loaded: LoadedScene, assets: Sequence[ShippedAsset], fetch: Callable[[str], bytes], folder: Path | None = None) -> LoadedScene:
+    """The parsed scene as this worker renders it: every asset checked out of the cache
+    (`check_out`) and linked under its scene-relative name in a checkout folder, which
+    becomes the scene's folder, so each path the scene names resolves to the cached copy.
+    The scene is not parsed again. A job whose assets alone exceed $MOTION_ASSET_CACHE_CAP
+    raises AssetError (the cap would evict a file the job is about to read)."""
+    cap = env_size("MOTION_ASSET_CACHE_CAP")
+    total = sum(a.size for a in assets)
+    if total > cap:
+        raise AssetError(f"{loaded.path}: the scene's {len(assets)} files take {total} bytes, more than MOTION_ASSET_CACHE_CAP={cap} on this worker; raise it")
+    root = folder if folder is not None else shipped_cache_dir()
+    paths = check_out(assets, fetch, root)
+    home = checkout_folder(assets, root)
+    for rel, target in paths.items():
+        link = home / rel
+        if not confined(home, link):
+            raise AssetError(f"{loaded.path}: {rel} lies outside the scene's folder; a shipped job uses only files inside it")
+        if link.is_symlink() and link.resolve() == target.resolve():
+            continue
+        link.parent.mkdir(parents=True, exist_ok=True)
+        tmp = link.with_name(f".{link.name}.{os.getpid()}.link")
+        tmp.unlink(missing_ok=True)
+        tmp.symlink_to(target.resolve())
+        os.replace(tmp, link)  # another process checking out the same manifest sees one link or the other
+    return replace(loaded, path=home / loaded.path.name)
+
+
+class BytesByHash(dict):  # type: ignore[type-arg]
+    """Asset bytes by content hash held in this process: the source `localize` fetches from
+    when the client's own process (or a local worker it forked) renders a shipped job."""
+
+    def __call__(self, sha256: str) -> bytes:
+        """The bytes with this hash."""
+        return bytes(self[sha256])
+
+
+@dataclass
+class ShippedScene:
+    """A job's scene as it travels in ship mode: the parsed scene (no worker parses it
+    again), its asset manifest, and where a worker fetches the bytes it lacks from
+    (`BytesByHash` in-process; on Dask, the scattered futures: `ScatteredAssets`)."""
+
+    loaded: LoadedScene
+    assets: tuple[ShippedAsset, ...]
+    fetch: Callable[[str], bytes] = field(repr=False)
+
+    def checkout(self) -> LoadedScene:
+        """The scene with its assets resolved to this worker's cached copies (`localize`)."""
+        return localize(self.loaded, self.assets, self.fetch)

@@ -19,7 +19,7 @@ import time
 from dataclasses import asdict, dataclass
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, Protocol, Sequence
 
 import numpy as np
 
@@ -47,11 +47,21 @@ class RenderJob:
     threads: int | None = None
     variant: str = "auto"
     fields: str | None = None  # tff/bff: each frame is a field, only its rows are drawn
+    shipped: SceneSource | None = None  # ship mode: the parsed scene and its assets travel with the job
 
     @property
     def key(self) -> str:
         """What a worker's cached renderer is keyed on (settings, threads, variant)."""
         return f"{self.settings_hash}:{self.threads}:{self.variant}"
+
+
+class SceneSource(Protocol):
+    """A job's scene carried to the worker instead of read by path (farm/transfer.py's
+    ShippedScene): `checkout()` gives the parsed scene with its assets on this worker."""
+
+    def checkout(self) -> LoadedScene:
+        """The parsed scene, its asset paths resolved on this worker."""
+        ...
 
 
 @dataclass
@@ -146,8 +156,14 @@ def _renderer(job: RenderJob) -> tuple[FrameRenderer, LoadedScene, str]:
     import gc
 
     gc.collect()
-    loaded = load_scene(job.scene_path, job.overrides, assets=False)  # the main process checked them
-    scene_hash, settings_hash = scene_hashes(loaded)
+    if job.shipped is not None:
+        # ship mode: the client parsed and hashed this very scene; the worker cannot see its
+        # file, so there is nothing to re-read or compare (parsed once, on the client)
+        loaded = job.shipped.checkout()
+        scene_hash, settings_hash = job.scene_hash, job.settings_hash
+    else:
+        loaded = load_scene(job.scene_path, job.overrides, assets=False)  # the main process checked them
+        scene_hash, settings_hash = scene_hashes(loaded)
     if (scene_hash, settings_hash) != (job.scene_hash, job.settings_hash):
         from ..errors import SceneChangedError
 
