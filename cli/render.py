@@ -40,6 +40,7 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--motion", "motion_file", type=click.Path(dir_okay=False, path_type=Path), help="Baked motion from `motion bake` (.json/.npz) instead of baking here.")
 @click.option("--workers", type=click.IntRange(min=1), help="Local worker processes (default: one per core, at most 8 and at most one per frame); drjit threads are divided among them.")
 @click.option("--scheduler", help="Dask cluster: tcp://HOST:PORT or a scheduler file (instead of local workers).")
+@click.option("--transfer", type=click.Choice(["auto", "ship", "shared"]), default="auto", show_default=True, help="With --scheduler: ship the parsed scene and its assets to the workers and bring frames home (no shared disk), use the shared folders, or auto (ship when a worker cannot read the scene file).")
 @click.option("--threads", type=click.IntRange(min=1), help="drjit threads per worker (default: cores // workers locally, all cores on a Dask worker).")
 @click.option("--chunk-size", type=click.IntRange(min=1), help="Frames per task (default: from frame and worker count; configs/farm.yaml).")
 @click.option("--retries", type=click.IntRange(min=0), help="Extra attempts for a failed chunk (default: configs/farm.yaml).")
@@ -75,6 +76,7 @@ def render(
     motion_file: Path | None,
     workers: int | None,
     scheduler: str | None,
+    transfer: str,
     threads: int | None,
     chunk_size: int | None,
     retries: int | None,
@@ -121,6 +123,7 @@ def render(
         shard=shard,
         workers=workers,
         scheduler=scheduler,
+        transfer=transfer,
         threads=threads,
         chunk_size=chunk_size,
         retries=retries,

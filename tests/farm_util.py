@@ -80,6 +80,17 @@ def leftovers(folder: Path) -> list[Path]:
     return tmps + claims
 
 
+def stop_processes(procs: list[subprocess.Popen]) -> None:
+    """Terminate a test cluster's processes (last started first), killing any that linger."""
+    for p in reversed(procs):
+        p.terminate()
+    for p in procs:
+        try:
+            p.wait(10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+
+
 def kill(pid: int, sig: int = signal.SIGKILL) -> None:
     try:
         os.kill(pid, sig)

@@ -9,7 +9,7 @@ import subprocess
 
 import pytest
 
-from farm_util import DASK, SCENE, SLOW, TINY, frames_in, kill, leftovers, motion, report, start_motion, wait_for
+from farm_util import DASK, SCENE, SLOW, TINY, frames_in, kill, leftovers, motion, report, start_motion, stop_processes, wait_for
 from motion.pipeline.frame_output import read_frame
 
 pytestmark = pytest.mark.render
@@ -50,13 +50,7 @@ def cluster(tmp_path_factory):
         wait_for(lambda: _try(lambda: _workers_connected(address) == 2), 60, "two dask workers")
         yield {"address": address, "workers": workers}
     finally:
-        for p in reversed(procs):
-            p.terminate()
-        for p in procs:
-            try:
-                p.wait(10)
-            except subprocess.TimeoutExpired:
-                p.kill()
+        stop_processes(procs)
 
 
 def _try(fn) -> bool:

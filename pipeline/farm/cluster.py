@@ -9,6 +9,10 @@ frames are written by the worker straight into the shared output folder, and onl
 small `ChunkResult` travels back. Progress moves per frame as with local workers: the task
 logs a `FrameWritten` event to the scheduler as each frame is written
 (`Worker.log_event`), and the client's topic subscription hands it to the farm.
+
+Without a shared disk (`--transfer ship`, farm/transfer.py) the job carries its parsed
+scene, the assets go to each worker once as scattered futures, the client claims the
+frames, and the worker returns each EXR's bytes for the client to publish.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from ..errors import UsageError
 from ..bake import BakedFrame
 from ..render.job import RenderJob
 from .executor import Done, Event, FrameWritten, Lost
+from .claims import release
 from .task import ChunkResult, TaskContext, run_chunk
 
 FRAME_TOPIC = "motion-frame-written"  # the scheduler's event topic for per-frame progress
@@ -43,12 +48,25 @@ def run_chunk_reporting(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFra
     return run_chunk(chunk_id, job, inputs, ctx, on_frame=written)
 
 
+def run_chunk_shipped(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext, topic: str, payload: dict[str, bytes]) -> ChunkResult:
+    """Ship mode (`--transfer ship`): `run_chunk_reporting` into the worker's own temporary
+    folder, with the asset bytes its cache lacked (`payload`: Dask resolved the scattered
+    futures into bytes before the task ran); the finished EXRs' bytes return in the result
+    (farm/transfer.py)."""
+    from .transfer import run_chunk_away, with_payload
+
+    return run_chunk_away(lambda c, j, i, x: run_chunk_reporting(c, j, i, x, topic), chunk_id, with_payload(job, payload), inputs, ctx)
+
+
 class DaskExecutor:
     """Chunks on a Dask cluster; workers that leave are seen on the next poll."""
 
     kind = "dask"
 
     def __init__(self, address: str | None = None, scheduler_file: str | None = None, connect_timeout_s: float = 30.0, wait_workers_s: float = 60.0) -> None:
+        """Connect to the scheduler and wait for a first worker. A job that carries its
+        scene (`RenderJob.shipped`, ship mode) has its assets scattered once, its chunks
+        rendered away from the output folder and its frames published here on return."""
         from distributed import Client
 
         try:
@@ -67,6 +85,9 @@ class DaskExecutor:
         self.client.subscribe_topic(self._topic, self._on_frame_event)
         self._live: list[str] = []
         self._refreshed = 0.0
+        self._ship: Any = None  # transfer.Shipment of a job that carries its inputs (ship mode)
+        self._claimed: dict[int, Any] = {}  # chunk id -> what the client settled before sending (ship mode)
+        self._ready: list[Event] = []  # chunks settled without a task (every frame held, done or refused)
         self._refresh(force=True)
 
     def _on_frame_event(self, event: tuple[float, Any]) -> None:
@@ -96,14 +117,19 @@ class DaskExecutor:
         return True  # workers may join the cluster at any time
 
     def submit(self, worker: str, chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext) -> None:
-        """Run one chunk on `worker` (pinned there, no work stealing)."""
+        """Run one chunk on `worker` (pinned there, no work stealing); a shipped job's
+        assets are scattered on its first chunk, once for the whole job."""
+        if job.shipped is not None:
+            self._submit_shipped(worker, chunk_id, job, inputs, ctx)
+            return
+        self._send(worker, chunk_id, run_chunk_reporting, job, list(inputs), ctx, self._topic)
+
+    def _send(self, worker: str, chunk_id: int, task: Any, *args: Any) -> None:
+        """Submit `task(chunk_id, *args)` pinned to `worker` (no stealing, no Dask retries)."""
         fut = self.client.submit(
-            run_chunk_reporting,
+            task,
             chunk_id,
-            job,
-            list(inputs),
-            ctx,
-            self._topic,
+            *args,
             key=f"motion-chunk-{chunk_id}-{uuid.uuid4().hex[:8]}",
             workers=[worker],
             allow_other_workers=False,
@@ -112,13 +138,47 @@ class DaskExecutor:
         )
         self._running[worker] = (fut, chunk_id)
 
+    def _submit_shipped(self, worker: str, chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext) -> None:
+        """Ship mode: claim and resume-check the chunk's frames here (the worker cannot see
+        the output folder), then send the frames still to render with the assets `worker`
+        lacks (scattered once per job: `transfer.Shipment`)."""
+        from .transfer import Shipment, claim_home, publish_home
+
+        if self._ship is None or self._ship.given is not job:
+            self._ship = Shipment(self.client, job)
+        todo, pre = claim_home(job, inputs, ctx)
+        if not todo or pre.disk_fault:
+            for b in todo:
+                release(ctx.paths[b.frame], ctx.run_id)
+            self._ready.append(Done(worker, chunk_id, publish_home(pre, ChunkResult(chunk_id, pre.worker), job, ctx)))
+            return
+        self._claimed[chunk_id] = (pre, ctx)
+        self._send(worker, chunk_id, run_chunk_shipped, self._ship.sent, todo, ctx, self._topic, self._ship.payload_for(self.client, worker))
+
+    def _finished(self, worker: str, chunk_id: int, fut: Any) -> Event:
+        """A chunk's result; a shipped chunk's frames are published under the output folder first."""
+        result = fut.result()
+        claimed = self._claimed.pop(chunk_id, None)
+        if claimed is not None:
+            from .transfer import publish_home
+
+            result = publish_home(claimed[0], result, self._ship.given, claimed[1])
+        return Done(worker, chunk_id, result)
+
+    def _forget(self, worker: str, chunk_id: int) -> None:
+        """A shipped chunk that did not come back: its worker is asked again what it holds
+        (it may have restarted); the farm releases the claims and retries the frames."""
+        self._claimed.pop(chunk_id, None)
+        if self._ship is not None:
+            self._ship.forget(worker)
+
     def poll(self, timeout: float) -> list[Event]:
         """Wait up to `timeout` s; the frames written, the chunks finished or failed since,
         and workers that joined or left."""
         from distributed import wait
 
         futs = [f for f, _ in self._running.values()]
-        if not futs:
+        if not futs and not self._ready:
             time.sleep(timeout)
         # wait for a finished chunk, in slices so that a frame a worker logged wakes us too
         deadline = time.monotonic() + timeout
@@ -129,13 +189,14 @@ class DaskExecutor:
             except Exception:  # a timeout (dask's own TimeoutError type)
                 continue
         self._refresh()
-        events: list[Event] = []
+        events: list[Event] = self._ready
+        self._ready = []
         while self._written:
             events.append(self._written.popleft())
         for w, (fut, chunk_id) in list(self._running.items()):
             if fut.status == "finished":
                 del self._running[w]
-                events.append(Done(w, chunk_id, fut.result()))
+                events.append(self._finished(w, chunk_id, fut))
             elif fut.status in ("error", "cancelled", "lost"):
                 del self._running[w]
                 try:
@@ -143,10 +204,12 @@ class DaskExecutor:
                     why = f"{type(exc).__name__}: {exc}"
                 except Exception as e:  # cancelled futures raise on .exception()
                     why = f"task {fut.status} ({type(e).__name__})"
+                self._forget(w, chunk_id)
                 events.append(Lost(w, chunk_id, f"on {w}: {why}"))
             elif w not in self._live:
                 del self._running[w]
                 fut.cancel()
+                self._forget(w, chunk_id)
                 events.append(Lost(w, chunk_id, f"worker {w} left the cluster"))
         return events
 
@@ -155,6 +218,7 @@ class DaskExecutor:
         entry = self._running.pop(worker, None)
         if entry is not None:
             entry[0].cancel()
+            self._forget(worker, entry[1])
         if reason == "timeout":
             # a running Python task cannot be cancelled: restart that worker's process
             try:

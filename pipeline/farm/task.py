@@ -37,6 +37,35 @@ class ChunkResult:
     already_done: list[int] = field(default_factory=list)
     seconds: float = 0.0
     disk_fault: str | None = None  # the disk refused a write: the chunk stopped there
+    frame_bytes: dict[int, bytes] = field(default_factory=dict)  # ship mode: finished EXRs travelling home
+
+
+def claim_frame(job: RenderJob, baked: BakedFrame, ctx: TaskContext, me: Claimant, out: ChunkResult) -> bool:
+    """Claim one frame of a chunk before rendering it: True when this process now holds its
+    claim and the frame needs rendering. Otherwise `out` says why not (a link leading out of
+    the output folder, a claim another render holds, or a complete frame with `resume`,
+    whose claim is released again). A disk refusing the claim raises DiskFaultError. Run by
+    the worker (`run_chunk`) or, for a shipped job, by the client (`transfer.claim_home`)."""
+    path = ctx.paths[baked.frame]
+    if not (confined(job.output_dir, path) and confined(job.output_dir, claim_path(path))):
+        # a link planted in the output folder after the job's checks: nothing is written through it
+        out.results.append(FrameResult(baked.frame, "", False, worker_id(), error=f"{path}: a link on its way leads outside the output folder {job.output_dir}; not written"))
+        return False
+    ok, holder = try_claim(path, me, ctx.stale_after_s)
+    if not ok:
+        owner = holder or {}
+        out.held_elsewhere[baked.frame] = f"{owner.get('host', '?')}:{owner.get('pid', '?')} (run {owner.get('run_id', '?')})"
+        return False
+    try:
+        remove_partials(path)
+        if ctx.resume and is_complete(path, expected_meta(job, baked)):
+            out.already_done.append(baked.frame)
+            release(path, ctx.run_id)
+            return False
+    except BaseException:
+        release(path, ctx.run_id)
+        raise
+    return True
 
 
 def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext, on_frame: Callable[[int, float], None] | None = None) -> ChunkResult:
@@ -48,24 +77,13 @@ def run_chunk(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: 
     out = ChunkResult(chunk_id=chunk_id, worker=worker_id())
     for baked in inputs:
         path = ctx.paths[baked.frame]
-        if not (confined(job.output_dir, path) and confined(job.output_dir, claim_path(path))):
-            # a link planted in the output folder after the job's checks: nothing is written through it
-            out.results.append(FrameResult(baked.frame, "", False, worker_id(), error=f"{path}: a link on its way leads outside the output folder {job.output_dir}; not written"))
-            continue
         try:
-            ok, holder = try_claim(path, me, ctx.stale_after_s)
+            if not claim_frame(job, baked, ctx, me, out):
+                continue
         except DiskFaultError as exc:
             out.disk_fault = str(exc)  # the farm stops the job; the rest of the chunk waits
             break
-        if not ok:
-            owner = holder or {}
-            out.held_elsewhere[baked.frame] = f"{owner.get('host', '?')}:{owner.get('pid', '?')} (run {owner.get('run_id', '?')})"
-            continue
         try:
-            remove_partials(path)
-            if ctx.resume and is_complete(path, expected_meta(job, baked)):
-                out.already_done.append(baked.frame)
-                continue
             results = render_frames(job, [baked], {baked.frame: path})  # the path claimed and checked above
             out.results.extend(results)
             fault = next((r.error for r in results if getattr(r, "disk_fault", False)), None)

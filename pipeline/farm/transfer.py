@@ -1,26 +1,36 @@
-"""Jobs that carry their inputs (docs/farm.md, "A farm without a shared disk"): the client
-lists every file the scene names by SHA-256 content hash (refusing, before anything is
-read or sent, a file outside the scene's folder); each worker keeps the files it receives in
-an on-disk content-addressed cache bounded by $MOTION_ASSET_CACHE_CAP and reused across jobs,
-and resolves the scene's relative asset paths to its cached copies. The bytes travel by
-Dask's own transfer (`client.scatter`); this module holds the two ends that need no cluster."""
+"""Jobs that carry their inputs, frames that come home (docs/farm.md, "A farm without a
+shared disk"). The client lists every file the scene names by SHA-256 content hash
+(refusing, before anything is read or sent, a file outside the scene's folder) and scatters
+the bytes once per job through Dask (`Shipment`); each worker keeps what it receives in an
+on-disk content-addressed cache bounded by $MOTION_ASSET_CACHE_CAP and reused across jobs,
+and resolves the scene's relative asset paths to its cached copies (`localize`). Chunks
+render into the worker's own temporary folder and return the checked EXR bytes
+(`run_chunk_away`); the client claims, resume-checks and publishes the frames under `-o`
+(`claim_home`, `publish_home`). `--transfer auto` asks one worker to hash the scene file
+(`workers_see`)."""
 
 from __future__ import annotations
 
 import hashlib
 import os
+import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 from ..cache import cache_root, enforce_cap
-from ..errors import AssetError
-from ..files import confined, write_atomic
+from ..bake import BakedFrame
+from ..errors import AssetError, DiskFaultError
+from ..frame_output import is_complete
+from ..render.job import FrameResult, RenderJob, expected_meta
+from ..files import confined, write_atomic, writing
 from ..limits import env_size
 from ..scene.checks import named_files
 from ..scene.loader import LoadedScene
 from ..scene.schema import Scene
 from ..scene.source import yaml_path
+from .claims import release
+from .task import ChunkResult, TaskContext, claim_frame
 
 
 @dataclass(frozen=True)
@@ -166,3 +176,189 @@ class ShippedScene:
     def checkout(self) -> LoadedScene:
         """The scene with its assets resolved to this worker's cached copies (`localize`)."""
         return localize(self.loaded, self.assets, self.fetch)
+
+
+def ship_job(job: RenderJob, loaded: LoadedScene, scene_file: str | Path) -> RenderJob:
+    """The job as ship mode sends it: the parsed scene and its asset manifest ride along
+    (their bytes in-process until an executor scatters them). Raises AssetError for a file
+    outside the scene's folder before anything is read or sent."""
+    assets = tuple(asset_manifest(loaded.scene, loaded.base_dir, scene_file))
+    data = BytesByHash({a.sha256: (loaded.base_dir / a.rel).read_bytes() for a in assets})
+    return replace(job, shipped=ShippedScene(loaded, assets, data))
+
+
+def missing_assets(assets: Sequence[ShippedAsset]) -> list[str]:
+    """The hashes of `assets` this worker's cache does not hold whole (run on a worker by
+    `client.run` before its first chunk of a job: only those bytes are sent to it)."""
+    return sorted({a.sha256 for a in assets if cached(a) is None})
+
+
+def with_payload(job: RenderJob, payload: dict[str, bytes]) -> RenderJob:
+    """The shipped job as a worker runs it: the asset bytes that came with its chunk (those
+    its cache lacked) are where `localize` fetches from."""
+    shipped = job.shipped
+    if not isinstance(shipped, ShippedScene):
+        return job
+    return replace(job, shipped=replace(shipped, fetch=BytesByHash(payload)))
+
+
+class Shipment:
+    """The client's side of one shipped job on a Dask cluster: the asset bytes scattered
+    once (`client.scatter`; the futures are held while the job runs, the cluster drops
+    data nobody holds), the job as sent (the manifest without the bytes), and which workers
+    already hold every asset. A worker's first chunk asks its cache what it lacks
+    (`missing_assets`, one `client.run`) and takes exactly those futures as arguments, so
+    Dask moves each asset to each worker once (from the client or another worker), never
+    once per frame, and not at all to a worker whose disk cache kept it from an earlier job."""
+
+    def __init__(self, client: Any, job: RenderJob) -> None:
+        """Scatter the job's asset bytes to the cluster."""
+        shipped = job.shipped
+        if not isinstance(shipped, ShippedScene) or not isinstance(shipped.fetch, BytesByHash):
+            raise TypeError("Shipment needs a job made by ship_job")
+        self.given = job
+        hashes = sorted(shipped.fetch)
+        futures = client.scatter([shipped.fetch[h] for h in hashes], hash=False) if hashes else []
+        self.futures: dict[str, Any] = dict(zip(hashes, futures))
+        self.sent = with_payload(job, {})
+        self.stocked: set[str] = set()  # workers that hold every asset (cache or sent)
+        self.bytes_sent = 0  # asset bytes handed to workers (each once per worker)
+
+    def payload_for(self, client: Any, worker: str) -> dict[str, Any]:
+        """The scattered futures `worker` still needs (empty once it holds every asset)."""
+        if worker in self.stocked:
+            return {}
+        shipped = self.given.shipped
+        assert isinstance(shipped, ShippedScene)  # made so in __init__
+        try:
+            lacking = client.run(missing_assets, shipped.assets, workers=[worker]).get(worker, sorted(self.futures))
+        except Exception:  # the worker left or cannot answer: send everything (the chunk is retried if it is gone)
+            lacking = sorted(self.futures)
+        self.stocked.add(worker)
+        sizes = {a.sha256: a.size for a in shipped.assets}
+        self.bytes_sent += sum(sizes[h] for h in lacking)
+        return {h: self.futures[h] for h in lacking}
+
+    def forget(self, worker: str) -> None:
+        """A worker lost a chunk (it may have restarted, its cache gone): ask it again."""
+        self.stocked.discard(worker)
+
+
+def claim_home(job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext) -> tuple[list[BakedFrame], ChunkResult]:
+    """On the client, before a shipped chunk is sent: the usual claims and resume check on
+    the output folder (`task.claim_frame`), which the workers cannot see. Returns the frames
+    to render remotely (claimed by this run) and a result holding the others (held by
+    another render, already complete, refused); a disk fault stops there."""
+    from ..render.job import worker_id
+    from .claims import Claimant
+
+    me = Claimant.here(ctx.run_id)
+    pre = ChunkResult(chunk_id=-1, worker=worker_id())
+    todo: list[BakedFrame] = []
+    for baked in inputs:
+        try:
+            if claim_frame(job, baked, ctx, me, pre):
+                todo.append(baked)
+        except DiskFaultError as exc:
+            pre.disk_fault = str(exc)
+            break
+    return todo, pre
+
+
+def run_chunk_away(run: Callable[[int, RenderJob, Sequence[BakedFrame], TaskContext], ChunkResult], chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext) -> ChunkResult:
+    """A chunk on a worker that cannot see the output folder: `run` renders it into a
+    temporary folder of the worker's own (the client holds the real claims), each finished
+    EXR is read back (`is_complete`: whole, and its header carries this job's hashes) and
+    its bytes go home in the result for the client to publish (`publish_home`). A disk
+    fault here is this worker's own disk (its asset cache, its temporary folder): the frame
+    fails with that one line and is retried on another worker; only the client's output
+    disk stops the job."""
+    with tempfile.TemporaryDirectory(prefix="motion-ship-") as tmp:
+        here = {b.frame: str(Path(tmp) / Path(ctx.paths[b.frame]).name) for b in inputs}
+        res = run(chunk_id, replace(job, output_dir=tmp), inputs, replace(ctx, paths=here, resume=False))
+        by_frame = {b.frame: b for b in inputs}
+        for r in res.results:
+            if r.disk_fault or not r.ok:
+                if r.disk_fault:
+                    r.disk_fault, r.error = False, f"on worker {res.worker}: {r.error}"
+                continue
+            if not is_complete(r.path, expected_meta(job, by_frame[r.frame])):
+                r.ok, r.error = False, f"frame {r.frame}: the EXR written on worker {res.worker} did not read back whole; not sent"
+                continue
+            res.frame_bytes[r.frame] = Path(r.path).read_bytes()
+        if res.disk_fault:
+            done = {r.frame for r in res.results}
+            res.results.extend(FrameResult(b.frame, "", False, res.worker, error=f"on worker {res.worker}: {res.disk_fault}") for b in inputs if b.frame not in done)
+            res.disk_fault = None
+    return res
+
+
+def publish_home(pre: ChunkResult, res: ChunkResult, job: RenderJob, ctx: TaskContext) -> ChunkResult:
+    """On the client: publish each frame a shipped chunk brought home at its planned path
+    under the output folder, atomically and read back (pipeline/files.py), release this
+    run's claims, and merge what `claim_home` settled before sending. A frame reported
+    written whose bytes did not arrive is failed (the farm retries it as after a lost
+    worker); a disk fault on the output folder marks the result so the farm stops as for
+    any disk fault."""
+    res.held_elsewhere.update(pre.held_elsewhere)
+    res.already_done.extend(pre.already_done)
+    res.results.extend(pre.results)
+    res.disk_fault = res.disk_fault or pre.disk_fault
+    unsent: list[FrameResult] = []
+    for r in res.results:
+        data = res.frame_bytes.pop(r.frame, None)
+        path = ctx.paths[r.frame]
+        try:
+            if res.disk_fault and r.ok:
+                unsent.append(r)  # the output disk refused an earlier frame: not rendered, kept for a rerun
+                continue
+            if not r.ok:
+                continue
+            if data is None:
+                r.ok, r.error = False, f"frame {r.frame}: rendered on {res.worker} but its EXR was lost on the way back"
+            elif not confined(job.output_dir, path):
+                r.ok, r.error = False, f"{path}: a link on its way leads outside the output folder {job.output_dir}; not written"
+            else:
+                with writing(path, "publishing a frame a worker sent", verify=lambda tmp, data=data: tmp.read_bytes() == data) as tmp:
+                    tmp.write_bytes(data)
+                r.path = path
+        except DiskFaultError as exc:
+            r.ok, r.error, r.disk_fault = False, str(exc), True
+            res.disk_fault = str(exc)
+        finally:
+            release(path, ctx.run_id)
+    res.frame_bytes.clear()
+    res.results = [r for r in res.results if r not in unsent]
+    return res
+
+
+def file_sha256_or_none(path: str) -> str | None:
+    """The file's SHA-256, or None when this process cannot read it (run on a worker by
+    `workers_see`)."""
+    try:
+        return _sha256_file(Path(path))
+    except OSError:
+        return None
+
+
+def workers_see(target: dict[str, Any], scene_file: str | Path) -> bool:
+    """Whether the cluster's workers read the scene file as the client does: one worker
+    hashes the file at the client's path and the hashes are compared (`--transfer auto`)."""
+    from distributed import Client
+
+    path = str(Path(scene_file).resolve())
+    with Client(**target, timeout=30, set_as_default=False) as client:
+        workers = sorted(client.scheduler_info(n_workers=-1)["workers"])
+        if not workers:
+            return True  # nobody to ask yet: the executor waits for workers and fails clearly
+        got = client.run(file_sha256_or_none, path, workers=workers[:1])
+    return next(iter(got.values())) == _sha256_file(Path(path))
+
+
+def choose_transfer(mode: str, target: dict[str, Any], job: RenderJob, loaded: LoadedScene) -> RenderJob:
+    """`--transfer`: shared keeps the job as it is (workers read the scene and write frames
+    by path); ship makes it carry its inputs (`ship_job`); auto ships when a worker does not
+    read the scene file the client reads."""
+    if mode == "shared" or (mode == "auto" and workers_see(target, loaded.path)):
+        return job
+    return ship_job(job, loaded, loaded.path)

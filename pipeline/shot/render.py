@@ -58,6 +58,8 @@ def check_request(req: RenderRequest) -> None:
         raise UsageError(f"--workers must be at least 1, got {req.workers}")
     if req.workers is not None and req.scheduler:
         raise UsageError("--workers is for the local executor; a Dask cluster (--scheduler) sizes itself")
+    if req.transfer != "auto" and not req.scheduler:
+        raise UsageError(f"--transfer {req.transfer} is for a Dask cluster (--scheduler); local workers read the scene and write frames here")
     explicit = bool(req.deliver) and req.deliver.strip().lower() != "none"  # type: ignore[union-attr]
     if explicit and req.shard:
         raise UsageError("--deliver needs every frame: assemble after all shards with --check --deliver (docs/ci-sharding.md)")
@@ -315,6 +317,11 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         from ..farm.address import probe_scheduler
 
         probe_scheduler(req.scheduler)  # in seconds, before the bake (and in --dry-run)
+        if not req.dry_run:
+            from ..farm.address import scheduler_target
+            from ..farm.transfer import choose_transfer
+
+            job = choose_transfer(req.transfer, scheduler_target(req.scheduler), job, loaded)  # a hostile asset path stops here
     if req.check and wanted:
         check_writable(out_dir, "output folder")  # --check --deliver writes the deliverables
     warn_variant(req, loaded)

@@ -26,6 +26,7 @@ class RenderRequest:
     shard: str | None = None
     workers: int | None = None
     scheduler: str | None = None
+    transfer: str = "auto"  # with --scheduler: ship | shared | auto (docs/farm.md, "A farm without a shared disk")
     threads: int | None = None
     chunk_size: int | None = None
     retries: int | None = None
