@@ -33,7 +33,7 @@ Color = Union[tuple[NonNegative, NonNegative, NonNegative], NonNegative]
 class Model(BaseModel):
     """Base of every scene record: immutable, unknown keys rejected."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True, defer_build=True)
 
 
 class EulerRotation(Model):
