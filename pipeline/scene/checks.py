@@ -11,7 +11,7 @@ import re
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path, PurePosixPath
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 from ..errors import AssetError, Problem
 from ..expr import ExpressionError, parse_expression
@@ -207,6 +207,32 @@ def check_springs(c: _Check) -> None:
             c.add(("dynamics", "springs", j), "a spring needs two different bodies")
 
 
+def named_files(scene: Scene) -> Iterator[tuple["Loc", str, str, bool]]:
+    """Every file the scene names, as (YAML path, path relative to the scene's folder,
+    kind 'mesh' or 'image', whether the mesh deforms), in file order: what the asset checks
+    open and what a farm that ships its inputs (pipeline/farm/transfer.py) sends."""
+    for i, obj in enumerate(scene.objects):
+        if isinstance(obj, Mesh):
+            yield ("objects", i, "file"), obj.file, "mesh", obj.deform is not None
+        if isinstance(obj.deform, BlendShapes):
+            for k, key in enumerate(obj.deform.keys):
+                if key.file is not None:
+                    yield ("objects", i, "deform", "keys", k, "file"), key.file, "mesh", False
+        if obj.motion.type == "plan" and obj.motion.grid.image is not None:
+            yield ("objects", i, "motion", "grid", "image"), obj.motion.grid.image, "image", False
+    for i, light in enumerate(scene.lights):
+        for name in light.image_files:
+            yield ("lights", i, name), getattr(light, name), "image", False
+    for i, obj in enumerate(scene.objects):
+        if obj.emission is not None and isinstance(obj.emission.radiance, Texture):
+            yield ("objects", i, "emission", "radiance", "file"), obj.emission.radiance.file, "image", False
+    for i, mat in enumerate(scene.materials):
+        for name in type(mat).model_fields:
+            tex = getattr(mat, name, None)
+            if isinstance(tex, Texture):
+                yield ("materials", i, name, "file"), tex.file, "image", False
+
+
 def check_asset_files(c: _Check) -> None:
     """Every file the scene names is there, and (with `assets`) opens and decodes as the
     renderer will read it, each file once however many fields name it (its outcome is
@@ -241,26 +267,8 @@ def check_asset_files(c: _Check) -> None:
         if decoded[key] is not None:
             c.add(loc, f"{kind} file {rel}: {decoded[key]}")
 
-    for i, obj in enumerate(scene.objects):
-        if isinstance(obj, Mesh):
-            check_file(("objects", i, "file"), obj.file, "mesh", deforming=obj.deform is not None)
-        if isinstance(obj.deform, BlendShapes):
-            for k, key in enumerate(obj.deform.keys):
-                if key.file is not None:
-                    check_file(("objects", i, "deform", "keys", k, "file"), key.file, "mesh")
-        if obj.motion.type == "plan" and obj.motion.grid.image is not None:
-            check_file(("objects", i, "motion", "grid", "image"), obj.motion.grid.image, "image")
-    for i, light in enumerate(scene.lights):
-        for name in light.image_files:
-            check_file(("lights", i, name), getattr(light, name), "image")
-    for i, obj in enumerate(scene.objects):
-        if obj.emission is not None and isinstance(obj.emission.radiance, Texture):
-            check_file(("objects", i, "emission", "radiance", "file"), obj.emission.radiance.file, "image")
-    for i, mat in enumerate(scene.materials):
-        for name in type(mat).model_fields:
-            tex = getattr(mat, name, None)
-            if isinstance(tex, Texture):
-                check_file(("materials", i, name, "file"), tex.file, "image")
+    for loc, rel, kind, deforming in named_files(scene):
+        check_file(loc, rel, kind, deforming)
 
 
 def check_derived(c: _Check) -> None:
