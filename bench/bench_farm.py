@@ -47,7 +47,9 @@ TINY = ROOT / "tests" / "data" / "farm-tiny.yaml"
 
 
 def render(args: list[str], out: Path, sample_memory: bool = False) -> tuple[dict, float, dict]:
-    """Run `motion render`; returns (report, wall seconds, memory samples)."""
+    """Run `motion render`; returns (report, wall seconds, samples: RSS in MB of the main
+    process and of each local worker, and the main process's CPU seconds as `main_cpu_s`,
+    every 50 ms while `sample_memory`)."""
     t0 = time.perf_counter()
     proc = subprocess.Popen([MOTION, "render", *args, "-o", str(out), "--no-progress", "--overwrite"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     samples: dict[str, list[tuple[float, float]]] = {}
@@ -59,6 +61,8 @@ def render(args: list[str], out: Path, sample_memory: bool = False) -> tuple[dic
                 procs = [("main", main)] + [(f"worker:{c.pid}", c) for c in main.children(recursive=True) if "spawn_main" in " ".join(c.cmdline()) and "resource_tracker" not in " ".join(c.cmdline())]
                 for name, p in procs:
                     samples.setdefault(name, []).append((now, p.memory_info().rss / 2**20))
+                cpu = main.cpu_times()
+                samples.setdefault("main_cpu_s", []).append((now, cpu.user + cpu.system))
             except psutil.Error:
                 pass
             time.sleep(0.05)
@@ -161,41 +165,54 @@ def memory(frames: int, tmp: Path) -> dict[str, dict]:
     return out
 
 
-def _cluster_counters(address: str) -> tuple[int, int]:
-    """Dask's own byte counters: what the scheduler has sent to its workers over their
-    streams (the tasks, with their arguments, and control messages) and what the workers
-    have sent out of their memory (results gathered by the client)."""
+def _to_workers_bytes(address: str) -> int:
+    """Dask's own byte counter of what the scheduler has sent its workers over their
+    streams: the tasks with their arguments, and control messages. (Results are not
+    counted here: the workers' `transfer_outgoing_bytes_total` adds Dask's `sizeof`
+    estimate of each result, 56 bytes for any small object, not the bytes on the wire.)"""
     from distributed import Client
 
     with Client(address, timeout=10) as c:
-        to_workers = c.run_on_scheduler(lambda dask_scheduler: sum(b.byte_count for b in dask_scheduler.stream_comms.values()))
-        from_workers = sum(c.run(lambda dask_worker: dask_worker.transfer_outgoing_bytes_total).values())
-    return int(to_workers), int(from_workers)
+        return int(c.run_on_scheduler(lambda dask_scheduler: sum(b.byte_count for b in dask_scheduler.stream_comms.values())))
+
+
+def _cpu_s(pid: int) -> float:
+    times = psutil.Process(pid).cpu_times()
+    return times.user + times.system
 
 
 def scale(worker_counts: list[int], frames: int, tmp: Path) -> dict[str, dict]:
     """Tasks per second the client sustains with many Dask workers on loopback: tiny frames
     (8x6 px, 1 spp, one frame a task), after a first job on the same cluster has paid every
-    worker's first-frame costs; bytes per frame from Dask's own counters; the client's peak
-    RSS. Beside it, the same job on two local worker processes."""
+    worker's first-frame costs; the bytes sent to workers per frame (Dask's own counter);
+    the CPU the client and the scheduler spend per task, from a job of a quarter of the
+    frames and the full job (the difference, so start-up and the bake drop out); the
+    client's peak RSS. Beside it, the same job on two local worker processes."""
     scene = long_scene(tmp, frames)
-    job = [str(scene), "--frames", f"0-{frames - 1}", "--resolution", "8x6", "--spp", "1", "--chunk-size", "1"]
+    small = max(1, frames // 4)
+    job = lambda n: [str(scene), "--frames", f"0-{n - 1}", "--resolution", "8x6", "--spp", "1", "--chunk-size", "1"]  # noqa: E731
     out: dict[str, dict] = {}
-    rep, wall, samples = render(job + ["--workers", "2"], tmp / "scale-local", sample_memory=True)
+    rep, wall, samples = render(job(frames) + ["--workers", "2"], tmp / "scale-local", sample_memory=True)
     out["local x2"] = {"tasks": rep["executor"]["chunks"], "farm_s": rep["totals"]["farm_s"], "wall_s": wall, "client_peak_mb": max(m for _, m in samples.get("main", [(0, 0.0)]))}
     for n in worker_counts:
         cluster = Cluster(n)
         try:
-            dask = job + ["--scheduler", cluster.address, "--threads", "1"]
-            render(dask, tmp / f"scale-warm-{n}")  # every worker's first frame, outside the measured job
-            sent0, back0 = _cluster_counters(cluster.address)
-            rep, wall, samples = render(dask, tmp / f"scale-dask-{n}", sample_memory=True)
-            sent1, back1 = _cluster_counters(cluster.address)
+            dask = ["--scheduler", cluster.address, "--threads", "1"]
+            render(job(frames) + dask, tmp / f"scale-warm-{n}")  # every worker's first frame, outside the measured jobs
+            sched_pid = cluster.procs[0].pid
+            c0 = _cpu_s(sched_pid)
+            _, _, few = render(job(small) + dask, tmp / f"scale-few-{n}", sample_memory=True)
+            c1, sent0 = _cpu_s(sched_pid), _to_workers_bytes(cluster.address)
+            rep, wall, samples = render(job(frames) + dask, tmp / f"scale-dask-{n}", sample_memory=True)
+            c2, sent1 = _cpu_s(sched_pid), _to_workers_bytes(cluster.address)
         finally:
             cluster.close()
+        client_few, client_all = few["main_cpu_s"][-1][1], samples["main_cpu_s"][-1][1]
         out[f"dask x{n}"] = {"tasks": rep["executor"]["chunks"], "farm_s": rep["totals"]["farm_s"], "wall_s": wall,
                              "client_peak_mb": max(m for _, m in samples.get("main", [(0, 0.0)])),
-                             "to_workers_per_frame": (sent1 - sent0) / frames, "from_workers_per_frame": (back1 - back0) / frames}
+                             "to_workers_per_frame": (sent1 - sent0) / frames,
+                             "client_ms_per_task": 1000 * (client_all - client_few) / (frames - small),
+                             "scheduler_ms_per_task": 1000 * ((c2 - c1) - (c1 - c0)) / (frames - small)}
     for v in out.values():
         v["tasks_per_s"] = v["tasks"] / v["farm_s"]
     return out
@@ -278,12 +295,11 @@ def main() -> None:
         if "scale" in only:
             counts = [int(n) for n in args.scale_workers.split(",") if n]
             sc = scale(counts, args.scale_frames, tmp)
-            print(f"\nscale: {args.scale_frames} tasks of one 8x6-px 1-spp frame (warm workers); bytes from Dask's counters")
-            print(f"{'executor':10} {'tasks/s':>8} {'farm s':>7} {'client MB':>10} {'to workers B/frame':>19} {'results B/frame':>16}")
+            print(f"\nscale: {args.scale_frames} tasks of one 8x6-px 1-spp frame (warm workers); bytes from Dask's counter")
+            print(f"{'executor':10} {'tasks/s':>8} {'farm s':>7} {'client MB':>10} {'to workers B/frame':>19} {'client ms/task':>15} {'scheduler ms/task':>18}")
             for name, v in sc.items():
-                sent = f"{v['to_workers_per_frame']:19.0f}" if "to_workers_per_frame" in v else f"{'-':>19}"
-                back = f"{v['from_workers_per_frame']:16.0f}" if "from_workers_per_frame" in v else f"{'-':>16}"
-                print(f"{name:10} {v['tasks_per_s']:8.1f} {v['farm_s']:7.2f} {v['client_peak_mb']:10.1f} {sent} {back}")
+                cols = [f"{v[k]:{w}.{d}f}" if k in v else f"{'-':>{w}}" for k, w, d in (("to_workers_per_frame", 19, 0), ("client_ms_per_task", 15, 2), ("scheduler_ms_per_task", 18, 2))]
+                print(f"{name:10} {v['tasks_per_s']:8.1f} {v['farm_s']:7.2f} {v['client_peak_mb']:10.1f} " + " ".join(cols))
         if "client" in only:
             cm = client_memory(args.client_frames, args.client_seconds, tmp)
             print(f"\nclient memory, a {cm['frames']}-frame job: {cm['planned_mb']:.0f} MB when planned ({cm['planned_s']:.1f} s), "
