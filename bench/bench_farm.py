@@ -9,8 +9,16 @@
   memory      peak RSS of the main process and of each worker over a 200-frame job
               (tiny resolution), sampled through the job: the last quarter's peak against
               the second quarter's (after start-up) (flat, not growing with frame count).
+  scale       tasks per second the client sustains with 8 and 16 Dask workers on loopback
+              (one 8x6-px 1-spp frame a task, workers warmed by a first job), bytes per
+              frame from Dask's own counters (scheduler to workers: tasks with their
+              arguments; workers to client: results), the client's peak RSS; beside it the
+              same job on two local workers.
+  client      the main process's RSS for a 100,000-frame job: when planned (first frame on
+              disk) and its growth per finished frame over 20 s, then Ctrl-C
+              (`client_memory` says why that is the whole cost).
 
-    python bench/bench_farm.py [--frames 24] [--memory-frames 200]
+    python bench/bench_farm.py [--frames 24] [--memory-frames 200] [--only scale --only client]
 """
 
 from __future__ import annotations
@@ -18,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -27,6 +36,9 @@ from pathlib import Path
 
 import psutil
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import cpu_model  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 MOTION = str(BIN / "motion")
@@ -35,7 +47,9 @@ TINY = ROOT / "tests" / "data" / "farm-tiny.yaml"
 
 
 def render(args: list[str], out: Path, sample_memory: bool = False) -> tuple[dict, float, dict]:
-    """Run `motion render`; returns (report, wall seconds, memory samples)."""
+    """Run `motion render`; returns (report, wall seconds, samples: RSS in MB of the main
+    process and of each local worker, and the main process's CPU seconds as `main_cpu_s`,
+    every 50 ms while `sample_memory`)."""
     t0 = time.perf_counter()
     proc = subprocess.Popen([MOTION, "render", *args, "-o", str(out), "--no-progress", "--overwrite"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     samples: dict[str, list[tuple[float, float]]] = {}
@@ -47,6 +61,8 @@ def render(args: list[str], out: Path, sample_memory: bool = False) -> tuple[dic
                 procs = [("main", main)] + [(f"worker:{c.pid}", c) for c in main.children(recursive=True) if "spawn_main" in " ".join(c.cmdline()) and "resource_tracker" not in " ".join(c.cmdline())]
                 for name, p in procs:
                     samples.setdefault(name, []).append((now, p.memory_info().rss / 2**20))
+                cpu = main.cpu_times()
+                samples.setdefault("main_cpu_s", []).append((now, cpu.user + cpu.system))
             except psutil.Error:
                 pass
             time.sleep(0.05)
@@ -149,33 +165,146 @@ def memory(frames: int, tmp: Path) -> dict[str, dict]:
     return out
 
 
+def _to_workers_bytes(address: str) -> int:
+    """Dask's own byte counter of what the scheduler has sent its workers over their
+    streams: the tasks with their arguments, and control messages. (Results are not
+    counted here: the workers' `transfer_outgoing_bytes_total` adds Dask's `sizeof`
+    estimate of each result, 56 bytes for any small object, not the bytes on the wire.)"""
+    from distributed import Client
+
+    with Client(address, timeout=10) as c:
+        return int(c.run_on_scheduler(lambda dask_scheduler: sum(b.byte_count for b in dask_scheduler.stream_comms.values())))
+
+
+def _cpu_s(pid: int) -> float:
+    times = psutil.Process(pid).cpu_times()
+    return times.user + times.system
+
+
+def scale(worker_counts: list[int], frames: int, tmp: Path) -> dict[str, dict]:
+    """Tasks per second the client sustains with many Dask workers on loopback: tiny frames
+    (8x6 px, 1 spp, one frame a task), after a first job on the same cluster has paid every
+    worker's first-frame costs; the bytes sent to workers per frame (Dask's own counter);
+    the CPU the client and the scheduler spend per task, from a job of a quarter of the
+    frames and the full job (the difference, so start-up and the bake drop out); the
+    client's peak RSS. Beside it, the same job on two local worker processes."""
+    scene = long_scene(tmp, frames)
+    small = max(1, frames // 4)
+    job = lambda n: [str(scene), "--frames", f"0-{n - 1}", "--resolution", "8x6", "--spp", "1", "--chunk-size", "1"]  # noqa: E731
+    out: dict[str, dict] = {}
+    rep, wall, samples = render(job(frames) + ["--workers", "2"], tmp / "scale-local", sample_memory=True)
+    out["local x2"] = {"tasks": rep["executor"]["chunks"], "farm_s": rep["totals"]["farm_s"], "wall_s": wall, "client_peak_mb": max(m for _, m in samples.get("main", [(0, 0.0)]))}
+    for n in worker_counts:
+        cluster = Cluster(n)
+        try:
+            dask = ["--scheduler", cluster.address, "--threads", "1"]
+            render(job(frames) + dask, tmp / f"scale-warm-{n}")  # every worker's first frame, outside the measured jobs
+            sched_pid = cluster.procs[0].pid
+            c0 = _cpu_s(sched_pid)
+            _, _, few = render(job(small) + dask, tmp / f"scale-few-{n}", sample_memory=True)
+            c1, sent0 = _cpu_s(sched_pid), _to_workers_bytes(cluster.address)
+            rep, wall, samples = render(job(frames) + dask, tmp / f"scale-dask-{n}", sample_memory=True)
+            c2, sent1 = _cpu_s(sched_pid), _to_workers_bytes(cluster.address)
+        finally:
+            cluster.close()
+        client_few, client_all = few["main_cpu_s"][-1][1], samples["main_cpu_s"][-1][1]
+        out[f"dask x{n}"] = {"tasks": rep["executor"]["chunks"], "farm_s": rep["totals"]["farm_s"], "wall_s": wall,
+                             "client_peak_mb": max(m for _, m in samples.get("main", [(0, 0.0)])),
+                             "to_workers_per_frame": (sent1 - sent0) / frames,
+                             "client_ms_per_task": 1000 * (client_all - client_few) / (frames - small),
+                             "scheduler_ms_per_task": 1000 * ((c2 - c1) - (c1 - c0)) / (frames - small)}
+    for v in out.values():
+        v["tasks_per_s"] = v["tasks"] / v["farm_s"]
+    return out
+
+
+def client_memory(frames: int, seconds: float, tmp: Path) -> dict[str, float]:
+    """The main process's RSS over a job of `frames` frames (the farm test scene, 1x1 px,
+    1 spp, two local workers; the client's share is the same with Dask): when planning is
+    done (the first frame is on disk: bake, frame paths, resume checks, chunks and the
+    scheduler's records all exist), and its growth per finished frame over the next
+    `seconds`, after which the job is interrupted (Ctrl-C) and the report read for how many
+    frames were done. Rendering all of them is not needed: nothing per frame is allocated
+    later except a finished frame's record, whose cost is the growth measured here."""
+    scene = long_scene(tmp, frames)
+    out = tmp / "client-memory"
+    cmd = [MOTION, "render", str(scene), "--frames", f"0-{frames - 1}", "--resolution", "1x1", "--spp", "1", "--workers", "2", "-o", str(out), "--no-progress", "--overwrite"]
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    main = psutil.Process(proc.pid)
+    peak, planned, planned_at, series = 0.0, None, None, []
+    while proc.poll() is None:
+        try:
+            rss = main.memory_info().rss / 2**20
+        except psutil.Error:
+            break
+        now = time.perf_counter() - t0
+        peak = max(peak, rss)
+        series.append((now, rss))
+        if planned is None and out.is_dir() and any(out.glob("*.exr")):
+            planned, planned_at = peak, now
+        if planned_at is not None and now - planned_at > seconds:
+            proc.send_signal(signal.SIGINT)
+            break
+        time.sleep(0.05)
+    _, err = proc.communicate()
+    if planned is None:
+        raise SystemExit(f"client memory: no frame was written ({proc.returncode}):\n{err}")
+    rep = json.loads((out / "render-report.json").read_text())
+    done = rep["totals"]["rendered"]
+    end = max(m for t, m in series if t >= series[-1][0] - 1.0)
+    growth = max(0.0, end - planned) / max(1, done)
+    return {"frames": frames, "planned_mb": planned, "planned_s": planned_at, "done": done, "end_mb": end, "peak_mb": peak,
+            "per_frame_kb": 1024 * growth, "extrapolated_mb": planned + growth * frames}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--frames", type=int, default=24)
     ap.add_argument("--memory-frames", type=int, default=200)
+    ap.add_argument("--scale-workers", default="8,16", help="Dask worker counts for the scale section")
+    ap.add_argument("--scale-frames", type=int, default=400)
+    ap.add_argument("--client-frames", type=int, default=100_000)
+    ap.add_argument("--client-seconds", type=float, default=20.0)
+    ap.add_argument("--only", choices=["throughput", "memory", "scale", "client"], action="append", help="run only these sections (repeatable)")
     args = ap.parse_args()
+    only = set(args.only or ["throughput", "memory", "scale", "client"])
     with tempfile.TemporaryDirectory(prefix="bench-farm-") as d:
         tmp = Path(d)
-        print(f"cores: {len(os.sched_getaffinity(0))}")
-        tp = throughput(args.frames, tmp)
-        base = tp["local x1"]
-        print(f"\nthroughput: {SHOT.name} --preset preview, {args.frames} frames")
-        print(f"{'executor':24} {'wall s':>7} {'fr/min':>7} {'farm s':>7} {'fr/min':>7} {'vs x1':>6}  first-frame s / warm render s per worker")
-        for name, v in tp.items():
-            if name.startswith("_"):
-                continue
-            ff = ", ".join(f"{a:.2f}/{b:.3f}" for a, b in zip(v["first_frame_s"], v["warm_render_s"]) if a is not None and b is not None)
-            print(f"{name:24} {v['wall_s']:7.2f} {v['fpm_wall']:7.1f} {v['farm_s']:7.2f} {v['fpm_farm']:7.1f} {v['fpm_wall'] / base['fpm_wall']:6.2f}  {ff}")
-        ov_local = overhead(["--workers", "1"], tmp / "ovl")
-        ov_dask = tp["_overhead_dask"]
-        print("\nscheduling overhead per task (1x1 px, 1 spp, one frame per task):")
-        for name, ov in (("local x1", ov_local), ("dask x2", ov_dask)):
-            print(f"  {name:10} {ov['tasks']} tasks in {ov['farm_s']:.2f}s (worker busy {ov['work_s']:.2f}s): {ov['per_task_worker_ms']:.1f} ms per task per worker")
-        mem = memory(args.memory_frames, tmp)
-        print(f"\nmemory over a {args.memory_frames}-frame job (32x24, 2 local workers): peak RSS, MB")
-        for name, m in mem.items():
-            print(f"  {name:16} peak {m['peak_mb']:7.1f}  2nd quarter {m['q2_peak_mb']:7.1f}  last quarter {m['q4_peak_mb']:7.1f}  growth x{m['growth']:.3f}")
-
+        print(f"cpu: {cpu_model()}, {len(os.sched_getaffinity(0))} cores")
+        if "throughput" in only:
+            tp = throughput(args.frames, tmp)
+            base = tp["local x1"]
+            print(f"\nthroughput: {SHOT.name} --preset preview, {args.frames} frames")
+            print(f"{'executor':24} {'wall s':>7} {'fr/min':>7} {'farm s':>7} {'fr/min':>7} {'vs x1':>6}  first-frame s / warm render s per worker")
+            for name, v in tp.items():
+                if name.startswith("_"):
+                    continue
+                ff = ", ".join(f"{a:.2f}/{b:.3f}" for a, b in zip(v["first_frame_s"], v["warm_render_s"]) if a is not None and b is not None)
+                print(f"{name:24} {v['wall_s']:7.2f} {v['fpm_wall']:7.1f} {v['farm_s']:7.2f} {v['fpm_farm']:7.1f} {v['fpm_wall'] / base['fpm_wall']:6.2f}  {ff}")
+            ov_local = overhead(["--workers", "1"], tmp / "ovl")
+            ov_dask = tp["_overhead_dask"]
+            print("\nscheduling overhead per task (1x1 px, 1 spp, one frame per task):")
+            for name, ov in (("local x1", ov_local), ("dask x2", ov_dask)):
+                print(f"  {name:10} {ov['tasks']} tasks in {ov['farm_s']:.2f}s (worker busy {ov['work_s']:.2f}s): {ov['per_task_worker_ms']:.1f} ms per task per worker")
+        if "memory" in only:
+            mem = memory(args.memory_frames, tmp)
+            print(f"\nmemory over a {args.memory_frames}-frame job (32x24, 2 local workers): peak RSS, MB")
+            for name, m in mem.items():
+                print(f"  {name:16} peak {m['peak_mb']:7.1f}  2nd quarter {m['q2_peak_mb']:7.1f}  last quarter {m['q4_peak_mb']:7.1f}  growth x{m['growth']:.3f}")
+        if "scale" in only:
+            counts = [int(n) for n in args.scale_workers.split(",") if n]
+            sc = scale(counts, args.scale_frames, tmp)
+            print(f"\nscale: {args.scale_frames} tasks of one 8x6-px 1-spp frame (warm workers); bytes from Dask's counter")
+            print(f"{'executor':10} {'tasks/s':>8} {'farm s':>7} {'client MB':>10} {'to workers B/frame':>19} {'client ms/task':>15} {'scheduler ms/task':>18}")
+            for name, v in sc.items():
+                cols = [f"{v[k]:{w}.{d}f}" if k in v else f"{'-':>{w}}" for k, w, d in (("to_workers_per_frame", 19, 0), ("client_ms_per_task", 15, 2), ("scheduler_ms_per_task", 18, 2))]
+                print(f"{name:10} {v['tasks_per_s']:8.1f} {v['farm_s']:7.2f} {v['client_peak_mb']:10.1f} " + " ".join(cols))
+        if "client" in only:
+            cm = client_memory(args.client_frames, args.client_seconds, tmp)
+            print(f"\nclient memory, a {cm['frames']}-frame job: {cm['planned_mb']:.0f} MB when planned ({cm['planned_s']:.1f} s), "
+                  f"{cm['end_mb']:.0f} MB after {cm['done']} frames ({cm['per_frame_kb']:.2f} KB per finished frame), "
+                  f"{cm['extrapolated_mb']:.0f} MB extrapolated to the last frame")
 
 if __name__ == "__main__":
     main()

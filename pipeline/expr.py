@@ -11,6 +11,7 @@ Grammar (docs/expressions.md):
     expr   := expr ('+' | '-' | '*' | '/' | '%' | '**' | '^') expr | ('+' | '-') expr
             | NUMBER | NAME | FUNC '(' expr (',' expr)* ')' | '(' expr ')'
 
+>>> import numpy as np
 >>> e = parse_expression("2 * sin(pi * t / 2) + max(t, 1)", ("t",))
 >>> e.evaluate({"t": np.array([0.0, 1.0])}).tolist()
 [1.0, 3.0]
@@ -25,9 +26,11 @@ from __future__ import annotations
 import ast
 import math
 from dataclasses import dataclass
-from typing import Callable, Mapping, Sequence
+from functools import cache
+from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
-import numpy as np
+if TYPE_CHECKING:  # numpy is imported when an expression is evaluated, not when one is parsed
+    import numpy as np
 
 from .errors import MotionError
 
@@ -40,41 +43,52 @@ MAX_LITERAL = 1e12  # |numeric literal|
 
 CONSTANTS: dict[str, float] = {"pi": math.pi, "e": math.e}
 
-ArrayFn = Callable[..., np.ndarray]
+ArrayFn = Callable[..., "np.ndarray"]
 
-
-def _clamp(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    return np.minimum(np.maximum(x, lo), hi)
-
-
-def _reduce(op: ArrayFn) -> ArrayFn:
-    def fold(*args: np.ndarray) -> np.ndarray:
-        out = args[0]
-        for a in args[1:]:
-            out = op(out, a)
-        return out
-
-    return fold
-
-
-# name -> (numpy function, min arity, max arity)
-FUNCTIONS: dict[str, tuple[ArrayFn, int, int]] = {
-    "sin": (np.sin, 1, 1),
-    "cos": (np.cos, 1, 1),
-    "tan": (np.tan, 1, 1),
-    "exp": (np.exp, 1, 1),
-    "log": (np.log, 1, 1),
-    "sqrt": (np.sqrt, 1, 1),
-    "abs": (np.abs, 1, 1),
-    "floor": (np.floor, 1, 1),
-    "min": (_reduce(np.minimum), 2, 16),
-    "max": (_reduce(np.maximum), 2, 16),
-    "clamp": (_clamp, 3, 3),
-    "pow": (np.power, 2, 2),
+# name -> (min arity, max arity); the numpy function of each name is in `_numpy_tables`.
+FUNCTIONS: dict[str, tuple[int, int]] = {
+    "sin": (1, 1),
+    "cos": (1, 1),
+    "tan": (1, 1),
+    "exp": (1, 1),
+    "log": (1, 1),
+    "sqrt": (1, 1),
+    "abs": (1, 1),
+    "floor": (1, 1),
+    "min": (2, 16),
+    "max": (2, 16),
+    "clamp": (3, 3),
+    "pow": (2, 2),
 }
 
 _BINARY: dict[type, str] = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Mod: "%", ast.Pow: "**"}
-_OPS: dict[str, ArrayFn] = {"+": np.add, "-": np.subtract, "*": np.multiply, "/": np.true_divide, "%": np.mod, "**": np.power}
+
+
+@cache
+def _numpy_tables() -> tuple[dict[str, ArrayFn], dict[str, ArrayFn]]:
+    """The numpy function of each name in FUNCTIONS and of each binary operator, built on the
+    first evaluation (importing numpy costs a process ~0.05 s that parsing does not need)."""
+    import numpy as np
+
+    def clamp(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        return np.minimum(np.maximum(x, lo), hi)
+
+    def fold(op: ArrayFn) -> ArrayFn:
+        def folded(*args: np.ndarray) -> np.ndarray:
+            out = args[0]
+            for a in args[1:]:
+                out = op(out, a)
+            return out
+
+        return folded
+
+    functions: dict[str, ArrayFn] = {
+        "sin": np.sin, "cos": np.cos, "tan": np.tan, "exp": np.exp, "log": np.log, "sqrt": np.sqrt, "abs": np.abs,
+        "floor": np.floor, "min": fold(np.minimum), "max": fold(np.maximum), "clamp": clamp, "pow": np.power,
+    }
+    ops: dict[str, ArrayFn] = {"+": np.add, "-": np.subtract, "*": np.multiply, "/": np.true_divide, "%": np.mod, "**": np.power}
+    return functions, ops
+
 
 # What users most often try, with the name we report.
 _FORBIDDEN: dict[type, str] = {
@@ -172,6 +186,8 @@ class Expression:
         missing = [v for v in self.variables if v not in values]
         if missing:
             raise ExpressionError(f"expression {self.text!r}: no value bound for {', '.join(missing)}")
+        import numpy as np
+
         env = {name: np.asarray(values[name], dtype=np.float64) for name in self.variables}
         if shape is None:
             shape = np.broadcast_shapes(*(a.shape for a in env.values())) if env else ()
@@ -197,6 +213,9 @@ def _uses_variables(node: Node) -> bool:
 
 
 def _eval(node: Node, env: Mapping[str, np.ndarray]) -> np.ndarray:
+    import numpy as np
+
+    functions, ops = _numpy_tables()
     if isinstance(node, Num):
         return np.float64(node.value)  # type: ignore[return-value]
     if isinstance(node, Var):
@@ -204,8 +223,8 @@ def _eval(node: Node, env: Mapping[str, np.ndarray]) -> np.ndarray:
     if isinstance(node, Neg):
         return np.negative(_eval(node.operand, env))
     if isinstance(node, BinOp):
-        return _OPS[node.op](_eval(node.left, env), _eval(node.right, env))
-    fn = FUNCTIONS[node.func][0]
+        return ops[node.op](_eval(node.left, env), _eval(node.right, env))
+    fn = functions[node.func]
     return fn(*(_eval(a, env) for a in node.args))
 
 
@@ -306,7 +325,7 @@ def parse_expression(text: str, variables: Sequence[str]) -> Expression:
                 raise fail(f"'{name}' is not an allowed function (allowed: {', '.join(sorted(FUNCTIONS))})", node)
             if node.keywords:
                 raise fail(f"'{name}' takes no keyword arguments", node)
-            _, lo, hi = FUNCTIONS[name]
+            lo, hi = FUNCTIONS[name]
             n = len(node.args)
             if not lo <= n <= hi:
                 want = str(lo) if lo == hi else f"{lo} to {hi}"
@@ -325,6 +344,8 @@ def parse_expression(text: str, variables: Sequence[str]) -> Expression:
 def _check_exponent(exponent: Node, node: ast.AST, fail: Callable[..., ExpressionError]) -> None:
     """Reject constant exponents whose magnitude exceeds MAX_EXPONENT (`9**9**9`)."""
     if not _uses_variables(exponent):
+        import numpy as np
+
         with np.errstate(all="ignore"):
             value = float(_eval(exponent, {}))
         if not math.isfinite(value) or abs(value) > MAX_EXPONENT:

@@ -10,9 +10,10 @@ import stat
 import typing
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import TYPE_CHECKING, Callable, Iterator
 
-import numpy as np
+if TYPE_CHECKING:  # numpy is imported by the checks that use it: `motion validate` of a scene without arrays never loads it
+    import numpy as np
 
 from .errors import InputFileError, MotionError, UsageError
 
@@ -130,12 +131,14 @@ def check_env_sizes() -> None:
 # an expression, an import, a bake file, a simulation): Mitsuba traces in float32, so a finite
 # float64 past FLOAT32_MAX becomes inf there (the object vanishes, pixels go inf); a half-float
 # EXR holds at most HALF_MAX, so a radiance above it is inf in the frame.
-FLOAT32_MAX = float(np.finfo(np.float32).max)  # 3.4e38
+FLOAT32_MAX = 3.4028234663852886e38  # float(np.finfo(np.float32).max)
 HALF_MAX = 65504.0
 
 
 def beyond_float32(values: np.ndarray) -> np.ndarray:
     """Mask of the values a float32 cannot hold (non-finite, or finite past FLOAT32_MAX)."""
+    import numpy as np
+
     values = np.asarray(values, dtype=np.float64)
     return ~np.isfinite(values) | (np.abs(values) > FLOAT32_MAX)
 
@@ -156,13 +159,15 @@ SEEN_RADIANCE = ("radiance",)
 
 def beyond_half(values: np.ndarray) -> np.ndarray:
     """Mask of the values a half-float EXR pixel cannot hold (non-finite, or past HALF_MAX)."""
+    import numpy as np
+
     values = np.asarray(values, dtype=np.float64)
     return ~np.isfinite(values) | (np.abs(values) > HALF_MAX)
 
 
 def half_problem(value: float) -> str | None:
     """Why a radiance seen directly cannot be a pixel of a half-float frame, or None."""
-    if beyond_half(np.array([value])).any():
+    if not math.isfinite(value) or abs(value) > HALF_MAX:
         return (f"radiance {value:g} is beyond what a half-float EXR holds ({HALF_MAX:g}): "
                 "its pixels would be inf; use output.pixel_type: float, or lower it")
     return None

@@ -17,7 +17,7 @@ from .checks import check_motion, motion_problems, pose_problem, scalar_problem
 from .evaluate import bake, evaluate_frames
 from .files import FORMAT, VERSION, read_baked, write_baked
 from .fingerprint import fingerprint, leaves
-from .records import BakedFrame, BakedMotion, summary
+from .records import BakedFrame, BakedFrames, BakedMotion, by_number, summary
 from .timing import sample_seconds, simulate_for, simulation_range
 
 __all__ = [
@@ -25,9 +25,11 @@ __all__ = [
     "VERSION",
     "BakeFileError",
     "BakedFrame",
+    "BakedFrames",
     "BakedMotion",
     "FrameNotBakedError",
     "bake",
+    "by_number",
     "check_motion",
     "evaluate_frames",
     "fingerprint",

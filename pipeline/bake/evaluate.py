@@ -9,7 +9,7 @@ import numpy as np
 
 from ..errors import UsageError
 from .checks import check_budget, check_motion
-from .records import BakedFrame, BakedMotion
+from .records import BakedFrame, BakedFrames, BakedMotion
 from .timing import sample_seconds, simulate_for
 
 if TYPE_CHECKING:
@@ -36,25 +36,12 @@ def bake(loaded: "LoadedScene", frames: Sequence[int], simulation: Any | None = 
     with np.errstate(over="ignore", invalid="ignore"):  # an overflow is reported by check_motion
         motion = evaluate(loaded, everything, simulation)
     check_motion(loaded, motion)
-    count = len(frames)
-    baked = []
-    for k, f in enumerate(frames):
-        start = count + k * n
-        baked.append(
-            BakedFrame(
-                frame=f,
-                time=float(frame_times[k]),
-                shutter=(float(shutters[k, 0]), float(shutters[k, 1])),
-                sample_times=sample_times[k],
-                at_frame=motion.take(slice(k, k + 1)),
-                across_shutter=motion.take(slice(start, start + n)),
-            )
-        )
+    baked = BakedFrames(frames, frame_times, shutters, sample_times, motion)
     shutter = scene.camera.shutter
     return BakedMotion(loaded.name, str(scene.timeline.rate), float(shutter.angle), shutter.position, baked)
 
 
-def evaluate_frames(loaded: "LoadedScene", frames: Sequence[int], simulation: Any = None) -> list[BakedFrame]:
+def evaluate_frames(loaded: "LoadedScene", frames: Sequence[int], simulation: Any = None) -> Sequence[BakedFrame]:
     """The `BakedFrame`s of `frames` (simulating once here if the scene has dynamics and
     no `simulation` is given): what a worker renders. An empty selection gives []."""
     if not frames:

@@ -8,8 +8,9 @@ from shutter open to close inclusive). No field stacks the two; no index rule.
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 
@@ -39,6 +40,83 @@ class BakedFrame:
         return int(len(self.sample_times))
 
 
+class BakedFrames(Sequence[BakedFrame]):
+    """The frames of one bake, in the order baked, each made when asked for from the bake's
+    own arrays: one `SceneMotion` over every frame time and then every shutter sample time
+    (`bake()`'s single vectorised evaluation). A `BakedFrame` is a view of those arrays
+    (`SceneMotion.take`), so holding the frames costs the arrays alone, not a record per
+    frame: a 100,000-frame job of the farm test scene held 1.16 GB as a list of records
+    and holds 0.15 GB as this table (bench/bench_farm.py, "client memory").
+    `by_number` is the same frames as a mapping by frame number."""
+
+    def __init__(self, frames: Sequence[int], times: np.ndarray, shutters: np.ndarray, sample_times: np.ndarray, motion: "SceneMotion") -> None:
+        self.numbers = [int(f) for f in frames]
+        self.times = times  # [F]
+        self.shutters = shutters  # [F, 2]
+        self.sample_times = sample_times  # [F, N]
+        self.motion = motion  # times: the F frame times, then F x N sample times
+        self.by_number: Mapping[int, BakedFrame] = _ByNumber(self)
+        self._index = {f: k for k, f in enumerate(self.numbers)}
+
+    def __len__(self) -> int:
+        return len(self.numbers)
+
+    @overload
+    def __getitem__(self, k: int) -> BakedFrame: ...
+
+    @overload
+    def __getitem__(self, k: slice) -> list[BakedFrame]: ...
+
+    def __getitem__(self, k: int | slice) -> BakedFrame | list[BakedFrame]:
+        if isinstance(k, slice):
+            return [self[i] for i in range(*k.indices(len(self)))]
+        count = len(self.numbers)
+        if k < 0:
+            k += count
+        if not 0 <= k < count:
+            raise IndexError(f"frame index {k} out of range for a bake of {count} frames")
+        n = self.sample_times.shape[1]
+        start = count + k * n
+        return BakedFrame(
+            frame=self.numbers[k],
+            time=float(self.times[k]),
+            shutter=(float(self.shutters[k, 0]), float(self.shutters[k, 1])),
+            sample_times=self.sample_times[k],
+            at_frame=self.motion.take(slice(k, k + 1)),
+            across_shutter=self.motion.take(slice(start, start + n)),
+        )
+
+    def position(self, number: int) -> int | None:
+        """Where frame `number` is in the bake's order (None if it is not baked)."""
+        return self._index.get(number)
+
+
+class _ByNumber(Mapping[int, BakedFrame]):
+    """A bake's frames by frame number, each made on access (`BakedFrames.by_number`)."""
+
+    def __init__(self, table: BakedFrames) -> None:
+        self._table = table
+
+    def __getitem__(self, number: int) -> BakedFrame:
+        k = self._table.position(number)
+        if k is None:
+            raise KeyError(number)
+        return self._table[k]
+
+    def __iter__(self) -> Iterator[int]:
+        return iter(self._table.numbers)
+
+    def __len__(self) -> int:
+        return len(self._table)
+
+
+def by_number(frames: Sequence[BakedFrame]) -> Mapping[int, BakedFrame]:
+    """`frames` by frame number: the table's own lazy view, or a dict of a plain list."""
+    if isinstance(frames, BakedFrames):
+        return frames.by_number
+    return {f.frame: f for f in frames}
+
+
 @dataclass(frozen=True)
 class BakedMotion:
     """A bake: the scene's name, its frame rate (as text, e.g. "24000/1001"), the camera
@@ -48,7 +126,7 @@ class BakedMotion:
     fps: str
     shutter_angle: float
     shutter_position: str
-    frames: list[BakedFrame]
+    frames: Sequence[BakedFrame]  # a BakedFrames table from bake(), a list from a file
 
     @property
     def samples_per_frame(self) -> int:
@@ -57,6 +135,10 @@ class BakedMotion:
 
     def frame(self, number: int) -> BakedFrame:
         """The baked frame `number`; FrameNotBakedError if the bake does not hold it."""
+        if isinstance(self.frames, BakedFrames):
+            k = self.frames.position(number)
+            if k is not None:
+                return self.frames[k]
         for f in self.frames:
             if f.frame == number:
                 return f

@@ -22,7 +22,7 @@ def simulation_for(loaded: LoadedScene, frames: Sequence[int], on_progress: Any 
     return simulate_for(loaded, frames, on_progress=on_progress)
 
 
-def baked_inputs(loaded: LoadedScene, frames: Sequence[int], simulation: Any = None) -> list[BakedFrame]:
+def baked_inputs(loaded: LoadedScene, frames: Sequence[int], simulation: Any = None) -> Sequence[BakedFrame]:
     """Bake `frames` here (poses, vertices, particles); [] for no frames."""
     return evaluate_frames(loaded, frames, simulation)
 

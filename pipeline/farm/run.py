@@ -11,6 +11,7 @@ themselves.
 from __future__ import annotations
 
 from pathlib import Path
+from collections.abc import Mapping
 from typing import Any
 
 from ..bake import BakedFrame
@@ -40,7 +41,7 @@ def default_workers(frames: int) -> int:
 def run_chunks(
     chunk_list: list[list[int]],
     job: RenderJob,
-    by_frame: dict[int, BakedFrame],
+    by_frame: Mapping[int, BakedFrame],
     ctx: TaskContext,
     cfg: FarmConfig,
     progress: Progress,

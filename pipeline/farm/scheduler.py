@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter, deque
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -73,7 +74,7 @@ class Scheduler:
         self,
         executor: Executor,
         job: RenderJob,
-        inputs: dict[int, BakedFrame],
+        inputs: Mapping[int, BakedFrame],
         ctx: TaskContext,
         config: FarmConfig,
         notify: Notify | None = None,

@@ -484,16 +484,13 @@ def expression_problems(scene: Scene, source: "SourceMap", evaluate: bool = True
     the job; a channel of time alone is also evaluated at every frame time, and a value the
     renderer cannot hold (limits.py: float32; a radiance seen directly past what a
     half-float frame holds) is refused at the channel, with the first time it occurs.
-    `evaluate` False (a worker reloading a checked scene) parses only."""
-    import numpy as np
-
+    `evaluate` False (a worker reloading a checked scene) parses only. numpy is imported
+    only when there is an expression to evaluate (a scene without one validates without it)."""
     from ..limits import SEEN_RADIANCE, beyond_float32, beyond_half
 
     problems: list[Problem] = []
     timeline = scene.timeline.timeline()
     count = scene.timeline.last - scene.timeline.first + 1
-    # at most MAX_FRAMES frame times (a longer timeline is refused by derived_problems)
-    times = np.arange(scene.timeline.first, scene.timeline.first + min(count, MAX_FRAMES), dtype=np.float64) / float(timeline.fps)
     half = scene.output.pixel_type == "half"
 
     def check(loc: "Loc", text: str, variables: tuple[str, ...]) -> None:
@@ -504,6 +501,10 @@ def expression_problems(scene: Scene, source: "SourceMap", evaluate: bool = True
             return
         if variables != ("t",) or not evaluate:
             return  # a field of space and time (wind) is evaluated by the simulation
+        import numpy as np
+
+        # at most MAX_FRAMES frame times (a longer timeline is refused by derived_problems)
+        times = np.arange(scene.timeline.first, scene.timeline.first + min(count, MAX_FRAMES), dtype=np.float64) / float(timeline.fps)
         try:
             with np.errstate(all="ignore"):
                 value = np.broadcast_to(np.asarray(expr.evaluate({"t": times}), dtype=np.float64), times.shape)

@@ -2,7 +2,9 @@
 `dynamics:` simulation settings (integrator, step, forces, springs, fluids) and particle
 emitters. SI units: kg, m, s; angles in degrees (angular velocity in degrees/s)."""
 
-from __future__ import annotations
+# No `from __future__ import annotations` in the schema modules: pydantic would compile and
+# evaluate every field's annotation string when each model class is made, about 0.03 s of
+# every process that loads a scene (issue 28, docs/ci-sharding.md).
 
 from typing import Annotated, Literal
 

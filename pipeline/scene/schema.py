@@ -5,7 +5,9 @@ into Mitsuba dictionaries through a registry keyed by `type`, and the motion sta
 evaluates their `motion` blocks.
 """
 
-from __future__ import annotations
+# No `from __future__ import annotations` in the schema modules: pydantic would compile and
+# evaluate every field's annotation string when each model class is made, about 0.03 s of
+# every process that loads a scene (issue 28, docs/ci-sharding.md).
 
 from fractions import Fraction
 from typing import Annotated, Any, Callable, ClassVar, Literal, Union, get_args

@@ -4,7 +4,9 @@ Every model is frozen and rejects unknown keys (`extra="forbid"`); the loader tu
 pydantic's errors into `FILE:LINE:COL: yaml.path: message` lines.
 """
 
-from __future__ import annotations
+# No `from __future__ import annotations` in the schema modules: pydantic would compile and
+# evaluate every field's annotation string when each model class is made, about 0.03 s of
+# every process that loads a scene (issue 28, docs/ci-sharding.md).
 
 import math
 from typing import Annotated, Any, Literal, Union
@@ -31,7 +33,7 @@ Color = Union[tuple[NonNegative, NonNegative, NonNegative], NonNegative]
 class Model(BaseModel):
     """Base of every scene record: immutable, unknown keys rejected."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True, defer_build=True)
 
 
 class EulerRotation(Model):

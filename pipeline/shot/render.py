@@ -14,9 +14,10 @@ import os
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
+from collections.abc import Mapping, Sequence
 from typing import Any, Callable
 
-from ..bake import BakedFrame
+from ..bake import BakedFrame, by_number
 from ..errors import IncompleteJobError, UsageError
 from ..farm.claims import new_run_id
 from ..farm.config import FarmConfig, load_farm_config
@@ -179,7 +180,7 @@ def warn_variant(req: RenderRequest, loaded: LoadedScene) -> None:
         variant_mod.warn_fallback(choice)
 
 
-def motion_inputs(req: RenderRequest, loaded: LoadedScene, sel: Selection) -> list[BakedFrame]:
+def motion_inputs(req: RenderRequest, loaded: LoadedScene, sel: Selection) -> Sequence[BakedFrame]:
     """The worker input of every frame of this shard: simulated over the whole selection
     and baked for the shard here, or read from the --motion file."""
     from ..farm.frame_inputs import baked_inputs, file_inputs, simulation_for
@@ -195,7 +196,7 @@ def motion_inputs(req: RenderRequest, loaded: LoadedScene, sel: Selection) -> li
     return inputs
 
 
-def complete_frames(req: RenderRequest, job: RenderJob, job_scene: Any, out_dir: Path, frames: list[int], paths: dict[int, str], by_frame: dict[int, BakedFrame]) -> FrameStates:
+def complete_frames(req: RenderRequest, job: RenderJob, job_scene: Any, out_dir: Path, frames: list[int], paths: dict[int, str], by_frame: Mapping[int, BakedFrame]) -> FrameStates:
     """The frames on disk: those --resume keeps (complete and made from this scene, motion
     and settings) and the stale ones this run replaces, each with the reason (shot/stale.py).
     Existing frames with neither --resume nor --overwrite are a UsageError."""
@@ -329,7 +330,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     t0 = time.perf_counter()
     inputs = motion_inputs(req, loaded, sel)
     bake_s = time.perf_counter() - t0
-    by_frame = {baked.frame: baked for baked in inputs}
+    by_frame = by_number(inputs)  # each frame made from the bake's arrays when a task needs it
     paths = {f: str(frame_path(job, loaded, f)) for f in frames}
 
     states = complete_frames(req, job, loaded.scene, out_dir, frames, paths, by_frame)
