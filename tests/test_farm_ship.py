@@ -6,6 +6,7 @@ refused before anything is sent."""
 
 from __future__ import annotations
 
+import hashlib
 import os
 import shutil
 import subprocess
@@ -14,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from farm_util import DASK, TINY, frames_in, motion, report, stop_processes, wait_for
+from farm_util import DASK, SLOW, TINY, frames_in, kill, leftovers, motion, report, start_motion, stop_processes, wait_for
 from motion.pipeline.frame_output import read_frame
 from test_farm_dask import _free_port, _try, _workers_connected
 from test_farm_transfer import _scene
@@ -30,9 +31,11 @@ def _namespaces_work(folder: Path) -> str | None:
     return None if probe.returncode == 0 else f"the kernel refuses a private mount namespace here: {probe.stderr.strip()}"
 
 
-@pytest.fixture()
-def hidden_cluster(tmp_path: Path):
-    """`client/` holds the scene and the output; the workers see an empty tmpfs there."""
+@pytest.fixture(scope="module")
+def hidden_cluster(tmp_path_factory):
+    """`client/` holds the scenes and the outputs; the workers see an empty tmpfs there.
+    Worker w1 keeps its cache on a 96 KiB tmpfs of its own (a small cache disk)."""
+    tmp_path = tmp_path_factory.mktemp("ship")
     client = tmp_path / "client"
     client.mkdir()
     (client / "probe").write_text("the client's")
@@ -41,27 +44,38 @@ def hidden_cluster(tmp_path: Path):
         pytest.skip(why)
     port = _free_port()
     address = f"tcp://127.0.0.1:{port}"
-    env = {**os.environ, "MOTION_CACHE_DIR": str(tmp_path / "worker-cache")}
     procs = [subprocess.Popen([DASK, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path)]
-    for i in (1, 2):
-        hide = f"mount -t tmpfs tmpfs '{client}' && exec {DASK} worker {address} --nthreads 1 --no-nanny --no-dashboard --host 127.0.0.1 --name w{i}"
-        procs.append(subprocess.Popen([UNSHARE, "-m", "--propagation", "private", "sh", "-c", hide], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path, env=env))
+    workers = {}
+    for name in ("w1", "w2"):
+        cache = tmp_path / f"cache-{name}"
+        cache.mkdir()
+        small = f" && mount -t tmpfs -o size=96k tmpfs '{cache}'" if name == "w1" else ""
+        hide = f"mount -t tmpfs tmpfs '{client}'{small} && exec {DASK} worker {address} --nthreads 1 --no-nanny --no-dashboard --host 127.0.0.1 --name {name}"
+        env = {**os.environ, "MOTION_CACHE_DIR": str(cache)}
+        workers[name] = subprocess.Popen([UNSHARE, "-m", "--propagation", "private", "sh", "-c", hide], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path, env=env)
+        procs.append(workers[name])
     try:
         wait_for(lambda: _try(lambda: _workers_connected(address) == 2), 60, "two hidden dask workers")
-        yield {"address": address, "client": client, "cache": tmp_path / "worker-cache"}
+        yield {"address": address, "client": client, "cache": tmp_path / "cache-w2", "workers": workers}
     finally:
         stop_processes(procs)
 
 
-def test_workers_without_the_clients_folders_render_the_same_frames(hidden_cluster) -> None:
-    client = hidden_cluster["client"]
-    path = _scene(client / "shot", "tex.png")
+def _textured(folder: Path, texture: np.ndarray) -> Path:
+    """The textured two-triangle scene of test_farm_transfer, framed close, with `texture`."""
     from PIL import Image
 
-    checker = (np.indices((8, 8)).sum(axis=0) % 2 * 200 + 30).astype(np.uint8)
-    Image.fromarray(np.stack([checker] * 3, axis=-1)).save(client / "shot" / "tex.png")
-    path.write_text(path.read_text().replace("position: [0, 1, 9], look_at: [0, 0, 0]", "position: [0.3, 0.3, 2.5], look_at: [0.3, 0.3, 0]")
+    path = _scene(folder, "tex.png")
+    Image.fromarray(texture).save(folder / "tex.png")
+    path.write_text(path.read_text().replace("last: 1", "last: 7").replace("position: [0, 1, 9], look_at: [0, 0, 0]", "position: [0.3, 0.3, 2.5], look_at: [0.3, 0.3, 0]")
                     + "lights: [{type: constant, radiance: 1.0}]\n")
+    return path
+
+
+def test_workers_without_the_clients_folders_render_the_same_frames(hidden_cluster) -> None:
+    client = hidden_cluster["client"]
+    checker = (np.indices((8, 8)).sum(axis=0) % 2 * 200 + 30).astype(np.uint8)
+    path = _textured(client / "shot", np.stack([checker] * 3, axis=-1))
     common = ["--frames", "0-1", "--threads", "1", *TINY]
     local = motion("render", path, "-o", client / "local", *common)
     assert local.returncode == 0, local.stderr
@@ -88,4 +102,52 @@ def test_a_hostile_asset_path_is_refused_before_sending(hidden_cluster) -> None:
     assert res.returncode != 0 and "Traceback" not in res.stderr
     line = res.stderr.strip().splitlines()[-1]
     assert "outside the scene's folder" in line and "materials[0].color.file" in line, res.stderr
-    assert not (hidden_cluster["cache"] / "shipped").exists()  # nothing reached a worker
+    secret = hashlib.sha256((client / "secret.png").read_bytes()).hexdigest()
+    assert not list(hidden_cluster["cache"].rglob(f"{secret}*"))  # nothing reached a worker
+
+
+def test_a_worker_whose_cache_disk_is_full_says_so_in_one_line(hidden_cluster) -> None:
+    """w1's 96 KiB cache disk cannot take a 192 KiB texture: its chunk fails with one line
+    naming the worker and the full disk, and is retried on w2; the job finishes, with this
+    scene's texture (warm workers keyed their scene by the assets' contents too)."""
+    client = hidden_cluster["client"]
+    noise = np.random.default_rng(5).integers(0, 256, (256, 256, 3), dtype=np.uint8)  # does not compress
+    path = _textured(client / "big", noise)
+    out = client / "out-big"
+    res = motion("render", path, "-o", out, "--scheduler", hidden_cluster["address"], "--transfer", "ship", "--frames", "0-3", "--chunk-size", "1", "--threads", "1", *TINY)
+    assert res.returncode == 0, res.stderr
+    rep = report(out)
+    assert rep["totals"]["rendered"] == 4 and rep["totals"]["failed"] == 0
+    errors = [e for r in rep["frames"] for e in r.get("errors", [])]
+    assert errors and all("\n" not in e and "No space left on device" in e and "caching a shipped asset" in e for e in errors), errors
+    w1 = [w for w in rep["workers"] if w["failures"]]
+    assert w1 and all(w["frames"] == 0 for w in w1)  # every frame came from the worker with room
+    assert any("No space left on device" in line for line in res.stderr.splitlines())
+    # same scene text as the first test's shot, another texture: no worker reused that scene
+    local = motion("render", path, "-o", client / "local-big", "--frames", "0", "--threads", "1", *TINY)
+    assert local.returncode == 0, local.stderr
+    assert np.array_equal(read_frame(out / "scene.0000.exr").rgba, read_frame(client / "local-big" / "scene.0000.exr").rgba)
+
+
+def test_a_worker_killed_mid_chunk_is_retried(hidden_cluster) -> None:
+    """SIGKILL the worker holding a shipped chunk: the chunk is retried on the other worker
+    (last in this module: the killed worker stays dead)."""
+    from distributed import Client
+
+    client = hidden_cluster["client"]
+    checker = (np.indices((8, 8)).sum(axis=0) % 2 * 200 + 30).astype(np.uint8)
+    path = _textured(client / "slow", np.stack([checker] * 3, axis=-1))
+    out = client / "out-slow"
+    proc = start_motion("render", path, "-o", out, "--scheduler", hidden_cluster["address"], "--transfer", "ship", "--frames", "0-5", "--chunk-size", "3", "--threads", "1", *SLOW)
+    victim = hidden_cluster["workers"]["w2"]
+    with Client(hidden_cluster["address"], timeout=10) as c:
+        address = next(a for a, w in c.scheduler_info(n_workers=-1)["workers"].items() if w["name"] == "w2")
+        wait_for(lambda: any(k.startswith("motion-chunk-") for k in c.processing().get(address, ())), 60, "a chunk on w2")
+    kill(victim.pid)
+    _, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 0, stderr
+    rep = report(out)
+    assert rep["totals"]["rendered"] == 6 and rep["totals"]["failed"] == 0
+    assert sum(r["attempts"] > 1 for r in rep["frames"]) == 3  # the killed chunk, once more
+    assert [f.name for f in frames_in(out)] == [f"scene.{f:04d}.exr" for f in range(6)]
+    assert not leftovers(out)  # the client's claims and temporary files are gone

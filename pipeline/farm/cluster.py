@@ -163,6 +163,8 @@ class DaskExecutor:
             from .transfer import publish_home
 
             result = publish_home(claimed[0], result, self._ship.given, claimed[1])
+            if any(not r.ok for r in result.results):
+                self._ship.forget(worker)  # its cache may have lost an asset: ask again before its next chunk
         return Done(worker, chunk_id, result)
 
     def _forget(self, worker: str, chunk_id: int) -> None:

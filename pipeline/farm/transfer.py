@@ -116,15 +116,25 @@ def check_out(assets: Iterable[ShippedAsset], fetch: Callable[[str], bytes], fol
     out: dict[str, Path] = {}
     for asset in assets:
         path = cached(asset, folder)
-        out[asset.rel] = path if path is not None else store(asset.sha256, fetch(asset.sha256), folder, asset.rel)
+        if path is None:
+            try:
+                data = fetch(asset.sha256)
+            except KeyError:
+                raise AssetError(f"shipped asset {asset.rel} ({asset.sha256[:16]}): not in this worker's cache and not sent with the chunk") from None
+            path = store(asset.sha256, data, folder, asset.rel)
+        out[asset.rel] = path
     return out
 
 
 def checkout_folder(assets: Iterable[ShippedAsset], folder: Path | None = None) -> Path:
     """Where a job's checkout lives on this worker: one folder per manifest (the same
     assets by the same names share it across jobs), beside the cached entries."""
-    h = hashlib.sha256("\n".join(sorted(f"{a.rel}\0{a.sha256}" for a in assets)).encode()).hexdigest()[:24]
-    return (folder if folder is not None else shipped_cache_dir()) / "checkouts" / h
+    return (folder if folder is not None else shipped_cache_dir()) / "checkouts" / manifest_key(assets)
+
+
+def manifest_key(assets: Iterable[ShippedAsset]) -> str:
+    """A short digest of a manifest (each file's scene-relative name and content hash)."""
+    return hashlib.sha256("\n".join(sorted(f"{a.rel}\0{a.sha256}" for a in assets)).encode()).hexdigest()[:24]
 
 
 def localize(loaded: LoadedScene, assets: Sequence[ShippedAsset], fetch: Callable[[str], bytes], folder: Path | None = None) -> LoadedScene:
@@ -172,6 +182,12 @@ class ShippedScene:
     loaded: LoadedScene
     assets: tuple[ShippedAsset, ...]
     fetch: Callable[[str], bytes] = field(repr=False)
+
+    @property
+    def key(self) -> str:
+        """What the assets' contents add to the job's key: a worker's first-frame cache
+        built from other textures under the same names (same scene text) is not reused."""
+        return manifest_key(self.assets)
 
     def checkout(self) -> LoadedScene:
         """The scene with its assets resolved to this worker's cached copies (`localize`)."""

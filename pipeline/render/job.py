@@ -59,6 +59,11 @@ class SceneSource(Protocol):
     """A job's scene carried to the worker instead of read by path (farm/transfer.py's
     ShippedScene): `checkout()` gives the parsed scene with its assets on this worker."""
 
+    @property
+    def key(self) -> str:
+        """A digest of the carried assets' contents (part of the first-frame cache's key)."""
+        ...
+
     def checkout(self) -> LoadedScene:
         """The parsed scene, its asset paths resolved on this worker."""
         ...
@@ -148,7 +153,10 @@ def _renderer(job: RenderJob) -> tuple[FrameRenderer, LoadedScene, str]:
     """The worker's cached renderer for this job (built on first use, reused after)."""
     from .. import variant as variant_mod
 
-    if _WORKER.get("key") == job.key and job.cache:
+    # a shipped job's key adds its assets' contents: the same scene text with other textures
+    # (another shot's folder) must not reuse this worker's scene
+    key = job.key if job.shipped is None else f"{job.key}:{job.shipped.key}"
+    if _WORKER.get("key") == key and job.cache:
         return _WORKER["renderer"], _WORKER["loaded"], _WORKER["variant"]
     # a different job (or no cache): drop the old scene first, so kernels do not bake in
     # stale object ids, then build anew
@@ -174,7 +182,7 @@ def _renderer(job: RenderJob) -> tuple[FrameRenderer, LoadedScene, str]:
 
     mi.set_log_level(mi.LogLevel.Error)
     renderer = FrameRenderer(loaded)
-    _WORKER.update(key=job.key, renderer=renderer, loaded=loaded, variant=choice.variant)
+    _WORKER.update(key=key, renderer=renderer, loaded=loaded, variant=choice.variant)
     return renderer, loaded, choice.variant
 
 
