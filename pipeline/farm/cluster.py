@@ -17,6 +17,7 @@ frames, and the worker returns each EXR's bytes for the client to publish.
 
 from __future__ import annotations
 
+import pickle
 import time
 import uuid
 from collections import deque
@@ -88,6 +89,8 @@ class DaskExecutor:
         self._ship: Any = None  # transfer.Shipment of a job that carries its inputs (ship mode)
         self._claimed: dict[int, Any] = {}  # chunk id -> what the client settled before sending (ship mode)
         self._ready: list[Event] = []  # chunks settled without a task (every frame held, done or refused)
+        self.task_bytes = 0  # pickled task arguments sent (job, baked frames, context, payload keys)
+        self.frame_bytes = 0  # EXR bytes brought home (ship mode)
         self._refresh(force=True)
 
     def _on_frame_event(self, event: tuple[float, Any]) -> None:
@@ -126,6 +129,7 @@ class DaskExecutor:
 
     def _send(self, worker: str, chunk_id: int, task: Any, *args: Any) -> None:
         """Submit `task(chunk_id, *args)` pinned to `worker` (no stealing, no Dask retries)."""
+        self.task_bytes += len(pickle.dumps(args, protocol=5))
         fut = self.client.submit(
             task,
             chunk_id,
@@ -162,10 +166,20 @@ class DaskExecutor:
         if claimed is not None:
             from .transfer import publish_home
 
+            self.frame_bytes += sum(len(b) for b in result.frame_bytes.values())
             result = publish_home(claimed[0], result, self._ship.given, claimed[1])
             if any(not r.ok for r in result.results):
                 self._ship.forget(worker)  # its cache may have lost an asset: ask again before its next chunk
         return Done(worker, chunk_id, result)
+
+    def transfer_stats(self) -> dict[str, Any]:
+        """What crossed the network for this job, as the report's `executor.transfer`: the
+        mode, the pickled task arguments, and in ship mode the assets (their total size,
+        the bytes handed to workers, each at most once per worker) and the frames brought home."""
+        out: dict[str, Any] = {"mode": "shared" if self._ship is None else "ship", "task_bytes": self.task_bytes}
+        if self._ship is not None:
+            out.update(self._ship.stats(), frame_bytes_home=self.frame_bytes)
+        return out
 
     def _forget(self, worker: str, chunk_id: int) -> None:
         """A shipped chunk that did not come back: its worker is asked again what it holds

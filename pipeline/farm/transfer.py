@@ -255,6 +255,12 @@ class Shipment:
         self.bytes_sent += sum(sizes[h] for h in lacking)
         return {h: self.futures[h] for h in lacking}
 
+    def stats(self) -> dict[str, int]:
+        """The job's assets: how many, their total size, the bytes handed to workers."""
+        shipped = self.given.shipped
+        assert isinstance(shipped, ShippedScene)  # made so in __init__
+        return {"assets": len(shipped.assets), "asset_bytes": sum(a.size for a in shipped.assets), "asset_bytes_to_workers": self.bytes_sent, "workers_stocked": len(self.stocked)}
+
     def forget(self, worker: str) -> None:
         """A worker lost a chunk (it may have restarted, its cache gone): ask it again."""
         self.stocked.discard(worker)

@@ -376,6 +376,9 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     t_farm = time.perf_counter()
     sched, interrupted = run_chunks(chunk_list, job, by_frame, ctx, cfg, progress, scheduler=req.scheduler, workers=workers, threads=threads, inline=inline)
     farm_s = time.perf_counter() - t_farm
+    executor_info = {"kind": "dask" if req.scheduler else ("inline" if inline else "local"), "workers": workers if not req.scheduler else None, "threads": threads, "scheduler": req.scheduler, "chunk_size": chunk_size, "chunks": len(chunk_list)}
+    if sched is not None and hasattr(sched.ex, "transfer_stats"):
+        executor_info["transfer"] = sched.ex.transfer_stats()  # what crossed the network (docs/farm.md)
 
     report = build_report(
         loaded=loaded,
@@ -387,7 +390,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         skipped=skipped,
         sched=sched,
         cfg=cfg,
-        executor_info={"kind": "dask" if req.scheduler else ("inline" if inline else "local"), "workers": workers if not req.scheduler else None, "threads": threads, "scheduler": req.scheduler, "chunk_size": chunk_size, "chunks": len(chunk_list)},
+        executor_info=executor_info,
         timings={"bake_s": bake_s, "farm_s": farm_s, "wall_s": time.perf_counter() - t_start},
         run_id=run_id,
         interrupted=interrupted,
