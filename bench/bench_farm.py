@@ -10,13 +10,20 @@
               (tiny resolution), sampled through the job: the last quarter's peak against
               the second quarter's (after start-up) (flat, not growing with frame count).
   scale       tasks per second the client sustains with 8 and 16 Dask workers on loopback
-              (one 8x6-px 1-spp frame a task, workers warmed by a first job), bytes per
-              frame from Dask's own counters (scheduler to workers: tasks with their
-              arguments; workers to client: results), the client's peak RSS; beside it the
-              same job on two local workers.
+              (one 8x6-px 1-spp frame a task of the farm test scene with a 768 KiB
+              texture on its floor, workers warmed by a first job), each Dask job twice:
+              shared disk (`--transfer shared`: workers read the scene, write the frames)
+              and no shared disk (`--transfer ship`: the parsed scene and the texture
+              travel, the frames come home); bytes per frame from Dask's own counter
+              (scheduler to workers: tasks with their arguments) and from the report's
+              `executor.transfer` (the client's pickled task arguments, the EXR bytes
+              home, the texture bytes handed to workers in the warm-up job: the fan-out),
+              the client's peak RSS; beside it the same job on two local workers.
   client      the main process's RSS for a 100,000-frame job: when planned (first frame on
               disk) and its growth per finished frame over 20 s, then Ctrl-C
-              (`client_memory` says why that is the whole cost).
+              (`client_memory` says why that is the whole cost); with two local workers,
+              and shipped to a 2-worker Dask cluster (the client then also claims,
+              publishes and holds the assets).
 
     python bench/bench_farm.py [--frames 24] [--memory-frames 200] [--only scale --only client]
 """
@@ -181,14 +188,28 @@ def _cpu_s(pid: int) -> float:
     return times.user + times.system
 
 
+def textured_scene(tmp: Path, frames: int) -> Path:
+    """`long_scene` with a 512x512 noise texture (768 KiB, incompressible) on its floor: an
+    asset for ship mode to carry."""
+    import numpy as np
+    from PIL import Image
+
+    Image.fromarray(np.random.default_rng(1).integers(0, 256, (512, 512, 3), dtype=np.uint8)).save(tmp / "floor.png")
+    path = long_scene(tmp, frames)
+    path.write_text(path.read_text().replace("{name: floor, type: diffuse, color: 0.5}", "{name: floor, type: diffuse, color: {file: floor.png}}"))
+    return path
+
+
 def scale(worker_counts: list[int], frames: int, tmp: Path) -> dict[str, dict]:
     """Tasks per second the client sustains with many Dask workers on loopback: tiny frames
     (8x6 px, 1 spp, one frame a task), after a first job on the same cluster has paid every
-    worker's first-frame costs; the bytes sent to workers per frame (Dask's own counter);
-    the CPU the client and the scheduler spend per task, from a job of a quarter of the
-    frames and the full job (the difference, so start-up and the bake drop out); the
-    client's peak RSS. Beside it, the same job on two local worker processes."""
-    scene = long_scene(tmp, frames)
+    worker's first-frame costs (and, shipped, filled its asset cache); the bytes sent to
+    workers per frame (Dask's own counter) and the report's transfer figures; the CPU the
+    client and the scheduler spend per task, from a job of a quarter of the frames and the
+    full job (the difference, so start-up and the bake drop out); the client's peak RSS.
+    Each cluster runs the job with a shared disk and shipped, the same frames. Beside it,
+    the same job on two local worker processes."""
+    scene = textured_scene(tmp, frames)
     small = max(1, frames // 4)
     job = lambda n: [str(scene), "--frames", f"0-{n - 1}", "--resolution", "8x6", "--spp", "1", "--chunk-size", "1"]  # noqa: E731
     out: dict[str, dict] = {}
@@ -197,38 +218,45 @@ def scale(worker_counts: list[int], frames: int, tmp: Path) -> dict[str, dict]:
     for n in worker_counts:
         cluster = Cluster(n)
         try:
-            dask = ["--scheduler", cluster.address, "--threads", "1"]
-            render(job(frames) + dask, tmp / f"scale-warm-{n}")  # every worker's first frame, outside the measured jobs
-            sched_pid = cluster.procs[0].pid
-            c0 = _cpu_s(sched_pid)
-            _, _, few = render(job(small) + dask, tmp / f"scale-few-{n}", sample_memory=True)
-            c1, sent0 = _cpu_s(sched_pid), _to_workers_bytes(cluster.address)
-            rep, wall, samples = render(job(frames) + dask, tmp / f"scale-dask-{n}", sample_memory=True)
-            c2, sent1 = _cpu_s(sched_pid), _to_workers_bytes(cluster.address)
+            for mode in ("shared", "ship"):
+                dask = ["--scheduler", cluster.address, "--threads", "1", "--transfer", mode]
+                warm, _, _ = render(job(frames) + dask, tmp / f"scale-warm-{n}-{mode}")  # every worker's first frame, outside the measured jobs
+                sched_pid = cluster.procs[0].pid
+                c0 = _cpu_s(sched_pid)
+                _, _, few = render(job(small) + dask, tmp / f"scale-few-{n}-{mode}", sample_memory=True)
+                c1, sent0 = _cpu_s(sched_pid), _to_workers_bytes(cluster.address)
+                rep, wall, samples = render(job(frames) + dask, tmp / f"scale-dask-{n}-{mode}", sample_memory=True)
+                c2, sent1 = _cpu_s(sched_pid), _to_workers_bytes(cluster.address)
+                client_few, client_all = few["main_cpu_s"][-1][1], samples["main_cpu_s"][-1][1]
+                moved = rep["executor"].get("transfer", {})
+                out[f"dask x{n} {mode}"] = {"tasks": rep["executor"]["chunks"], "farm_s": rep["totals"]["farm_s"], "wall_s": wall,
+                                            "client_peak_mb": max(m for _, m in samples.get("main", [(0, 0.0)])),
+                                            "to_workers_per_frame": (sent1 - sent0) / frames,
+                                            "task_args_per_frame": moved.get("task_bytes", 0) / frames,
+                                            "home_per_frame": moved.get("frame_bytes_home", 0) / frames,
+                                            "fan_out_bytes": warm["executor"].get("transfer", {}).get("asset_bytes_to_workers", 0),
+                                            "asset_bytes": moved.get("asset_bytes", 0),
+                                            "client_ms_per_task": 1000 * (client_all - client_few) / (frames - small),
+                                            "scheduler_ms_per_task": 1000 * ((c2 - c1) - (c1 - c0)) / (frames - small)}
         finally:
             cluster.close()
-        client_few, client_all = few["main_cpu_s"][-1][1], samples["main_cpu_s"][-1][1]
-        out[f"dask x{n}"] = {"tasks": rep["executor"]["chunks"], "farm_s": rep["totals"]["farm_s"], "wall_s": wall,
-                             "client_peak_mb": max(m for _, m in samples.get("main", [(0, 0.0)])),
-                             "to_workers_per_frame": (sent1 - sent0) / frames,
-                             "client_ms_per_task": 1000 * (client_all - client_few) / (frames - small),
-                             "scheduler_ms_per_task": 1000 * ((c2 - c1) - (c1 - c0)) / (frames - small)}
     for v in out.values():
         v["tasks_per_s"] = v["tasks"] / v["farm_s"]
     return out
 
 
-def client_memory(frames: int, seconds: float, tmp: Path) -> dict[str, float]:
+def client_memory(frames: int, seconds: float, tmp: Path, executor: list[str] | None = None) -> dict[str, float]:
     """The main process's RSS over a job of `frames` frames (the farm test scene, 1x1 px,
     1 spp, two local workers; the client's share is the same with Dask): when planning is
     done (the first frame is on disk: bake, frame paths, resume checks, chunks and the
     scheduler's records all exist), and its growth per finished frame over the next
     `seconds`, after which the job is interrupted (Ctrl-C) and the report read for how many
     frames were done. Rendering all of them is not needed: nothing per frame is allocated
-    later except a finished frame's record, whose cost is the growth measured here."""
+    later except a finished frame's record, whose cost is the growth measured here.
+    `executor`: other flags than `--workers 2` (a Dask cluster, a transfer mode)."""
     scene = long_scene(tmp, frames)
-    out = tmp / "client-memory"
-    cmd = [MOTION, "render", str(scene), "--frames", f"0-{frames - 1}", "--resolution", "1x1", "--spp", "1", "--workers", "2", "-o", str(out), "--no-progress", "--overwrite"]
+    out = tmp / ("client-memory" + "-".join(executor or []).replace("/", "").replace(":", ""))
+    cmd = [MOTION, "render", str(scene), "--frames", f"0-{frames - 1}", "--resolution", "1x1", "--spp", "1", *(executor or ["--workers", "2"]), "-o", str(out), "--no-progress", "--overwrite"]
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     main = psutil.Process(proc.pid)
@@ -295,16 +323,23 @@ def main() -> None:
         if "scale" in only:
             counts = [int(n) for n in args.scale_workers.split(",") if n]
             sc = scale(counts, args.scale_frames, tmp)
-            print(f"\nscale: {args.scale_frames} tasks of one 8x6-px 1-spp frame (warm workers); bytes from Dask's counter")
-            print(f"{'executor':10} {'tasks/s':>8} {'farm s':>7} {'client MB':>10} {'to workers B/frame':>19} {'client ms/task':>15} {'scheduler ms/task':>18}")
+            print(f"\nscale: {args.scale_frames} tasks of one 8x6-px 1-spp frame (warm workers), a 768 KiB texture; bytes per frame")
+            print(f"{'executor':16} {'tasks/s':>8} {'farm s':>7} {'client MB':>10} {'to workers':>11} {'task args':>10} {'home':>7} {'client ms/task':>15} {'scheduler ms/task':>18} {'fan-out MiB':>12}")
             for name, v in sc.items():
-                cols = [f"{v[k]:{w}.{d}f}" if k in v else f"{'-':>{w}}" for k, w, d in (("to_workers_per_frame", 19, 0), ("client_ms_per_task", 15, 2), ("scheduler_ms_per_task", 18, 2))]
-                print(f"{name:10} {v['tasks_per_s']:8.1f} {v['farm_s']:7.2f} {v['client_peak_mb']:10.1f} " + " ".join(cols))
+                cols = [f"{v[k]:{w}.{d}f}" if k in v else f"{'-':>{w}}" for k, w, d in (("to_workers_per_frame", 11, 0), ("task_args_per_frame", 10, 0), ("home_per_frame", 7, 0), ("client_ms_per_task", 15, 2), ("scheduler_ms_per_task", 18, 2))]
+                fan = f"{v['fan_out_bytes'] / 2**20:12.2f}" if "fan_out_bytes" in v else f"{'-':>12}"
+                print(f"{name:16} {v['tasks_per_s']:8.1f} {v['farm_s']:7.2f} {v['client_peak_mb']:10.1f} " + " ".join(cols) + " " + fan)
         if "client" in only:
-            cm = client_memory(args.client_frames, args.client_seconds, tmp)
-            print(f"\nclient memory, a {cm['frames']}-frame job: {cm['planned_mb']:.0f} MB when planned ({cm['planned_s']:.1f} s), "
-                  f"{cm['end_mb']:.0f} MB after {cm['done']} frames ({cm['per_frame_kb']:.2f} KB per finished frame), "
-                  f"{cm['extrapolated_mb']:.0f} MB extrapolated to the last frame")
+            cluster = Cluster(2)
+            try:
+                runs = (("2 local workers", None), ("shipped, 2 Dask workers", ["--scheduler", cluster.address, "--threads", "1", "--transfer", "ship"]))
+                for name, executor in runs:
+                    cm = client_memory(args.client_frames, args.client_seconds, tmp, executor)
+                    print(f"\nclient memory, a {cm['frames']}-frame job, {name}: {cm['planned_mb']:.0f} MB when planned ({cm['planned_s']:.1f} s), "
+                          f"{cm['end_mb']:.0f} MB after {cm['done']} frames ({cm['per_frame_kb']:.2f} KB per finished frame), "
+                          f"{cm['extrapolated_mb']:.0f} MB extrapolated to the last frame")
+            finally:
+                cluster.close()
 
 if __name__ == "__main__":
     main()

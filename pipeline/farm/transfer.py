@@ -237,6 +237,8 @@ class Shipment:
         futures = client.scatter([shipped.fetch[h] for h in hashes], hash=False) if hashes else []
         self.futures: dict[str, Any] = dict(zip(hashes, futures))
         self.sent = with_payload(job, {})
+        # the job (parsed scene, settings) crosses once per worker too: tasks carry its key
+        self.job_future = client.scatter(self.sent, hash=False)
         self.stocked: set[str] = set()  # workers that hold every asset (cache or sent)
         self.bytes_sent = 0  # asset bytes handed to workers (each once per worker)
 
