@@ -82,9 +82,11 @@ def render(args: list[str], out: Path, sample_memory: bool = False) -> tuple[dic
 
 
 class Cluster:
-    """A `dask scheduler` and N single-threaded `dask worker`s on 127.0.0.1."""
+    """A `dask scheduler` and N single-threaded `dask worker`s on 127.0.0.1; with `caches`,
+    each worker has its own cache folder under it (as if on a machine of its own: a shipped
+    asset then crosses once to each)."""
 
-    def __init__(self, workers: int) -> None:
+    def __init__(self, workers: int, caches: Path | None = None) -> None:
         with socket.socket() as s:
             s.bind(("127.0.0.1", 0))
             port = s.getsockname()[1]
@@ -93,7 +95,8 @@ class Cluster:
         quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
         self.procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], **quiet)]
         for i in range(workers):
-            self.procs.append(subprocess.Popen([dask, "worker", self.address, "--nthreads", "1", "--no-nanny", "--no-dashboard", "--host", "127.0.0.1"], **quiet))
+            env = {**os.environ, "MOTION_CACHE_DIR": str(caches / f"worker-{i}")} if caches else None
+            self.procs.append(subprocess.Popen([dask, "worker", self.address, "--nthreads", "1", "--no-nanny", "--no-dashboard", "--host", "127.0.0.1"], env=env, **quiet))
         from distributed import Client
 
         deadline = time.monotonic() + 60
@@ -216,7 +219,7 @@ def scale(worker_counts: list[int], frames: int, tmp: Path) -> dict[str, dict]:
     rep, wall, samples = render(job(frames) + ["--workers", "2"], tmp / "scale-local", sample_memory=True)
     out["local x2"] = {"tasks": rep["executor"]["chunks"], "farm_s": rep["totals"]["farm_s"], "wall_s": wall, "client_peak_mb": max(m for _, m in samples.get("main", [(0, 0.0)]))}
     for n in worker_counts:
-        cluster = Cluster(n)
+        cluster = Cluster(n, caches=tmp / f"caches-{n}")
         try:
             for mode in ("shared", "ship"):
                 dask = ["--scheduler", cluster.address, "--threads", "1", "--transfer", mode]
@@ -245,6 +248,13 @@ def scale(worker_counts: list[int], frames: int, tmp: Path) -> dict[str, dict]:
     return out
 
 
+def _sigint_default() -> None:
+    """In the child, before exec: SIGINT as a terminal gives it (a bench started in the
+    background inherits it ignored, and the Ctrl-C that ends the job would be lost)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
 def client_memory(frames: int, seconds: float, tmp: Path, executor: list[str] | None = None) -> dict[str, float]:
     """The main process's RSS over a job of `frames` frames (the farm test scene, 1x1 px,
     1 spp, two local workers; the client's share is the same with Dask): when planning is
@@ -258,7 +268,7 @@ def client_memory(frames: int, seconds: float, tmp: Path, executor: list[str] | 
     out = tmp / ("client-memory" + "-".join(executor or []).replace("/", "").replace(":", ""))
     cmd = [MOTION, "render", str(scene), "--frames", f"0-{frames - 1}", "--resolution", "1x1", "--spp", "1", *(executor or ["--workers", "2"]), "-o", str(out), "--no-progress", "--overwrite"]
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, preexec_fn=_sigint_default)
     main = psutil.Process(proc.pid)
     peak, planned, planned_at, series = 0.0, None, None, []
     while proc.poll() is None:

@@ -105,7 +105,7 @@ def test_a_hostile_asset_path_is_refused_before_sending(hidden_cluster) -> None:
     Image.new("RGB", (4, 4), (9, 9, 9)).save(client / "secret.png")  # a real image: the asset checks pass, only the folder rule refuses it
     path = _scene(client / "shot", "../secret.png")
     res = motion("render", path, "-o", client / "out", "--scheduler", hidden_cluster["address"], "--transfer", "ship", "--frames", "0", *TINY)
-    assert res.returncode != 0 and "Traceback" not in res.stderr
+    assert res.returncode == 2 and "Traceback" not in res.stderr
     line = res.stderr.strip().splitlines()[-1]
     assert "outside the scene's folder" in line and "materials[0].color.file" in line, res.stderr
     secret = hashlib.sha256((client / "secret.png").read_bytes()).hexdigest()
