@@ -90,10 +90,12 @@ def test_workers_without_the_clients_folders_render_the_same_frames(hidden_clust
     assert list((hidden_cluster["cache"] / "shipped").glob("*.png"))  # the texture came through the cluster
     sent = rep["executor"]["transfer"]
     assert sent["mode"] == "ship" and sent["assets"] == 2 and 0 < sent["asset_bytes_to_workers"] <= 2 * sent["asset_bytes"]  # once per worker at most
+    assert sent["asset_bytes_from_client"] == sent["asset_bytes"]  # the client uploads each once; workers pass them on
     assert sent["frame_bytes_home"] == sum(p.stat().st_size for p in got)
     again = motion("render", path, "-o", client / "out", "--scheduler", hidden_cluster["address"], "--overwrite", *common)
     assert again.returncode == 0, again.stderr
-    assert report(client / "out")["executor"]["transfer"]["asset_bytes_to_workers"] == 0  # the workers' caches kept them
+    moved = report(client / "out")["executor"]["transfer"]
+    assert moved["asset_bytes_to_workers"] == moved["asset_bytes_from_client"] == 0  # the workers' caches kept them
     # --check and resume work on the frames that came home
     assert motion("render", path, "-o", client / "out", "--check", *common).returncode == 0
 

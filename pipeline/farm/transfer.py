@@ -177,7 +177,7 @@ class BytesByHash(dict):  # type: ignore[type-arg]
 class ShippedScene:
     """A job's scene as it travels in ship mode: the parsed scene (no worker parses it
     again), its asset manifest, and where a worker fetches the bytes it lacks from
-    (`BytesByHash` in-process; on Dask, the scattered futures: `ScatteredAssets`)."""
+    (the client's `FilesByHash`; on a worker, `BytesByHash` of what came with the chunk)."""
 
     loaded: LoadedScene
     assets: tuple[ShippedAsset, ...]
@@ -196,11 +196,10 @@ class ShippedScene:
 
 def ship_job(job: RenderJob, loaded: LoadedScene, scene_file: str | Path) -> RenderJob:
     """The job as ship mode sends it: the parsed scene and its asset manifest ride along
-    (their bytes in-process until an executor scatters them). Raises AssetError for a file
+    (their bytes read when a worker first lacks them: `Shipment`). Raises AssetError for a file
     outside the scene's folder before anything is read or sent."""
     assets = tuple(asset_manifest(loaded.scene, loaded.base_dir, scene_file))
-    data = BytesByHash({a.sha256: (loaded.base_dir / a.rel).read_bytes() for a in assets})
-    return replace(job, shipped=ShippedScene(loaded, assets, data))
+    return replace(job, shipped=ShippedScene(loaded, assets, FilesByHash(loaded.base_dir, assets)))
 
 
 def missing_assets(assets: Sequence[ShippedAsset]) -> list[str]:
@@ -218,50 +217,79 @@ def with_payload(job: RenderJob, payload: dict[str, bytes]) -> RenderJob:
     return replace(job, shipped=replace(shipped, fetch=BytesByHash(payload)))
 
 
+class FilesByHash:
+    """Asset bytes on the client, read from the scene's folder when a worker first needs
+    them (nothing is held in memory meanwhile) and checked against the manifest's hash."""
+
+    def __init__(self, base_dir: Path, assets: Iterable[ShippedAsset]) -> None:
+        """Where the files lie, and each one's scene-relative name by content hash."""
+        self.base = Path(base_dir)
+        self.rel = {a.sha256: a.rel for a in assets}
+
+    def __call__(self, sha256: str) -> bytes:
+        """The file's bytes; AssetError when it changed since the job was planned."""
+        path = self.base / self.rel[sha256]
+        data = path.read_bytes()
+        if hashlib.sha256(data).hexdigest() != sha256:
+            raise AssetError(f"{path}: changed while the job runs (its hash is no longer {sha256[:16]}); run motion render again")
+        return data
+
+
 class Shipment:
-    """The client's side of one shipped job on a Dask cluster: the asset bytes scattered
-    once (`client.scatter`; the futures are held while the job runs, the cluster drops
-    data nobody holds), the job as sent (the manifest without the bytes), and which workers
-    already hold every asset. A worker's first chunk asks its cache what it lacks
-    (`missing_assets`, one `client.run`) and takes exactly those futures as arguments, so
-    Dask moves each asset to each worker once (from the client or another worker), never
-    once per frame, and not at all to a worker whose disk cache kept it from an earlier job."""
+    """The client's side of one shipped job on a Dask cluster: the job as sent (the parsed
+    scene and manifest, without bytes) scattered once, and which workers already hold every
+    asset. A worker's first chunk asks its cache what it lacks (`missing_assets`, one
+    `client.run`) and takes exactly those assets as futures among its arguments: an asset
+    is scattered (`client.scatter`, to that worker) when a worker first lacks it, and Dask
+    moves it to every later one (from any worker holding it), so each asset crosses to each
+    worker once, never once per frame, and not at all when every disk cache kept it from an
+    earlier job. The futures are held while the job runs (the cluster drops data nobody holds)."""
 
     def __init__(self, client: Any, job: RenderJob) -> None:
-        """Scatter the job's asset bytes to the cluster."""
+        """Scatter the job as sent."""
         shipped = job.shipped
-        if not isinstance(shipped, ShippedScene) or not isinstance(shipped.fetch, BytesByHash):
+        if not isinstance(shipped, ShippedScene):
             raise TypeError("Shipment needs a job made by ship_job")
         self.given = job
-        hashes = sorted(shipped.fetch)
-        futures = client.scatter([shipped.fetch[h] for h in hashes], hash=False) if hashes else []
-        self.futures: dict[str, Any] = dict(zip(hashes, futures))
+        self.assets = shipped.assets
+        self.fetch = shipped.fetch
+        self.futures: dict[str, Any] = {}
         self.sent = with_payload(job, {})
         # the job (parsed scene, settings) crosses once per worker too: tasks carry its key
         self.job_future = client.scatter(self.sent, hash=False)
         self.stocked: set[str] = set()  # workers that hold every asset (cache or sent)
         self.bytes_sent = 0  # asset bytes handed to workers (each once per worker)
+        self.bytes_scattered = 0  # asset bytes the client itself uploaded
+
+    def _future(self, client: Any, sha256: str, worker: str) -> Any:
+        if sha256 not in self.futures:
+            data = self.fetch(sha256)
+            try:
+                self.futures[sha256] = client.scatter(data, workers=[worker], hash=False)
+            except KeyError:  # that worker just left the cluster: anywhere will do
+                self.futures[sha256] = client.scatter(data, hash=False)
+            self.bytes_scattered += len(data)
+        return self.futures[sha256]
 
     def payload_for(self, client: Any, worker: str) -> dict[str, Any]:
-        """The scattered futures `worker` still needs (empty once it holds every asset)."""
+        """The asset futures `worker` still needs (empty once it holds every asset)."""
         if worker in self.stocked:
             return {}
-        shipped = self.given.shipped
-        assert isinstance(shipped, ShippedScene)  # made so in __init__
+        everything = sorted({a.sha256 for a in self.assets})
         try:
-            lacking = client.run(missing_assets, shipped.assets, workers=[worker]).get(worker, sorted(self.futures))
+            lacking = client.run(missing_assets, self.assets, workers=[worker]).get(worker, everything)
         except Exception:  # the worker left or cannot answer: send everything (the chunk is retried if it is gone)
-            lacking = sorted(self.futures)
+            lacking = everything
         self.stocked.add(worker)
-        sizes = {a.sha256: a.size for a in shipped.assets}
+        sizes = {a.sha256: a.size for a in self.assets}
         self.bytes_sent += sum(sizes[h] for h in lacking)
-        return {h: self.futures[h] for h in lacking}
+        return {h: self._future(client, h, worker) for h in lacking}
 
     def stats(self) -> dict[str, int]:
-        """The job's assets: how many, their total size, the bytes handed to workers."""
-        shipped = self.given.shipped
-        assert isinstance(shipped, ShippedScene)  # made so in __init__
-        return {"assets": len(shipped.assets), "asset_bytes": sum(a.size for a in shipped.assets), "asset_bytes_to_workers": self.bytes_sent, "workers_stocked": len(self.stocked)}
+        """The job's assets: how many, their total size, the bytes handed to workers and
+        the bytes the client uploaded."""
+        return {"assets": len(self.assets), "asset_bytes": sum(a.size for a in self.assets), "asset_bytes_to_workers": self.bytes_sent,
+                "asset_bytes_from_client": self.bytes_scattered, "workers_stocked": len(self.stocked)}
 
     def forget(self, worker: str) -> None:
         """A worker lost a chunk (it may have restarted, its cache gone): ask it again."""
