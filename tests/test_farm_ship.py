@@ -100,6 +100,20 @@ def test_workers_without_the_clients_folders_render_the_same_frames(hidden_clust
     assert motion("render", path, "-o", client / "out", "--check", *common).returncode == 0
 
 
+def test_auto_ships_when_only_the_output_folder_is_hidden(hidden_cluster) -> None:
+    """The scene lies where the workers can read it, `-o` where they cannot: writing frames
+    there would leave them on the workers' disks, so --transfer auto ships."""
+    visible = hidden_cluster["client"].parent / "visible"
+    checker = (np.indices((8, 8)).sum(axis=0) % 2 * 200 + 30).astype(np.uint8)
+    path = _textured(visible / "shot", np.stack([checker] * 3, axis=-1))
+    out = hidden_cluster["client"] / "out-auto"
+    res = motion("render", path, "-o", out, "--scheduler", hidden_cluster["address"], "--frames", "0-1", "--threads", "1", *TINY)
+    assert res.returncode == 0, res.stderr
+    assert report(out)["executor"]["transfer"]["mode"] == "ship"
+    assert [p.name for p in frames_in(out)] == ["scene.0000.exr", "scene.0001.exr"]
+    assert not list(out.glob(".motion-transfer-probe-*"))
+
+
 def test_a_hostile_asset_path_is_refused_before_sending(hidden_cluster) -> None:
     client = hidden_cluster["client"]
     from PIL import Image

@@ -384,33 +384,47 @@ def publish_home(pre: ChunkResult, res: ChunkResult, job: RenderJob, ctx: TaskCo
     return res
 
 
-def file_sha256_or_none(path: str) -> str | None:
-    """The file's SHA-256, or None when this process cannot read it (run on a worker by
+def files_sha256(paths: Sequence[str]) -> list[str | None]:
+    """Each file's SHA-256, or None where this process cannot read it (run on a worker by
     `workers_see`)."""
-    try:
-        return _sha256_file(Path(path))
-    except OSError:
-        return None
+    out: list[str | None] = []
+    for path in paths:
+        try:
+            out.append(_sha256_file(Path(path)))
+        except OSError:
+            out.append(None)
+    return out
 
 
-def workers_see(target: dict[str, Any], scene_file: str | Path) -> bool:
-    """Whether the cluster's workers read the scene file as the client does: one worker
-    hashes the file at the client's path and the hashes are compared (`--transfer auto`)."""
+def workers_see(target: dict[str, Any], scene_file: str | Path, out_dir: str | Path) -> bool:
+    """Whether the cluster's workers see the client's folders (`--transfer auto`): one
+    worker hashes, at the client's paths, the scene file and a probe file the client has just
+    written into the output folder; both must match. A cluster with no worker within 60 s
+    counts as seeing them (the executor then waits and fails in one line)."""
+    import uuid
+
     from distributed import Client
 
-    path = str(Path(scene_file).resolve())
-    with Client(**target, timeout=30, set_as_default=False) as client:
-        workers = sorted(client.scheduler_info(n_workers=-1)["workers"])
-        if not workers:
-            return True  # nobody to ask yet: the executor waits for workers and fails clearly
-        got = client.run(file_sha256_or_none, path, workers=workers[:1])
-    return next(iter(got.values())) == _sha256_file(Path(path))
+    scene = str(Path(scene_file).resolve())
+    probe = Path(out_dir).resolve() / f".motion-transfer-probe-{uuid.uuid4().hex[:12]}"
+    write_atomic(probe, uuid.uuid4().hex.encode(), "probing whether the workers see the output folder")
+    try:
+        with Client(**target, timeout=30, set_as_default=False) as client:
+            try:
+                client.wait_for_workers(1, timeout=60)
+            except Exception:  # dask's own TimeoutError type
+                return True
+            workers = sorted(client.scheduler_info(n_workers=-1)["workers"])
+            got = client.run(files_sha256, [scene, str(probe)], workers=workers[:1])
+        return next(iter(got.values())) == files_sha256([scene, str(probe)])
+    finally:
+        probe.unlink(missing_ok=True)
 
 
 def choose_transfer(mode: str, target: dict[str, Any], job: RenderJob, loaded: LoadedScene) -> RenderJob:
     """`--transfer`: shared keeps the job as it is (workers read the scene and write frames
     by path); ship makes it carry its inputs (`ship_job`); auto ships when a worker does not
-    read the scene file the client reads."""
-    if mode == "shared" or (mode == "auto" and workers_see(target, loaded.path)):
+    see the scene file or the output folder the client sees."""
+    if mode == "shared" or (mode == "auto" and workers_see(target, loaded.path, job.output_dir)):
         return job
     return ship_job(job, loaded, loaded.path)
