@@ -136,3 +136,27 @@ def test_a_shipped_job_renders_the_same_pixels_without_the_scene_folder(tmp_path
     assert a.ok and b.ok, (a.error, b.error)
     pa, pb = read_frame(a.path).rgba, read_frame(b.path).rgba
     assert np.array_equal(pa, pb) and float(pa[..., :3].std()) > 0.01  # the texture is really seen
+
+
+def test_frames_come_home_atomically_and_one_lost_on_the_way_fails(tmp_path: Path) -> None:
+    """The client's end of a shipped chunk: a frame whose bytes came is published at its
+    planned path; one reported written whose bytes did not come fails (the farm retries it);
+    this run's claims are released and no temporary file is left."""
+    from motion.pipeline.farm.claims import Claimant, claim_path, try_claim
+    from motion.pipeline.farm.task import ChunkResult, TaskContext
+    from motion.pipeline.farm.transfer import publish_home
+    from motion.pipeline.render.job import FrameResult, RenderJob
+
+    out = tmp_path / "out"
+    out.mkdir()
+    paths = {0: str(out / "s.0000.exr"), 1: str(out / "s.0001.exr")}
+    ctx = TaskContext("run-a", paths)
+    for p in paths.values():
+        assert try_claim(p, Claimant.here("run-a"), 1800)[0]
+    job = RenderJob("scene.yaml", {}, str(out), "h", "s")
+    sent = ChunkResult(3, "w:1", results=[FrameResult(f, f"/worker/tmp/s.{f:04d}.exr", True, "w:1") for f in (0, 1)], frame_bytes={0: b"the frame's bytes"})
+    got = publish_home(ChunkResult(-1, "client"), sent, job, ctx)
+    assert Path(paths[0]).read_bytes() == b"the frame's bytes" and got.results[0].ok and got.results[0].path == paths[0]
+    assert not got.results[1].ok and "lost on the way back" in (got.results[1].error or "") and not Path(paths[1]).exists()
+    assert not got.frame_bytes and not any(claim_path(p).exists() for p in paths.values())
+    assert sorted(x.name for x in out.iterdir() if x.name != ".motion-claims") == ["s.0000.exr"]  # no temporary file left
