@@ -162,7 +162,7 @@ class DaskExecutor:
             self._ready.append(Done(worker, chunk_id, publish_home(pre, ChunkResult(chunk_id, pre.worker), job, ctx)))
             return
         self._claimed[chunk_id] = (pre, ctx)
-        self._send(worker, chunk_id, run_chunk_shipped, self._ship.job_future, todo, ctx.for_chunk(todo), self._topic, self._ship.payload_for(self.client, worker))
+        self._send(worker, chunk_id, run_chunk_shipped, self._ship.job_future(self.client), todo, ctx.for_chunk(todo), self._topic, self._ship.payload_for(self.client, worker))
 
     def _finished(self, worker: str, chunk_id: int, fut: Any) -> Event:
         """A chunk's result; a shipped chunk's frames are published under the output folder first."""

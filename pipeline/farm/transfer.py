@@ -256,13 +256,19 @@ class Shipment:
         self.futures: dict[str, Any] = {}
         self.sent = with_payload(job, {})
         # the job (parsed scene, settings) crosses once per worker too: tasks carry its key
-        self.job_future = client.scatter(self.sent, hash=False)
+        self._job_future = client.scatter(self.sent, hash=False)
         self.stocked: set[str] = set()  # workers that hold every asset (cache or sent)
         self.bytes_sent = 0  # asset bytes handed to workers (each once per worker)
         self.bytes_scattered = 0  # asset bytes the client itself uploaded
 
+    def job_future(self, client: Any) -> Any:
+        """The scattered job, scattered again if every worker holding it has died."""
+        if self._job_future.status != "finished":
+            self._job_future = client.scatter(self.sent, hash=False)
+        return self._job_future
+
     def _future(self, client: Any, sha256: str, worker: str) -> Any:
-        if sha256 not in self.futures:
+        if sha256 not in self.futures or self.futures[sha256].status != "finished":  # new, or every holder died
             data = self.fetch(sha256)
             try:
                 self.futures[sha256] = client.scatter(data, workers=[worker], hash=False)
