@@ -66,6 +66,10 @@ def run_chunks(
 
                 executor = DaskExecutor(**scheduler_target(scheduler))
                 progress.note(f"  executor: dask at {executor.address}, {len(executor.live_workers())} workers")
+                assets = getattr(job.shipped, "assets", None)
+                if assets is not None:
+                    mb = sum(a.size for a in assets) / 1e6
+                    progress.note(f"  transfer: ship (no shared disk): the job carries its scene and {len(assets)} files ({mb:.1f} MB), each sent once per worker; frames come home")
             elif inline:
                 from .inline import InlineExecutor
 
