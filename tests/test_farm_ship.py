@@ -20,6 +20,8 @@ from motion.pipeline.frame_output import read_frame
 from test_farm_dask import _free_port, _try, _workers_connected
 from test_farm_transfer import _scene
 
+pytestmark = pytest.mark.render
+
 UNSHARE = shutil.which("unshare")
 
 
