@@ -22,8 +22,8 @@
   client      the main process's RSS for a 100,000-frame job: when planned (first frame on
               disk) and its growth per finished frame over 20 s, then Ctrl-C
               (`client_memory` says why that is the whole cost); with two local workers,
-              and shipped to a 2-worker Dask cluster (the client then also claims,
-              publishes and holds the assets).
+              and on a 2-worker Dask cluster with a shared disk and shipped (the client
+              then also claims and publishes the frames).
 
     python bench/bench_farm.py [--frames 24] [--memory-frames 200] [--only scale --only client]
 """
@@ -342,7 +342,8 @@ def main() -> None:
         if "client" in only:
             cluster = Cluster(2)
             try:
-                runs = (("2 local workers", None), ("shipped, 2 Dask workers", ["--scheduler", cluster.address, "--threads", "1", "--transfer", "ship"]))
+                dask = ["--scheduler", cluster.address, "--threads", "1", "--transfer"]
+                runs = (("2 local workers", None), ("shared disk, 2 Dask workers", [*dask, "shared"]), ("shipped, 2 Dask workers", [*dask, "ship"]))
                 for name, executor in runs:
                     cm = client_memory(args.client_frames, args.client_seconds, tmp, executor)
                     print(f"\nclient memory, a {cm['frames']}-frame job, {name}: {cm['planned_mb']:.0f} MB when planned ({cm['planned_s']:.1f} s), "
