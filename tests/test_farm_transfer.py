@@ -171,6 +171,7 @@ def test_a_task_carries_only_its_own_frames_paths(tmp_path: Path) -> None:
     from motion.pipeline.farm.task import TaskContext
 
     path = _scene(tmp_path / "shot", "tex.png")
+    (tmp_path / "shot" / "tex.png").write_bytes(b"not decoded here")
     inputs = evaluate_frames(load_scene(path, assets=False), [1])
     ctx = TaskContext("run-a", {f: f"/renders/shot.{f:06d}.exr" for f in range(100_000)})
     sent = ctx.for_chunk(inputs)
