@@ -16,7 +16,8 @@ sky, sun, camera, 180-degree shutter, CPU, the same threads) and measured the sa
 Cycles' own reference; the ratio ours / Cycles is printed with the CPU's name.
 
 Shots: `bench` - the 100k-triangle terrain of bench_render.py with 4 orbiting diffuse balls,
-constant sky 0.4 + sun 2.5, 320x180, max_depth 4; `walk-cycle` - scenes/walk-cycle.yaml
+constant sky 0.4 + sun 2.5, 320x180, max_depth 4; `lamps` - the same with four point lamps
+flying over the terrain (moving lights; ours only); `walk-cycle` - scenes/walk-cycle.yaml
 (ours only: its rig is not rebuilt in Cycles).
 """
 
@@ -42,6 +43,7 @@ ROOT = Path(__file__).resolve().parent.parent
 LEVELS = (5e-4, 3e-4, 1e-4, 7e-5, 5e-5)
 FRAME = 5  # the frame measured (a warm frame: frame 4 renders cold first)
 THREADS = int(os.environ.get("BENCH_THREADS", "2"))
+LAMPS = int(os.environ.get("BENCH_LAMPS", "4"))  # point lamps of the `lamps` shot: 4, or a multiple of 4
 
 
 def rel_mse(image: np.ndarray, reference: np.ndarray) -> float:
@@ -72,6 +74,20 @@ def bench_shot(folder: Path, denoise: bool) -> Path:
         text = text.replace("motion_blur: stochastic", "motion_blur: stochastic, denoise: oidn")
     terrain_ply(folder / "terrain.ply")
     path.write_text(text)
+    return path
+
+
+def lamps_shot(folder: Path, denoise: bool) -> Path:
+    """The bench shot with four point lamps flying 2.5 m over the terrain (moving lights:
+    posed at each path's time; chosen with the sun by contribution at each vertex)."""
+    path = bench_shot(folder, denoise)
+    keyed = "{{type: point, position: [{x}, 2.5, {z}], intensity: 6, motion: {{type: keyframes, interpolation: linear, channels: {{translate: {{keys: [{{time: 0, value: [{x}, 2.5, {z}]}}, {{time: 1, value: [{x2}, 2.5, {z}]}}]}}}}}}}}"
+    spots = [(-6, -3), (-3, 2), (1, -2), (3, 3)] if LAMPS == 4 else [(-7 + 14 * (i % 4) / 3, -4 + 8 * (i // 4) / max(1, LAMPS // 4 - 1)) for i in range(LAMPS)]
+    lamps = ", ".join(keyed.format(x=x, z=z, x2=x + 4) for x, z in spots)
+    text = path.read_text()
+    sun = "{type: directional, direction: [-0.4, -1, -0.3], irradiance: 2.5}]"
+    assert sun in text
+    path.write_text(text.replace(sun, sun[:-1] + ", " + lamps + "]"))
     return path
 
 
@@ -322,7 +338,7 @@ def main() -> None:
     results: dict[str, Any] = {"cpu": cpu_model(), "threads": THREADS}
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.shots.split(","):
-            path = bench_shot(Path(tmp), args.denoise) if name == "bench" else walk_shot(Path(tmp), args.denoise)
+            path = {"bench": bench_shot, "lamps": lamps_shot, "walk-cycle": walk_shot}[name](Path(tmp), args.denoise)
             try:
                 print(f"{name}:")
                 res: dict[str, Any] = {"ours": ours(path, spps, args.ref_spp, args.denoise)}
