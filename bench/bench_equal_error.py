@@ -5,7 +5,8 @@
 
 Each shot is rendered by our worker (`FrameRenderer`, warm: after one cold frame, stochastic
 motion blur) at every sample count of `--spp`, timed (render only, and the OIDN denoise with
-`--denoise`), and scored by relative MSE, mean((x - ref)^2 / (ref^2 + 0.01)), against our own
+`--denoise`, with the denoiser warm too: a worker makes OIDN's filter at its first frame),
+and scored by relative MSE, mean((x - ref)^2 / (ref^2 + 0.01)), against our own
 render of the same frame at `--ref-spp`. The time to reach each error level is interpolated
 in log-log between the two counts that bracket it. With `bpy` importable by `--cycles-python`
 (default: this Python, or $BENCH_CYCLES_PYTHON; Blender as a Python module, `pip install bpy`
@@ -120,8 +121,12 @@ def ours(path: Path, spps: list[int], ref_spp: int, denoise: bool) -> dict[str, 
     settings = renderer.settings
     renderer.settings = settings.model_copy(update={"seed": settings.seed + 7919})
     renderer.spp = ref_spp
-    reference, _ = renderer.render(fi)
+    reference, ref_aovs, _ = renderer.render_layers(fi)
     renderer.settings = settings
+    if denoise:
+        from motion.pipeline.render.denoise import denoise_frame
+
+        denoise_frame(reference, ref_aovs)  # a worker's first denoise makes OIDN's filter: warm, as the frame is
     rows = []
     for spp in spps:
         renderer.spp = spp
