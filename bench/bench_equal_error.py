@@ -5,7 +5,8 @@
 
 Each shot is rendered by our worker (`FrameRenderer`, warm: after one cold frame, stochastic
 motion blur) at every sample count of `--spp`, timed (render only, and the OIDN denoise with
-`--denoise`), and scored by relative MSE, mean((x - ref)^2 / (ref^2 + 0.01)), against our own
+`--denoise`, with the denoiser warm too: a worker makes OIDN's filter at its first frame),
+and scored by relative MSE, mean((x - ref)^2 / (ref^2 + 0.01)), against our own
 render of the same frame at `--ref-spp`. The time to reach each error level is interpolated
 in log-log between the two counts that bracket it. With `bpy` importable by `--cycles-python`
 (default: this Python, or $BENCH_CYCLES_PYTHON; Blender as a Python module, `pip install bpy`
@@ -16,7 +17,8 @@ sky, sun, camera, 180-degree shutter, CPU, the same threads) and measured the sa
 Cycles' own reference; the ratio ours / Cycles is printed with the CPU's name.
 
 Shots: `bench` - the 100k-triangle terrain of bench_render.py with 4 orbiting diffuse balls,
-constant sky 0.4 + sun 2.5, 320x180, max_depth 4; `walk-cycle` - scenes/walk-cycle.yaml
+constant sky 0.4 + sun 2.5, 320x180, max_depth 4; `lamps` - the same with four point lamps
+flying over the terrain (moving lights; ours only); `walk-cycle` - scenes/walk-cycle.yaml
 (ours only: its rig is not rebuilt in Cycles).
 """
 
@@ -42,6 +44,7 @@ ROOT = Path(__file__).resolve().parent.parent
 LEVELS = (5e-4, 3e-4, 1e-4, 7e-5, 5e-5)
 FRAME = 5  # the frame measured (a warm frame: frame 4 renders cold first)
 THREADS = int(os.environ.get("BENCH_THREADS", "2"))
+LAMPS = int(os.environ.get("BENCH_LAMPS", "4"))  # point lamps of the `lamps` shot: 4, or a multiple of 4
 
 
 def rel_mse(image: np.ndarray, reference: np.ndarray) -> float:
@@ -75,6 +78,20 @@ def bench_shot(folder: Path, denoise: bool) -> Path:
     return path
 
 
+def lamps_shot(folder: Path, denoise: bool) -> Path:
+    """The bench shot with four point lamps flying 2.5 m over the terrain (moving lights:
+    posed at each path's time; chosen with the sun by contribution at each vertex)."""
+    path = bench_shot(folder, denoise)
+    keyed = "{{type: point, position: [{x}, 2.5, {z}], intensity: 6, motion: {{type: keyframes, interpolation: linear, channels: {{translate: {{keys: [{{time: 0, value: [{x}, 2.5, {z}]}}, {{time: 1, value: [{x2}, 2.5, {z}]}}]}}}}}}}}"
+    spots = [(-6, -3), (-3, 2), (1, -2), (3, 3)] if LAMPS == 4 else [(-7 + 14 * (i % 4) / 3, -4 + 8 * (i // 4) / max(1, LAMPS // 4 - 1)) for i in range(LAMPS)]
+    lamps = ", ".join(keyed.format(x=x, z=z, x2=x + 4) for x, z in spots)
+    text = path.read_text()
+    sun = "{type: directional, direction: [-0.4, -1, -0.3], irradiance: 2.5}]"
+    assert sun in text
+    path.write_text(text.replace(sun, sun[:-1] + ", " + lamps + "]"))
+    return path
+
+
 def walk_shot(folder: Path, denoise: bool) -> Path:
     """scenes/walk-cycle.yaml (copied beside its assets, with the denoiser when asked)."""
     text = (ROOT / "scenes" / "walk-cycle.yaml").read_text()
@@ -104,8 +121,12 @@ def ours(path: Path, spps: list[int], ref_spp: int, denoise: bool) -> dict[str, 
     settings = renderer.settings
     renderer.settings = settings.model_copy(update={"seed": settings.seed + 7919})
     renderer.spp = ref_spp
-    reference, _ = renderer.render(fi)
+    reference, ref_aovs, _ = renderer.render_layers(fi)
     renderer.settings = settings
+    if denoise:
+        from motion.pipeline.render.denoise import denoise_frame
+
+        denoise_frame(reference, ref_aovs)  # a worker's first denoise makes OIDN's filter: warm, as the frame is
     rows = []
     for spp in spps:
         renderer.spp = spp
@@ -322,7 +343,7 @@ def main() -> None:
     results: dict[str, Any] = {"cpu": cpu_model(), "threads": THREADS}
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.shots.split(","):
-            path = bench_shot(Path(tmp), args.denoise) if name == "bench" else walk_shot(Path(tmp), args.denoise)
+            path = {"bench": bench_shot, "lamps": lamps_shot, "walk-cycle": walk_shot}[name](Path(tmp), args.denoise)
             try:
                 print(f"{name}:")
                 res: dict[str, Any] = {"ours": ours(path, spps, args.ref_spp, args.denoise)}

@@ -161,19 +161,3 @@ def test_frames_come_home_atomically_and_one_lost_on_the_way_fails(tmp_path: Pat
     assert not got.frame_bytes and not any(claim_path(p).exists() for p in paths.values())
     assert sorted(x.name for x in out.iterdir() if x.name != ".motion-claims") == ["s.0000.exr"]  # no temporary file left
 
-
-def test_a_task_carries_only_its_own_frames_paths(tmp_path: Path) -> None:
-    """What a chunk's task carries does not grow with the job: only its frames' paths (the
-    whole job's went with every task: 28.8 KB a task at 400 frames)."""
-    import pickle
-
-    from motion.pipeline.bake import evaluate_frames
-    from motion.pipeline.farm.task import TaskContext
-
-    path = _scene(tmp_path / "shot", "tex.png")
-    (tmp_path / "shot" / "tex.png").write_bytes(b"not decoded here")
-    inputs = evaluate_frames(load_scene(path, assets=False), [1])
-    ctx = TaskContext("run-a", {f: f"/renders/shot.{f:06d}.exr" for f in range(100_000)})
-    sent = ctx.for_chunk(inputs)
-    assert sent.paths == {1: "/renders/shot.000001.exr"} and sent.run_id == "run-a" and sent.resume == ctx.resume
-    assert len(pickle.dumps(sent)) < 500

@@ -130,7 +130,7 @@ class DaskExecutor:
         if job.shipped is not None:
             self._submit_shipped(worker, chunk_id, job, inputs, ctx)
             return
-        self._send(worker, chunk_id, run_chunk_reporting, job, list(inputs), ctx.for_chunk(inputs), self._topic)
+        self._send(worker, chunk_id, run_chunk_reporting, job, list(inputs), ctx, self._topic)
 
     def _send(self, worker: str, chunk_id: int, task: Any, *args: Any) -> None:
         """Submit `task(chunk_id, *args)` pinned to `worker` (no stealing, no Dask retries)."""
@@ -162,7 +162,7 @@ class DaskExecutor:
             self._ready.append(Done(worker, chunk_id, publish_home(pre, ChunkResult(chunk_id, pre.worker), job, ctx)))
             return
         self._claimed[chunk_id] = (pre, ctx)
-        self._send(worker, chunk_id, run_chunk_shipped, self._ship.job_future(self.client), todo, ctx.for_chunk(todo), self._topic, self._ship.payload_for(self.client, worker))
+        self._send(worker, chunk_id, run_chunk_shipped, self._ship.job_future(self.client), todo, ctx.only([b.frame for b in todo]), self._topic, self._ship.payload_for(self.client, worker))
 
     def _finished(self, worker: str, chunk_id: int, fut: Any) -> Event:
         """A chunk's result; a shipped chunk's frames are published under the output folder first."""

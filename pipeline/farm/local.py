@@ -117,7 +117,7 @@ class LocalExecutor:
         w = self._workers[worker]
         w.chunk = chunk_id
         try:
-            w.conn.send((chunk_id, job, list(inputs), ctx.for_chunk(inputs)))
+            w.conn.send((chunk_id, job, list(inputs), ctx))
         except (BrokenPipeError, OSError):
             pass  # the sentinel reports the death on the next poll
 

@@ -193,7 +193,7 @@ class Scheduler:
             for f in pick.frames:
                 self.frames[f].attempts += 1
             self.running[w] = (pick, self.clock())
-            self.ex.submit(w, pick.id, self.job, [self.inputs[f] for f in pick.frames], self.ctx)
+            self.ex.submit(w, pick.id, self.job, [self.inputs[f] for f in pick.frames], self.ctx.only(pick.frames))
 
     def _take_running(self, worker: str, chunk_id: int | None) -> Chunk | None:
         entry = self.running.get(worker)
