@@ -161,3 +161,30 @@ def test_frames_come_home_atomically_and_one_lost_on_the_way_fails(tmp_path: Pat
     assert not got.frame_bytes and not any(claim_path(p).exists() for p in paths.values())
     assert sorted(x.name for x in out.iterdir() if x.name != ".motion-claims") == ["s.0000.exr"]  # no temporary file left
 
+
+
+def test_an_imported_scene_ships_its_converted_meshes(tmp_path: Path) -> None:
+    """A glTF import's meshes are converted into motion's import cache, which the scene then
+    names by an absolute path outside its folder (its textures too); a shipped job carries them as
+    `.motion-imports/<name>` inside the folder (before, such a scene was refused as hostile),
+    reads them from the cache on the client, and the worker's checkout resolves them."""
+    import shutil
+
+    from motion.pipeline.farm.transfer import IMPORTED, BytesByHash, localize, ship_job
+    from motion.pipeline.render.job import RenderJob
+
+    root = Path(__file__).resolve().parents[1]
+    shot = tmp_path / "shot"
+    shutil.copytree(root / "scenes" / "assets", shot / "assets")
+    shutil.copy(root / "scenes" / "walker.yaml", shot / "walker.yaml")
+    loaded = load_scene(shot / "walker.yaml")
+    job = ship_job(RenderJob(str(shot / "walker.yaml"), {}, str(tmp_path / "out"), "h", "s"), loaded, shot / "walker.yaml")
+    shipped = job.shipped
+    imported = [a for a in shipped.assets if a.rel.startswith(IMPORTED + "/")]
+    meshes = {a.rel for a in imported if a.rel.endswith(".ply")}  # and the textures the import extracted
+    named = {o.file for o in shipped.loaded.scene.objects if getattr(o, "file", None)}
+    assert meshes and meshes <= named and not any(Path(f).is_absolute() for f in named)
+    payload = BytesByHash({a.sha256: shipped.fetch(a.sha256) for a in shipped.assets})  # read on the client, hash-checked
+    there = localize(shipped.loaded, shipped.assets, payload, tmp_path / "worker-cache")
+    for a in imported:
+        assert hashlib.sha256((there.base_dir / a.rel).read_bytes()).hexdigest() == a.sha256

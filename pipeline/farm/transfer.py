@@ -51,20 +51,57 @@ def _sha256_file(path: Path) -> str:
     return h.hexdigest()
 
 
-def asset_manifest(scene: Scene, base_dir: Path, scene_file: str | Path) -> list[ShippedAsset]:
+IMPORTED = ".motion-imports"  # where a shipped job's converted import files are named, in the scene's folder
+
+
+def ship_imports(scene: Scene, base_dir: Path) -> tuple[Scene, dict[str, Path]]:
+    """The scene with every file that import expansion made (a glTF or USD mesh converted
+    into motion's own import cache, named there by an absolute path) renamed to
+    `.motion-imports/<name>`, a path inside the scene's folder as a shipped job carries it;
+    and where each renamed file lies on this machine. Those files are ours, converted from
+    sources inside the scene's folder that the import stage opened and checked."""
+    from ..scene.imports.cache import cache_dir
+
+    imports = cache_dir().resolve()
+    sources: dict[str, Path] = {}
+    for loc, rel, _kind, _deforming in list(named_files(scene)):
+        path = (Path(base_dir) / rel).resolve()
+        if path.is_relative_to(imports):
+            name = f"{IMPORTED}/{path.name}"
+            sources[name] = path
+            scene = _replace_at(scene, loc, name)
+    return scene, sources
+
+
+def _replace_at(model: Any, loc: Sequence[Any], value: Any) -> Any:
+    """`model` (a frozen record) with the field at YAML path `loc` set to `value`."""
+    head, rest = loc[0], loc[1:]
+    if not rest:
+        return model.model_copy(update={head: value})
+    child = getattr(model, head)
+    if isinstance(child, (list, tuple)):
+        items = list(child)
+        items[rest[0]] = _replace_at(items[rest[0]], rest[1:], value) if rest[1:] else value
+        return model.model_copy(update={head: type(child)(items)})
+    return model.model_copy(update={head: _replace_at(child, rest, value)})
+
+
+def asset_manifest(scene: Scene, base_dir: Path, scene_file: str | Path, sources: dict[str, Path] | None = None) -> list[ShippedAsset]:
     """Every file the scene names (`named_files`, the asset checks' own walk), each once, by
     content hash. A path that leads outside the scene's folder (`..`, an absolute path, a
     link) raises AssetError naming the scene file and the YAML path, before any file is read:
-    a shipped job never carries the client's other files to the cluster."""
+    a shipped job never carries the client's other files to the cluster. `sources`: where
+    the converted import files (`ship_imports`) lie."""
     base = Path(base_dir)
+    sources = sources or {}
     named = list(named_files(scene))
     for loc, rel, _kind, _deforming in named:
-        if not confined(base, base / rel):
+        if rel not in sources and not confined(base, base / rel):
             raise AssetError(f"{scene_file}: {yaml_path(loc)}: {rel} lies outside the scene's folder {base.resolve()}; a shipped job sends only files inside it")
     out: dict[str, ShippedAsset] = {}
     for _loc, rel, _kind, _deforming in named:
         if rel not in out:
-            path = base / rel
+            path = sources.get(rel, base / rel)
             out[rel] = ShippedAsset(rel, _sha256_file(path), path.stat().st_size)
     return list(out.values())
 
@@ -198,8 +235,9 @@ def ship_job(job: RenderJob, loaded: LoadedScene, scene_file: str | Path) -> Ren
     """The job as ship mode sends it: the parsed scene and its asset manifest ride along
     (their bytes read when a worker first lacks them: `Shipment`). Raises AssetError for a file
     outside the scene's folder before anything is read or sent."""
-    assets = tuple(asset_manifest(loaded.scene, loaded.base_dir, scene_file))
-    return replace(job, shipped=ShippedScene(loaded, assets, FilesByHash(loaded.base_dir, assets)))
+    scene, sources = ship_imports(loaded.scene, loaded.base_dir)
+    assets = tuple(asset_manifest(scene, loaded.base_dir, scene_file, sources))
+    return replace(job, shipped=ShippedScene(replace(loaded, scene=scene), assets, FilesByHash(loaded.base_dir, assets, sources)))
 
 
 def missing_assets(assets: Sequence[ShippedAsset]) -> list[str]:
@@ -221,14 +259,15 @@ class FilesByHash:
     """Asset bytes on the client, read from the scene's folder when a worker first needs
     them (nothing is held in memory meanwhile) and checked against the manifest's hash."""
 
-    def __init__(self, base_dir: Path, assets: Iterable[ShippedAsset]) -> None:
-        """Where the files lie, and each one's scene-relative name by content hash."""
-        self.base = Path(base_dir)
-        self.rel = {a.sha256: a.rel for a in assets}
+    def __init__(self, base_dir: Path, assets: Iterable[ShippedAsset], sources: dict[str, Path] | None = None) -> None:
+        """Where the files lie: each one's scene-relative name by content hash, under the
+        scene's folder or, for a converted import file, where `sources` says."""
+        sources = sources or {}
+        self.path = {a.sha256: sources.get(a.rel, Path(base_dir) / a.rel) for a in assets}
 
     def __call__(self, sha256: str) -> bytes:
         """The file's bytes; AssetError when it changed since the job was planned."""
-        path = self.base / self.rel[sha256]
+        path = self.path[sha256]
         data = path.read_bytes()
         if hashlib.sha256(data).hexdigest() != sha256:
             raise AssetError(f"{path}: changed while the job runs (its hash is no longer {sha256[:16]}); run motion render again")
