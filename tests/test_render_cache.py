@@ -180,3 +180,35 @@ def test_the_task_path_is_where_the_frame_is_written(tmp_path: Path) -> None:
     assert result.results[0].path == str(chosen)
     assert read_frame(chosen).meta["frame"] == 0
     assert not frame_path(job, loaded, 0).exists()
+
+
+def test_the_settings_hash_follows_file_contents_not_where_they_lie(tmp_path: Path) -> None:
+    """A frame's settings hash reads the files a scene names by their bytes: the same
+    import scene hashes the same whatever the machine's cache folder (its converted meshes
+    and skin arrays sit there: a Dask worker under another user refused the job as an edited
+    scene), and a texture edited under the same name changes it (`--resume` replaced nothing
+    and a warm worker kept serving the old texture)."""
+    import os
+    import subprocess
+    import sys
+
+    probe = ("import sys; from motion.pipeline.scene import load_scene; from motion.pipeline.render.job import scene_hashes; "
+             "print(scene_hashes(load_scene(sys.argv[1], assets=False))[1])")
+
+    def settings_hash(scene: Path, cache: Path) -> str:
+        env = {**os.environ, "MOTION_CACHE_DIR": str(cache)}
+        return subprocess.run([sys.executable, "-c", probe, str(scene)], env=env, capture_output=True, text=True, check=True).stdout.strip()
+
+    walker = SCENES / "walker.yaml"
+    assert settings_hash(walker, tmp_path / "cache-a") == settings_hash(walker, tmp_path / "cache-b")
+    shot = tmp_path / "shot"
+    shot.mkdir()
+    (shot / "tex.ppm").write_bytes(b"P6 1 1 255\n" + bytes([200, 10, 10]))
+    (shot / "scene.yaml").write_text(
+        "camera: {position: [0, 1, 4], look_at: [0, 0, 0]}\n"
+        "materials: [{name: m, type: diffuse, color: {file: tex.ppm}}]\n"
+        "objects: [{name: s, shape: sphere, material: m}]\n"
+    )
+    before = settings_hash(shot / "scene.yaml", tmp_path / "cache-a")
+    (shot / "tex.ppm").write_bytes(b"P6 1 1 255\n" + bytes([10, 10, 200]))
+    assert settings_hash(shot / "scene.yaml", tmp_path / "cache-a") != before

@@ -25,7 +25,7 @@ from ..frame_output import is_complete
 from ..render.job import FrameResult, RenderJob, expected_meta
 from ..files import confined, write_atomic, writing
 from ..limits import env_size
-from ..scene.checks import named_files
+from ..scene.checks import named_files, replace_at
 from ..scene.loader import LoadedScene
 from ..scene.schema import Scene
 from ..scene.source import yaml_path
@@ -69,21 +69,8 @@ def ship_imports(scene: Scene, base_dir: Path) -> tuple[Scene, dict[str, Path]]:
         if path.is_relative_to(imports):
             name = f"{IMPORTED}/{path.name}"
             sources[name] = path
-            scene = _replace_at(scene, loc, name)
+            scene = replace_at(scene, loc, name)
     return scene, sources
-
-
-def _replace_at(model: Any, loc: Sequence[Any], value: Any) -> Any:
-    """`model` (a frozen record) with the field at YAML path `loc` set to `value`."""
-    head, rest = loc[0], loc[1:]
-    if not rest:
-        return model.model_copy(update={head: value})
-    child = getattr(model, head)
-    if isinstance(child, (list, tuple)):
-        items = list(child)
-        items[rest[0]] = _replace_at(items[rest[0]], rest[1:], value) if rest[1:] else value
-        return model.model_copy(update={head: type(child)(items)})
-    return model.model_copy(update={head: _replace_at(child, rest, value)})
 
 
 def asset_manifest(scene: Scene, base_dir: Path, scene_file: str | Path, sources: dict[str, Path] | None = None) -> list[ShippedAsset]:

@@ -95,12 +95,36 @@ class FrameResult:
 
 def scene_hashes(loaded: LoadedScene) -> tuple[str, str]:
     """(scene, settings) hashes: the scene file's bytes; the validated scene with every
-    override applied, plus the renderer's version."""
+    override applied, each file it names standing for its contents (`content_named`), plus
+    the renderer's version."""
     scene_hash = hashlib.sha256(loaded.path.read_bytes()).hexdigest()[:16]
     # output.deliver says what a full render assembles afterwards: not how a frame looks
-    canon = json.dumps(loaded.scene.model_dump(mode="json", exclude={"output": {"deliver"}}), sort_keys=True)
+    canon = json.dumps(content_named(loaded).model_dump(mode="json", exclude={"output": {"deliver"}}), sort_keys=True)
     settings_hash = hashlib.sha256(f"{RENDERER_VERSION}|{canon}".encode()).hexdigest()[:16]
     return scene_hash, settings_hash
+
+
+def content_named(loaded: LoadedScene) -> Any:
+    """The scene with every file it names (meshes, textures, environment maps, an import's
+    converted files) given as `sha256:<digest of its bytes>`: a frame's settings hash then
+    changes when a texture is edited under the same name (`--resume` replaces the frames,
+    a warm worker does not serve the old scene), and does not depend on where the file
+    lies (an import's converted meshes sit in each machine's own cache folder: a worker
+    under another user computed another hash and refused the job). A file that cannot be
+    read stands as `unreadable:<name>` (the asset checks report it before any task)."""
+    from ..scene.checks import named_files, replace_at
+    from ..scene.imports.cache import file_digest
+
+    scene = loaded.scene
+    digests: dict[str, str] = {}
+    for loc, rel, _kind, _deforming in list(named_files(scene)):
+        if rel not in digests:
+            try:
+                digests[rel] = "sha256:" + file_digest(loaded.base_dir / rel)
+            except OSError:
+                digests[rel] = f"unreadable:{rel}"
+        scene = replace_at(scene, loc, digests[rel])
+    return scene
 
 
 def render_settings(scene: Any) -> dict[str, Any]:
