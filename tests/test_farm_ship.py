@@ -102,6 +102,29 @@ def test_workers_without_the_clients_folders_render_the_same_frames(hidden_clust
     assert motion("render", path, "-o", client / "out", "--check", *common).returncode == 0
 
 
+def test_an_imported_skinned_character_ships(hidden_cluster, monkeypatch: pytest.MonkeyPatch) -> None:
+    """scenes/walker.yaml imports a skinned, keyframed glTF: its expansion names converted
+    meshes, textures, morph targets and skin arrays by absolute path in the client's import
+    cache, which the workers cannot see either (kept inside the hidden folder here). They
+    travel as `.motion-imports/<name>`; the frames equal a local render's."""
+    client = hidden_cluster["client"]
+    root = Path(__file__).resolve().parents[1]
+    shutil.copytree(root / "scenes" / "assets", client / "walker" / "assets")
+    shutil.copy(root / "scenes" / "walker.yaml", client / "walker" / "walker.yaml")
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(client / "client-cache"))  # the client's import cache: hidden too
+    common = ["--frames", "0-1", "--threads", "1", *TINY]
+    path = client / "walker" / "walker.yaml"
+    local = motion("render", path, "-o", client / "walker-local", *common)
+    assert local.returncode == 0, local.stderr
+    shipped = motion("render", path, "-o", client / "walker-out", "--scheduler", hidden_cluster["address"], *common)
+    assert shipped.returncode == 0, shipped.stderr
+    got, want = frames_in(client / "walker-out"), frames_in(client / "walker-local")
+    assert [p.name for p in got] == [p.name for p in want] == ["walker.0000.exr", "walker.0001.exr"]
+    for a, b in zip(got, want):
+        assert np.array_equal(read_frame(a).rgba, read_frame(b).rgba)
+    assert report(client / "walker-out")["executor"]["transfer"]["mode"] == "ship"
+
+
 def test_auto_ships_when_only_the_output_folder_is_hidden(hidden_cluster) -> None:
     """The scene lies where the workers can read it, `-o` where they cannot: writing frames
     there would leave them on the workers' disks, so --transfer auto ships."""
