@@ -40,8 +40,18 @@ def _mount(path: Path, size: str) -> str | None:
     return None
 
 
-def _remount(path: Path, options: str) -> None:
-    subprocess.run(["mount", "-o", f"remount,{options}", str(path)], check=True, capture_output=True)
+def _remount(path: Path, options: str, busy_retry_s: float = 0.0) -> None:
+    """Remount `path` with `options`. The kernel refuses a read-only remount (EBUSY) while a
+    file on it is open for writing, as a frame is while a worker writes it: with
+    `busy_retry_s` the remount is tried again until the write is over."""
+    deadline = time.monotonic() + busy_retry_s
+    while True:
+        done = subprocess.run(["mount", "-o", f"remount,{options}", str(path)], capture_output=True, text=True)
+        if done.returncode == 0:
+            return
+        if time.monotonic() > deadline:
+            raise AssertionError(f"mount -o remount,{options} {path}: {done.stderr.strip()}")
+        time.sleep(0.005)
 
 
 @pytest.fixture
@@ -111,7 +121,7 @@ def test_output_turning_read_only_mid_job(small_disk: Path, tmp_path: Path) -> N
     deadline = time.monotonic() + 180
     while not (out / "farm-tiny.0000.exr").exists() and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.01)
-    _remount(small_disk, "ro")
+    _remount(small_disk, "ro", busy_retry_s=30)
     try:
         _, stderr = proc.communicate(timeout=180)
     finally:
