@@ -92,6 +92,40 @@ def test_stale_frames_are_named_by_the_dry_run_and_the_run(tmp_path: Path) -> No
     assert json.loads(dry.stdout)["replace"] == [{"frames": "2,3", "reason": "were made from another version of the scene or its settings"}]
 
 
+def test_a_texture_edited_under_the_same_name_makes_its_frames_stale_and_is_named(tmp_path: Path) -> None:
+    """The artist repaints tex.ppm and renders again: the frames are replaced and the run
+    names the file (before, the settings hash read the scene's text only, so --resume kept
+    every old frame). A file added to the scene is an edit of the scene. The header keeps
+    each named file's digest (`motion:files`)."""
+    from motion.pipeline.frame_output import read_header
+
+    shot = tmp_path / "shot"
+    shot.mkdir()
+    (shot / "tex.ppm").write_bytes(b"P6 2 2 255\n" + bytes([200, 10, 10] * 4))
+    (shot / "s.yaml").write_text(
+        "timeline: {fps: 24, first: 0, last: 3}\n"
+        "camera: {position: [0, 1, 4], look_at: [0, 0, 0]}\n"
+        "lights: [{type: constant, radiance: 1.0}]\n"
+        "materials: [{name: m, type: diffuse, color: {file: tex.ppm}}]\n"
+        "objects: [{name: s, shape: sphere, material: m}]\n"
+    )
+    out = tmp_path / "out"
+    assert motion("render", shot / "s.yaml", "-o", out, *TINY).returncode == 0
+    assert json.loads(read_header(out / "s.0000.exr")["motion:files"]).keys() == {"tex.ppm"}
+    again = motion("render", shot / "s.yaml", "-o", out, *TINY)
+    assert again.returncode == 0 and report(out)["totals"]["skipped"] == 4  # unchanged: kept
+    (shot / "tex.ppm").write_bytes(b"P6 2 2 255\n" + bytes([10, 10, 200] * 4))
+    dry = motion("render", shot / "s.yaml", "-o", out, *TINY, "--dry-run", "--json")
+    assert json.loads(dry.stdout)["replace"] == [{"frames": "0-3", "reason": "were made from other files (tex.ppm changed)"}], dry.stdout
+    run = motion("render", shot / "s.yaml", "-o", out, *TINY)
+    assert run.returncode == 0 and "frames 0-3 exist but were made from other files (tex.ppm changed)" in run.stderr, run.stderr
+    assert report(out)["totals"]["rendered"] == 4
+    (shot / "glow.ppm").write_bytes(b"P6 1 1 255\n" + bytes([9, 9, 9]))
+    (shot / "s.yaml").write_text((shot / "s.yaml").read_text().replace("material: m}", "material: m, emission: {radiance: {file: glow.ppm}}}"))
+    dry = motion("render", shot / "s.yaml", "-o", out, *TINY, "--dry-run", "--json")
+    assert json.loads(dry.stdout)["replace"] == [{"frames": "0-3", "reason": "were made from another version of the scene or its settings"}], dry.stdout
+
+
 def test_the_dry_run_shows_resolved_settings_with_their_source_and_an_estimate(tmp_path: Path) -> None:
     res = motion("render", SCENE, "-o", tmp_path / "out", "--preset", "ci-smoke", "--spp", "3", "--frames", "0-3", "--dry-run", "--json")
     assert res.returncode == 0, res.stderr

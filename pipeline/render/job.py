@@ -47,6 +47,7 @@ class RenderJob:
     threads: int | None = None
     variant: str = "auto"
     fields: str | None = None  # tff/bff: each frame is a field, only its rows are drawn
+    files: str = ""  # JSON {name: digest} of the files the scene names (`file_digests`), kept in each frame's header
     shipped: SceneSource | None = None  # ship mode: the parsed scene and its assets travel with the job
 
     @property
@@ -104,6 +105,40 @@ def scene_hashes(loaded: LoadedScene) -> tuple[str, str]:
     return scene_hash, settings_hash
 
 
+def _named_digests(loaded: LoadedScene) -> list[tuple[Any, str, str]]:
+    """(YAML path, name as the scene gives it, "sha256:<digest>" or "unreadable:<name>")
+    for each file the scene names (`scene.checks.named_files`), each file read once."""
+    from ..scene.checks import named_files
+    from ..scene.imports.cache import file_digest
+
+    digests: dict[str, str] = {}
+    out = []
+    for loc, rel, _kind, _deforming in list(named_files(loaded.scene)):
+        if rel not in digests:
+            try:
+                digests[rel] = "sha256:" + file_digest(loaded.base_dir / rel)
+            except OSError:
+                digests[rel] = f"unreadable:{rel}"
+        out.append((loc, rel, digests[rel]))
+    return out
+
+
+def file_digests(loaded: LoadedScene) -> dict[str, str]:
+    """The files the scene names -> the first 16 hex digits of each one's SHA-256, as kept
+    in a frame's header (`motion:files`) so that a rerun can name the file that changed.
+    An import's converted file is named `import:<its name>` (its path lies in this
+    machine's cache folder, which does not belong in a deliverable)."""
+    from ..scene.imports.cache import cache_dir
+
+    imports = cache_dir().resolve()
+    out = {}
+    for _loc, rel, digest in _named_digests(loaded):
+        path = (loaded.base_dir / rel).resolve()
+        name = f"import:{path.name}" if path.is_relative_to(imports) else rel
+        out[name] = digest.split(":", 1)[1][:16] if digest.startswith("sha256:") else "unreadable"
+    return out
+
+
 def content_named(loaded: LoadedScene) -> Any:
     """The scene with every file it names (meshes, textures, environment maps, an import's
     converted files) given as `sha256:<digest of its bytes>`: a frame's settings hash then
@@ -112,18 +147,11 @@ def content_named(loaded: LoadedScene) -> Any:
     lies (an import's converted meshes sit in each machine's own cache folder: a worker
     under another user computed another hash and refused the job). A file that cannot be
     read stands as `unreadable:<name>` (the asset checks report it before any task)."""
-    from ..scene.checks import named_files, replace_at
-    from ..scene.imports.cache import file_digest
+    from ..scene.checks import replace_at
 
     scene = loaded.scene
-    digests: dict[str, str] = {}
-    for loc, rel, _kind, _deforming in list(named_files(scene)):
-        if rel not in digests:
-            try:
-                digests[rel] = "sha256:" + file_digest(loaded.base_dir / rel)
-            except OSError:
-                digests[rel] = f"unreadable:{rel}"
-        scene = replace_at(scene, loc, digests[rel])
+    for loc, _rel, digest in _named_digests(loaded):
+        scene = replace_at(scene, loc, digest)
     return scene
 
 
@@ -282,6 +310,7 @@ def _header(job: RenderJob, baked: BakedFrame, loaded: LoadedScene, variant: str
         "render_seconds": float(drawn.stats.render_s),
         "renderer": RENDERER_VERSION,
         "render_settings": json.dumps(render_settings(scene), sort_keys=True),
+        **({"files": job.files} if job.files else {}),
         **drawn.denoise_meta,
         **({"field": drawn.parity, "fieldOrder": job.fields} if drawn.parity else {}),
     }

@@ -9,6 +9,7 @@ otherwise workers are spawned (or are Dask workers) and import it themselves.
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import time
@@ -30,7 +31,7 @@ from ..farm.scheduler import Scheduler
 from ..farm.task import TaskContext
 from ..limits import check_env_sizes
 from ..presets import Preset, load_preset, overrides_from, spread
-from ..render.job import RenderJob, expected_meta, frame_path, render_settings, scene_hashes
+from ..render.job import RenderJob, expected_meta, file_digests, frame_path, render_settings, scene_hashes
 from ..scene.loader import LoadedScene, load_scene
 from .deliver import DeliverPlan, check_deliver, deliver_and_record, deliver_plan
 from .estimate import estimate, samples_of
@@ -129,6 +130,7 @@ def make_job(req: RenderRequest, loaded: LoadedScene, overrides: dict[str, Any],
         threads=threads,
         variant=loaded.scene.render.variant,
         fields=req.fields,
+        files=json.dumps(file_digests(loaded), sort_keys=True),
     )
     return job, workers, threads
 
@@ -203,7 +205,7 @@ def complete_frames(req: RenderRequest, job: RenderJob, job_scene: Any, out_dir:
     existing = [f for f in frames if os.path.exists(paths[f])]
     if not req.resume and not req.overwrite and existing:
         raise UsageError(f"{out_dir}: frames {format_frames(existing)} exist; pass --resume to keep complete ones or --overwrite to re-render them")
-    states = frame_states(existing, paths, {f: expected_meta(job, by_frame[f]) for f in existing}, render_settings(job_scene))
+    states = frame_states(existing, paths, {f: expected_meta(job, by_frame[f]) for f in existing}, render_settings(job_scene), json.loads(job.files or "{}"))
     if req.overwrite:
         return FrameStates(complete=[], stale={f: "--overwrite" for f in existing})
     return states

@@ -54,8 +54,26 @@ def settings_change(stored: Any, current: Mapping[str, Any]) -> str | None:
     return ", ".join(diffs) if diffs else None
 
 
-def why_stale(path: str, expect: Mapping[str, Any], settings: Mapping[str, Any]) -> str | None:
-    """Why the frame at `path` is not a complete frame of this run, or None if it is."""
+def files_change(stored: Any, current: Mapping[str, str] | None) -> str | None:
+    """'tex.png changed, bump.png changed' from the header's file digests (JSON) and this
+    run's (`render.job.file_digests`): files whose bytes changed under the same name, at
+    most three named. None when the header has none, or none changed in place (a file
+    added or dropped is an edit of the scene itself, named as such)."""
+    try:
+        before = json.loads(stored) if isinstance(stored, str) else None
+    except ValueError:
+        before = None
+    if not isinstance(before, dict) or current is None:
+        return None
+    changes = [f"{k} changed" for k in sorted(before.keys() & current.keys()) if before[k] != current[k]]
+    if not changes:
+        return None
+    return ", ".join(changes[:3]) + (f" and {len(changes) - 3} more" if len(changes) > 3 else "")
+
+
+def why_stale(path: str, expect: Mapping[str, Any], settings: Mapping[str, Any], files: Mapping[str, str] | None = None) -> str | None:
+    """Why the frame at `path` is not a complete frame of this run, or None if it is.
+    `files`: this run's file digests, to name an asset that changed under the same name."""
     try:
         header = read_header(path)
     except FrameIOError:
@@ -65,6 +83,9 @@ def why_stale(path: str, expect: Mapping[str, Any], settings: Mapping[str, Any])
         change = settings_change(meta.get("render_settings"), settings)
         if change:
             return f"were made with other settings ({change})"
+        edited = files_change(meta.get("files"), files)
+        if edited:
+            return f"were made from other files ({edited})"
         if "settings_hash" not in meta:
             return "were not made by motion render (no settings in the header)"
         return "were made from another version of the scene or its settings"
@@ -77,11 +98,12 @@ def why_stale(path: str, expect: Mapping[str, Any], settings: Mapping[str, Any])
     return None
 
 
-def frame_states(existing: list[int], paths: Mapping[int, str], expect: Mapping[int, Mapping[str, Any]], settings: Mapping[str, Any]) -> FrameStates:
+def frame_states(existing: list[int], paths: Mapping[int, str], expect: Mapping[int, Mapping[str, Any]], settings: Mapping[str, Any],
+                 files: Mapping[str, str] | None = None) -> FrameStates:
     """Sort the selected frames found on disk into complete and stale (with the reason)."""
     states = FrameStates()
     for f in existing:
-        why = why_stale(paths[f], expect[f], settings)
+        why = why_stale(paths[f], expect[f], settings, files)
         if why is None:
             states.complete.append(f)
         else:
