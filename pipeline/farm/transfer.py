@@ -26,6 +26,7 @@ from ..render.job import FrameResult, RenderJob, expected_meta
 from ..files import confined, write_atomic, writing
 from ..limits import env_size
 from ..scene.checks import named_files, replace_at
+from ..scene.imports.cache import converted_file, file_digest
 from ..scene.loader import LoadedScene
 from ..scene.schema import Scene
 from ..scene.source import yaml_path
@@ -43,14 +44,6 @@ class ShippedAsset:
     size: int
 
 
-def _sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 IMPORTED = ".motion-imports"  # where a shipped job's converted import files are named, in the scene's folder
 
 
@@ -60,15 +53,12 @@ def ship_imports(scene: Scene, base_dir: Path) -> tuple[Scene, dict[str, Path]]:
     `.motion-imports/<name>`, a path inside the scene's folder as a shipped job carries it;
     and where each renamed file lies on this machine. Those files are ours, converted from
     sources inside the scene's folder that the import stage opened and checked."""
-    from ..scene.imports.cache import cache_dir
-
-    imports = cache_dir().resolve()
     sources: dict[str, Path] = {}
     for loc, rel, _kind, _deforming in list(named_files(scene)):
-        path = (Path(base_dir) / rel).resolve()
-        if path.is_relative_to(imports):
+        path = Path(base_dir) / rel
+        if converted_file(path):
             name = f"{IMPORTED}/{path.name}"
-            sources[name] = path
+            sources[name] = path.resolve()
             scene = replace_at(scene, loc, name)
     return scene, sources
 
@@ -89,7 +79,7 @@ def asset_manifest(scene: Scene, base_dir: Path, scene_file: str | Path, sources
     for _loc, rel, _kind, _deforming in named:
         if rel not in out:
             path = sources.get(rel, base / rel)
-            out[rel] = ShippedAsset(rel, _sha256_file(path), path.stat().st_size)
+            out[rel] = ShippedAsset(rel, file_digest(path), path.stat().st_size)  # hashed once per run: the settings hash read it too
     return list(out.values())
 
 
@@ -206,12 +196,6 @@ class ShippedScene:
     loaded: LoadedScene
     assets: tuple[ShippedAsset, ...]
     fetch: Callable[[str], bytes] = field(repr=False)
-
-    @property
-    def key(self) -> str:
-        """What the assets' contents add to the job's key: a worker's first-frame cache
-        built from other textures under the same names (same scene text) is not reused."""
-        return manifest_key(self.assets)
 
     def checkout(self) -> LoadedScene:
         """The scene with its assets resolved to this worker's cached copies (`localize`)."""
@@ -422,7 +406,7 @@ def files_sha256(paths: Sequence[str]) -> list[str | None]:
     out: list[str | None] = []
     for path in paths:
         try:
-            out.append(_sha256_file(Path(path)))
+            out.append(file_digest(Path(path)))
         except OSError:
             out.append(None)
     return out

@@ -60,11 +60,6 @@ class SceneSource(Protocol):
     """A job's scene carried to the worker instead of read by path (farm/transfer.py's
     ShippedScene): `checkout()` gives the parsed scene with its assets on this worker."""
 
-    @property
-    def key(self) -> str:
-        """A digest of the carried assets' contents (part of the first-frame cache's key)."""
-        ...
-
     def checkout(self) -> LoadedScene:
         """The parsed scene, its asset paths resolved on this worker."""
         ...
@@ -105,20 +100,21 @@ def scene_hashes(loaded: LoadedScene) -> tuple[str, str]:
     return scene_hash, settings_hash
 
 
-def _named_digests(loaded: LoadedScene) -> list[tuple[Any, str, str]]:
-    """(YAML path, name as the scene gives it, "sha256:<digest>" or "unreadable:<name>")
-    for each file the scene names (`scene.checks.named_files`), each file read once."""
+def _named_digests(loaded: LoadedScene) -> list[tuple[Any, str, str | None]]:
+    """(YAML path, name as the scene gives it, SHA-256 of its bytes or None when it cannot
+    be read) for each file the scene names (`scene.checks.named_files`), each file read
+    once (`file_digest` keeps them per path, size and modification time)."""
     from ..scene.checks import named_files
     from ..scene.imports.cache import file_digest
 
-    digests: dict[str, str] = {}
+    digests: dict[str, str | None] = {}
     out = []
     for loc, rel, _kind, _deforming in list(named_files(loaded.scene)):
         if rel not in digests:
             try:
-                digests[rel] = "sha256:" + file_digest(loaded.base_dir / rel)
+                digests[rel] = file_digest(loaded.base_dir / rel)
             except OSError:
-                digests[rel] = f"unreadable:{rel}"
+                digests[rel] = None
         out.append((loc, rel, digests[rel]))
     return out
 
@@ -128,14 +124,12 @@ def file_digests(loaded: LoadedScene) -> dict[str, str]:
     in a frame's header (`motion:files`) so that a rerun can name the file that changed.
     An import's converted file is named `import:<its name>` (its path lies in this
     machine's cache folder, which does not belong in a deliverable)."""
-    from ..scene.imports.cache import cache_dir
+    from ..scene.imports.cache import converted_file
 
-    imports = cache_dir().resolve()
     out = {}
     for _loc, rel, digest in _named_digests(loaded):
-        path = (loaded.base_dir / rel).resolve()
-        name = f"import:{path.name}" if path.is_relative_to(imports) else rel
-        out[name] = digest.split(":", 1)[1][:16] if digest.startswith("sha256:") else "unreadable"
+        path = loaded.base_dir / rel
+        out[f"import:{path.name}" if converted_file(path) else rel] = digest[:16] if digest else "unreadable"
     return out
 
 
@@ -150,8 +144,8 @@ def content_named(loaded: LoadedScene) -> Any:
     from ..scene.checks import replace_at
 
     scene = loaded.scene
-    for loc, _rel, digest in _named_digests(loaded):
-        scene = replace_at(scene, loc, digest)
+    for loc, rel, digest in _named_digests(loaded):
+        scene = replace_at(scene, loc, f"sha256:{digest}" if digest else f"unreadable:{rel}")
     return scene
 
 
@@ -205,10 +199,9 @@ def _renderer(job: RenderJob) -> tuple[FrameRenderer, LoadedScene, str]:
     """The worker's cached renderer for this job (built on first use, reused after)."""
     from .. import variant as variant_mod
 
-    # a shipped job's key adds its assets' contents: the same scene text with other textures
-    # (another shot's folder) must not reuse this worker's scene
-    key = job.key if job.shipped is None else f"{job.key}:{job.shipped.key}"
-    if _WORKER.get("key") == key and job.cache:
+    # the key's settings hash reads every file the scene names by its bytes (`content_named`):
+    # the same scene text with other textures (another shot's folder) is another key
+    if _WORKER.get("key") == job.key and job.cache:
         return _WORKER["renderer"], _WORKER["loaded"], _WORKER["variant"]
     # a different job (or no cache): drop the old scene first, so kernels do not bake in
     # stale object ids, then build anew
@@ -234,7 +227,7 @@ def _renderer(job: RenderJob) -> tuple[FrameRenderer, LoadedScene, str]:
 
     mi.set_log_level(mi.LogLevel.Error)
     renderer = FrameRenderer(loaded)
-    _WORKER.update(key=key, renderer=renderer, loaded=loaded, variant=choice.variant)
+    _WORKER.update(key=job.key, renderer=renderer, loaded=loaded, variant=choice.variant)
     return renderer, loaded, choice.variant
 
 

@@ -27,6 +27,13 @@ def cache_dir() -> Path:
     return cache_root() / "assets" / "imports"
 
 
+def converted_file(path: Path) -> bool:
+    """Whether `path` is one of the files import expansion made in this machine's cache
+    (a converted mesh, an extracted texture, skin arrays), which the expanded scene names by
+    an absolute path: a frame header names it by its file name, a shipped job carries it."""
+    return Path(path).resolve().is_relative_to(cache_dir().resolve())
+
+
 def file_digest(path: Path) -> str:
     """sha256 of a file's bytes (memoised per path, size and modification time)."""
     st = path.stat()
