@@ -135,13 +135,9 @@ class BakedMotion:
 
     def frame(self, number: int) -> BakedFrame:
         """The baked frame `number`; FrameNotBakedError if the bake does not hold it."""
-        if isinstance(self.frames, BakedFrames):
-            k = self.frames.position(number)
-            if k is not None:
-                return self.frames[k]
-        for f in self.frames:
-            if f.frame == number:
-                return f
+        found = by_number(self.frames).get(number)
+        if found is not None:
+            return found
         held = f"{self.frames[0].frame}..{self.frames[-1].frame}" if self.frames else "none"
         raise FrameNotBakedError(f"frame {number} is not in this bake (it holds {held})")
 

@@ -34,14 +34,20 @@ class FrameStates:
                 else f"frames {format_frames(fs)} exist: --overwrite replaces them" for why, fs in by_reason.items()]
 
 
+def _stored_dict(stored: Any) -> dict[str, Any] | None:
+    """A JSON object kept as a header attribute, or None (absent, not JSON, not an object)."""
+    try:
+        value = json.loads(stored) if isinstance(stored, str) else None
+    except ValueError:
+        return None
+    return value if isinstance(value, dict) else None
+
+
 def settings_change(stored: Any, current: Mapping[str, Any]) -> str | None:
     """'spp 16 -> 4, resolution 320x180 -> 64x36' from the header's render settings (JSON)
     and this run's, or None when the header has none or they agree."""
-    try:
-        before = json.loads(stored) if isinstance(stored, str) else None
-    except ValueError:
-        before = None
-    if not isinstance(before, dict):
+    before = _stored_dict(stored)
+    if before is None:
         return None
 
     def show(v: Any) -> str:
@@ -59,11 +65,8 @@ def files_change(stored: Any, current: Mapping[str, str] | None) -> str | None:
     run's (`render.job.file_digests`): files whose bytes changed under the same name, at
     most three named. None when the header has none, or none changed in place (a file
     added or dropped is an edit of the scene itself, named as such)."""
-    try:
-        before = json.loads(stored) if isinstance(stored, str) else None
-    except ValueError:
-        before = None
-    if not isinstance(before, dict) or current is None:
+    before = _stored_dict(stored)
+    if before is None or current is None:
         return None
     changes = [f"{k} changed" for k in sorted(before.keys() & current.keys()) if before[k] != current[k]]
     if not changes:
