@@ -10,6 +10,7 @@ import json
 import logging
 import os
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -53,6 +54,28 @@ def test_the_same_command_twice_renders_and_rebuilds_nothing(tmp_path: Path) -> 
     assert report(out)["deliverables"]["status"] == {"24p": "made", "60i": "made", "contact": "made"}
     assert movie.stat().st_mtime_ns > made[movie.name]
     assert not [p for p in (out / "deliver").iterdir() if p.name.startswith(".")]  # no staging left
+
+
+def test_a_rerun_clears_the_stale_claim_a_stopped_run_left_on_a_complete_frame(tmp_path: Path) -> None:
+    """A run stopped between publishing a frame and releasing its claim (the disk turned
+    read-only, a kill) leaves a claim on a complete frame. The rerun keeps the frame and
+    renders no task for it, so no task cleared the claim: it stayed for good (seen once in
+    test_disk_faults). The rerun now removes it; a live claim (another run's, its process
+    alive) on a complete frame is left alone."""
+    from motion.pipeline.farm.claims import Claimant, claim_path, try_claim
+
+    out = tmp_path / "out"
+    args = ["render", SCENE, "-o", out, "--frames", "0-3", *TINY]
+    assert motion(*args).returncode == 0
+    frames = sorted(out.glob("*.exr"))
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True).stdout.strip()
+    assert try_claim(frames[1], Claimant(run_id="stopped-run", host=Claimant.here("x").host, pid=int(dead)), 60)[0]
+    assert try_claim(frames[2], Claimant.here("live-run"), 60)[0]
+    second = motion(*args)
+    assert second.returncode == 0, second.stderr
+    assert "0 rendered, 4 skipped" in second.stderr
+    assert not claim_path(frames[1]).exists()
+    assert claim_path(frames[2]).exists()
 
 
 def test_a_deliverable_is_made_from_the_selected_frames_and_rebuilt_when_they_change(tmp_path: Path) -> None:

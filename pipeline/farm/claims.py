@@ -135,17 +135,39 @@ def try_claim(frame_file: str | Path, who: Claimant, stale_after_s: float) -> tu
                 write_atomic(path, body, "claiming frame")  # our own earlier attempt (its worker died): take over
                 return True, None
             if is_stale(path, info, stale_after_s):
-                # break it atomically: only one breaker's rename succeeds
-                grave = path.with_name(f"{path.name}.stale.{os.getpid()}.{uuid.uuid4().hex[:6]}")
-                try:
-                    os.rename(path, grave)
-                    grave.unlink(missing_ok=True)
-                except FileNotFoundError:
-                    pass
+                _break(path)
                 continue
             return False, info
         info = read_claim(path)
         return False, info or {}
+
+
+def _break(path: Path) -> None:
+    """Remove a stale claim atomically: only one breaker's rename succeeds."""
+    grave = path.with_name(f"{path.name}.stale.{os.getpid()}.{uuid.uuid4().hex[:6]}")
+    try:
+        os.rename(path, grave)
+        grave.unlink(missing_ok=True)
+    except FileNotFoundError:
+        pass
+
+
+def clear_stale(frame_files: list[str], stale_after_s: float) -> int:
+    """Remove the stale claims on frames a resumed run keeps as complete: a run stopped
+    between publishing a frame and releasing its claim (a disk turned read-only, a kill)
+    left one, and no task of a later run claims a complete frame to clear it. A live
+    claim is left alone; a disk that refuses the removal too. Returns how many went."""
+    n = 0
+    for f in frame_files:
+        path = claim_path(f)
+        info = read_claim(path)
+        if info is not None and is_stale(path, info, stale_after_s):
+            try:
+                _break(path)
+                n += 1
+            except OSError:
+                pass
+    return n
 
 
 def release(frame_file: str | Path, run_id: str) -> bool:

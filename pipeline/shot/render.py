@@ -20,7 +20,7 @@ from typing import Any, Callable
 
 from ..bake import BakedFrame, by_number
 from ..errors import IncompleteJobError, UsageError
-from ..farm.claims import new_run_id
+from ..farm.claims import clear_stale, new_run_id
 from ..farm.config import FarmConfig, load_farm_config
 from ..farm.frames import chunks as make_chunks
 from ..farm.frames import default_chunk_size, format_frames, parse_frames, parse_shard, shard
@@ -367,6 +367,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     out_dir.mkdir(parents=True, exist_ok=True)
     run_id = new_run_id()
     ctx = TaskContext(run_id=run_id, paths=paths, resume=req.resume and not req.overwrite, stale_after_s=cfg.stale_after_s)
+    clear_stale([paths[f] for f in skipped], cfg.stale_after_s)
     label = f"{loaded.name}" + (f" shard {shard_spec[0]}/{shard_spec[1]}" if shard_spec else "")
     progress = Progress(total=len(frames), already=len(skipped), label=label, live=req.progress, estimate_s=cost["per_frame_s"] if todo else None)
     progress.note(
