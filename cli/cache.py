@@ -1,5 +1,5 @@
 """`motion cache info|clear|key|warm`: the shared on-disk caches (converted assets, drjit
-kernels); `key` and `warm` serve a CI system that saves the kernel cache between runs
+kernels, what validation keeps); `key` and `warm` serve a CI system that saves the kernel cache between runs
 (docs/ci-sharding.md)."""
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ import click
 
 
 def _folders() -> dict[str, Path]:
-    from motion.pipeline.cache import kernels_dir
+    from motion.pipeline.cache import kernels_dir, validation_dir
     from motion.pipeline.render.assets import assets_dir
 
-    return {"assets": assets_dir(), "kernels": kernels_dir()}
+    return {"assets": assets_dir(), "kernels": kernels_dir(), "validation": validation_dir()}
 
 
 @click.group("cache")
@@ -32,7 +32,7 @@ def cache_info() -> None:
 
 
 @cache.command("clear")
-@click.option("--what", type=click.Choice(["all", "assets", "kernels"]), default="all", show_default=True)
+@click.option("--what", type=click.Choice(["all", "assets", "kernels", "validation"]), default="all", show_default=True)
 def cache_clear(what: str) -> None:
     """Delete cached files (they are rebuilt on demand)."""
     from motion.pipeline.render.assets import clear

@@ -3,8 +3,11 @@ probe): one root, shared by every stage that caches."""
 
 from __future__ import annotations
 
+import hashlib
 import os
 from pathlib import Path
+
+_DIGESTS: dict[tuple[str, int, int], str] = {}
 
 
 def cache_root() -> Path:
@@ -60,6 +63,12 @@ def enforce_cap(folder: Path, cap_bytes: int, keep: Path | None = None) -> int:
     return freed
 
 
+def validation_dir() -> Path:
+    """What validation keeps: the scene's compiled validator (scene/compiled.py) and the
+    assets whose bytes passed their checks (checked.py), under the cache root."""
+    return cache_root() / "validation"
+
+
 def kernels_dir() -> Path:
     """drjit's kernel cache: $DRJIT_CACHE_DIR, else kernels/ under the cache root."""
     return Path(os.environ.get("DRJIT_CACHE_DIR", str(cache_root() / "kernels")))
@@ -88,3 +97,17 @@ def kernel_cache_key() -> str:
     except OSError:
         parts.append(platform.processor())
     return "motion-kernels-" + hashlib.sha256("|".join(parts).encode()).hexdigest()[:16]
+
+
+def file_digest(path: Path) -> str:
+    """sha256 of a file's bytes (memoised per path, size and modification time): the key of
+    every content-addressed cache (imports, validation, shipped assets) and of the settings hash."""
+    st = path.stat()
+    memo = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    if memo not in _DIGESTS:
+        h = hashlib.sha256()
+        with open(path, "rb") as f:
+            for chunk in iter(lambda: f.read(1 << 20), b""):
+                h.update(chunk)
+        _DIGESTS[memo] = h.hexdigest()
+    return _DIGESTS[memo]

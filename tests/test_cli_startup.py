@@ -5,8 +5,13 @@ every command module, in one place."""
 from __future__ import annotations
 
 import importlib
+import os
 import subprocess
 import sys
+from pathlib import Path
+
+import pytest
+from pydantic import ValidationError
 
 from _support import REPO
 
@@ -47,19 +52,91 @@ def test_validate_of_a_scene_without_expressions_or_array_assets_imports_no_nump
     assert "numpy" not in mods
 
 
-def test_scene_models_build_their_validators_on_first_use() -> None:
+def _in_process(code: str, cache: Path) -> list[str]:
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=REPO, env={**os.environ, "MOTION_CACHE_DIR": str(cache)})
+    assert res.returncode == 0, res.stderr
+    return res.stdout.split()
+
+
+def test_scene_models_build_their_validators_on_first_use_and_the_next_process_loads_it(tmp_path: Path) -> None:
     """The ~75 scene records are declared with pydantic's defer_build: importing the schema
-    builds no validator (each class used to build its own at import, then the scene's again),
-    the first validation builds the one it needs."""
+    builds no validator (each class used to build its own at import, then the scene's again;
+    defaults such as `transform: Transform = Transform()` built Transform's). The first
+    validation builds the scene's and keeps it in the cache root; the next process loads it
+    and builds none (pipeline/scene/compiled.py)."""
     code = (
-        "from motion.pipeline.scene import load_scene, schema\n"
-        "print(schema.Scene.__pydantic_complete__)\n"
+        "from motion.pipeline.scene import load_scene, schema, types\n"
+        "print(schema.Scene.__pydantic_complete__, types.Transform.__pydantic_complete__)\n"
         f"load_scene({str(REPO / 'scenes' / 'bouncing-balls.yaml')!r})\n"
         "print(schema.Scene.__pydantic_complete__)\n"
     )
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=REPO)
-    assert res.returncode == 0, res.stderr
-    assert res.stdout.split() == ["False", "True"]
+    assert _in_process(code, tmp_path) == ["False", "False", "True"]
+    assert len(list((tmp_path / "validation").glob("Scene-*.pickle"))) == 1
+    assert _in_process(code, tmp_path) == ["False", "False", "False"]
+
+
+def test_the_kept_scene_validator_gives_the_same_records_and_errors(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Loaded from its entry, the validator makes the same records of every example as
+    `Scene.model_validate` (the `imports:` lists as `ImportList.model_validate`), and the
+    same errors of a scene with many (errors are what users read)."""
+    from motion.pipeline.scene import compiled
+    from motion.pipeline.scene.imports.spec import ImportList
+    from motion.pipeline.scene.schema import Scene
+    from motion.pipeline.scene.source import parse_yaml
+
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(compiled, "_validators", {})
+    entry = compiled.entry_path(Scene)
+    compiled.kept_validator(Scene)
+    compiled.kept_validator(ImportList)
+    kept = compiled._load(entry)
+    assert kept is not None and kept is not Scene.__pydantic_validator__
+    for path in sorted((REPO / "scenes").glob("*.yaml")):
+        data, _ = parse_yaml(path.read_text(), str(path))
+        if "imports" in data:  # validated as the import list, then expanded before the scene is
+            imports = {"imports": data["imports"]}
+            assert compiled._load(compiled.entry_path(ImportList)).validate_python(imports) == ImportList.model_validate(imports), path.name  # type: ignore[union-attr]
+            continue
+        assert kept.validate_python(data) == Scene.model_validate(data), path.name
+    bad = {"camera": {"fov": -1, "position": [0, 0, "x"]}, "lights": [{"type": "pont"}, {"type": "sun", "direction": [0, 0, 0], "irradiance": float("nan")}],
+           "objects": [{"name": "a", "shape": "sphere", "radius": 0, "transform": {"rotate": {"quaternion": [0, 0, 0, 0]}}}], "timeline": {"first": 5, "last": 1}}
+    with pytest.raises(ValidationError) as ours:
+        kept.validate_python(bad)
+    with pytest.raises(ValidationError) as theirs:
+        Scene.model_validate(bad)
+    assert ours.value.errors(include_url=False, include_context=False) == theirs.value.errors(include_url=False, include_context=False)
+    assert len(ours.value.errors()) >= 5
+
+
+def test_a_scene_validator_entry_is_used_only_when_whole_and_current(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """An entry whose sources changed (size or modification time), cut short, or naming a
+    record the code no longer has, is not used: the validator is made again and the entry
+    replaced."""
+    import pickle
+
+    from motion.pipeline.scene import compiled
+    from motion.pipeline.scene.schema import Scene
+
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(compiled, "_validators", {})
+    entry = compiled.entry_path(Scene)
+    compiled.kept_validator(Scene)
+    whole = entry.read_bytes()
+    assert compiled._load(entry) is not None
+    with open(entry, "rb") as fh:
+        sources = pickle.load(fh)
+    assert any(s[0].endswith("scene/schema.py") for s in sources) and any(s[0].endswith("scene/types.py") for s in sources)
+
+    stale = [(f, size, mtime + 1 if f.endswith("types.py") else mtime) for f, size, mtime in sources]
+    entry.write_bytes(pickle.dumps(stale) + whole[len(pickle.dumps(sources)):])
+    assert compiled._load(entry) is None
+    entry.write_bytes(whole[: len(whole) // 2])
+    assert compiled._load(entry) is None
+    entry.write_bytes(whole.replace(b"RenderSettings", b"RenderSettingz"))
+    assert compiled._load(entry) is None
+    monkeypatch.setattr(compiled, "_validators", {})
+    compiled.kept_validator(Scene)  # made again, and kept
+    assert entry.read_bytes() == whole
 
 
 def test_the_command_table_names_every_command_of_every_module() -> None:
@@ -80,3 +157,22 @@ def test_a_smoke_render_imports_no_scipy(tmp_path) -> None:  # type: ignore[no-u
     mods = _imported_after(["-q", "render", str(REPO / "scenes" / "bouncing-balls.yaml"), "--preset", "ci-smoke", "-o", str(tmp_path), "--no-progress"])
     assert "scipy" not in mods
     assert "motion.pipeline.render.job" in mods  # it did render in this process
+
+
+def test_record_defaults_made_without_validation_equal_the_validated_ones() -> None:
+    """A field default written `Record.default()` (made by `model_construct`, so that
+    importing the schema builds no validator) equals `Record()`, validators and all, for
+    every record of the scene format."""
+    from pydantic import BaseModel
+
+    from motion.pipeline.scene import dynamics_schema, motion_schema, schema, types
+    from motion.pipeline.scene.imports import spec
+
+    records = {cls for module in (schema, types, spec, motion_schema, dynamics_schema) for cls in vars(module).values() if isinstance(cls, type) and issubclass(cls, types.Model)}
+    checked = 0
+    for cls in records:
+        for name, field in cls.model_fields.items():
+            if isinstance(field.default, BaseModel):
+                assert field.default == type(field.default)(), f"{cls.__name__}.{name}"
+                checked += 1
+    assert checked >= 12

@@ -18,6 +18,7 @@ from pydantic import ValidationError
 
 from ..errors import Problem, SceneError
 from .checks import numeric_range_problems, semantic_problems
+from . import compiled
 from .imports import expand_imports
 from .problems import problems_from_validation
 from .schema import Scene
@@ -71,7 +72,7 @@ def load_scene(path: str | Path, overrides: Mapping[str, Any] | None = None, ass
         data = deep_merge(data, overrides)
     data, source = expand_imports(data, source, path.parent)
     try:
-        scene = Scene.model_validate(data)
+        scene = compiled.validate(Scene, data)
     except ValidationError as exc:
         problems = problems_from_validation(exc, data, source, Scene)
         problems += salvaged_problems(exc, data, source, path.parent, problems, assets)
@@ -173,7 +174,7 @@ def salvage(exc: ValidationError, data: dict[str, Any], source: SourceMap | None
                 del node[loc[-1]]
                 dropped.append(loc)
         try:
-            return Scene.model_validate(doc), dropped, later
+            return compiled.validate(Scene, doc), dropped, later
         except ValidationError as again:
             exc = again
         if source is not None and guessed:

@@ -394,9 +394,9 @@ class Bone(Model):
 
     name: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_.\-]*$")]
     parent: str | None = None
-    transform: Transform = Transform()
+    transform: Transform = Transform.default()
     length: Positive = 1.0
-    motion: Annotated[Union[StaticMotion, KeyframeMotion, ProceduralMotion], Field(discriminator="type")] = StaticMotion()
+    motion: Annotated[Union[StaticMotion, KeyframeMotion, ProceduralMotion], Field(discriminator="type")] = StaticMotion.default()
 
 
 class Skinning(Model):
@@ -493,7 +493,7 @@ class Flock(Model):
     neighbours: Annotated[int, Field(ge=1, le=64)] = 8  # the nearest k within the radius
     separation: Positive = 0.2  # m: no two agents come closer (hard constraint)
     separation_range: Positive | None = None  # m: the separation rule acts inside it (default 2 x separation)
-    weights: FlockWeights = FlockWeights()
+    weights: FlockWeights = FlockWeights.default()
     goal: Vec3 | None = None
     avoid_distance: Positive = 1.0  # m: obstacle avoidance starts this far from a collider
     look_ahead: NonNegativeFloat = 0.5  # s: obstacles are also tested where the agent will be

@@ -88,9 +88,9 @@ class Camera(Model):
     ortho_width: Positive = 2.0  # metres across the image's x axis (orthographic)
     near: Positive = 0.01
     far: Positive = 10000.0
-    shutter: Shutter = Shutter()
+    shutter: Shutter = Shutter.default()
     parent: Name | None = None
-    motion: MotionBlock = StaticMotion()
+    motion: MotionBlock = StaticMotion.default()
 
     @model_validator(mode="after")
     def _placement(self) -> "Camera":
@@ -131,7 +131,7 @@ class _Light(Model):
 
     name: Name | None = None
     parent: Name | None = None
-    motion: MotionBlock = StaticMotion()
+    motion: MotionBlock = StaticMotion.default()
 
     @property
     def emission(self) -> Any:
@@ -396,11 +396,11 @@ class _Object(Model):
     spawned: ClassVar[bool] = False  # its geometry is spawned by the simulation (a particle system)
 
     name: Name
-    transform: Transform = Transform()
+    transform: Transform = Transform.default()
     material: Name | None = None
     emission: Emission | None = None
     parent: Name | None = None
-    motion: MotionBlock = StaticMotion()
+    motion: MotionBlock = StaticMotion.default()
     collider: Collider | None = None
     visible: bool = True
     deform: Deformation | None = None
@@ -587,15 +587,15 @@ class Scene(Model):
     version: Literal[1] = 1
     name: Name | None = None
     imports: list[ImportSpec] = []  # glTF / USD files expanded into the lists below (docs/imports.md)
-    timeline: TimelineSpec = TimelineSpec()
+    timeline: TimelineSpec = TimelineSpec.default()
     camera: Camera
     lights: list[Light] = []
     materials: list[Material] = []
     objects: list[SceneObject] = []
-    dynamics: DynamicsSettings = DynamicsSettings()
+    dynamics: DynamicsSettings = DynamicsSettings.default()
     ik: list[IKConstraint] = []  # inverse kinematics on parented chains (motion/ik.py)
-    render: RenderSettings = RenderSettings()
-    output: OutputSettings = OutputSettings()
+    render: RenderSettings = RenderSettings.default()
+    output: OutputSettings = OutputSettings.default()
 
 
 __all__ = [

@@ -37,11 +37,12 @@ def expand_imports(data: dict[str, Any], source: "SourceMap", base_dir: Path) ->
         return data, source
     from pydantic import ValidationError
 
+    from .. import compiled
     from ..problems import problems_from_validation
     from .spec import ImportList
 
     try:
-        specs = ImportList.model_validate({"imports": raw}).imports
+        specs = compiled.validate(ImportList, {"imports": raw}).imports
     except ValidationError as exc:
         raise SceneError(problems_from_validation(exc, {"imports": raw}, source, ImportList)) from None
 
@@ -130,7 +131,7 @@ def _read(path: Path, shown: str, spec: Any, index: int, base_dir: Path) -> Expa
     confined to the scene's folder, `base_dir`)."""
     suffix = path.suffix.lower()
     if suffix in (".gltf", ".glb"):
-        from .gltf import read_gltf
+        from .memo import read_gltf
 
         return read_gltf(path, shown, spec, index)
     from .usd import read_usd

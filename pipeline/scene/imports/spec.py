@@ -31,7 +31,7 @@ class ImportSpec(Model):
     file: str
     prefix: Annotated[str, Field(pattern=PREFIX_PATTERN, max_length=64)] = ""
     root: Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_.\-]*$", max_length=128)] | None = None
-    transform: Transform = Transform()
+    transform: Transform = Transform.default()
     scene: Union[Annotated[int, Field(ge=0)], str, None] = None  # glTF: which scene (default: the file's)
     nodes: list[str] | None = None  # glTF node / USD prim names: import only these subtrees
     # glTF: a name or index, "*" for all at once, -1 for none; default: all when they key
