@@ -16,14 +16,18 @@ def validate(scenes: tuple[Path, ...], preset: str | None, as_json: bool) -> Non
     import json
     from dataclasses import asdict
 
+    from motion.cli.main import nothing_to_finish, restore_gc
     from motion.pipeline.errors import Problem, SceneError
     from motion.pipeline.presets import load_preset, overrides_from
     from motion.pipeline.scene import load_scene
 
+    nothing_to_finish()  # it only reads: its process may end without teardown (cli/main.py)
     overrides = overrides_from(load_preset(preset)[0], {}) if preset else None
     problems: list[Problem] = []
     results = []
-    for path in scenes:
+    for n, path in enumerate(scenes):
+        if n == 1:
+            restore_gc()  # off while the first scene loads (cli/main.py); on for the rest
         try:
             loaded = load_scene(path, overrides)
         except SceneError as err:
@@ -49,4 +53,5 @@ def validate(scenes: tuple[Path, ...], preset: str | None, as_json: bool) -> Non
         raise SceneError(problems)
 
 
+validate.start_up_only = True  # type: ignore[attr-defined]  # cli/main.py: the collector stays off while it starts
 commands = [validate]

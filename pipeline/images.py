@@ -7,13 +7,14 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from .errors import AssetError
-from .limits import open_bounded
+from .limits import MAX_IMAGE_BYTES, open_bounded
 
-MAX_IMAGE_BYTES = 2 * 1024**3  # one texture or environment map file
+if TYPE_CHECKING:
+    import numpy as np
+
 MAX_IMAGE_PIXELS = 16384 * 8192  # width x height of one image
 # What Mitsuba's Bitmap reads; decoded here with OpenEXR, Pillow or a few lines of our own.
 IMAGE_FORMATS = {".exr": "OpenEXR", ".hdr": "Radiance RGBE", ".rgbe": "Radiance RGBE", ".pfm": "PFM",
@@ -54,6 +55,8 @@ def _pixels_ok(width: int, height: int) -> None:
 
 
 def _finite(pixels: np.ndarray) -> None:
+    import numpy as np  # only float images need it (~0.04 s of a validate without them)
+
     bad = ~np.isfinite(pixels)
     if bad.any():
         y, x = np.argwhere(bad.reshape(pixels.shape[0], pixels.shape[1], -1).any(axis=2))[0]
@@ -61,6 +64,7 @@ def _finite(pixels: np.ndarray) -> None:
 
 
 def _check_exr(path: Path) -> tuple[int, int]:
+    import numpy as np
     import OpenEXR
 
     try:
@@ -120,6 +124,8 @@ def _check_pfm(data: bytes) -> tuple[int, int]:
     need = width * height * channels * 4
     if len(data) - pos != need:
         raise AssetError(f"PFM data is {len(data) - pos} bytes; {width}x{height}x{channels} floats need {need}")
+    import numpy as np
+
     _finite(np.frombuffer(data, "<f4" if scale < 0 else ">f4", width * height * channels, pos).reshape(height, width, channels))
     return width, height
 

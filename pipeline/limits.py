@@ -19,6 +19,9 @@ from .errors import InputFileError, MotionError, UsageError
 
 ErrorFor = Callable[[str], MotionError]  # the caller's own error from "FILE: reason"
 
+MAX_IMAGE_BYTES = 2 * 1024**3  # one texture or environment map file (images.py)
+MAX_MESH_BYTES = 2 * 1024**3  # one mesh file (meshes.py)
+
 
 @contextmanager
 def _as(error: ErrorFor | None) -> Iterator[None]:

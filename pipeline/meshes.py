@@ -20,9 +20,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .errors import AssetError, MeshFormatError
-from .limits import FLOAT32_MAX, beyond_float32
+from .limits import FLOAT32_MAX, MAX_MESH_BYTES, beyond_float32
 
-MAX_MESH_BYTES = 2 * 1024**3  # one mesh file
 MAX_POLYGON = 256  # vertices of one face
 
 _PLY_TYPES = {"char": "i1", "uchar": "u1", "short": "i2", "ushort": "u2", "int": "i4", "uint": "u4", "float": "f4", "double": "f8",

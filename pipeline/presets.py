@@ -10,7 +10,6 @@ preset name too.
 from __future__ import annotations
 
 import os
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -31,10 +30,17 @@ class Preset(Model):
     output: dict[str, Any] = {}
 
 
+def configs_dir() -> Path:
+    """The built-in presets' folder: the `motion.configs` package (importlib.resources
+    would cost every command 4 ms of imports for a path the package knows)."""
+    from .. import configs
+
+    return Path(configs.__file__).parent
+
+
 def preset_names() -> list[str]:
     """The built-in presets (configs/*.yaml, not farm.yaml)."""
-    folder = resources.files("motion.configs")
-    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".yaml") and p.name != "farm.yaml")
+    return sorted(p.name[:-5] for p in configs_dir().iterdir() if p.name.endswith(".yaml") and p.name != "farm.yaml")
 
 
 def load_preset(name: str) -> tuple[Preset, str]:
@@ -44,7 +50,7 @@ def load_preset(name: str) -> tuple[Preset, str]:
         # bounded like a scene: a regular file within the size limit (docs/scene-format.md)
         text, file = read_yaml_file(path, "preset file"), str(path)
     else:
-        entry = resources.files("motion.configs") / f"{name}.yaml"
+        entry = configs_dir() / f"{name}.yaml"
         if name == "farm" or not entry.is_file():
             raise UsageError(f"unknown preset '{name}'; available: {', '.join(preset_names())} (or a path to a .yaml file)")
         text, file = entry.read_text(), f"configs/{name}.yaml"

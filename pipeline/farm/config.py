@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from importlib import resources
 from typing import Any
 
 import yaml
@@ -37,7 +36,9 @@ class FarmConfig:
 
 def load_farm_config() -> FarmConfig:
     """Read configs/farm.yaml; unknown keys or bad values are a UsageError."""
-    text = (resources.files("motion.configs") / "farm.yaml").read_text()
+    from ..presets import configs_dir
+
+    text = (configs_dir() / "farm.yaml").read_text()
     data = yaml.safe_load(text) or {}
     known = {"retries", "task_timeout_s", "chunk_size", "max_worker_failures", "claim_stale_s"}
     unknown = sorted(set(data) - known)

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
-from ..cache import cache_root, enforce_cap
+from ..cache import cache_root, enforce_cap, file_digest
 from ..bake import BakedFrame
 from ..errors import AssetError, DiskFaultError
 from ..frame_output import is_complete
@@ -26,7 +26,7 @@ from ..render.job import FrameResult, RenderJob, expected_meta
 from ..files import confined, write_atomic, writing
 from ..limits import env_size
 from ..scene.checks import named_files, replace_at
-from ..scene.imports.cache import converted_file, file_digest
+from ..scene.imports.cache import converted_file
 from ..scene.loader import LoadedScene
 from ..scene.schema import Scene
 from ..scene.source import yaml_path

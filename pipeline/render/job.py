@@ -105,7 +105,7 @@ def _named_digests(loaded: LoadedScene) -> list[tuple[Any, str, str | None]]:
     be read) for each file the scene names (`scene.checks.named_files`), each file read
     once (`file_digest` keeps them per path, size and modification time)."""
     from ..scene.checks import named_files
-    from ..scene.imports.cache import file_digest
+    from ..cache import file_digest
 
     digests: dict[str, str | None] = {}
     out = []

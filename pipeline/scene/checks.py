@@ -14,8 +14,10 @@ from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any, Callable, Iterator, Sequence
 
 from ..errors import AssetError, Problem
+from ..limits import MAX_IMAGE_BYTES, MAX_MESH_BYTES
 from ..expr import ExpressionError, parse_expression
 from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
+from . import checked
 from .problems import closest
 from .motion_schema import BlendShapes, JointSkin, KeyframeMotion, MorphTargets, ProceduralMotion, TRANSFORM_CHANNELS
 from .schema import LIGHT_TYPES, Mesh, Particles, Scene, Texture
@@ -275,18 +277,25 @@ def check_asset_files(c: _Check) -> None:
         key = ((base_dir / rel).resolve(), kind + ("-render" if deforming else ""))
         if key not in decoded:
             decoded[key] = None
-            try:
-                if kind == "mesh":
-                    from ..meshes import load_mesh, load_render_mesh
+            kept = checked.entry(key[0], key[1], MAX_MESH_BYTES if kind == "mesh" else MAX_IMAGE_BYTES)
+            if kept is not None and kept.is_file():
+                pass  # these bytes passed this check before (pipeline/checked.py)
+            else:
+                try:
+                    if kind == "mesh":
+                        from ..meshes import load_mesh, load_render_mesh
 
-                    # a deforming mesh is drawn from its render vertices (uvs, normals)
-                    load_render_mesh(key[0]) if deforming else load_mesh(key[0])
+                        # a deforming mesh is drawn from its render vertices (uvs, normals)
+                        load_render_mesh(key[0]) if deforming else load_mesh(key[0])
+                    else:
+                        from ..images import check_image
+
+                        check_image(key[0])
+                except AssetError as exc:
+                    decoded[key] = str(exc).split(": ", 1)[-1]
                 else:
-                    from ..images import check_image
-
-                    check_image(key[0])
-            except AssetError as exc:
-                decoded[key] = str(exc).split(": ", 1)[-1]
+                    if kept is not None:
+                        checked.remember_pass(kept)
         if decoded[key] is not None:
             c.add(loc, f"{kind} file {rel}: {decoded[key]}")
 

@@ -4,7 +4,6 @@ a suggestion for a misspelt key or kind."""
 
 from __future__ import annotations
 
-import difflib
 import typing
 from typing import Any, Mapping, Union
 
@@ -24,6 +23,8 @@ def closest(word: object, options: list[str], cutoff: float = 0.6) -> str | None
     lowered: dict[str, str] = {}
     for option in options:
         lowered.setdefault(option.lower(), option)
+    import difflib  # only a misspelt name needs it
+
     found = difflib.get_close_matches(str(word).lower(), list(lowered), n=1, cutoff=cutoff)
     return lowered[found[0]] if found else None
 

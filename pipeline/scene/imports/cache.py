@@ -9,17 +9,16 @@ import hashlib
 import re
 import threading
 from pathlib import Path
-from typing import Callable
-
-import numpy as np
+from typing import TYPE_CHECKING, Callable
 
 from ...cache import cache_root
-from ...meshes import cache_entry_whole
+
+if TYPE_CHECKING:  # numpy and meshes.py are imported where a file is written or checked: a warm import needs neither
+    import numpy as np
 
 CONVERSION_VERSION = "import-v2"  # v2: stricter accessor reading (sparse indices); entries made by a laxer reader are not reused
 _lock = threading.Lock()
 STATS = {"hits": 0, "misses": 0, "records": 0}  # converted-file hits / misses; record-set hits
-_DIGESTS: dict[tuple[str, int, int], str] = {}
 
 
 def cache_dir() -> Path:
@@ -34,24 +33,13 @@ def converted_file(path: Path) -> bool:
     return Path(path).resolve().is_relative_to(cache_dir().resolve())
 
 
-def file_digest(path: Path) -> str:
-    """sha256 of a file's bytes (memoised per path, size and modification time)."""
-    st = path.stat()
-    memo = (str(path.resolve()), st.st_size, st.st_mtime_ns)
-    if memo not in _DIGESTS:
-        h = hashlib.sha256()
-        with open(path, "rb") as f:
-            for chunk in iter(lambda: f.read(1 << 20), b""):
-                h.update(chunk)
-        _DIGESTS[memo] = h.hexdigest()
-    return _DIGESTS[memo]
-
-
 def cached(stem: str, key: str, suffix: str, write: Callable[[Path], None]) -> Path:
     """The cache file for (`key`, conversion version); `write(tmp_path)` makes it on a miss."""
     digest = hashlib.sha256(f"{CONVERSION_VERSION}|{key}".encode()).hexdigest()[:32]
     safe = re.sub(r"[^A-Za-z0-9_.-]", "_", stem)[:48]
     target = cache_dir() / f"{safe}-{digest}{suffix}"
+    from ...meshes import cache_entry_whole
+
     if target.is_file() and cache_entry_whole(target):  # (an entry cut short or emptied is made again, never a hit)
         with _lock:
             STATS["hits"] += 1
@@ -70,6 +58,7 @@ def write_atomic(target: Path, write: Callable[[Path], None]) -> None:
     from ...cache import enforce_cap
     from ...files import writing
     from ...limits import env_size
+    from ...meshes import cache_entry_whole
 
     with writing(target, "writing the import cache", suffix=target.suffix, verify=lambda p: cache_entry_whole(p, full=True)) as tmp:
         write(tmp)
@@ -79,6 +68,8 @@ def write_atomic(target: Path, write: Callable[[Path], None]) -> None:
 def write_ply(path: Path, positions: np.ndarray, faces: np.ndarray | None, normals: np.ndarray | None = None, uvs: np.ndarray | None = None) -> None:
     """A binary little-endian PLY: float x y z [nx ny nz] [u v] per vertex, triangles as
     `list uchar int`, the layout Mitsuba's PLY loader and pipeline/meshes.py both read."""
+    import numpy as np
+
     fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
     if normals is not None:
         fields += [("nx", "<f4"), ("ny", "<f4"), ("nz", "<f4")]
@@ -102,3 +93,30 @@ def write_ply(path: Path, positions: np.ndarray, faces: np.ndarray | None, norma
         f.write(("\n".join(header) + "\n").encode("ascii"))
         f.write(verts.tobytes())
         f.write(tris.tobytes())
+
+
+def source_digest(path: Path) -> str:
+    """sha256 over the glTF file and the external files its buffers and images name (a
+    .gltf's .bin and textures), so a converted asset is stale when any of them changes."""
+    import json
+    import struct
+    from urllib.parse import unquote
+
+    from ...cache import file_digest
+
+    h = hashlib.sha256(file_digest(path).encode())
+    try:
+        raw = path.read_bytes()
+        if raw[:4] == b"glTF":
+            length = struct.unpack_from("<I", raw, 12)[0]
+            doc = json.loads(raw[20 : 20 + length])
+        else:
+            doc = json.loads(raw.decode("utf-8"))
+        uris = [item.get("uri") for key in ("buffers", "images") for item in doc.get(key) or [] if isinstance(item, dict)]
+    except (ValueError, struct.error, AttributeError, TypeError, RecursionError):
+        return h.hexdigest()  # the reader reports what is wrong with the file (JSON nested 100,000 deep, too)
+    for uri in uris:
+        if isinstance(uri, str) and not uri.startswith("data:"):
+            file = path.parent / unquote(uri)
+            h.update(f"|{uri}|".encode() + (file_digest(file).encode() if file.is_file() else b"missing"))
+    return h.hexdigest()

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from .records import Expansion, ImportFileError, Origin, SpecError, import_frames
-from .cache import cached, file_digest, write_atomic, write_ply
+from .cache import cached, source_digest, write_atomic, write_ply
 
 COMPONENTS = {5120: np.dtype("<i1"), 5121: np.dtype("<u1"), 5122: np.dtype("<i2"), 5123: np.dtype("<u2"), 5125: np.dtype("<u4"), 5126: np.dtype("<f4")}
 WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
@@ -815,85 +815,9 @@ class GltfReader:
         return rec
 
 
-def source_digest(path: Path) -> str:
-    """sha256 over the glTF file and the external files its buffers and images name (a
-    .gltf's .bin and textures), so a converted asset is stale when any of them changes."""
-    import hashlib
-    import json
-    from urllib.parse import unquote
-
-    h = hashlib.sha256(file_digest(path).encode())
-    try:
-        raw = path.read_bytes()
-        if raw[:4] == b"glTF":
-            length = struct.unpack_from("<I", raw, 12)[0]
-            doc = json.loads(raw[20 : 20 + length])
-        else:
-            doc = json.loads(raw.decode("utf-8"))
-        uris = [item.get("uri") for key in ("buffers", "images") for item in doc.get(key) or [] if isinstance(item, dict)]
-    except (ValueError, struct.error, AttributeError, TypeError, RecursionError):
-        return h.hexdigest()  # the reader reports what is wrong with the file (JSON nested 100,000 deep, too)
-    for uri in uris:
-        if isinstance(uri, str) and not uri.startswith("data:"):
-            file = path.parent / unquote(uri)
-            h.update(f"|{uri}|".encode() + (file_digest(file).encode() if file.is_file() else b"missing"))
-    return h.hexdigest()
-
-
-def _files(value: Any) -> list[str]:
-    """Every `file` value in a record (meshes, targets, skins, textures)."""
-    if isinstance(value, dict):
-        return [v for k, v in value.items() if k == "file" and isinstance(v, str)] + [f for v in value.values() for f in _files(v)]
-    if isinstance(value, list):
-        return [f for v in value for f in _files(v)]
-    return []
-
-
-def _to_json(ex: Expansion) -> dict[str, Any]:
-    pack = lambda o: {"file": o.file, "where": o.where, "yaml_keys": o.yaml_keys, "default": o.default}  # noqa: E731
-    return {
-        "objects": [[r, pack(o)] for r, o in ex.objects],
-        "materials": [[r, pack(o)] for r, o in ex.materials],
-        "lights": [[r, pack(o)] for r, o in ex.lights],
-        "cameras": [[n, r, pack(o)] for n, r, o in ex.cameras],
-    }
-
-
-def _from_json(doc: dict[str, Any]) -> Expansion:
-    unpack = lambda d: Origin(d["file"], d["where"], {k: tuple(v) for k, v in d["yaml_keys"].items()}, tuple(d["default"]) if d["default"] is not None else None)  # noqa: E731
-    return Expansion(
-        objects=[(r, unpack(o)) for r, o in doc["objects"]],
-        materials=[(r, unpack(o)) for r, o in doc["materials"]],
-        lights=[(r, unpack(o)) for r, o in doc["lights"]],
-        cameras=[(n, r, unpack(o)) for n, r, o in doc["cameras"]],
-    )
-
-
-def read_gltf(path: Path, shown: str, spec: Any, index: int) -> Expansion:
-    """The records of one glTF import; ImportFileError (the file and node) or SpecError
-    (the import entry's field) otherwise.
-
-    The records themselves are cached too (keyed by the sources' digest, the import entry
-    without its overrides, and where it is shown): a warm load reads one JSON file instead
-    of parsing the glTF, as long as every converted file it names is still there."""
-    import hashlib
-    import json
-
-    from .cache import STATS, cache_dir
-
-    settings = spec.model_dump(mode="json", exclude={"overrides"})
-    code = hashlib.sha256(Path(__file__).read_bytes()).hexdigest()  # a changed reader rebuilds
-    key = hashlib.sha256(json.dumps([source_digest(path), settings, shown, index, code], sort_keys=True).encode()).hexdigest()[:32]
-    memo = cache_dir() / f"records-{key}.json"
-    if memo.is_file():
-        try:
-            ex = _from_json(json.loads(memo.read_text()))
-            records = [r for r, _ in ex.objects + ex.materials + ex.lights]
-            if all(Path(f).is_file() for f in _files(records)):
-                STATS["records"] += 1
-                return ex
-        except (OSError, ValueError, KeyError, TypeError):
-            pass  # rebuilt below
+def expand_gltf(path: Path, shown: str, spec: Any, index: int) -> Expansion:
+    """The records of one glTF import, read from the file (memo.read_gltf keeps them);
+    ImportFileError (the file and node) or SpecError (the import entry's field) otherwise."""
     reader = None
     try:
         reader = GltfReader(path, shown, spec, index)
@@ -905,5 +829,4 @@ def read_gltf(path: Path, shown: str, spec: Any, index: int) -> Expansion:
         # still one located line (the item being read), never a traceback
         where = reader.at if reader is not None else "<file>"
         raise ImportFileError(shown, where, f"malformed glTF: {type(exc).__name__}: {exc}") from None
-    write_atomic(memo, lambda tmp: tmp.write_text(json.dumps(_to_json(ex))))
     return ex

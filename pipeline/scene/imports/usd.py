@@ -22,7 +22,8 @@ from typing import Any
 import numpy as np
 
 from .records import Expansion, ImportFileError, Origin, SpecError, import_frames
-from .cache import cached, file_digest, write_ply
+from ...cache import file_digest
+from .cache import cached, write_ply
 from .gltf import _Names, sanitize
 
 MAX_SAMPLES = 100_000  # time samples per prim we are willing to key
