@@ -18,7 +18,7 @@ from _support import REPO
 HEAVY = ("mitsuba", "drjit", "scipy", "av", "matplotlib", "OpenImageIO", "PyOpenColorIO")
 
 
-def _imported_after(argv: list[str]) -> set[str]:
+def _imported_after(argv: list[str], env: dict[str, str] | None = None) -> set[str]:
     code = (
         "import sys\n"
         "from motion.cli.main import main\n"
@@ -26,7 +26,7 @@ def _imported_after(argv: list[str]) -> set[str]:
         "print(' '.join(sorted({m.split('.')[0] for m in sys.modules})))\n"
         "print(' '.join(sorted(m for m in sys.modules if m.startswith('motion.'))))\n"
     )
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=REPO)
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=REPO, env={**os.environ, **(env or {})})
     assert res.returncode == 0, res.stderr
     tops, ours = res.stdout.strip().splitlines()[-2:]
     return set(tops.split()) | set(ours.split())
@@ -176,3 +176,78 @@ def test_record_defaults_made_without_validation_equal_the_validated_ones() -> N
                 assert field.default == type(field.default)(), f"{cls.__name__}.{name}"
                 checked += 1
     assert checked >= 12
+
+
+def test_an_asset_whose_bytes_passed_is_not_decoded_again_and_a_changed_or_failing_one_is(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """What validation keeps of assets (scene/checked.py): a texture that decoded is not
+    decoded by the next load; the same name with other bytes is; a damaged file is decoded
+    and refused every time (a failure is never kept); other checking code misses."""
+    from PIL import Image
+
+    import motion.pipeline.images as images
+    from motion.pipeline.errors import SceneError
+    from motion.pipeline.scene import checked, load_scene
+
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
+    tex = tmp_path / "tex.png"
+    Image.new("RGB", (4, 4), (200, 10, 10)).save(tex)
+    scene = tmp_path / "s.yaml"
+    scene.write_text("camera: {position: [0, 0, 4], look_at: [0, 0, 0]}\nmaterials: [{name: m, type: diffuse, color: {file: tex.png}}]\n"
+                     "objects: [{name: a, shape: sphere, material: m}]\nlights: [{type: constant, radiance: 1}]\n")
+    decoded: list[Path] = []
+    real = images.check_image
+    monkeypatch.setattr(images, "check_image", lambda p: decoded.append(p) or real(p))
+    load_scene(scene)
+    load_scene(scene)
+    assert len(decoded) == 1
+    Image.new("RGB", (4, 4), (10, 200, 10)).save(tex)  # repainted under the same name
+    load_scene(scene)
+    assert len(decoded) == 2
+    tex.write_bytes(tex.read_bytes()[:40])  # cut short
+    for _ in range(2):
+        with pytest.raises(SceneError, match="tex.png"):
+            load_scene(scene)
+    assert len(decoded) == 4
+    Image.new("RGB", (4, 4), (10, 200, 10)).save(tex)  # the bytes that passed before: kept
+    load_scene(scene)
+    assert len(decoded) == 4
+    monkeypatch.setattr(checked, "_checker_digest", "another checker")
+    load_scene(scene)
+    assert len(decoded) == 5
+
+
+def test_a_kept_gltf_import_is_validated_without_its_reader(tmp_path: Path) -> None:
+    """The second `motion validate` of the walker reads its import's kept records and
+    never imports the glTF reader, pygltflib or numpy (imports/memo.py)."""
+    env = {"MOTION_CACHE_DIR": str(tmp_path)}
+    walker = str(REPO / "scenes" / "walker.yaml")
+    first = _imported_after(["validate", walker], env)
+    assert "motion.pipeline.scene.imports.gltf" in first
+    again = _imported_after(["validate", walker], env)
+    assert not {"numpy", "pygltflib", "motion.pipeline.scene.imports.gltf"} & again
+
+
+def test_validate_ends_with_its_output_whole_and_leaves_an_in_process_caller_as_it_was() -> None:
+    """`motion validate` ends its process without the interpreter's teardown (cli/main.py):
+    its output, here the JSON of every example through a pipe, is whole. Called in-process
+    with arguments, `main` leaves the garbage collector as it found it, on or off."""
+    import gc
+    import json
+
+    from _support import run_motion
+
+    from motion.cli.main import main
+
+    scenes = sorted(str(p) for p in (REPO / "scenes").glob("*.yaml"))
+    proc = run_motion("validate", "--json", *scenes)
+    assert proc.returncode == 0, proc.stderr
+    assert [s["ok"] for s in json.loads(proc.stdout)["scenes"]] == [True] * len(scenes)
+    one = str(REPO / "scenes" / "bouncing-balls.yaml")
+    assert gc.isenabled()
+    assert main(["validate", one]) == 0 and gc.isenabled()
+    assert main(["cache", "key"]) == 0 and gc.isenabled()
+    gc.disable()
+    try:
+        assert main(["validate", one]) == 0 and not gc.isenabled()
+    finally:
+        gc.enable()
