@@ -2,6 +2,7 @@
 
     python bench/bench_startup.py               # 5 alternating rounds, warm kernel cache, then an empty one
     python bench/bench_startup.py --rounds 3 --no-cold
+    python bench/bench_startup.py --only validate   # validate of every example, warm and with an empty cache root
 
 Jobs (each a fresh process, alternating, medians, with the CPU named):
 - the ci-smoke job of every example (`motion -q render SCENE --preset ci-smoke`), and the
@@ -54,6 +55,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--no-cold", action="store_true", help="skip the empty-kernel-cache runs")
+    ap.add_argument("--only", help="only the jobs whose name contains this text (e.g. validate)")
     ap.add_argument("--cycles-python", default=os.environ.get("BENCH_CYCLES_PYTHON"), help="a Python with bpy: also time Cycles' one frame of the bench shot")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench-startup-"))
@@ -69,6 +71,8 @@ def main() -> None:
         jobs[f"validate {name}"] = [MOTION, "validate", str(ROOT / "scenes" / f"{name}.yaml")]
     jobs["--dry-run bouncing-balls"] = [MOTION, "-q", "render", str(ROOT / "scenes" / "bouncing-balls.yaml"), "--dry-run", "-o", str(tmp / "dry")]
     jobs["--help"] = [MOTION, "--help"]
+    if args.only:
+        jobs = {k: v for k, v in jobs.items() if args.only in k or k.startswith("plain")}
     if args.cycles_python:
         import json
 
@@ -97,7 +101,14 @@ def main() -> None:
         if name == "one bench-shot frame, ours (16 spp)":
             ratio = f"  {med / statistics.median(times['one bench-shot frame, Cycles (16 spp)']):5.2f}x Cycles"
         print(f"{name:42} {med:7.3f} s  {statistics.median(rss[name]):6.0f} MB{ratio}")
-    if args.no_cold:
+    if not args.only or "validate" in args.only:
+        # what validation keeps (the scene's compiled validator, the assets whose bytes
+        # passed, a glTF import's records: docs/ci-sharding.md) is lost with the cache root
+        print("# validate with an empty cache root (a fresh MOTION_CACHE_DIR each run: the first validate on a machine)")
+        for name in ("bouncing-balls", "cannonball-splash", "walker-meadow"):
+            walls = [timed([MOTION, "validate", str(ROOT / "scenes" / f"{name}.yaml")], {**env, "MOTION_CACHE_DIR": str(tmp / f"vcache-{name}-{r}")})[0] for r in range(args.rounds)]
+            print(f"{'validate ' + name + ', empty cache root':52} {statistics.median(walls):7.3f} s")
+    if args.no_cold or args.only:
         return
     print("# empty kernel cache (fresh MOTION_CACHE_DIR and DRJIT_CACHE_DIR each run)")
     smoke = jobs["ci-smoke bouncing-balls"]
