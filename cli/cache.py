@@ -1,6 +1,6 @@
 """`motion cache info|clear|key|warm`: the shared on-disk caches (converted assets, drjit
-kernels, what validation keeps); `key` and `warm` serve a CI system that saves the kernel cache between runs
-(docs/ci-sharding.md)."""
+kernels, what validation keeps); `key` and `warm` serve a CI system that saves the kernel
+cache between runs (docs/ci-sharding.md)."""
 
 from __future__ import annotations
 

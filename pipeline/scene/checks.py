@@ -14,8 +14,8 @@ from pathlib import Path, PurePosixPath
 from typing import TYPE_CHECKING, Any, Callable, Iterator, Sequence
 
 from ..errors import AssetError, Problem
-from ..limits import MAX_IMAGE_BYTES, MAX_MESH_BYTES
 from ..expr import ExpressionError, parse_expression
+from ..limits import MAX_IMAGE_BYTES, MAX_MESH_BYTES
 from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
 from . import checked
 from .problems import closest
@@ -278,9 +278,7 @@ def check_asset_files(c: _Check) -> None:
         if key not in decoded:
             decoded[key] = None
             kept = checked.entry(key[0], key[1], MAX_MESH_BYTES if kind == "mesh" else MAX_IMAGE_BYTES)
-            if kept is not None and kept.is_file():
-                pass  # these bytes passed this check before (pipeline/checked.py)
-            else:
+            if kept is None or not kept.is_file():  # else these bytes passed this check before (scene/checked.py)
                 try:
                     if kind == "mesh":
                         from ..meshes import load_mesh, load_render_mesh
