@@ -253,10 +253,10 @@ def cycles_worker(spec_file: Path) -> None:
     scene.camera = cam_obj
     scene.frame_set(spec["frame"])
 
-    def render(name: str, spp: int, practical: bool) -> float:
+    def render(name: str, spp: int, practical: bool, denoise: bool | None = None) -> float:
         scene.cycles.samples = spp
         scene.cycles.use_adaptive_sampling = practical
-        scene.cycles.use_denoising = practical
+        scene.cycles.use_denoising = practical if denoise is None else denoise
         scene.cycles.use_light_tree = practical
         scene.render.filepath = str(out_dir / f"{name}.exr")
         t0 = time.perf_counter()
@@ -274,6 +274,10 @@ def cycles_worker(spec_file: Path) -> None:
         for spp in spec["spps"]:
             key = f"{'practical' if practical else 'equal'}-{spp}"
             timings[key] = min(render(key, spp, practical) for _ in range(2))
+    if spec["practical"]:  # OIDN alone (no adaptive sampling, no light tree): the denoiser against raw samples, as ours is measured
+        render("warmup", 4, False, denoise=True)
+        for spp in spec["spps"]:
+            timings[f"denoised-{spp}"] = min(render(f"denoised-{spp}", spp, False, denoise=True) for _ in range(2))
     (out_dir / "timings.json").write_text(json.dumps(timings))
 
 
@@ -295,7 +299,7 @@ def cycles(path: Path, spps: list[int], ref_spp: int, practical: bool, python: s
 
     reference = image("reference")
     out: dict[str, Any] = {"ref_spp": ref_spp, "reference_mean": float(reference[..., :3].mean())}
-    for mode in ("equal", "practical") if practical else ("equal",):
+    for mode in ("equal", "practical", "denoised") if practical else ("equal",):
         rows = []
         for spp in spps:
             key = f"{mode}-{spp}"
@@ -323,7 +327,7 @@ def main() -> None:
     ap.add_argument("--spp", default="1,2,4,8,16,32,64,128,256")
     ap.add_argument("--ref-spp", type=int, default=1024)
     ap.add_argument("--shots", default="bench,walk-cycle")
-    ap.add_argument("--denoise", action="store_true", help="also OIDN-denoised (ours) and OIDN + adaptive + light tree (Cycles)")
+    ap.add_argument("--denoise", action="store_true", help="also OIDN-denoised (ours), and OIDN + adaptive + light tree and OIDN alone (Cycles)")
     ap.add_argument("--no-cycles", action="store_true")
     ap.add_argument("--json", type=Path)
     ap.add_argument("--cycles-python", default=os.environ.get("BENCH_CYCLES_PYTHON", sys.executable), help="a Python with bpy (default: this one, or $BENCH_CYCLES_PYTHON)")
@@ -365,6 +369,10 @@ def main() -> None:
                     by = {r["spp"]: r for r in rows}
                     if 16 in by and 256 in by:
                         print(f"  denoised 16 spp relMSE {by[16]['denoised_rel_mse']:.3e} vs raw 256 spp {by[256]['rel_mse']:.3e}")
+                        if have_cycles and name == "bench":
+                            cy = {m: {r["spp"]: r for r in res["cycles"][m]} for m in ("equal", "denoised")}
+                            print(f"  cycles: OIDN-denoised 16 spp relMSE {cy['denoised'][16]['rel_mse']:.3e} vs raw 256 spp {cy['equal'][256]['rel_mse']:.3e}"
+                                  f" (OIDN on 256 spp: {cy['denoised'][256]['rel_mse']:.3e})")
                 results[name] = res
             finally:
                 pass
