@@ -785,6 +785,13 @@ def test_a_cache_folder_that_is_a_file_is_one_line_before_any_work(tmp_path: Pat
                          capture_output=True, text=True, env=env, timeout=120)
     assert res.returncode == 2 and "is a file; point MOTION_CACHE_DIR at a folder" in res.stderr and "Traceback" not in res.stderr, res.stderr
     assert not (tmp_path / "out").exists()
+    # a scene that imports a glTF file converts it into the cache while it loads: validate
+    # and the dry run (which load before the render's own check) said NotADirectoryError
+    # in a traceback
+    walker = str(Path(__file__).resolve().parents[1] / "scenes" / "walker.yaml")
+    for args in (["validate", walker], ["render", walker, "--dry-run", "-o", str(tmp_path / "out")]):
+        res = subprocess.run([str(Path(sys.executable).with_name("motion")), *args], capture_output=True, text=True, env=env, timeout=120)
+        assert res.returncode == 2 and "is a file; point MOTION_CACHE_DIR at a folder" in res.stderr and "Traceback" not in res.stderr, res.stderr
 
 
 def test_the_import_cache_keeps_to_the_asset_cache_cap(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

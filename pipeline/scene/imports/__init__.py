@@ -37,9 +37,12 @@ def expand_imports(data: dict[str, Any], source: "SourceMap", base_dir: Path) ->
         return data, source
     from pydantic import ValidationError
 
+    from ...cache import check_cache_root
     from .. import compiled
     from ..problems import problems_from_validation
     from .spec import ImportList
+
+    check_cache_root()  # the readers convert into it: a cache root that is a file, or not writable, is one line
 
     try:
         specs = compiled.validate(ImportList, {"imports": raw}).imports
