@@ -374,3 +374,69 @@ def test_choices_match_without_case_and_a_misspelt_kind_keeps_its_fields_checked
     assert "did you mean 'catmull-rom'" in by_path["objects[1].motion.interpolation"]
     assert "did you mean 'half'" in by_path["output.pixel_type"]
     assert [p.line for p in err.value.problems] == sorted(p.line for p in err.value.problems)
+
+
+def _parse_both(text: str, monkeypatch: pytest.MonkeyPatch) -> tuple[Any, Any]:
+    """parse_yaml's outcome (data and positions, or the problems it raised) by libyaml (the
+    fast path) and by PyYAML alone."""
+    from motion.pipeline.scene import source
+
+    def outcome() -> Any:
+        try:
+            data, smap = source.parse_yaml(text, "s.yaml")
+            return data, smap.positions
+        except SceneError as err:
+            return [str(p) for p in err.problems]
+
+    fast = outcome()
+    with monkeypatch.context() as m:
+        m.setattr(source, "_compose_fast", lambda _text: (_ for _ in ()).throw(source._Reparse()))
+        slow = outcome()
+    return fast, slow
+
+
+HOSTILE_YAML = {
+    "deep": "a: " + "[" * 70 + "]" * 70 + "\n",
+    "deep-at-the-limit": "a: " + "[" * 62 + "1" + "]" * 62 + "\n",  # the scalar is the 64th level: allowed
+    "one-past-the-limit": "a: " + "[" * 63 + "1" + "]" * 63 + "\n",
+    "many-values": "a: [" + ", ".join(["1"] * 60) + "]\n",
+    "alias-bomb": "a: &a [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a, *a, *a]\nc: &c [*b, *b, *b, *b, *b, *b, *b, *b, *b, *b]\nd: [*c, *c, *c, *c, *c, *c, *c, *c, *c, *c]\n",
+    "recursive-alias": "a: &a [1, *a]\n",
+    "duplicate-key": "a: 1\nb: 2\na: 3\n",
+    "huge-int": "a: " + "9" * 40 + "\n",
+    "tab-indent": "a:\n\tb: 1\n",
+    "unclosed": "a: [1, 2\nb: 3\n",
+    "bad-indent": "a:\n  b: 1\n c: 2\n",
+    "two-documents": "a: 1\n---\nb: 2\n",
+    "control-char": "a: \x07\n",
+    "tag": "a: !!python/object:os.system ls\n",
+    "empty": "",
+    "comment-only": "# nothing\n",
+    "unicode": "name: caf\u00e9 \U0001f600\nv: [1.5e3, .inf, -0x1f, 0o17, ~, yes, 2001-12-14]\n",
+    "anchors": "base: &b {x: 1, y: [1, 2]}\nother: {<<: *b, y: 3}\n",
+    "block-scalars": "a: |\n  line 1\n  line 2\nb: >-\n  folded\n  text\n",
+}
+
+
+@pytest.mark.parametrize("name", sorted(HOSTILE_YAML))
+def test_libyaml_and_pyyaml_read_every_document_alike(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The scene's YAML is composed by libyaml after a pass over its events bounds nesting
+    and values (scene/source.py), and anything libyaml refuses is parsed again by PyYAML:
+    the same data and positions, or the same located problems, as PyYAML alone. The value
+    bound is lowered to 50 here so that the case stays small."""
+    from motion.pipeline.scene import source
+
+    monkeypatch.setattr(source, "MAX_YAML_NODES", 50)
+    monkeypatch.setattr(source, "TOO_MANY_NODES", "more than 50 values in one file (the limit)")
+    fast, slow = _parse_both(HOSTILE_YAML[name], monkeypatch)
+    assert fast == slow
+
+
+def test_libyaml_and_pyyaml_read_every_example_and_preset_alike(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every example scene and built-in preset: the same data and the same position of every value."""
+    root = Path(__file__).resolve().parents[1]
+    files = sorted(SCENES.glob("*.yaml")) + sorted((root / "configs").glob("*.yaml"))
+    assert len(files) >= 14
+    for path in files:
+        fast, slow = _parse_both(path.read_text(), monkeypatch)
+        assert fast == slow, path.name
