@@ -5,9 +5,12 @@ from __future__ import annotations
 
 import hashlib
 import os
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Iterator
 
 _DIGESTS: dict[tuple[str, int, int], str] = {}
+_RECORDERS: list[dict[str, str]] = []  # open `digests_recorded` blocks, innermost last
 
 
 def cache_root() -> Path:
@@ -110,4 +113,19 @@ def file_digest(path: Path) -> str:
             for chunk in iter(lambda: f.read(1 << 20), b""):
                 h.update(chunk)
         _DIGESTS[memo] = h.hexdigest()
+    for seen in _RECORDERS:
+        seen[memo[0]] = _DIGESTS[memo]
     return _DIGESTS[memo]
+
+
+@contextmanager
+def digests_recorded() -> Iterator[dict[str, str]]:
+    """Every file `file_digest` reads inside the block, by resolved path, with its digest:
+    the inputs of a reader whose output is kept (a USD stage's layers and the textures it
+    converts; a glTF file's buffers and images: imports/memo.py)."""
+    seen: dict[str, str] = {}
+    _RECORDERS.append(seen)
+    try:
+        yield seen
+    finally:
+        del _RECORDERS[next(i for i, r in enumerate(_RECORDERS) if r is seen)]

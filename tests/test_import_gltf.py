@@ -651,3 +651,39 @@ def test_mutated_files_give_located_errors_never_a_traceback(asset, tmp_path):
             evaluate(load_scene(shot), np.array([0.0, 0.3]))
         except SceneError as err:
             assert err.problems and all(p.file.endswith(("m.glb", "shot.yaml")) for p in err.problems), str(err)
+
+
+def test_kept_gltf_records_follow_the_buffer_file_a_gltf_names(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A .gltf keeps its vertices in a .bin beside it. The records are kept between loads
+    (imports/memo.py) by the digest of every file the reader read: a new .bin under the
+    same name is read again (a mesh converted from the new vertices), an unchanged one is
+    not."""
+    import struct
+
+    from motion.pipeline.meshes import load_mesh
+    from motion.pipeline.scene.imports import cache
+
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
+
+    def write_bin(x: float) -> None:
+        (tmp_path / "tri.bin").write_bytes(struct.pack("<9f", 0, 0, 0, x, 0, 0, 0, 1, 0))
+
+    write_bin(1.0)
+    doc = {"asset": {"version": "2.0"}, "scenes": [{"nodes": [0]}], "nodes": [{"name": "Tri", "mesh": 0}],
+           "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}], "buffers": [{"uri": "tri.bin", "byteLength": 36}],
+           "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36}],
+           "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [2, 1, 0]}]}
+    (tmp_path / "tri.gltf").write_text(json.dumps(doc))
+    (tmp_path / "shot.yaml").write_text("camera: {position: [0, 0, 5], look_at: [0, 0, 0]}\nimports: [{file: tri.gltf}]\n")
+
+    def widest() -> float:
+        scene = load_scene(tmp_path / "shot.yaml", assets=False).scene
+        mesh = next(o for o in scene.objects if o.shape == "mesh")
+        return float(load_mesh(Path(mesh.file))[0][:, 0].max())
+
+    before = cache.STATS["records"]
+    assert widest() == 1.0
+    assert widest() == 1.0 and cache.STATS["records"] == before + 1  # kept
+    write_bin(2.0)
+    assert widest() == 2.0 and cache.STATS["records"] == before + 1  # read again
+    assert widest() == 2.0 and cache.STATS["records"] == before + 2

@@ -210,3 +210,37 @@ def test_usd_rotate_op_turns_by_its_angle_not_the_shortest_arc(tmp_path):
     for i, code in enumerate(codes):
         theirs = np.array(xf.ComputeLocalToWorldTransform(Usd.TimeCode(float(code)))).T
         np.testing.assert_allclose(motion.objects["Wheel"].matrices()[i], theirs, atol=1e-6, err_msg=f"time code {code}")
+
+
+def test_a_kept_usd_import_is_read_without_usd_core_until_a_layer_changes(tmp_path, monkeypatch):
+    """The second load of a USD import reads its kept records (imports/memo.py) and never
+    imports usd-core (0.3 s of each `motion validate`, and of each worker); a change to a
+    sublayer, not the root layer the key names, is seen and the stage read again."""
+    import subprocess
+    import sys
+
+    sub = Usd.Stage.CreateNew(str(tmp_path / "set.usda"))
+    UsdGeom.Xform.Define(sub, "/World/Box").AddTranslateOp().Set(Gf.Vec3d(1, 0, 0))
+    sub.GetRootLayer().Save()
+    root = Sdf.Layer.CreateNew(str(tmp_path / "shot.usda"))
+    root.subLayerPaths.append("set.usda")
+    root.Save()
+    (tmp_path / "shot.yaml").write_text("camera: {position: [0, 0, 5], look_at: [0, 0, 0]}\nimports: [{file: shot.usda}]\n")
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
+
+    def box_x() -> tuple[float, bool]:
+        code = ("import sys\nfrom motion.pipeline.scene.loader import load_scene\n"
+                f"scene = load_scene({str(tmp_path / 'shot.yaml')!r}).scene\n"
+                "print(next(o for o in scene.objects if o.name == 'Box').transform.translate[0], 'pxr' in sys.modules)\n")
+        res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+        assert res.returncode == 0, res.stderr
+        x, read = res.stdout.split()
+        return float(x), read == "True"
+
+    assert box_x() == (1.0, True)
+    assert box_x() == (1.0, False)  # kept
+    sub = Usd.Stage.Open(str(tmp_path / "set.usda"))
+    UsdGeom.Xformable(sub.GetPrimAtPath("/World/Box")).GetOrderedXformOps()[0].Set(Gf.Vec3d(2, 0, 0))
+    sub.GetRootLayer().Save()
+    assert box_x() == (2.0, True)
+    assert box_x() == (2.0, False)

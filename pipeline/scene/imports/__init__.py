@@ -130,13 +130,8 @@ def expand_imports(data: dict[str, Any], source: "SourceMap", base_dir: Path) ->
 
 
 def _read(path: Path, shown: str, spec: Any, index: int, base_dir: Path) -> Expansion:
-    """Dispatch on the file's suffix to the glTF or USD reader (a USD stage's layers are
-    confined to the scene's folder, `base_dir`)."""
-    suffix = path.suffix.lower()
-    if suffix in (".gltf", ".glb"):
-        from .memo import read_gltf
+    """The glTF or USD reader's records of one import, kept between loads (memo.py; a USD
+    stage's layers are confined to the scene's folder, `base_dir`)."""
+    from .memo import read_import
 
-        return read_gltf(path, shown, spec, index)
-    from .usd import read_usd
-
-    return read_usd(path, shown, spec, index, root=base_dir)
+    return read_import(path, shown, spec, index, base_dir)

@@ -93,30 +93,3 @@ def write_ply(path: Path, positions: np.ndarray, faces: np.ndarray | None, norma
         f.write(("\n".join(header) + "\n").encode("ascii"))
         f.write(verts.tobytes())
         f.write(tris.tobytes())
-
-
-def source_digest(path: Path) -> str:
-    """sha256 over the glTF file and the external files its buffers and images name (a
-    .gltf's .bin and textures), so a converted asset is stale when any of them changes."""
-    import json
-    import struct
-    from urllib.parse import unquote
-
-    from ...cache import file_digest
-
-    h = hashlib.sha256(file_digest(path).encode())
-    try:
-        raw = path.read_bytes()
-        if raw[:4] == b"glTF":
-            length = struct.unpack_from("<I", raw, 12)[0]
-            doc = json.loads(raw[20 : 20 + length])
-        else:
-            doc = json.loads(raw.decode("utf-8"))
-        uris = [item.get("uri") for key in ("buffers", "images") for item in doc.get(key) or [] if isinstance(item, dict)]
-    except (ValueError, struct.error, AttributeError, TypeError, RecursionError):
-        return h.hexdigest()  # the reader reports what is wrong with the file (JSON nested 100,000 deep, too)
-    for uri in uris:
-        if isinstance(uri, str) and not uri.startswith("data:"):
-            file = path.parent / unquote(uri)
-            h.update(f"|{uri}|".encode() + (file_digest(file).encode() if file.is_file() else b"missing"))
-    return h.hexdigest()

@@ -21,8 +21,9 @@ from typing import Any
 
 import numpy as np
 
+from ...cache import file_digest
 from .records import Expansion, ImportFileError, Origin, SpecError, import_frames
-from .cache import cached, source_digest, write_atomic, write_ply
+from .cache import cached, write_atomic, write_ply
 
 COMPONENTS = {5120: np.dtype("<i1"), 5121: np.dtype("<u1"), 5122: np.dtype("<i2"), 5123: np.dtype("<u2"), 5125: np.dtype("<u4"), 5126: np.dtype("<f4")}
 WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
@@ -813,6 +814,31 @@ class GltfReader:
         else:
             self.fail(f"{lwhere}.type", f"unknown light type '{kind}'")
         return rec
+
+
+def source_digest(path: Path) -> str:
+    """sha256 over the glTF file and the external files its buffers and images name (a
+    .gltf's .bin and textures), so a converted asset is stale when any of them changes."""
+    import hashlib
+    import json
+    from urllib.parse import unquote
+
+    h = hashlib.sha256(file_digest(path).encode())
+    try:
+        raw = path.read_bytes()
+        if raw[:4] == b"glTF":
+            length = struct.unpack_from("<I", raw, 12)[0]
+            doc = json.loads(raw[20 : 20 + length])
+        else:
+            doc = json.loads(raw.decode("utf-8"))
+        uris = [item.get("uri") for key in ("buffers", "images") for item in doc.get(key) or [] if isinstance(item, dict)]
+    except (ValueError, struct.error, AttributeError, TypeError, RecursionError):
+        return h.hexdigest()  # the reader reports what is wrong with the file (JSON nested 100,000 deep, too)
+    for uri in uris:
+        if isinstance(uri, str) and not uri.startswith("data:"):
+            file = path.parent / unquote(uri)
+            h.update(f"|{uri}|".encode() + (file_digest(file).encode() if file.is_file() else b"missing"))
+    return h.hexdigest()
 
 
 def expand_gltf(path: Path, shown: str, spec: Any, index: int) -> Expansion:

@@ -1,11 +1,14 @@
-"""The records of a glTF import, kept between loads (issue 28).
+"""The records of a glTF or USD import, kept between loads (issue 28).
 
-A glTF import's records depend only on its source files' bytes (the .gltf or .glb and the
-buffers and images it names), the import entry without its overrides, where it is shown,
-and the reader's code. They are kept as one JSON file in the import cache, beside the
-converted meshes, textures and skins they name. A warm load reads that file and never
-imports the reader (numpy and pygltflib, about 0.05 s of `motion validate`), as long as
-every converted file it names is still there; otherwise the file is read again.
+An import's records depend only on the bytes of the files its reader reads (the .gltf or
+.glb and the buffers and images it names; a USD stage's layers and the textures it
+converts), the import entry without its overrides, where it is shown, the scene's folder
+(a USD stage's layers are confined to it) and the readers' code. They are kept as one JSON
+file in the import cache, beside the converted meshes, textures and skins they name, with
+the digest of every file the reader read (`cache.digests_recorded`). A later load checks
+those digests and that every converted file is still there, and then never imports the
+reader: numpy and pygltflib (0.05 s of `motion validate`), or usd-core (0.3 s). Any
+difference, or an entry that does not read whole, and the file is read again.
 """
 
 from __future__ import annotations
@@ -15,38 +18,65 @@ import json
 from pathlib import Path
 from typing import Any
 
-from .cache import source_digest
+from ...cache import digests_recorded, file_digest
 from .records import Expansion, Origin
 
-READER = Path(__file__).with_name("gltf.py")  # its code is part of the key: a changed reader rebuilds
+# each reader's code is part of the key: a changed reader rebuilds
+READERS = {"gltf": ("gltf.py", "records.py", "cache.py", "memo.py"), "usd": ("usd.py", "gltf.py", "records.py", "cache.py", "memo.py")}
+FORMAT = 2  # of an entry: 2 adds the digests of the files read
 
 
-def read_gltf(path: Path, shown: str, spec: Any, index: int) -> Expansion:
-    """The records of one glTF import: kept ones when current, else `gltf.expand_gltf`'s
-    (and kept); ImportFileError (the file and node) or SpecError (the import entry's field)
-    otherwise."""
+def read_import(path: Path, shown: str, spec: Any, index: int, base_dir: Path) -> Expansion:
+    """The records of one glTF or USD import: kept ones when current, else the reader's (and
+    kept); ImportFileError (the file and node or prim) or SpecError (the import entry's
+    field) otherwise."""
     from .cache import STATS, cache_dir, write_atomic
 
+    kind = "gltf" if path.suffix.lower() in (".gltf", ".glb") else "usd"
     # the entry without its overrides, as text: its repr names every field's value (a dump
     # would build the entry's serializer, 0.01 s, for a key)
     settings = repr(spec.model_copy(update={"overrides": {}}))
-    code = hashlib.sha256(READER.read_bytes()).hexdigest()
-    key = hashlib.sha256(json.dumps([source_digest(path), settings, shown, index, code]).encode()).hexdigest()[:32]
+    key = hashlib.sha256(json.dumps([FORMAT, kind, file_digest(path), settings, shown, index, str(base_dir.resolve()), _code(kind)]).encode()).hexdigest()[:32]
     memo = cache_dir() / f"records-{key}.json"
-    if memo.is_file():
-        try:
-            ex = _from_json(json.loads(memo.read_text()))
-            records = [r for r, _ in ex.objects + ex.materials + ex.lights]
-            if all(Path(f).is_file() for f in _files(records)):
-                STATS["records"] += 1
-                return ex
-        except (OSError, ValueError, KeyError, TypeError):
-            pass  # rebuilt below
-    from .gltf import expand_gltf
+    kept = _recall(memo)
+    if kept is not None:
+        STATS["records"] += 1
+        return kept
+    with digests_recorded() as read:
+        if kind == "gltf":
+            from .gltf import expand_gltf
 
-    ex = expand_gltf(path, shown, spec, index)
-    write_atomic(memo, lambda tmp: tmp.write_text(json.dumps(_to_json(ex))))
+            ex = expand_gltf(path, shown, spec, index)
+        else:
+            from .usd import read_usd
+
+            ex = read_usd(path, shown, spec, index, root=base_dir)
+    read.pop(str(path.resolve()), None)  # the key has it
+    write_atomic(memo, lambda tmp: tmp.write_text(json.dumps({"read": read, "records": _to_json(ex)})))
     return ex
+
+
+def _code(kind: str) -> str:
+    h = hashlib.sha256()
+    for name in READERS[kind]:
+        h.update(Path(__file__).with_name(name).read_bytes())
+    return h.hexdigest()
+
+
+def _recall(memo: Path) -> Expansion | None:
+    """The kept records if the entry reads whole, every file the reader read has the bytes
+    it had (at the same place: a link put on its way since is a difference) and every
+    converted file the records name is there."""
+    try:
+        doc = json.loads(memo.read_text())
+        for file, digest in doc["read"].items():
+            if Path(file).resolve() != Path(file) or file_digest(Path(file)) != digest:
+                return None
+        ex = _from_json(doc["records"])
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return None
+    records = [r for r, _ in ex.objects + ex.materials + ex.lights]
+    return ex if all(Path(f).is_file() for f in _files(records)) else None
 
 
 def _files(value: Any) -> list[str]:

@@ -478,6 +478,7 @@ def check_layers(path: Path, root: Path, shown: str) -> None:
             _fail(shown, "<layers>", f"layer {named} is not a regular file (a device, pipe or folder)")
         if st.st_size > MAX_LAYER_BYTES:
             _fail(shown, "<layers>", f"layer {named} is {st.st_size} bytes; the limit is {MAX_LAYER_BYTES}")
+        file_digest(real)  # the records depend on its bytes (imports/memo.py keeps them by these digests)
         try:
             layer = Sdf.Layer.FindOrOpen(str(real))
         except Tf.ErrorException as exc:
