@@ -21,6 +21,8 @@ ErrorFor = Callable[[str], MotionError]  # the caller's own error from "FILE: re
 
 MAX_IMAGE_BYTES = 2 * 1024**3  # one texture or environment map file (images.py)
 MAX_MESH_BYTES = 2 * 1024**3  # one mesh file (meshes.py)
+MAX_GLTF_BYTES = 4 << 30  # one .gltf or .glb file (scene/imports/gltf.py)
+MAX_USD_LAYER_BYTES = 2 * 1024**3  # one USD layer file (scene/imports/usd.py)
 
 
 @contextmanager

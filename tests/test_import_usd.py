@@ -244,3 +244,27 @@ def test_a_kept_usd_import_is_read_without_usd_core_until_a_layer_changes(tmp_pa
     sub.GetRootLayer().Save()
     assert box_x() == (2.0, True)
     assert box_x() == (2.0, False)
+
+
+def test_a_kept_usd_import_is_not_used_when_a_layer_became_a_link_outside(tmp_path, monkeypatch):
+    """A sublayer replaced by a link to the same bytes outside the scene's folder: the kept
+    records are not used (the file the reader read is no longer at its place), and the
+    reader's layer check refuses the stage as it would have the first time."""
+    import shutil
+
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
+    shot = tmp_path / "shot"
+    shot.mkdir()
+    sub = Usd.Stage.CreateNew(str(shot / "set.usda"))
+    UsdGeom.Xform.Define(sub, "/World/Box").AddTranslateOp().Set(Gf.Vec3d(1, 0, 0))
+    sub.GetRootLayer().Save()
+    root = Sdf.Layer.CreateNew(str(shot / "shot.usda"))
+    root.subLayerPaths.append("set.usda")
+    root.Save()
+    (shot / "shot.yaml").write_text("camera: {position: [0, 0, 5], look_at: [0, 0, 0]}\nimports: [{file: shot.usda}]\n")
+    load_scene(shot / "shot.yaml")
+    (tmp_path / "elsewhere").mkdir()
+    shutil.move(str(shot / "set.usda"), str(tmp_path / "elsewhere" / "set.usda"))
+    (shot / "set.usda").symlink_to(tmp_path / "elsewhere" / "set.usda")
+    with pytest.raises(SceneError, match="outside the scene's folder"):
+        load_scene(shot / "shot.yaml")

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from ...cache import file_digest
+from ...limits import MAX_GLTF_BYTES as MAX_FILE_BYTES  # refuse absurd files before reading them
 from .records import Expansion, ImportFileError, Origin, SpecError, import_frames
 from .cache import cached, write_atomic, write_ply
 
@@ -32,7 +33,6 @@ NORMALISED = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
 SUPPORTED_EXTENSIONS = ("KHR_lights_punctual", "KHR_materials_emissive_strength")
 MODES = {"STEP": "hold", "LINEAR": "linear", "CUBICSPLINE": "hermite"}
 WRAP = {10497: "repeat", 33071: "clamp", 33648: "mirror"}
-MAX_FILE_BYTES = 4 << 30  # refuse absurd files before reading them
 # values one accessor may hold: a buffer view bounds the others by the file's size, but an
 # accessor without one (zeros, then sparse values) would allocate whatever `count` says
 MAX_ACCESSOR_VALUES = 1 << 25  # numbers in one accessor (11M VEC3 vertices; a 44M-vertex accessor was read whole)

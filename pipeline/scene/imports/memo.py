@@ -19,11 +19,14 @@ from pathlib import Path
 from typing import Any
 
 from ...cache import digests_recorded, file_digest
+from ...limits import MAX_GLTF_BYTES, MAX_USD_LAYER_BYTES
 from .records import Expansion, Origin
 
 # each reader's code is part of the key: a changed reader rebuilds
 READERS = {"gltf": ("gltf.py", "records.py", "cache.py", "memo.py"), "usd": ("usd.py", "gltf.py", "records.py", "cache.py", "memo.py")}
 FORMAT = 2  # of an entry: 2 adds the digests of the files read
+# no file larger than its reader accepts is hashed here (the reader refuses it unread)
+MOST_BYTES = {"gltf": MAX_GLTF_BYTES, "usd": MAX_USD_LAYER_BYTES}
 
 
 def read_import(path: Path, shown: str, spec: Any, index: int, base_dir: Path) -> Expansion:
@@ -33,27 +36,33 @@ def read_import(path: Path, shown: str, spec: Any, index: int, base_dir: Path) -
     from .cache import STATS, cache_dir, write_atomic
 
     kind = "gltf" if path.suffix.lower() in (".gltf", ".glb") else "usd"
+    if path.stat().st_size > MOST_BYTES[kind]:
+        return _read_file(kind, path, shown, spec, index, base_dir)  # it says why not
     # the entry without its overrides, as text: its repr names every field's value (a dump
     # would build the entry's serializer, 0.01 s, for a key)
     settings = repr(spec.model_copy(update={"overrides": {}}))
     key = hashlib.sha256(json.dumps([FORMAT, kind, file_digest(path), settings, shown, index, str(base_dir.resolve()), _code(kind)]).encode()).hexdigest()[:32]
     memo = cache_dir() / f"records-{key}.json"
-    kept = _recall(memo)
+    kept = _recall(memo, MOST_BYTES[kind])
     if kept is not None:
         STATS["records"] += 1
         return kept
     with digests_recorded() as read:
-        if kind == "gltf":
-            from .gltf import expand_gltf
-
-            ex = expand_gltf(path, shown, spec, index)
-        else:
-            from .usd import read_usd
-
-            ex = read_usd(path, shown, spec, index, root=base_dir)
+        ex = _read_file(kind, path, shown, spec, index, base_dir)
     read.pop(str(path.resolve()), None)  # the key has it
     write_atomic(memo, lambda tmp: tmp.write_text(json.dumps({"read": read, "records": _to_json(ex)})))
     return ex
+
+
+def _read_file(kind: str, path: Path, shown: str, spec: Any, index: int, base_dir: Path) -> Expansion:
+    """The reader's records (gltf.py, usd.py: numpy and pygltflib, or usd-core)."""
+    if kind == "gltf":
+        from .gltf import expand_gltf
+
+        return expand_gltf(path, shown, spec, index)
+    from .usd import read_usd
+
+    return read_usd(path, shown, spec, index, root=base_dir)
 
 
 def _code(kind: str) -> str:
@@ -63,14 +72,15 @@ def _code(kind: str) -> str:
     return h.hexdigest()
 
 
-def _recall(memo: Path) -> Expansion | None:
+def _recall(memo: Path, most_bytes: int) -> Expansion | None:
     """The kept records if the entry reads whole, every file the reader read has the bytes
-    it had (at the same place: a link put on its way since is a difference) and every
-    converted file the records name is there."""
+    it had (at the same place: a link put on its way since is a difference; grown past
+    `most_bytes`, it is not hashed) and every converted file the records name is there."""
     try:
         doc = json.loads(memo.read_text())
         for file, digest in doc["read"].items():
-            if Path(file).resolve() != Path(file) or file_digest(Path(file)) != digest:
+            dep = Path(file)
+            if dep.resolve() != dep or not dep.is_file() or dep.stat().st_size > most_bytes or file_digest(dep) != digest:
                 return None
         ex = _from_json(doc["records"])
     except (OSError, ValueError, KeyError, TypeError, AttributeError):

@@ -23,6 +23,7 @@ import numpy as np
 
 from .records import Expansion, ImportFileError, Origin, SpecError, import_frames
 from ...cache import file_digest
+from ...limits import MAX_USD_LAYER_BYTES as MAX_LAYER_BYTES
 from .cache import cached, write_ply
 from .gltf import _Names, sanitize
 
@@ -493,7 +494,6 @@ def check_layers(path: Path, root: Path, shown: str) -> None:
 
 
 MAX_LAYERS = 1000  # layers one stage may bring in
-MAX_LAYER_BYTES = 2 * 1024**3  # one layer file
 
 
 def read_usd(path: Path, shown: str, spec: Any, index: int, root: Path | None = None) -> Expansion:
