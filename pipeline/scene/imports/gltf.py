@@ -842,7 +842,7 @@ def source_digest(path: Path) -> str:
 
 
 def expand_gltf(path: Path, shown: str, spec: Any, index: int) -> Expansion:
-    """The records of one glTF import, read from the file (memo.read_gltf keeps them);
+    """The records of one glTF import, read from the file (memo.read_import keeps them);
     ImportFileError (the file and node) or SpecError (the import entry's field) otherwise."""
     reader = None
     try:
