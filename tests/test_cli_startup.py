@@ -251,3 +251,21 @@ def test_validate_ends_with_its_output_whole_and_leaves_an_in_process_caller_as_
         assert main(["validate", one]) == 0 and not gc.isenabled()
     finally:
         gc.enable()
+
+
+def test_kept_asset_passes_are_held_to_a_bound(tmp_path: Path) -> None:
+    """Each of the 256 folders of kept asset passes holds at most SHARD_CAP of them: over
+    it, the oldest go until half remain (one pass per texture version a machine has seen
+    would otherwise grow without end)."""
+    import os
+
+    from motion.pipeline.scene.checked import hold_to_cap
+
+    for i in range(5):
+        (tmp_path / f"pass{i}").write_bytes(b"")
+        os.utime(tmp_path / f"pass{i}", ns=(i * 10**9, i * 10**9))
+    (tmp_path / ".pass.tmp").write_bytes(b"")
+    hold_to_cap(tmp_path, cap=5)
+    assert len(list(tmp_path.iterdir())) == 6
+    hold_to_cap(tmp_path, cap=4)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".pass.tmp", "pass3", "pass4"]

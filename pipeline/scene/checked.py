@@ -11,11 +11,15 @@ same bytes reads and hashes them (the settings hash reads them anyway) and decod
 Only a pass is kept: a file that fails is decoded again each time, so its error is always
 today's. A file over its kind's size bound is never hashed here; its check refuses it.
 Losing the folder costs one decode per file (`motion cache clear --what validation`).
+The passes are spread over 256 folders by their names' first two digits, each held to
+SHARD_CAP files (its oldest half goes when it is full: about 262,000 passes in all, one
+per texture version a machine has seen).
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
 from pathlib import Path
 
 from ..cache import file_digest, validation_dir
@@ -23,6 +27,7 @@ from ..cache import file_digest, validation_dir
 FORMAT = 1
 _CHECKERS = ("images.py", "meshes.py", "limits.py")  # pipeline/: the modules whose code a verdict depends on
 _checker_digest: str | None = None
+SHARD_CAP = 1024  # passes kept in one of the 256 folders
 
 
 def _checkers() -> str:
@@ -38,7 +43,7 @@ def _checkers() -> str:
 
 def _entry(path: Path, kind: str) -> Path:
     key = hashlib.sha256(f"{kind}|{file_digest(path)}|{_checkers()}".encode()).hexdigest()[:40]
-    return validation_dir() / "assets" / key
+    return validation_dir() / "assets" / key[:2] / key[2:]
 
 
 def entry(path: Path, kind: str, most_bytes: int) -> Path | None:
@@ -62,4 +67,22 @@ def remember_pass(kept: Path) -> None:
         kept.parent.mkdir(parents=True, exist_ok=True)
     except OSError:
         return
-    write_best_effort(kept, b"")
+    if write_best_effort(kept, b""):
+        hold_to_cap(kept.parent)
+
+
+def hold_to_cap(folder: Path, cap: int | None = None) -> None:
+    """Over `cap` passes (SHARD_CAP) in `folder`: remove the oldest until half remain
+    (a removed pass costs one decode of its file; temporary files, named .*, are left)."""
+    cap = SHARD_CAP if cap is None else cap
+    try:
+        entries = sorted((e.stat().st_mtime_ns, e.path) for e in os.scandir(folder) if e.is_file() and not e.name.startswith("."))
+    except OSError:
+        return
+    if len(entries) <= cap:
+        return
+    for _, old in entries[: len(entries) - cap // 2]:
+        try:
+            os.unlink(old)
+        except OSError:
+            pass
