@@ -212,6 +212,17 @@ def test_usd_rotate_op_turns_by_its_angle_not_the_shortest_arc(tmp_path):
         np.testing.assert_allclose(motion.objects["Wheel"].matrices()[i], theirs, atol=1e-6, err_msg=f"time code {code}")
 
 
+def _sublayered_shot(folder: Path) -> None:
+    """shot.yaml importing shot.usda, whose one sublayer set.usda places /World/Box at x = 1."""
+    sub = Usd.Stage.CreateNew(str(folder / "set.usda"))
+    UsdGeom.Xform.Define(sub, "/World/Box").AddTranslateOp().Set(Gf.Vec3d(1, 0, 0))
+    sub.GetRootLayer().Save()
+    root = Sdf.Layer.CreateNew(str(folder / "shot.usda"))
+    root.subLayerPaths.append("set.usda")
+    root.Save()
+    (folder / "shot.yaml").write_text("camera: {position: [0, 0, 5], look_at: [0, 0, 0]}\nimports: [{file: shot.usda}]\n")
+
+
 def test_a_kept_usd_import_is_read_without_usd_core_until_a_layer_changes(tmp_path, monkeypatch):
     """The second load of a USD import reads its kept records (imports/memo.py) and never
     imports usd-core (0.3 s of each `motion validate`, and of each worker); a change to a
@@ -219,13 +230,7 @@ def test_a_kept_usd_import_is_read_without_usd_core_until_a_layer_changes(tmp_pa
     import subprocess
     import sys
 
-    sub = Usd.Stage.CreateNew(str(tmp_path / "set.usda"))
-    UsdGeom.Xform.Define(sub, "/World/Box").AddTranslateOp().Set(Gf.Vec3d(1, 0, 0))
-    sub.GetRootLayer().Save()
-    root = Sdf.Layer.CreateNew(str(tmp_path / "shot.usda"))
-    root.subLayerPaths.append("set.usda")
-    root.Save()
-    (tmp_path / "shot.yaml").write_text("camera: {position: [0, 0, 5], look_at: [0, 0, 0]}\nimports: [{file: shot.usda}]\n")
+    _sublayered_shot(tmp_path)
     monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
 
     def box_x() -> tuple[float, bool]:
@@ -255,13 +260,7 @@ def test_a_kept_usd_import_is_not_used_when_a_layer_became_a_link_outside(tmp_pa
     monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
     shot = tmp_path / "shot"
     shot.mkdir()
-    sub = Usd.Stage.CreateNew(str(shot / "set.usda"))
-    UsdGeom.Xform.Define(sub, "/World/Box").AddTranslateOp().Set(Gf.Vec3d(1, 0, 0))
-    sub.GetRootLayer().Save()
-    root = Sdf.Layer.CreateNew(str(shot / "shot.usda"))
-    root.subLayerPaths.append("set.usda")
-    root.Save()
-    (shot / "shot.yaml").write_text("camera: {position: [0, 0, 5], look_at: [0, 0, 0]}\nimports: [{file: shot.usda}]\n")
+    _sublayered_shot(shot)
     load_scene(shot / "shot.yaml")
     (tmp_path / "elsewhere").mkdir()
     shutil.move(str(shot / "set.usda"), str(tmp_path / "elsewhere" / "set.usda"))
