@@ -199,3 +199,22 @@ def test_an_interrupt_settles_unfinished_frames_as_not_rendered(tmp_path: Path) 
     assert sched.abandon() == [0, 1]
     assert sched.settle_interrupted() == ([], [0, 1])
     assert status(sched) == {0: "not_rendered", 1: "not_rendered"}
+
+
+def test_frame_states_are_a_closed_set_moved_only_by_the_transitions_table() -> None:
+    """A frame's state moves only along TRANSITIONS: a final state never moves again, every
+    state in the table is one of FRAME_STATES, and the scheduler assigns no status by hand."""
+    import re
+
+    from motion.pipeline.farm import scheduler
+    from motion.pipeline.farm.scheduler import FRAME_STATES, TRANSITIONS, FrameRecord
+
+    assert {s for move in TRANSITIONS for s in move} <= set(FRAME_STATES)
+    rec = FrameRecord(7)
+    rec.move("rendered")
+    assert rec.status == "rendered"
+    with pytest.raises(RuntimeError, match="frame 7: no move from 'rendered' to 'failed'"):
+        rec.move("failed")
+    source = Path(scheduler.__file__).read_text()
+    assigned = re.findall(r"\.status\s*=[^=]", source)
+    assert len(assigned) == 1, "only FrameRecord.move assigns a status"

@@ -18,7 +18,7 @@ import time
 from collections import Counter, deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Literal, get_args
 
 from ..frame_output import is_complete
 from ..bake import BakedFrame
@@ -39,15 +39,35 @@ class Chunk:
     failed_on: set[str] = field(default_factory=set)
 
 
+# A frame's state in one run is a closed set, and every allowed move between states is one
+# entry below (as Dask's scheduler keeps its task states): a new state or move is one line here.
+FrameState = Literal["pending", "rendered", "skipped", "done_elsewhere", "failed", "not_rendered"]
+FRAME_STATES: tuple[FrameState, ...] = get_args(FrameState)
+
+TRANSITIONS: dict[tuple[FrameState, FrameState], str] = {
+    ("pending", "rendered"): "a worker wrote it (or finished writing it before an interrupt)",
+    ("pending", "skipped"): "complete on disk, made from this scene and settings (resume)",
+    ("pending", "done_elsewhere"): "another render holding its claim finished it",
+    ("pending", "failed"): "every attempt failed, the disk refused it, or no usable worker was left",
+    ("pending", "not_rendered"): "the job was interrupted before it was rendered",
+}
+
+
 @dataclass
 class FrameRecord:
-    """One frame's story for the report."""
+    """One frame's story for the report; its `status` moves only along `TRANSITIONS`."""
 
     frame: int
-    status: str = "pending"  # rendered | skipped | done_elsewhere | failed | pending | not_rendered (interrupted)
+    status: FrameState = "pending"
     attempts: int = 0
     result: FrameResult | None = None
     errors: list[str] = field(default_factory=list)
+
+    def move(self, to: FrameState) -> None:
+        """Move to state `to`; a move the table does not allow is a scheduler bug and raises."""
+        if (self.status, to) not in TRANSITIONS:
+            raise RuntimeError(f"frame {self.frame}: no move from {self.status!r} to {to!r} (farm/scheduler.py TRANSITIONS)")
+        self.status = to
 
 
 @dataclass
@@ -117,9 +137,9 @@ class Scheduler:
         self._next_id += 1
         return c
 
-    def _final(self, frame: int, status: str, error: str | None = None) -> None:
+    def _final(self, frame: int, status: FrameState, error: str | None = None) -> None:
         rec = self.frames[frame]
-        rec.status = status
+        rec.move(status)
         if error:
             rec.errors.append(error)
         self.notify(status, {"frame": frame, "error": error})
@@ -132,7 +152,7 @@ class Scheduler:
             self.notify("retry", {"frames": frames, "worker": worker, "error": error, "attempt": chunk.attempt + 1})
         else:
             for f in frames:
-                self.frames[f].status = "failed"
+                self.frames[f].move("failed")
                 self.notify("failed", {"frame": f, "error": error})
 
     def _worker_failed(self, worker: str, reason: str) -> None:
@@ -349,10 +369,10 @@ class Scheduler:
             if rec.status != "pending":
                 continue
             if is_complete(self.ctx.paths[f], expected_meta(self.job, self.inputs[f])):
-                rec.status = "rendered"
+                rec.move("rendered")
                 written.append(f)
             else:
-                rec.status = "not_rendered"
+                rec.move("not_rendered")
                 not_rendered.append(f)
         return written, not_rendered
 
