@@ -16,7 +16,8 @@ render: setup
 render-cannonball-full: setup
 	.venv/bin/motion render scenes/cannonball.yaml -o out/cannonball $(ARGS)
 
-test: setup
+test:
+	@bash tools/setup.sh --test
 	.venv/bin/python -m pytest -q $(ARGS)
 
 bench: setup

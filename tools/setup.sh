@@ -46,6 +46,28 @@ else
   fi
 fi
 rm -f /tmp/motion-llvm-check.$$
+
+# `--test` (make test, CI): what the suite needs beyond motion itself, so that no test skips
+# for a tool CI could have: headless Chromium (the flipbook's and compare report's pages run in
+# it) and the Khronos glTF validator (npm). Each only when missing.
+if [ "${1:-}" = "--test" ]; then
+  if [ "$(id -u)" = 0 ]; then SUDO=; else SUDO=sudo; fi
+  if ! command -v chromium >/dev/null 2>&1 && ! command -v chromium-browser >/dev/null 2>&1; then
+    say "installing Debian's chromium (headless pages in the tests)"
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq chromium >/dev/null \
+      || say "warning: chromium did not install; the page tests will skip"
+  fi
+  if [ ! -f .node/node_modules/gltf-validator/index.js ]; then
+    if ! command -v npm >/dev/null 2>&1; then
+      $SUDO apt-get update -qq
+      DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq npm >/dev/null || true
+    fi
+    say "installing the Khronos glTF validator into .node/ (npm)"
+    npm install --silent --no-audit --no-fund --prefix .node gltf-validator >/dev/null 2>&1 \
+      || say "warning: gltf-validator did not install; its test will skip"
+  fi
+fi
 # bytecode for motion's own modules: where PYTHONDONTWRITEBYTECODE is set (CI images often
 # do) every `motion` command would otherwise compile them from source (~0.1 s a process)
 .venv/bin/python -m compileall -q -j0 pipeline cli configs >/dev/null 2>&1 || true
