@@ -4,7 +4,9 @@ depth, part of D(t, X), so every integrator integrates it (RK4 at each of its st
 Contact model (CG:PP 35.6.5.3; Kelvin-Voigt). Each body is a set of contact points, each a
 small sphere fixed in the body (point p, radius rho): a sphere is its centre with its radius,
 a capsule the two centres of its caps with its radius, a box its 8 corners, a cylinder 16
-samples of its rims, a mesh the vertices of its convex hull (at most MESH_POINTS). A point's
+samples of its rims, a mesh the vertices of its convex hull (at most MESH_POINTS); against
+other bodies a box (or mesh) adds 4 points inside each face and a cylinder an inner ring on
+each cap (`_inner_face_points`). A point's
 depth in a surface is delta = rho - sdf(point) (> 0: touching), n the surface's outward
 normal there. The normal force on the body, at the point of its sphere deepest in the
 surface, is
@@ -72,6 +74,23 @@ class BodyShape:
     offset: np.ndarray
     points: np.ndarray
     point_radius: np.ndarray
+    bodies_only: np.ndarray | None = None  # [k] bool: points used against other bodies only
+
+
+def _inner_face_points(half: np.ndarray, offset: np.ndarray) -> np.ndarray:
+    """4 points on each face of a box, halfway from its centre to its edges ([24, 3]): two
+    aligned boxes stacked face to face touch at corners that lie exactly on each other's
+    edges (no depth, or the side face's normal); these carry the contact there."""
+    out = []
+    for axis in range(3):
+        u, v = (axis + 1) % 3, (axis + 2) % 3
+        for side in (-1.0, 1.0):
+            for su in (-0.5, 0.5):
+                for sv in (-0.5, 0.5):
+                    p = np.zeros(3)
+                    p[axis], p[u], p[v] = side * half[axis], su * half[u], sv * half[v]
+                    out.append(p)
+    return np.array(out) + offset
 
 
 def sphere_shape(radius: float) -> BodyShape:
@@ -89,16 +108,20 @@ def box_shape(half: np.ndarray, offset: np.ndarray | None = None, points: np.nda
     """A box of half extents `half` about `offset`: its 8 corners (or the given points, a
     mesh's hull), radius 0."""
     offset = np.zeros(3) if offset is None else np.asarray(offset, dtype=np.float64)
+    half = np.asarray(half, dtype=np.float64)
     corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=np.float64) * half + offset
-    pts = corners if points is None else points
-    return BodyShape(BOX, np.asarray(half, dtype=np.float64), 0.0, offset, pts, np.zeros(len(pts)))
+    pts = np.concatenate((corners if points is None else points, _inner_face_points(half, offset)))
+    only = np.arange(len(pts)) >= len(pts) - 24
+    return BodyShape(BOX, half, 0.0, offset, pts, np.zeros(len(pts)), only)
 
 
 def cylinder_shape(radius: float, height: float) -> BodyShape:
     """A cylinder along Y: RIM_POINTS samples on each rim, radius 0."""
     ang = 2 * np.pi * np.arange(RIM_POINTS) / RIM_POINTS
-    rims = np.concatenate([np.stack((radius * np.cos(ang), np.full(RIM_POINTS, cap * height / 2), radius * np.sin(ang)), axis=1) for cap in (-1.0, 1.0)])
-    return BodyShape(CYLINDER, np.array([radius, height / 2, radius]), 0.0, np.zeros(3), rims, np.zeros(len(rims)))
+    rims = np.concatenate([np.stack((ring * np.cos(ang), np.full(RIM_POINTS, cap * height / 2), ring * np.sin(ang)), axis=1)
+                           for ring in (radius, radius / 2) for cap in (-1.0, 1.0)])
+    only = np.arange(len(rims)) >= 2 * RIM_POINTS  # the inner rings: against bodies (see _inner_face_points)
+    return BodyShape(CYLINDER, np.array([radius, height / 2, radius]), 0.0, np.zeros(3), rims, np.zeros(len(rims)), only)
 
 
 def mesh_shape(vertices: np.ndarray) -> BodyShape:
@@ -220,7 +243,7 @@ class PenaltySet:
         self.half = np.zeros((n, 3))
         self.round_radius = np.zeros(n)
         self.offset = np.zeros((n, 3))
-        owner, local, rad = [], [], []
+        owner, local, rad, only = [], [], [], []
         for b, shape in enumerate(shapes):
             if shape is None or not body[b]:
                 continue
@@ -228,6 +251,8 @@ class PenaltySet:
             owner.append(np.full(len(shape.points), b))
             local.append(shape.points)
             rad.append(shape.point_radius)
+            only.append(shape.bodies_only if shape.bodies_only is not None else np.zeros(len(shape.points), bool))
+        self.against_colliders = ~np.concatenate(only) if only else np.zeros(0, bool)
         self.owner = np.concatenate(owner) if owner else np.zeros(0, np.int64)
         self.local = np.concatenate(local) if local else np.zeros((0, 3))
         self.point_radius = np.concatenate(rad) if rad else np.zeros(0)
@@ -247,7 +272,7 @@ class PenaltySet:
         """Every touching contact point of the state (positions x [n, 3], rotations [n, 3, 3]
         or None when every point is a body's centre)."""
         parts: list[tuple[np.ndarray, ...]] = []
-        live = np.flatnonzero(moving[self.owner])
+        live = np.flatnonzero(moving[self.owner] & self.against_colliders)
         owner = self.owner[live]
         rad = self.point_radius[live]
         pw = x[owner] if rot is None else x[owner] + np.einsum("pij,pj->pi", rot[owner], self.local[live])

@@ -278,9 +278,46 @@ def _describe(name: str, p: PenaltyParameters, mass: float) -> str:
             f"zeta = {p.zeta:.3g}, contact time {1e3 * p.contact_time:.4g} ms")
 
 
+def contact_modes(obj: Any) -> list[tuple[float, str]]:
+    """(s^2, what) for the contact modes of a penalty body resting on a plane: each mode's
+    angular frequency is s sqrt(k/m) and its damping ratio s zeta (the contact points'
+    dampers are their springs times c/k, so the modes of K are those of C). Spheres: one
+    point (s^2 = 1); boxes on a face: 4 corners (vertical 4, rocking 12 a^2/(a^2 + b^2) for
+    half extents a along the rocking lever, b along the normal); capsules on their side: 2
+    cap spheres (2, and rocking 2 a^2 m / I); cylinders on a cap: 8 rim points (8, and
+    4 r^2 m / I). Meshes: 1 here (their hull is read by the dynamics stage; the blow-up
+    guard catches a step too long for their modes)."""
+    import numpy as np
+
+    from ..geometry import shape_geometry
+
+    m = obj.motion.mass
+    entry = shape_geometry(obj.shape)
+    if obj.shape not in ("cube", "capsule", "cylinder"):
+        return [(1.0, "one point")]
+    meas = entry.measure(obj, np.asarray(obj.transform.scale, dtype=np.float64), None)
+    inertia = entry.inertia(m, meas.dims)
+    d = meas.dims
+    if obj.shape == "cube":
+        half = np.array([d["sx"], d["sy"], d["sz"]]) / 2
+        out = [(4.0, "4 corners, vertical")]
+        for normal in range(3):
+            for lever in range(3):
+                if lever != normal:
+                    a, b = half[lever], half[normal]
+                    out.append((12 * a * a / (a * a + b * b), "4 corners, rocking"))
+        return out
+    if obj.shape == "capsule":
+        a = d["height"] / 2
+        return [(2.0, "2 caps, vertical"), (2 * a * a * m / inertia[0], "2 caps, rocking")]
+    r, h = d["radius"], d["height"]
+    return [(8.0, "8 rim points, vertical"), (4 * r * r * m / inertia[0], "8 rim points, rocking"), (2 * (h / 2) ** 2 * m / inertia[0], "on its side, rocking")]
+
+
 def penalty_problems(scene: Any) -> list[tuple[tuple, str]]:
     """(YAML path, message) for each penalty body whose contact the fixed step cannot
-    integrate stably: h sqrt(k/m) past the integrator's stability limit for the contact's
+    integrate stably: for each of its contact modes (`contact_modes`: frequency s omega0,
+    damping ratio s zeta), h s omega0 past the integrator's stability limit for that
     damping ratio (`stability_limit`). rk45 adapts its step and is never refused here (its
     step budget is checked while it runs)."""
     d = scene.dynamics
@@ -288,16 +325,23 @@ def penalty_problems(scene: Any) -> list[tuple[tuple, str]]:
         return []
     out = []
     for i, obj, p in penalty_bodies(scene):
-        limit = stability_limit(d.integrator, p.zeta)
-        y = d.step * p.omega0
-        if y <= limit:
+        worst = None
+        for s2, what in contact_modes(obj):
+            s = math.sqrt(s2)
+            limit = stability_limit(d.integrator, s * p.zeta)
+            y = d.step * p.omega0 * s
+            if y > limit and (worst is None or y / max(limit, 1e-300) > worst[0]):
+                worst = (y / max(limit, 1e-300), s, limit, what)
+        if worst is None:
             continue
+        _, s, limit, what = worst
+        mode = "" if s == 1.0 else f" (its stiffest contact mode, {what}: omega = {s:.3g} sqrt(k/m), zeta = {s * p.zeta:.3g})"
         if limit == 0.0:
-            bound = f"{d.integrator} is unstable on this contact at any step (zeta = {p.zeta:.3g}: an undamped or barely damped spring gains energy every step)"
+            bound = f"{d.integrator} is unstable on this contact at any step{mode} (an undamped or barely damped spring gains energy every step)"
             fix = "use semi-implicit-euler or rk4, or a lower restitution"
         else:
-            h_max = limit / p.omega0
-            bound = f"the stability bound of {d.integrator} for this contact is h < {1e3 * h_max:.4g} ms (h sqrt(k/m) < {limit:.3g}), the step is {1e3 * d.step:.4g} ms (h sqrt(k/m) = {y:.3g})"
+            h_max = limit / (s * p.omega0)
+            bound = f"the stability bound of {d.integrator} for this contact{mode} is h < {1e3 * h_max:.4g} ms, the step is {1e3 * d.step:.4g} ms"
             fix = f"use dynamics.step <= {h_max / 2:.3g} s, rk4 or rk45, or a softer contact (a longer contact_time)"
         out.append((_penalty_loc(scene, i), f"penalty contact of {_describe(obj.name, p, obj.motion.mass)}: {bound}; {fix}"))
     return out
