@@ -260,7 +260,7 @@ def penalty_bodies(scene: Any) -> list[tuple[int, Any, PenaltyParameters]]:
     out = []
     for i, obj in enumerate(scene.objects):
         m = obj.motion
-        if m.type != "dynamics" or (m.contact or d.contact) != "penalty":
+        if m.type != "dynamics" or m.pinned or (m.contact or d.contact) != "penalty":  # (a pinned body never moves)
             continue
         out.append((i, obj, penalty_parameters(m.penalty or d.penalty, m.mass, m.restitution)))
     return out
@@ -274,8 +274,8 @@ def _penalty_loc(scene: Any, i: int) -> tuple:
 
 
 def _describe(name: str, p: PenaltyParameters, mass: float) -> str:
-    return (f"'{name}': k = {p.k:.4g} N/m, c = {p.c:.4g} N s/m, m = {mass:g} kg: sqrt(m/k) = {1e3 / p.omega0:.4g} ms, "
-            f"zeta = {p.zeta:.3g}, contact time {1e3 * p.contact_time:.4g} ms")
+    during = f"contact time {1e3 * p.contact_time:.4g} ms" if p.zeta < 1.0 else "no rebound (zeta >= 1)"
+    return f"'{name}': k = {p.k:.4g} N/m, c = {p.c:.4g} N s/m, m = {mass:g} kg: sqrt(m/k) = {1e3 / p.omega0:.4g} ms, zeta = {p.zeta:.3g}, {during}"
 
 
 def contact_modes(obj: Any) -> list[tuple[float, str]]:
@@ -342,7 +342,8 @@ def penalty_problems(scene: Any) -> list[tuple[tuple, str]]:
         else:
             h_max = limit / (s * p.omega0)
             bound = f"the stability bound of {d.integrator} for this contact{mode} is h < {1e3 * h_max:.4g} ms, the step is {1e3 * d.step:.4g} ms"
-            fix = f"use dynamics.step <= {h_max / 2:.3g} s, rk4 or rk45, or a softer contact (a longer contact_time)"
+            others = " or ".join(x for x in ("rk4", "rk45") if x != d.integrator)
+            fix = f"use dynamics.step <= {h_max / 2:.3g} s, {others}, or a softer contact (a longer contact_time)"
         out.append((_penalty_loc(scene, i), f"penalty contact of {_describe(obj.name, p, obj.motion.mass)}: {bound}; {fix}"))
     return out
 
@@ -355,9 +356,10 @@ def penalty_warnings(scene: Any) -> list[str]:
         return []
     out = []
     for i, obj, p in penalty_bodies(scene):
-        steps = p.contact_time / d.step
+        span = p.contact_time if p.zeta < 1.0 else math.pi / p.omega0  # (no rebound: the time scale pi / omega0)
+        steps = span / d.step
         if steps < MIN_STEPS_PER_CONTACT and d.step * p.omega0 <= stability_limit(d.integrator, p.zeta):
             out.append(f"objects[{i}].motion: penalty contact of {_describe(obj.name, p, obj.motion.mass)} lasts {steps:.3g} steps of "
-                       f"{1e3 * d.step:.4g} ms: its rebound and depth are under-resolved (dynamics.step <= {p.contact_time / MIN_STEPS_PER_CONTACT:.3g} s "
+                       f"{1e3 * d.step:.4g} ms: its rebound and depth are under-resolved (dynamics.step <= {span / MIN_STEPS_PER_CONTACT:.3g} s "
                        f"gives {MIN_STEPS_PER_CONTACT} steps)")
     return out
