@@ -232,3 +232,17 @@ def test_the_bouncing_balls_example_validates_bakes_and_renders_with_penalty_con
     assert proc.returncode == 0, proc.stderr
     frame = read_frame(next(out.glob("*.exr")))
     assert frame.rgba.shape == (36, 64, 4) and np.isfinite(frame.rgba).all() and frame.rgba[..., :3].std() > 1e-3
+
+
+def test_a_penalty_body_keeps_impulses_against_a_mesh_collider(tmp_path: Path) -> None:
+    """A capsule collider is a mesh collider: the penalty ball resting on it is held on its
+    surface by impulses (no sink), beside a cylinder resting on the floor on its 8 rim
+    points (sinks m g / (8 k))."""
+    p = _params(1.0, 0.3, 0.02)
+    capsule = {"name": "cc", "shape": "capsule", "radius": 0.2, "height": 1.0, "transform": {"translate": [2, 0.2, 0], "rotate": {"euler": [0, 0, 90]}},
+               "collider": {"restitution": 0.5}}
+    cylinder = {"name": "c", "shape": "cylinder", "radius": 0.1, "height": 0.2, "transform": {"translate": [0, 0.12, 0]},
+                "motion": {"type": "dynamics", "mass": 1.0, **_pen(0.3, 0.02)}}
+    sim = run(tmp_path, [floor(), capsule, cylinder, ball("b", 0.55, x=2.0, radius=0.1, mass=1.0, **_pen(0.3, 0.02))], 0.6, {"integrator": "rk4", "step": 0.001})
+    assert sim.bodies.x[-1, 0, 1] == pytest.approx(0.1 - G / (8 * p.k), abs=1e-8)
+    assert sim.bodies.x[-1, 1, 1] == pytest.approx(0.5, abs=1e-9)
