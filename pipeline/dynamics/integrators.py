@@ -21,7 +21,7 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from ..errors import UnknownIntegratorError
+from ..errors import SimulationError, UnknownIntegratorError
 
 
 class StepSystem(Protocol):
@@ -160,7 +160,9 @@ class DormandPrince45(Integrator):
     """Adaptive embedded RK 5(4): the step is accepted when the error estimate
     ||y5 - y4|| / (atol + rtol |y|) (RMS norm) <= 1; the next step is
     h * clamp(0.9 err^(-1/5), 0.2, 5); the driver caps it at the scene's step so
-    collisions are swept at least that often."""
+    collisions are swept at least that often, and bounds the number of steps of a run
+    (`dynamics.rk45_max_steps`). A step that would have to go below h_min raises a
+    SimulationError instead of accepting an error past the tolerance."""
 
     name, order, adaptive = "rk45", 5, True
 
@@ -182,8 +184,11 @@ class DormandPrince45(Integrator):
             if not np.isfinite(err):
                 err = 1e10
             factor = 5.0 if err == 0.0 else min(5.0, max(0.2, 0.9 * err ** -0.2))
-            if err <= 1.0 or h <= self.h_min:
+            if err <= 1.0:
                 return StepResult(system.normalize(y5), h, h * factor)
+            if h <= self.h_min:
+                raise SimulationError(f"rk45 cannot meet rtol {self.rtol:g} / atol {self.atol:g} at t = {t:.9g} s even with a step of {h:.3g} s "
+                                      "(a force that changes faster than any step: a stiff penalty contact?); loosen rtol/atol or soften the contact")
             h = max(self.h_min, h * factor)
 
 

@@ -145,7 +145,7 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0, on_progr
         p = group.system.props
         mass, start = p.mass.copy(), group.system.x_ref.copy()
         guard = Guard(names, d.integrator, d.energy_growth_limit, 0.0, float((p.mass * g_mag * p.radius).sum()) + 1e-9)
-        track = run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard, on_progress)
+        track = run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard, on_progress, d.rk45_max_steps)
     systems: dict[str, ParticleSystem] = {}
     for i, obj in enumerate(loaded.scene.objects):
         if obj.shape != "particles":

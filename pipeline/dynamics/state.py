@@ -13,12 +13,16 @@ over arrays; pinned bodies (inverse mass 0) and bodies not yet started have D = 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from . import forces
 from ..motion.pose import quat_normalize
 from .rigid import angular_acceleration, isotropic, quat_rate
+
+if TYPE_CHECKING:
+    from .penalty import PenaltySet
 
 
 @dataclass
@@ -108,6 +112,7 @@ class System:
         self._isotropic = rotating and props.count > 0 and isotropic(props.inertia)
         self._free = props.inv_mass > 0  # not pinned (pinned: inverse mass 0)
         self.x_ref = np.zeros((self.n, 3))  # where gravity's potential is zero
+        self.penalty: "PenaltySet | None" = None  # penalty-force contacts (penalty.py), part of D
         if env.newtonian is not None and self.n > forces.NBODY_LIMIT:
             from ..errors import SimulationError
 
@@ -215,15 +220,16 @@ class System:
         move = self.moving()
         everyone = bool(move.all())
         acc = self.acceleration(t, s.x, s.v, dt)
+        torque = self._contact(s, dt, move, acc)
         out = np.zeros(X.shape)
         n = self.n
         if not self.rotating:
             parts = ((slice(0, 3 * n), s.v), (slice(3 * n, 6 * n), acc))
-        elif not s.w.any():
+        elif not s.w.any() and torque is None:
             parts = ((slice(0, 3 * n), s.v), (slice(7 * n, 10 * n), acc))
         else:
             dq = quat_rate(s.q, s.w)
-            alpha = angular_acceleration(s.q, s.w, self.props.inertia, self.props.inv_inertia, np.zeros_like(s.w))
+            alpha = angular_acceleration(s.q, s.w, self.props.inertia, self.props.inv_inertia, np.zeros_like(s.w) if torque is None else torque)
             parts = ((slice(0, 3 * n), s.v), (slice(3 * n, 7 * n), dq), (slice(7 * n, 10 * n), acc), (slice(10 * n, 13 * n), alpha))
         for where, rate in parts:
             out[where] = (rate if everyone else np.where(move[:, None], rate, 0.0)).ravel()
@@ -236,6 +242,7 @@ class System:
         s = self.unpack(X)
         move = self.moving()
         acc = self.acceleration(t, s.x, s.v, dt)
+        torque = self._contact(s, dt, move, acc)
         everyone = bool(move.all())
         if not everyone:
             acc = np.where(move[:, None], acc, 0.0)
@@ -244,10 +251,22 @@ class System:
         n = self.n
         out = np.zeros(6 * n)
         out[: 3 * n] = acc.ravel()
-        if s.w.any():
-            alpha = angular_acceleration(s.q, s.w, self.props.inertia, self.props.inv_inertia, np.zeros_like(s.w))
+        if s.w.any() or torque is not None:
+            alpha = angular_acceleration(s.q, s.w, self.props.inertia, self.props.inv_inertia, np.zeros_like(s.w) if torque is None else torque)
             out[3 * n :] = (alpha if everyone else np.where(move[:, None], alpha, 0.0)).ravel()
         return out
+
+    def _contact(self, s: State, dt: float, move: np.ndarray, acc: np.ndarray) -> np.ndarray | None:
+        """Penalty contacts' share of D: adds their force / m to `acc` in place and returns
+        their torques [n, 3] (None: no penalty contact touches)."""
+        if self.penalty is None:
+            return None
+        out = self.penalty.forces(s.x, s.q, s.v, s.w, dt, move)
+        if out is None:
+            return None
+        force, torque = out
+        acc += force * self.props.inv_mass[:, None]
+        return torque if self.rotating else None
 
     def position_rate(self, t: float, X: np.ndarray) -> np.ndarray:
         """The position-like part of D (velocities and quaternion rates): no forces needed."""
@@ -265,8 +284,8 @@ class System:
 
     def energy(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         """(kinetic [n], potential [n], shared potential) in J for moving bodies: kinetic
-        1/2 m v^2 + 1/2 w.I w; potential of gravity and buoyancy per body; springs and
-        Newtonian gravity are shared between bodies."""
+        1/2 m v^2 + 1/2 w.I w; potential of gravity and buoyancy per body; springs, Newtonian
+        gravity and the penalty contacts' springs are shared between bodies."""
         s = self.unpack(X)
         p, env = self.props, self.env
         move = self.moving()
@@ -286,6 +305,8 @@ class System:
             shared += float(forces.spring_energy(s.x, env.springs).sum())
         if env.newtonian is not None and self.n > 1:
             shared += forces.newtonian_energy(s.x[move], p.mass[move], *env.newtonian)
+        if self.penalty is not None:
+            shared += self.penalty.energy(s.x, s.q, move)
         if move.all():  # (the usual case: no masking passes)
             return kinetic, potential, shared
         return np.where(move, kinetic, 0.0), np.where(move, potential, 0.0), shared

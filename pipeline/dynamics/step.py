@@ -25,10 +25,12 @@ from typing import Callable
 import numpy as np
 
 from . import forces
+from ..errors import SimulationError
 from .collisions import Collider, ContactBodies, Hits, _sweep_spheres, resolve_pairs, resolve_static
 from .guard import Guard
 from ..motion.pose import quat_exp, quat_mul
 from .integrators import Integrator
+from .penalty import handles
 from .rigid import inverse_inertia_world
 from .shapes import ShapeSet, find_contacts, resolve_shaped, true_shape_collider
 from .state import System
@@ -158,13 +160,21 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
     if not group.colliders and group.pairs[0].size == 0:
         return contact, impacts
     p = system.props
-    shaped = group.shapes.shaped() & moving if group.shapes is not None else np.zeros(system.n, dtype=bool)
+    # penalty bodies: their contacts with plane, sphere and box colliders and with each other
+    # are forces inside D (penalty.py); against mesh colliders and impulse bodies, impulses
+    penalty = system.penalty.body if system.penalty is not None else None
+    impulse = moving if penalty is None else moving & ~penalty
+    shaped = group.shapes.shaped() & impulse if group.shapes is not None else np.zeros(system.n, dtype=bool)
+    pairs = group.pairs
+    if penalty is not None and pairs[0].size:
+        keep = ~(penalty[pairs[0]] & penalty[pairs[1]])
+        pairs = (pairs[0][keep], pairs[1][keep])
 
     def sweep(col: Collider) -> Hits:
         """The moving bodies' sphere sweeps against `col` (boxes and cylinders against
         plane, box and sphere colliders: their true shape, below)."""
         hits = col.sweep(s0.x, s1.x, p.radius)
-        hits.hit &= moving
+        hits.hit &= impulse if penalty is not None and handles(col) else moving
         if true_shape_collider(col):
             hits.hit &= ~shaped
         return hits
@@ -172,7 +182,7 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
     # the first pass's sphere sweeps, done before anything else: most steps of a small
     # system touch nothing, and then nothing more needs computing
     first_hits = [sweep(col) for col in group.colliders]
-    if not shaped.any() and group.pairs[0].size == 0 and not any(h.hit.any() for h in first_hits):
+    if not shaped.any() and pairs[0].size == 0 and not any(h.hit.any() for h in first_hits):
         return contact, impacts
     inv_mass = np.where(moving, p.inv_mass, 0.0)
     inv_I = None
@@ -207,8 +217,8 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
             out = resolve_static(bodies, hits, col, ctx.dt, v_rest)
             if out.shape[1]:
                 impacts.append(np.stack((ctx.t + out[2] * ctx.dt, out[0], out[1], np.full(out.shape[1], float(ci)), *out[3:6]), axis=1))
-        if group.pairs[0].size:
-            out = resolve_pairs(bodies, group.pairs, ctx.dt, v_rest)
+        if pairs[0].size:
+            out = resolve_pairs(bodies, pairs, ctx.dt, v_rest)
             if out.shape[1]:
                 found = True
                 contact[out[0].astype(int)] = True
@@ -373,6 +383,8 @@ def resting(group: Group, x: np.ndarray, v: np.ndarray, move: np.ndarray, a: np.
     held = move & (np.einsum("ij,ij->i", v, v) <= REST_SPEED * REST_SPEED)
     if group.shapes is not None:
         held &= ~group.shapes.shaped()
+    if group.system.penalty is not None:  # a penalty body rests on its springs: it steps
+        held &= ~group.system.penalty.body
     if not held.any() or not group.colliders:
         return np.zeros(len(x), dtype=bool)
     idx = np.flatnonzero(held)
@@ -476,9 +488,11 @@ def coast(group: Group, integrator: Integrator, ctx: StepContext, t0: float, t1:
 
 
 def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: float, iterations: int, guard: Guard,
-              on_progress: Callable[[float, float, float], None] | None = None) -> Track:
+              on_progress: Callable[[float, float, float], None] | None = None, max_steps: int | None = None) -> Track:
     """Advance a group from t0 to t1 through the named stages; returns its Track.
-    `on_progress(t, t0, t1)` is called every 64 steps and at the end."""
+    `on_progress(t, t0, t1)` is called every 64 steps and at the end. An adaptive
+    integrator may take at most `max_steps` steps (None: no bound); past that, a
+    SimulationError says where it was and what made it step down."""
     system = group.system
     g_mag = float(np.linalg.norm(system.env.gravity))
     recorder = Recorder(group, int(math.ceil((t1 - t0) / step / group.record_stride)) + 2)
@@ -505,6 +519,11 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
                 t, index = t0 + (index + done) * step, index + done
                 continue
             wait = skip = min(2 * wait + 1, 64)
+        if max_steps is not None and integrator.adaptive and index >= max_steps:
+            raise SimulationError(
+                f"{integrator.name} took its budget of {max_steps} steps (dynamics.rk45_max_steps) by t = {t:.6g} s of {t0:g}..{t1:g} s, its last "
+                f"step {h:.3g} s (the scene's step {step:g} s): a stiff force, such as a penalty contact's spring, makes it step down; "
+                "soften the contact (a longer penalty contact_time), loosen rtol/atol, raise the budget or use a fixed-step integrator")
         X = group.X
         X1, ctx, h_next = integrate(group, integrator, ctx, t0, step)
         contact, found = collide(group, X, X1, ctx, iterations, g_mag)

@@ -13,11 +13,13 @@ import numpy as np
 
 from ..errors import SceneError
 from ..geometry import BOUND, SHAPES, shape_geometry
+from ..scene.dynamics_schema import penalty_parameters
 from ..motion.rotation import parent_from_object
 from ..motion.rotation import transform_quat as quat_from_rotation
 from . import forces
 from .collisions import BoxCollider, Collider, MeshCollider, PlaneCollider, SphereCollider
 from .particles import Spawns, ballistic
+from .penalty import BodyShape, PenaltySet, box_shape, capsule_shape, cylinder_shape, mesh_shape, sphere_shape
 from .shapes import ShapeSet
 from .state import BodyProps, Environment, System
 from .step import Group, StepContext, bodies_activate
@@ -152,10 +154,18 @@ def build_bodies(loaded: "LoadedScene", t_start: float) -> tuple[Group, list[np.
     cols: dict[str, list[float] | list[np.ndarray]] = {k: [] for k in ("mass", "inv_mass", "radius", "radius_eq", "area", "cd", "linear", "restitution", "friction", "static_friction", "start", "inertia", "inv_inertia")}
     x, v, q, w, scales = [], [], [], [], []
     kind, half = np.full(n, BOUND, dtype=np.int64), np.zeros((n, 3))
+    d = loaded.scene.dynamics
+    on_penalty = np.array([(o.motion.contact or d.contact) == "penalty" for o in objs])
+    contact_shapes: list[BodyShape | None] = [None] * n
+    spring = np.zeros((2, n))  # penalty k (N/m), c (N s/m)
     for k_obj, o in enumerate(objs):
         m = o.motion
         entry = shape_geometry(o.shape)
         meas = body_measure(loaded, o)
+        if on_penalty[k_obj]:
+            contact_shapes[k_obj] = penalty_shape(loaded, o, meas)
+            params = penalty_parameters(m.penalty or d.penalty, m.mass, m.restitution)
+            spring[:, k_obj] = params.k, params.c
         r_eq = (3.0 * max(meas.volume, 1e-12) / (4.0 * math.pi)) ** (1.0 / 3.0)
         inertia = entry.inertia(m.mass, meas.dims)
         rigid = m.body == "rigid" and not m.pinned
@@ -190,8 +200,31 @@ def build_bodies(loaded: "LoadedScene", t_start: float) -> tuple[Group, list[np.
     system.x_ref = x_arr.copy()
     X = system.pack(x_arr, np.asarray(v, dtype=np.float64), np.asarray(q), np.asarray(w, dtype=np.float64))
     pairs = np.triu_indices(n, 1)
-    group = Group(system, X, build_colliders(loaded), (pairs[0], pairs[1]), bodies_activate, shapes=ShapeSet(kind, half))
+    colliders = build_colliders(loaded)
+    if on_penalty.any():
+        system.penalty = PenaltySet(on_penalty, spring[0], spring[1], contact_shapes, colliders, (pairs[0], pairs[1]), props.mass, props.inv_mass,
+                                    props.inv_inertia, props.radius, props.friction, props.static_friction)
+    group = Group(system, X, colliders, (pairs[0], pairs[1]), bodies_activate, shapes=ShapeSet(kind, half))
     return group, scales
+
+
+def penalty_shape(loaded: "LoadedScene", obj: object, meas: "Measure") -> BodyShape:
+    """A penalty body's contact points and solid (penalty.py) from its shape, scale applied:
+    spheres, capsules, boxes (`cube`), cylinders and meshes (their convex hull); any other
+    shape is the sphere of its bounding radius."""
+    shape, dims = obj.shape, meas.dims  # type: ignore[attr-defined]
+    if shape == "sphere":
+        return sphere_shape(dims["radius"])
+    if shape == "capsule":
+        return capsule_shape(dims["radius"], dims["height"])
+    if shape == "cube":
+        return box_shape(np.array([dims["sx"], dims["sy"], dims["sz"]]) / 2)
+    if shape == "cylinder":
+        return cylinder_shape(dims["radius"], dims["height"])
+    if shape == "mesh":
+        verts, _ = _file_mesh(loaded, obj)
+        return mesh_shape(np.asarray(verts, dtype=np.float64) * np.asarray(obj.transform.scale, dtype=np.float64))  # type: ignore[attr-defined]
+    return sphere_shape(meas.bound)
 
 
 def emitter_group(loaded: "LoadedScene", index: int, spawns: Spawns, colliders: list[Collider], t_start: float, t_end: float, step: float) -> Group:

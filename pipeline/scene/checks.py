@@ -209,6 +209,15 @@ def check_springs(c: _Check) -> None:
             c.add(("dynamics", "springs", j), "a spring needs two different bodies")
 
 
+def check_penalty_stability(c: _Check) -> None:
+    """A penalty contact's spring is within the fixed step's stability bound
+    (dynamics_schema.penalty_problems)."""
+    from .dynamics_schema import penalty_problems
+
+    for loc, message in penalty_problems(c.scene):
+        c.add(loc, message)
+
+
 def named_files(scene: Scene) -> Iterator[tuple["Loc", str, str, bool]]:
     """Every file the scene names, as (YAML path, path relative to the scene's folder,
     kind 'mesh', 'image', 'morph' (a morph target's vertices) or 'skin' (a joint skin's
@@ -329,6 +338,7 @@ SEMANTIC_CHECKS: tuple[Callable[[_Check], None], ...] = (
     check_world_space_motion,
     check_ik,
     check_springs,
+    check_penalty_stability,
     check_asset_files,
     check_derived,
     check_motion_channels,
@@ -595,6 +605,9 @@ def scene_warnings(scene: Scene) -> list[str]:
     if not lit and not emissive:
         what = "no lights" if not scene.lights else "only lights of strength 0"
         out.append(f"the scene has {what} and no emissive objects: every frame renders black")
+    from .dynamics_schema import penalty_warnings
+
+    out.extend(penalty_warnings(scene))
     return out
 
 
