@@ -16,9 +16,11 @@ render: setup
 render-cannonball-full: setup
 	.venv/bin/motion render scenes/cannonball.yaml -o out/cannonball $(ARGS)
 
+# the suite on every core (pytest-xdist; a module's tests stay on one worker, so its shared
+# fixtures are made once); ARGS="-n 0" runs it in one process
 test:
 	@bash tools/setup.sh --test
-	.venv/bin/python -m pytest -q $(ARGS)
+	.venv/bin/python -m pytest -q -n auto --dist loadscope $(ARGS)
 
 bench: setup
 	for b in bench/bench_*.py; do echo "== $$b"; .venv/bin/python $$b || exit 1; done
