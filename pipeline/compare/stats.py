@@ -1,0 +1,223 @@
+"""The noise-aware test of one frame against its reference (docs/compare.md).
+
+Two path-traced frames of the same picture differ by noise whenever the seed, the variant,
+the thread count or the machine differs. The question per region is whether the difference
+NEW - REF is explained by that noise. Everything is estimated from the two images:
+
+- D = NEW - REF, per channel (R, G, B, A).
+- Per-pixel noise variance of D from Immerkaer's mask M = [1 -2 1]^T [1 -2 1] applied to D
+  (v = (M * D)^2 / 36, exact for independent noise; Immerkaer 1996). M is the product of a
+  second difference in x and one in y, so it is blind to anything constant, linear or
+  varying along one axis only: a region made uniformly brighter leaves no trace in v.
+- Block sums over windows of k x k blocks of `block` pixels, k = 1, 2, 4, ... and the whole
+  frame: z = sum(D) / sqrt(kappa * sum(v)). kappa corrects for neighbouring pixels' noise
+  being correlated (the reconstruction filter splats a sample over several pixels, a
+  denoiser smooths): it is the ratio of the variance of a block sum to sum(v), measured on
+  the frame itself from differences of adjacent blocks (a change confined to some blocks, or
+  one that shifts them all alike, cancels in those differences; the median ignores the rest).
+- A window is different when |z| exceeds a threshold set by the number of tests (a
+  Bonferroni bound at `alpha` false alarms per frame, never below `z_min`); the measured
+  false-alarm rate over many seeds is in bench/bench_compare.py.
+
+A window takes the larger of its own variance and that of the window one block wider on
+every side, scaled to its area (a few blocks' own estimate has too few degrees of freedom
+for the far tail the threshold lives in). A firefly (one huge sample) raises sum(v) as much as sum(D):
+its z stays near 1.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+Verdict = Literal["identical", "equal", "different"]
+CHANNELS = ("R", "G", "B", "A")
+
+ALPHA = 1e-4  # the nominal false-alarm probability per frame (Bonferroni over its tests)
+Z_MIN = 6.0  # never a threshold below this (heavy-tailed path-tracing noise)
+# (M * D)^2 / 36 is D's variance for independent noise: sum of M's squared weights = 6 * 6
+_IMMERKAER = 36.0
+_MEDIAN_CHI2_1 = 0.454936423119572  # the median of a chi-square with one degree of freedom
+KAPPA_RANGE = (1.0, 1.0e4)
+
+
+@dataclass(frozen=True)
+class Region:
+    """A connected area of blocks that differ: its pixel box (x0, y0 inclusive, x1, y1
+    exclusive), covered pixels, fraction of the frame, the channel that differs most, its
+    peak z, the mean difference NEW - REF there (in that channel) and that relative to REF."""
+
+    x0: int
+    y0: int
+    x1: int
+    y1: int
+    pixels: int
+    fraction: float
+    channel: str
+    z: float
+    mean_diff: float
+    relative: float
+
+    def describe(self) -> str:
+        """One phrase: where, how large, which channel, how much."""
+        sign = "brighter" if self.mean_diff > 0 else "darker"
+        rel = f"{abs(self.relative) * 100:.1f}% {sign}" if math.isfinite(self.relative) else f"{self.mean_diff:+.3g}"
+        return (f"x {self.x0}-{self.x1 - 1}, y {self.y0}-{self.y1 - 1} ({self.fraction * 100:.1f}% of the frame): "
+                f"{self.channel} {rel} (z {self.z:+.1f})")
+
+
+@dataclass
+class FrameTest:
+    """The test's outcome for one frame: verdict, the largest |z| and the threshold it was
+    held to, the regions that differ (largest |z| first), kappa, per-channel RMS and
+    largest absolute difference, and the per-block map of |z| (for the report)."""
+
+    verdict: Verdict
+    max_z: float = 0.0
+    threshold: float = Z_MIN
+    regions: list[Region] = field(default_factory=list)
+    kappa: float = 1.0
+    rms: dict[str, float] = field(default_factory=dict)
+    max_abs: dict[str, float] = field(default_factory=dict)
+    block: int = 8
+    z_blocks: np.ndarray | None = None  # [gy, gx] largest |z| of a single-block window
+
+
+def block_size(height: int, width: int) -> int:
+    """Pixels per block side: 8, or 4 for frames under 64 pixels on their short side."""
+    return 8 if min(height, width) >= 64 else 4
+
+
+def _immerkaer(d: np.ndarray) -> np.ndarray:
+    """(M * d)^2 / 36 per pixel and channel, d [H, W, C], edges reflected."""
+    p = np.pad(d, ((1, 1), (1, 1), (0, 0)), mode="reflect") if min(d.shape[:2]) > 1 else np.pad(d, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    dx = p[:, :-2] - 2.0 * p[:, 1:-1] + p[:, 2:]
+    m = dx[:-2] - 2.0 * dx[1:-1] + dx[2:]
+    return m * m / _IMMERKAER
+
+
+def _block_sums(x: np.ndarray, b: int) -> np.ndarray:
+    """[H, W, C] -> [gy, gx, C] sums over b x b blocks (the frame padded with zeros)."""
+    h, w, c = x.shape
+    gy, gx = -(-h // b), -(-w // b)
+    padded = np.zeros((gy * b, gx * b, c), x.dtype)
+    padded[:h, :w] = x
+    return padded.reshape(gy, b, gx, b, c).sum(axis=(1, 3))
+
+
+def _window_sums(g: np.ndarray, k: int) -> np.ndarray:
+    """[gy, gx, C] -> [gy-k+1, gx-k+1, C] sums over every k x k window (summed-area table)."""
+    s = np.zeros((g.shape[0] + 1, g.shape[1] + 1, g.shape[2]))
+    s[1:, 1:] = g.cumsum(0).cumsum(1)
+    return s[k:, k:] - s[:-k, k:] - s[k:, :-k] + s[:-k, :-k]
+
+
+def _kappa(sd: np.ndarray, sv: np.ndarray, noisy: np.ndarray) -> float:
+    """Variance of a block sum over the sum of its v, from adjacent full blocks' differences
+    (colour channels pooled): median((S1 - S2)^2 / (V1 + V2)) / median(chi2_1), over the
+    pairs of `noisy` blocks (a constant sky has no noise to measure)."""
+    ratios = []
+    pairs = ((np.s_[:, :-1], np.s_[:, 1:]), (np.s_[:-1], np.s_[1:]))  # left/right, top/bottom
+    for first, second in pairs:
+        var = sv[first] + sv[second]
+        ok = noisy[first] & noisy[second]
+        ok[..., 3:] = False  # alpha is often noise-free: the colour channels say it
+        ratios.append(((sd[first] - sd[second]) ** 2 / np.where(ok, var, 1.0))[ok])
+    r = np.concatenate(ratios)
+    if r.size < 8:
+        return KAPPA_RANGE[0] * 2.0  # too few blocks to measure: a cautious guess
+    return float(np.clip(np.median(r) / _MEDIAN_CHI2_1, *KAPPA_RANGE))
+
+
+def threshold(tests: int, alpha: float = ALPHA, z_min: float = Z_MIN) -> float:
+    """|z| above which a window differs: two-sided Bonferroni at `alpha` over `tests`."""
+    from scipy.special import ndtri
+
+    return max(z_min, float(-ndtri(alpha / (2.0 * max(tests, 1)))))
+
+
+def test_frame(new: np.ndarray, ref: np.ndarray, *, alpha: float = ALPHA, z_min: float = Z_MIN, block: int | None = None) -> FrameTest:
+    """Compare NEW with REF ([H, W, C] linear, C <= 4, the same shape): identical, equal
+    within noise or different, with the regions that differ."""
+    if new.shape != ref.shape:
+        raise ValueError(f"shapes differ: {new.shape} and {ref.shape}")
+    h, w, c = new.shape
+    names = CHANNELS[:c]
+    if np.array_equal(new, ref):
+        zero = {n: 0.0 for n in names}
+        return FrameTest("identical", rms=zero, max_abs=dict(zero), block=block or block_size(h, w))
+    b = block or block_size(h, w)
+    d = new.astype(np.float64) - ref.astype(np.float64)
+    # half floats round to 11 bits: a floor under v for frames that differ only by rounding
+    floor = (np.maximum(np.abs(new), np.abs(ref)).astype(np.float64) * 2.0 ** -11) ** 2
+    v = _immerkaer(d) + floor
+    sd, sv = _block_sums(d, b), _block_sums(v, b)
+    gy, gx = sd.shape[:2]
+    # blocks whose every pixel was drawn and most of whose pixels differ: noise to measure
+    noisy = _block_sums((d != 0).astype(np.float64), b) > 0.75 * b * b
+    noisy[h // b :] = False
+    noisy[:, w // b :] = False
+    kappa = _kappa(sd, sv, noisy)
+
+    scales: list[tuple[int, np.ndarray]] = []
+    padded = np.pad(sv, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    k = 1
+    while k == 1 or (k <= max(gy, gx) // 2 and k <= min(gy, gx)):
+        # the window's own variance, or its ring-widened neighbourhood's scaled to its area
+        own = _window_sums(sv, k)
+        ring = _window_sums(padded, k + 2) * (k * k / (k + 2) ** 2)
+        scales.append((k, _window_sums(sd, k) / np.sqrt(kappa * np.maximum(own, ring))))
+        k *= 2
+    whole = sd.sum(axis=(0, 1)) / np.sqrt(kappa * sv.sum(axis=(0, 1)))
+    scales.append((0, whole[None, None, :]))
+    tests = sum(z.size for _, z in scales)
+    z_crit = threshold(tests, alpha, z_min)
+    max_z = max(float(np.nanmax(np.abs(z))) for _, z in scales)
+
+    # blocks marked by the smallest windows that differ; a larger window marks its blocks
+    # only where no smaller one did (a local change also tips the whole-frame sum)
+    marked = np.zeros((gy, gx), bool)
+    peak = np.zeros((gy, gx))
+    peak_ch = np.zeros((gy, gx), int)
+    for k, z in scales:
+        hit = np.abs(z).max(axis=2) > z_crit
+        if not hit.any():
+            continue
+        for y, x in zip(*np.nonzero(hit)):
+            ys, xs = (slice(0, gy), slice(0, gx)) if k == 0 else (slice(y, y + k), slice(x, x + k))
+            if marked[ys, xs].any():
+                continue
+            marked[ys, xs] = True
+            ch = int(np.abs(z[y, x]).argmax())
+            peak[ys, xs] = z[y, x, ch]
+            peak_ch[ys, xs] = ch
+    regions = _regions(marked, peak, peak_ch, sd, _block_sums(ref.astype(np.float64), b), b, h, w, names)
+    rms = {n: float(np.sqrt(np.mean(d[..., i] ** 2))) for i, n in enumerate(names)}
+    max_abs = {n: float(np.abs(d[..., i]).max()) for i, n in enumerate(names)}
+    return FrameTest("different" if regions else "equal", max_z, z_crit, regions, kappa, rms, max_abs, b, np.abs(scales[0][1]).max(axis=2))
+
+
+def _regions(marked: np.ndarray, peak: np.ndarray, peak_ch: np.ndarray, sd: np.ndarray, sr: np.ndarray, b: int, h: int, w: int, names: tuple[str, ...]) -> list[Region]:
+    """Connected (8-neighbour) areas of marked blocks, largest |z| first."""
+    if not marked.any():
+        return []
+    from scipy.ndimage import label
+
+    labels, count = label(marked, structure=np.ones((3, 3), int))
+    out = []
+    for i in range(1, count + 1):
+        ys, xs = np.nonzero(labels == i)
+        at = int(np.abs(peak[ys, xs]).argmax())
+        ch = int(peak_ch[ys[at], xs[at]])
+        x0, y0 = int(xs.min()) * b, int(ys.min()) * b
+        x1, y1 = min(w, (int(xs.max()) + 1) * b), min(h, (int(ys.max()) + 1) * b)
+        pixels = sum(min(b, h - y * b) * min(b, w - x * b) for y, x in zip(ys, xs))
+        diff = float(sd[ys, xs, ch].sum())
+        base = float(sr[ys, xs, ch].sum())
+        out.append(Region(x0, y0, x1, y1, int(pixels), pixels / float(h * w), names[ch], float(peak[ys[at], xs[at]]),
+                          diff / pixels, diff / base if base > 0 else float("inf")))
+    out.sort(key=lambda r: -abs(r.z))
+    return out
