@@ -3,6 +3,7 @@
     python bench/bench_compare.py                 # all three parts, short
     python bench/bench_compare.py --seeds 1000    # false alarms over 1000 seed pairs per scene
     python bench/bench_compare.py --part speed    # 72 frames at 480x270
+    python bench/bench_compare.py --part kappa    # the noise correlation factor per filter
 
 1. False alarms: unchanged scenes (the examples at their ci-smoke settings, 64x36, 4 spp,
    plus a still test set) rendered with many seeds in this process (the real renderer, one
@@ -99,6 +100,12 @@ def _ci_smoke() -> dict[str, Any]:
     return out
 
 
+def _kappa_of(renderer: Any) -> float:
+    from motion.pipeline.compare.stats import FILTER_KAPPA
+
+    return FILTER_KAPPA[renderer.settings.filter]
+
+
 def false_alarms(scenes: list[Path], pairs: int) -> list[dict[str, Any]]:
     """Per scene: frames tested, false alarms, the largest |z| seen and the threshold."""
     from motion.pipeline.compare.stats import test_frame
@@ -118,7 +125,7 @@ def false_alarms(scenes: list[Path], pairs: int) -> list[dict[str, Any]]:
         alarms, tested, zs, thr = 0, 0, [], 0.0
         for i, imgs in images.items():
             for a, b in zip(imgs[0::2], imgs[1::2]):
-                t = test_frame(a, b)
+                t = test_frame(a, b, kappa=_kappa_of(renderer))
                 tested += 1
                 alarms += t.verdict == "different"
                 zs.append(t.max_z)
@@ -151,10 +158,35 @@ def sensitivity(spps: list[int], pairs: int) -> list[dict[str, Any]]:
             for label, change in changes.items():
                 renderer, baked = _renderer(_still(Path(tmp), "changed", spp=spp, **change))
                 news = [img for _, _, img in seeded(renderer, baked, range(5000, 5000 + pairs))]
-                caught = sum(test_frame(n, r).verdict == "different" for n, r in zip(news, refs))
+                caught = sum(test_frame(n, r, kappa=_kappa_of(renderer)).verdict == "different" for n, r in zip(news, refs))
                 rows.append({"change": label, "spp": spp, "caught": caught, "pairs": pairs})
                 print(f"  {spp:5d} spp  {label:26s} caught in {caught:4d} of {pairs} seed pairs", flush=True)
     return rows
+
+
+def kappa(pairs: int, spps: tuple[int, ...] = (4, 64)) -> None:
+    """The noise correlation factor per reconstruction filter (stats.FILTER_KAPPA): over
+    `pairs` seed pairs of the still set, the variance of a window's sum of D over the mean
+    sum of its Immerkaer v, for 4-, 8- and 16-pixel windows (median over windows, and
+    the ratio of the sums)."""
+    from motion.pipeline.compare import stats as S
+
+    with tempfile.TemporaryDirectory() as tmp:
+        for filt in ("gaussian", "box", "tent"):
+            for spp in spps:
+                path = Path(tmp) / f"{filt}{spp}.yaml"
+                path.write_text(STILL.format(**{**STILL_BASE, "spp": spp}).replace("max_depth: 3}", f"max_depth: 3, filter: {filt}}}"))
+                renderer, baked = _renderer(path)
+                imgs = np.array([img for _, _, img in seeded(renderer, baked, range(2 * pairs))], dtype=np.float64)
+                d = imgs[0::2] - imgs[1::2]
+                cells = []
+                for b in (4, 8, 16):
+                    sd = np.array([S._block_sums(x, b) for x in d])[..., :3]
+                    sv = np.array([S._block_sums(S._immerkaer(x), b) for x in d]).mean(0)[..., :3]
+                    ok = sv > 1e-6
+                    var = sd.var(0)[ok]
+                    cells.append(f"{b:2d} px: {np.median(var / sv[ok]):5.2f} / {var.sum() / sv[ok].sum():5.2f}")
+                print(f"  {filt:8s} {spp:4d} spp  kappa (median / ratio of sums)  " + "   ".join(cells), flush=True)
 
 
 def speed(frames: int = 72, size: tuple[int, int] = (480, 270)) -> dict[str, Any]:
@@ -187,10 +219,10 @@ def speed(frames: int = 72, size: tuple[int, int] = (480, 270)) -> dict[str, Any
 def main() -> None:
     """Run the parts asked for and print the figures."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--part", choices=["all", "false-alarms", "sensitivity", "speed"], default="all")
+    parser.add_argument("--part", choices=["all", "false-alarms", "sensitivity", "speed", "kappa"], default="all")
     parser.add_argument("--seeds", type=int, default=200, help="seed pairs per scene for the false-alarm rate")
     parser.add_argument("--pairs", type=int, default=20, help="seed pairs per change and spp for the sensitivity")
-    parser.add_argument("--spp", default="4,16,64,256", help="spp for the sensitivity")
+    parser.add_argument("--spp", default="4,16,64,256,1024", help="spp for the sensitivity")
     parser.add_argument("--scenes", default="bouncing-balls,spinning-top,walker,walk-cycle,cannonball-splash")
     args = parser.parse_args()
     print(f"motion compare bench on {cpu_model()}")
@@ -202,6 +234,9 @@ def main() -> None:
     if args.part in ("all", "sensitivity"):
         print(f"smallest change caught: still set at {STILL_BASE['w']}x{STILL_BASE['h']}, {args.pairs} seed pairs per cell")
         sensitivity([int(s) for s in args.spp.split(",")], args.pairs)
+    if args.part in ("all", "kappa"):
+        print("kappa by filter: still set at 64x36")
+        kappa(max(8, args.pairs))
     if args.part in ("all", "speed"):
         print("speed:")
         speed()

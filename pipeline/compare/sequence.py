@@ -26,7 +26,7 @@ from ..frame_output import read_frame
 from ..telecine.sequence import Sequence, discover
 from .frames import FrameFacts, differences, facts_from_header
 from .golden import NOISY_LAYER, Manifest, read_manifest
-from .stats import ALPHA, Region, test_frame
+from .stats import ALPHA, FILTER_KAPPA, Region, test_frame
 
 Outcome = Literal["identical", "equal", "different", "missing"]
 FlipMode = Literal["different", "all", "off"]
@@ -153,11 +153,13 @@ def compare_pair(number: int, new_path: str, ref_path: str, *, flip: FlipMode = 
         h, w = ref.rgba.shape[:2]
         raise ReferenceMismatchError(f"{new_path}: frame {number} is {new.rgba.shape[1]}x{new.rgba.shape[0]}, its reference {ref_path} is {w}x{h}: not comparable")
     use_noisy = all(isinstance(f.aovs.get(NOISY_LAYER), np.ndarray) and f.aovs[NOISY_LAYER].shape[:2] == f.rgba.shape[:2] for f in (new, ref)) and new.aovs[NOISY_LAYER].shape == ref.aovs[NOISY_LAYER].shape
-    test = test_frame(_pixels(new, use_noisy), _pixels(ref, use_noisy), alpha=alpha)
+    new_facts = facts_from_header(Path(new_path), new.header).to_dict()
+    ref_facts = facts_from_header(Path(ref_path), ref.header).to_dict()
+    test = test_frame(_pixels(new, use_noisy), _pixels(ref, use_noisy), alpha=alpha, kappa=filter_kappa(new_facts, ref_facts))
     outcome = FrameOutcome(
         frame=number, new=new_path, ref=ref_path, outcome=test.verdict, layer=NOISY_LAYER if use_noisy else "beauty",
         max_z=test.max_z, threshold=test.threshold, kappa=test.kappa, rms=test.rms, max_abs=test.max_abs, regions=test.regions,
-        new_facts=facts_from_header(Path(new_path), new.header).to_dict(), ref_facts=facts_from_header(Path(ref_path), ref.header).to_dict(),
+        new_facts=new_facts, ref_facts=ref_facts,
         block=test.block, z_blocks=test.z_blocks if keep_maps else None,
     )
     if flip == "all" or (flip == "different" and test.verdict == "different"):
@@ -166,6 +168,15 @@ def compare_pair(number: int, new_path: str, ref_path: str, *, flip: FlipMode = 
             outcome.flip_map = fmap
     outcome.seconds = time.perf_counter() - t0
     return outcome
+
+
+def filter_kappa(new_facts: dict[str, Any], ref_facts: dict[str, Any]) -> float | None:
+    """The noise correlation factor of the frames' reconstruction filter when both headers
+    name the same known one (stats.FILTER_KAPPA), else None (measured on the frame)."""
+    names = {(f.get("settings") or {}).get("filter") for f in (new_facts, ref_facts)}
+    if len(names) != 1:
+        return None
+    return FILTER_KAPPA.get(str(names.pop()))
 
 
 def flip_score(new: np.ndarray, ref: np.ndarray) -> tuple[float, np.ndarray]:

@@ -11,10 +11,12 @@ NEW - REF is explained by that noise. Everything is estimated from the two image
   varying along one axis only: a region made uniformly brighter leaves no trace in v.
 - Block sums over windows of k x k blocks of `block` pixels, k = 1, 2, 4, ... and the whole
   frame: z = sum(D) / sqrt(kappa * sum(v)). kappa corrects for neighbouring pixels' noise
-  being correlated (the reconstruction filter splats a sample over several pixels, a
-  denoiser smooths): it is the ratio of the variance of a block sum to sum(v), measured on
-  the frame itself from differences of adjacent blocks (a change confined to some blocks, or
-  one that shifts them all alike, cancels in those differences; the median ignores the rest).
+  being correlated (the reconstruction filter splats a sample over several pixels): it is
+  the ratio of the variance of a window's sum to sum(v). For motion's frames it is a
+  property of the filter the header names (FILTER_KAPPA, measured once by the bench); for
+  other frames it is measured on the frame from differences of adjacent blocks (a change
+  confined to some blocks, or one that shifts them all alike, cancels in those
+  differences; the median ignores the rest), which is noisier.
 - A window is different when |z| exceeds a threshold set by the number of tests (a
   Bonferroni bound at `alpha` false alarms per frame, never below `z_min`); the measured
   false-alarm rate over many seeds is in bench/bench_compare.py.
@@ -42,6 +44,12 @@ Z_MIN = 6.0  # never a threshold below this (heavy-tailed path-tracing noise)
 _IMMERKAER = 36.0
 _MEDIAN_CHI2_1 = 0.454936423119572  # the median of a chi-square with one degree of freedom
 KAPPA_RANGE = (1.0, 1.0e4)
+# kappa of motion's own frames by reconstruction filter (render.filter): the variance of a
+# window's sum of D over the sum of its v, measured over 40 seed pairs of a still set at 4
+# and 64 spp, 4- to 16-pixel windows (bench/bench_compare.py --part kappa; box 0.85-1.04,
+# tent 2.8-5.1, gaussian 6.0-10.9), taken at the top of each range: a sample splatted over
+# neighbouring pixels makes their noise alike, which the mask does not see
+FILTER_KAPPA = {"box": 1.1, "tent": 5.0, "gaussian": 10.0}
 
 
 @dataclass(frozen=True)
@@ -139,9 +147,10 @@ def threshold(tests: int, alpha: float = ALPHA, z_min: float = Z_MIN) -> float:
     return max(z_min, float(-ndtri(alpha / (2.0 * max(tests, 1)))))
 
 
-def test_frame(new: np.ndarray, ref: np.ndarray, *, alpha: float = ALPHA, z_min: float = Z_MIN, block: int | None = None) -> FrameTest:
+def test_frame(new: np.ndarray, ref: np.ndarray, *, alpha: float = ALPHA, z_min: float = Z_MIN, block: int | None = None, kappa: float | None = None) -> FrameTest:
     """Compare NEW with REF ([H, W, C] linear, C <= 4, the same shape): identical, equal
-    within noise or different, with the regions that differ."""
+    within noise or different, with the regions that differ. `kappa`: the noise's
+    correlation factor when known (FILTER_KAPPA by the frames' filter), else measured."""
     if new.shape != ref.shape:
         raise ValueError(f"shapes differ: {new.shape} and {ref.shape}")
     h, w, c = new.shape
@@ -160,7 +169,7 @@ def test_frame(new: np.ndarray, ref: np.ndarray, *, alpha: float = ALPHA, z_min:
     noisy = _block_sums((d != 0).astype(np.float64), b) > 0.75 * b * b
     noisy[h // b :] = False
     noisy[:, w // b :] = False
-    kappa = _kappa(sd, sv, noisy)
+    kappa = float(kappa) if kappa is not None else _kappa(sd, sv, noisy)
 
     scales: list[tuple[int, np.ndarray]] = []
     padded = np.pad(sv, ((1, 1), (1, 1), (0, 0)), mode="edge")
