@@ -143,12 +143,12 @@ _SCRIPT = """
   done();
   function show(swap, ref) {
     swap.classList.toggle('showing-ref', ref);
-    swap.querySelector('.which').textContent = ref ? 'reference' : 'new';
+    swap.parentNode.querySelector('.which').textContent = ref ? 'reference' : 'new';
     swap.dataset.showing = ref ? 'ref' : 'new';
   }
   document.querySelectorAll('.swap').forEach(function (swap) {
     swap.addEventListener('click', function () { show(swap, !swap.classList.contains('showing-ref')); });
-    swap.addEventListener('mouseenter', function () { swap.querySelector('.which').textContent = 'reference'; });
+    swap.addEventListener('mouseenter', function () { swap.parentNode.querySelector('.which').textContent = 'reference'; });
     swap.addEventListener('mouseleave', function () { show(swap, swap.classList.contains('showing-ref')); });
   });
   var args = {};
