@@ -124,12 +124,14 @@ def false_alarms(scenes: list[Path], pairs: int) -> list[dict[str, Any]]:
         render_s = time.perf_counter() - t0
         alarms, tested, zs, thr = 0, 0, [], 0.0
         for i, imgs in images.items():
-            for a, b in zip(imgs[0::2], imgs[1::2]):
+            for k, (a, b) in enumerate(zip(imgs[0::2], imgs[1::2])):
                 t = test_frame(a, b, kappa=_kappa_of(renderer))
                 tested += 1
-                alarms += t.verdict == "different"
                 zs.append(t.max_z)
                 thr = t.threshold
+                if t.verdict == "different":
+                    alarms += 1
+                    print(f"    false alarm: frame {i}, seeds {1000 + 2 * k} and {1001 + 2 * k}: {t.regions[0].describe()}", flush=True)
         rows.append({"scene": path.stem, "tested": tested, "false_alarms": alarms, "max_z": float(max(zs)), "median_max_z": float(np.median(zs)),
                      "threshold": thr, "render_s": render_s})
         print(f"  {path.stem:18s} {tested:5d} pairs  {alarms:3d} false alarms  largest |z| {max(zs):5.2f} (median {np.median(zs):4.2f}) threshold {thr:4.2f}  ({render_s:.0f} s rendering)", flush=True)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import json
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,7 @@ import numpy as np
 
 from ..errors import FrameIOError, ReferenceMismatchError
 from ..files import write_atomic
-from ..frame_output import read_frame, write_exr
+from ..frame_output import META_PREFIX, read_frame, write_exr
 from ..telecine.sequence import discover
 from .frames import differences, frame_facts
 
@@ -78,9 +79,12 @@ def bless(new_dir: str | Path, golden_dir: str | Path, prefix: str | None = None
         if diff:
             raise ReferenceMismatchError(f"{f.path}: frame {number} was not made like frame {seq.numbers[0]} ({diff[0].replace('(reference)', f'(frame {seq.numbers[0]})')}); a golden set is one shot")
     entries = []
+    scene = _scene_reference(first["scene"], Path(new_dir), golden)
     for number, path, f in zip(seq.numbers, seq.paths, facts):
         frame = read_frame(path)
         header = {k: v for k, v in frame.header.items() if k not in _STRUCTURAL}
+        if scene is not None:
+            header[f"{META_PREFIX}scene"] = scene  # as seen from the golden folder (no checkout path kept)
         channels: dict[str, np.ndarray] = {"RGBA": frame.rgba.astype(np.float16)}
         noisy = frame.aovs.get(NOISY_LAYER)
         if noisy is not None and noisy.ndim == 3:
@@ -95,7 +99,7 @@ def bless(new_dir: str | Path, golden_dir: str | Path, prefix: str | None = None
         "motion_version": motion_version(),
         "blessed": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
         "prefix": seq.prefix,
-        "scene": first["scene"],
+        "scene": scene,
         "scene_digest": first["scene_digest"],
         "renderer": first["renderer"],
         "resolution": first["resolution"],
@@ -110,6 +114,21 @@ def bless(new_dir: str | Path, golden_dir: str | Path, prefix: str | None = None
             if entry.get("file") not in kept and stale.parent == golden and stale.is_file():
                 stale.unlink()
     return Manifest(golden, data)
+
+
+def _scene_reference(scene: str | None, frames_dir: Path, golden: Path) -> str | None:
+    """The scene file named in a frame's header (relative to the frame's folder, or
+    absolute), as seen from the golden folder: relative when the two share a folder below
+    the root (a repository's golden frames name its scene without the checkout's path)."""
+    if not scene:
+        return scene
+    path = Path(scene) if Path(scene).is_absolute() else (frames_dir / scene)
+    path, base = path.resolve(), golden.resolve()
+    try:
+        common = Path(os.path.commonpath([path, base]))
+    except ValueError:
+        return str(path)
+    return str(path) if common == Path(common.anchor) else os.path.relpath(path, base).replace(os.sep, "/")
 
 
 def read_manifest(golden_dir: str | Path, *, verify: bool = True) -> Manifest | None:

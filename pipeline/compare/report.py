@@ -112,7 +112,7 @@ def _frame_images(f: FrameOutcome) -> dict[str, bytes]:
 
 _STYLE = """
 body { font: 14px/1.4 system-ui, sans-serif; margin: 1.5em; background: #15161a; color: #ddd; }
-h1 { font-size: 1.3em; } h2 { font-size: 1.1em; margin-top: 2em; }
+a { color: #8cf; } h1 { font-size: 1.3em; } h2 { font-size: 1.1em; margin-top: 2em; }
 table { border-collapse: collapse; } td, th { padding: 2px 8px; border-bottom: 1px solid #333; text-align: left; }
 .identical, .equal { color: #7c7; } .different, .missing { color: #f66; font-weight: bold; }
 .maps { display: flex; flex-wrap: wrap; gap: 12px; }
