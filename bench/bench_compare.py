@@ -8,7 +8,7 @@
 1. False alarms: unchanged scenes (the examples at their ci-smoke settings, 64x36, 4 spp,
    plus a still test set) rendered with many seeds in this process (the real renderer, one
    FrameRenderer per scene, `render.seed` changed between renders); disjoint pairs of seeds
-   are tested (stats.test_frame) and every pair that is called different is a false alarm.
+   are tested (stats.compare_frame) and every pair that is called different is a false alarm.
 2. Smallest change caught: a still set at 64x36 (a 5% patch of its own material, a ball, a
    sun), changed by a 2% albedo change on the patch, the ball moved by one pixel, the sun
    5% dimmer; the fraction of seed pairs in which each is caught, at several spp.
@@ -108,7 +108,7 @@ def _kappa_of(renderer: Any) -> float:
 
 def false_alarms(scenes: list[Path], pairs: int) -> list[dict[str, Any]]:
     """Per scene: frames tested, false alarms, the largest |z| seen and the threshold."""
-    from motion.pipeline.compare.stats import test_frame
+    from motion.pipeline.compare.stats import compare_frame
 
     rows = []
     smoke = _ci_smoke()
@@ -125,7 +125,7 @@ def false_alarms(scenes: list[Path], pairs: int) -> list[dict[str, Any]]:
         alarms, tested, zs, thr = 0, 0, [], 0.0
         for i, imgs in images.items():
             for k, (a, b) in enumerate(zip(imgs[0::2], imgs[1::2])):
-                t = test_frame(a, b, kappa=_kappa_of(renderer))
+                t = compare_frame(a, b, kappa=_kappa_of(renderer))
                 tested += 1
                 zs.append(t.max_z)
                 thr = t.threshold
@@ -147,7 +147,7 @@ def _still(tmp: Path, name: str, **changes: Any) -> Path:
 def sensitivity(spps: list[int], pairs: int) -> list[dict[str, Any]]:
     """Per change and spp: the fraction of seed pairs in which the change is caught, and
     whether the region that differs most overlaps the changed object's box."""
-    from motion.pipeline.compare.stats import test_frame
+    from motion.pipeline.compare.stats import compare_frame
 
     px = _pixel_world(40.0, 4.6, STILL_BASE["w"])
     changes = {"none": {}, "albedo 2% on 5% region": {"patch": 0.5 * 1.02}, "ball moved 1 px": {"ball_x": STILL_BASE["ball_x"] + px}, "sun 5% dimmer": {"sun": 3.0 * 0.95}}
@@ -160,7 +160,7 @@ def sensitivity(spps: list[int], pairs: int) -> list[dict[str, Any]]:
             for label, change in changes.items():
                 renderer, baked = _renderer(_still(Path(tmp), "changed", spp=spp, **change))
                 news = [img for _, _, img in seeded(renderer, baked, range(5000, 5000 + pairs))]
-                caught = sum(test_frame(n, r, kappa=_kappa_of(renderer)).verdict == "different" for n, r in zip(news, refs))
+                caught = sum(compare_frame(n, r, kappa=_kappa_of(renderer)).verdict == "different" for n, r in zip(news, refs))
                 rows.append({"change": label, "spp": spp, "caught": caught, "pairs": pairs})
                 print(f"  {spp:5d} spp  {label:26s} caught in {caught:4d} of {pairs} seed pairs", flush=True)
     return rows

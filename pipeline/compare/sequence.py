@@ -2,7 +2,7 @@
 
 Frames pair by number. Each pair is read (frame_output.read_frame), checked for being made
 alike (frames.differences against the golden manifest, or the reference frame's own header
-when REF is a plain folder), then tested (stats.test_frame) on the noisy beauty when both
+when REF is a plain folder), then tested (stats.compare_frame) on the noisy beauty when both
 frames keep one (a denoiser's output has no per-pixel noise left to measure), else on the
 beauty. A frame that differs gets a perceptual score: NVIDIA's FLIP (`flip-evaluator`,
 HDR-FLIP on the linear beauty), its mean and the FLIP map for the report.
@@ -26,7 +26,7 @@ from ..frame_output import read_frame
 from ..telecine.sequence import Sequence, discover
 from .frames import FrameFacts, differences, facts_from_header
 from .golden import NOISY_LAYER, Manifest, read_manifest
-from .stats import ALPHA, FILTER_KAPPA, Region, test_frame
+from .stats import ALPHA, FILTER_KAPPA, Region, compare_frame
 
 Outcome = Literal["identical", "equal", "different", "missing"]
 FlipMode = Literal["different", "all", "off"]
@@ -155,7 +155,7 @@ def compare_pair(number: int, new_path: str, ref_path: str, *, flip: FlipMode = 
     use_noisy = all(isinstance(f.aovs.get(NOISY_LAYER), np.ndarray) and f.aovs[NOISY_LAYER].shape[:2] == f.rgba.shape[:2] for f in (new, ref)) and new.aovs[NOISY_LAYER].shape == ref.aovs[NOISY_LAYER].shape
     new_facts = facts_from_header(Path(new_path), new.header).to_dict()
     ref_facts = facts_from_header(Path(ref_path), ref.header).to_dict()
-    test = test_frame(_pixels(new, use_noisy), _pixels(ref, use_noisy), alpha=alpha, kappa=filter_kappa(new_facts, ref_facts))
+    test = compare_frame(_pixels(new, use_noisy), _pixels(ref, use_noisy), alpha=alpha, kappa=filter_kappa(new_facts, ref_facts))
     outcome = FrameOutcome(
         frame=number, new=new_path, ref=ref_path, outcome=test.verdict, layer=NOISY_LAYER if use_noisy else "beauty",
         max_z=test.max_z, threshold=test.threshold, kappa=test.kappa, rms=test.rms, max_abs=test.max_abs, regions=test.regions,

@@ -180,7 +180,7 @@ def threshold(tests: int, alpha: float = ALPHA, z_min: float = Z_MIN) -> float:
     return max(z_min, float(-ndtri(alpha / (2.0 * max(tests, 1)))))
 
 
-def test_frame(new: np.ndarray, ref: np.ndarray, *, alpha: float = ALPHA, z_min: float = Z_MIN, block: int | None = None, kappa: float | None = None) -> FrameTest:
+def compare_frame(new: np.ndarray, ref: np.ndarray, *, alpha: float = ALPHA, z_min: float = Z_MIN, block: int | None = None, kappa: float | None = None) -> FrameTest:
     """Compare NEW with REF ([H, W, C] linear, C <= 4, the same shape): identical, equal
     within noise or different, with the regions that differ. `kappa`: the noise's
     correlation factor when known (FILTER_KAPPA by the frames' filter), else measured."""
