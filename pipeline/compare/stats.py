@@ -234,8 +234,9 @@ def compare_frame(new: np.ndarray, ref: np.ndarray, *, alpha: float = ALPHA, z_m
     z_crit = threshold(tests, alpha, z_min)
     max_z = max(float(np.nanmax(np.abs(z))) for _, z in scales)
 
-    # blocks marked by the smallest windows that differ; a larger window marks its blocks
-    # only where no smaller one did (a local change also tips the whole-frame sum)
+    # blocks marked by the smallest windows that differ; a larger window marks the blocks no
+    # smaller one did when those still differ on their own (a local change also tips the
+    # whole-frame sum, and must not make the whole frame its region)
     marked = np.zeros((gy, gx), bool)
     peak = np.zeros((gy, gx))
     peak_ch = np.zeros((gy, gx), int)
@@ -245,12 +246,21 @@ def compare_frame(new: np.ndarray, ref: np.ndarray, *, alpha: float = ALPHA, z_m
             continue
         for y, x in zip(*np.nonzero(hit)):
             ys, xs = (slice(0, gy), slice(0, gx)) if k == 0 else (slice(y, y + k), slice(x, x + k))
-            if marked[ys, xs].any():
+            free = ~marked[ys, xs]
+            if not free.any():
                 continue
-            marked[ys, xs] = True
-            ch = int(np.abs(z[y, x]).argmax())
-            peak[ys, xs] = z[y, x, ch]
-            peak_ch[ys, xs] = ch
+            zw = z[y, x]
+            if not free.all():
+                # what smaller windows marked is theirs: does the rest of this one still differ?
+                zw = _as_z(sd[ys, xs][free].sum(axis=0) / np.sqrt(kappa * sv[ys, xs][free].sum(axis=0)), sn[ys, xs][free].sum(axis=0))
+                if not np.abs(zw).max() > z_crit:
+                    continue
+            ch = int(np.abs(zw).argmax())
+            sub = np.zeros((gy, gx), bool)
+            sub[ys, xs] = free
+            marked |= sub
+            peak[sub] = zw[ch]
+            peak_ch[sub] = ch
     regions = _regions(marked, peak, peak_ch, sd, sr, b, h, w, names)
     return FrameTest("different" if regions else "equal", max_z, z_crit, regions, kappa, rms, max_abs, b, np.abs(scales[0][1]).max(axis=2))
 
