@@ -125,7 +125,8 @@ class Comparison:
         if self.failed:
             w = max(self.failed, key=lambda f: (f.outcome == "different", f.max_z))
             worst = f"; worst {w.message()}"
-        return f"{head}: {len(self.frames)} frames of {self.new_dir} against {self.ref_dir}: {', '.join(parts)}{worst} ({self.seconds:.2f} s)"
+        n = len(self.frames)
+        return f"{head}: {n} frame{'' if n == 1 else 's'} of {self.new_dir} against {self.ref_dir}: {', '.join(parts)}{worst} ({self.seconds:.2f} s)"
 
     def variants(self) -> dict[str, list[int]]:
         """Which variant made which new frames (a mixed CPU/GPU farm, checked)."""
