@@ -118,3 +118,25 @@ def test_html_report_in_headless_chromium(compared: tuple[Path, object]) -> None
     assert 'class="pane swap showing-ref" data-showing="ref"' in shown and 'class="which">reference<' in shown
     plain = dom("#frame=2")
     assert 'class="pane swap" data-showing="new"' in plain and 'class="which">new<' in plain
+
+
+def test_denoised_frames_are_tested_on_their_noisy_layer(tmp_path: Path) -> None:
+    """A denoised frame keeps its noisy beauty as the `noisy` layer: that is what the test
+    reads (the denoised beauties here are the same picture; their noisy layers differ by
+    noise in one pair and by a brighter patch in the other)."""
+    from motion.pipeline.compare import compare_sequences
+
+    rng = np.random.default_rng(3)
+    pic = _picture()
+    for side, frame, patch in (("ref", 0, False), ("ref", 1, False), ("new", 0, False), ("new", 1, True)):
+        noisy = pic.copy()
+        if patch:
+            x0, y0, x1, y1 = PATCH
+            noisy[y0:y1, x0:x1, 1] *= 1.3
+        noisy = noisy * (1.0 + 0.1 * rng.standard_normal(pic.shape))
+        noisy[..., 3] = 1.0
+        meta = {"frame": frame, "variant": "llvm_ad_rgb", "seed": frame, "spp": 16, "scene_hash": "abc", "renderer": "motion-render-1",
+                "render_settings": json.dumps({"spp": 16, "filter": "box", "denoise": "oidn"})}
+        write_frame(tmp_path / side / f"shot.{frame:04d}.exr", pic, meta, aovs={"noisy": noisy, "albedo": pic[..., :3]}, pixel_type="half")
+    result = compare_sequences(tmp_path / "new", tmp_path / "ref", workers=1)
+    assert [(f.layer, f.outcome) for f in result.frames] == [("noisy", "equal"), ("noisy", "different")]

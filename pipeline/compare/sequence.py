@@ -1,6 +1,6 @@
 """`motion compare NEW REF`: two EXR sequences, frame by frame (docs/compare.md).
 
-Frames pair by number. Each pair is read (frame_output.read_frame), checked for being made
+Frames pair by number. Each pair is read (frames.read_pixels), checked for being made
 alike (frames.differences against the golden manifest, or the reference frame's own header
 when REF is a plain folder), then tested (stats.compare_frame) on the noisy beauty when both
 frames keep one (a denoiser's output has no per-pixel noise left to measure), else on the
@@ -22,9 +22,8 @@ from typing import Any, Literal
 import numpy as np
 
 from ..errors import FrameIOError, ReferenceMismatchError
-from ..frame_output import read_frame
 from ..telecine.sequence import Sequence, discover
-from .frames import FrameFacts, differences, facts_from_header
+from .frames import FrameFacts, differences, facts_from_header, read_pixels
 from .golden import NOISY_LAYER, Manifest, read_manifest
 from .stats import ALPHA, FILTER_KAPPA, Region, compare_frame
 
@@ -142,21 +141,17 @@ class Comparison:
                 "frames": [f.to_dict() for f in self.frames]}
 
 
-def _pixels(frame: Any, use_noisy: bool) -> np.ndarray:
-    return frame.aovs[NOISY_LAYER] if use_noisy else frame.rgba
-
-
 def compare_pair(number: int, new_path: str, ref_path: str, *, flip: FlipMode = "different", alpha: float = ALPHA, keep_maps: bool = False) -> FrameOutcome:
     """Read and test one pair of frames (what each pool process runs)."""
     t0 = time.perf_counter()
-    new, ref = read_frame(new_path), read_frame(ref_path)
-    if new.rgba.shape != ref.rgba.shape:
-        h, w = ref.rgba.shape[:2]
-        raise ReferenceMismatchError(f"{new_path}: frame {number} is {new.rgba.shape[1]}x{new.rgba.shape[0]}, its reference {ref_path} is {w}x{h}: not comparable")
-    use_noisy = all(isinstance(f.aovs.get(NOISY_LAYER), np.ndarray) and f.aovs[NOISY_LAYER].shape[:2] == f.rgba.shape[:2] for f in (new, ref)) and new.aovs[NOISY_LAYER].shape == ref.aovs[NOISY_LAYER].shape
-    new_facts = facts_from_header(Path(new_path), new.header).to_dict()
-    ref_facts = facts_from_header(Path(ref_path), ref.header).to_dict()
-    test = compare_frame(_pixels(new, use_noisy), _pixels(ref, use_noisy), alpha=alpha, kappa=filter_kappa(new_facts, ref_facts))
+    (new_header, new_rgba, new_noisy), (ref_header, ref_rgba, ref_noisy) = read_pixels(new_path, NOISY_LAYER), read_pixels(ref_path, NOISY_LAYER)
+    if new_rgba.shape != ref_rgba.shape:
+        h, w = ref_rgba.shape[:2]
+        raise ReferenceMismatchError(f"{new_path}: frame {number} is {new_rgba.shape[1]}x{new_rgba.shape[0]}, its reference {ref_path} is {w}x{h}: not comparable")
+    use_noisy = new_noisy is not None and ref_noisy is not None and new_noisy.shape == ref_noisy.shape
+    new_facts = facts_from_header(Path(new_path), new_header).to_dict()
+    ref_facts = facts_from_header(Path(ref_path), ref_header).to_dict()
+    test = compare_frame(new_noisy if use_noisy else new_rgba, ref_noisy if use_noisy else ref_rgba, alpha=alpha, kappa=filter_kappa(new_facts, ref_facts))  # type: ignore[arg-type]
     outcome = FrameOutcome(
         frame=number, new=new_path, ref=ref_path, outcome=test.verdict, layer=NOISY_LAYER if use_noisy else "beauty",
         max_z=test.max_z, threshold=test.threshold, kappa=test.kappa, rms=test.rms, max_abs=test.max_abs, regions=test.regions,
@@ -164,7 +159,7 @@ def compare_pair(number: int, new_path: str, ref_path: str, *, flip: FlipMode = 
         block=test.block, z_blocks=test.z_blocks if keep_maps else None,
     )
     if flip == "all" or (flip == "different" and test.verdict == "different"):
-        outcome.flip, fmap = flip_score(new.rgba, ref.rgba)
+        outcome.flip, fmap = flip_score(new_rgba, ref_rgba)
         if keep_maps:
             outcome.flip_map = fmap
     outcome.seconds = time.perf_counter() - t0
