@@ -163,7 +163,9 @@ def _as_z(t: np.ndarray, dof: np.ndarray) -> np.ndarray:
 
     t = np.asarray(t, dtype=np.float64)
     dof = np.maximum(np.asarray(dof, dtype=np.float64) - 1.0, 1.0)
-    small = dof < 400.0  # beyond, t and z differ by under 1% where it matters
+    # beyond 400 degrees of freedom t and z differ by under 1% where it matters; under
+    # |t| = 2 the deviate is never near a threshold (and never above |t|): left as it is
+    small = (dof < 400.0) & (np.abs(t) > 2.0)
     out = t.copy()
     if np.any(small):
         ts = np.abs(t[small])
