@@ -205,3 +205,14 @@ def test_golden_set_bless_and_compare(shots: Path, reference: Path, tmp_path: Pa
     assert res.returncode == 1 and "frame 12: missing" in res.stdout, res.stdout + res.stderr
     res = motion("compare", tmp_path / "nowhere", golden)
     assert res.returncode == 2 and len(res.stderr.strip().splitlines()) == 1
+
+
+def test_render_with_compare_fails_on_a_regression(shots: Path, reference: Path) -> None:
+    _render(shots, "material")  # writes material.yaml (and its frames)
+    out = shots / "out-material-compare"
+    res = motion("render", shots / "material.yaml", "-o", out, "--frames", FRAMES, "--no-progress", "--workers", "1",
+                 "--compare", reference, "--allow-different-settings")
+    assert res.returncode == 1 and "Traceback" not in res.stderr, res.stderr
+    assert "FAIL: 3 frames" in res.stderr and res.stderr.strip().splitlines()[-1].startswith("error: 3 of 3 frames differ")
+    assert (out / "compare" / "index.html").is_file() and (out / "compare" / "junit.xml").is_file()
+    assert len(list(out.glob("regress.*.exr"))) == 3  # the frames are written whatever the verdict
