@@ -35,7 +35,10 @@ def report_paths(report_dir: Path | None, html_dir: Path | None, junit: Path | N
 @click.option("-v", "--verbose", is_flag=True, help="A line per frame.")
 def compare(new_dir: Path, ref_dir: Path, bless: bool, allow_different_settings: bool, frames_spec: str | None, prefix: str | None,
             report_dir: Path | None, html_dir: Path | None, junit: Path | None, json_path: Path | None, flip: str, workers: int | None, verbose: bool) -> None:
-    """Compare the EXR sequence in NEW_DIR with the references in REF_DIR, frame by frame."""
+    """Compare the EXR sequence in NEW_DIR with the references in REF_DIR, frame by frame:
+    identical, equal within noise, or different (where, how large, which channel).
+    Exit 0 when every frame is identical or equal, 1 when one differs or is missing,
+    2 for bad input or frames made from another scene or settings (docs/compare.md)."""
     if bless:
         from motion.pipeline.compare import bless as bless_frames
 
