@@ -36,6 +36,7 @@ COMMANDS: dict[str, str] = {
     "view": "export",
     "cache": "cache",
     "info": "info",
+    "compare": "compare",
 }
 
 

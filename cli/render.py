@@ -60,6 +60,8 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--json", "as_json", is_flag=True, help="Print the plan (--dry-run) or the run's summary as JSON on stdout.")
 @click.option("--fields", "fields", type=click.Choice(["60i", "50i"]), help="Render the video's fields directly (each at its own instant and shutter, only its rows) into OUT/fields/ and weave them into interlaced frames and a movie in OUT; --frames then counts interlaced frames.")
 @click.option("--field-order", type=click.Choice(["tff", "bff"]), default="tff", show_default=True, help="With --fields: which field of each frame is first in time.")
+@click.option("--compare", "compare_ref", type=click.Path(file_okay=False, path_type=Path), help="After the frames, compare them with the references in this folder (motion compare; reports in OUTPUT/compare/; exit 1 if one differs).")
+@click.option("--allow-different-settings", is_flag=True, help="With --compare: compare even when the scene or settings differ from the references'.")
 def render(
     scene: Path,
     output_dir: Path | None,
@@ -96,6 +98,8 @@ def render(
     as_json: bool,
     fields: str | None,
     field_order: str,
+    compare_ref: Path | None,
+    allow_different_settings: bool,
 ) -> None:
     """Render SCENE's frames to OpenEXR files."""
     from motion.pipeline.errors import IncompleteJobError
@@ -137,8 +141,8 @@ def render(
     if fields:
         from motion.pipeline.shot import run_field_render
 
-        if dry_run or as_json:
-            raise click.UsageError("--fields does not combine with --dry-run or --json")
+        if dry_run or as_json or compare_ref:
+            raise click.UsageError("--fields does not combine with --dry-run, --json or --compare")
 
         run_field_render(request, fields, field_order)
         return
@@ -152,6 +156,22 @@ def render(
         click.echo(json.dumps(result, indent=2) if as_json else plan_text(result))
     elif as_json:
         click.echo(json.dumps(summary(result) if "totals" in result else result, indent=2))
+    if compare_ref is not None and not dry_run:
+        _compare(result, compare_ref, allow_different_settings)
+
+
+def _compare(report: dict, ref_dir: Path, allow: bool) -> None:
+    """`--compare REF`: the frames just rendered against the references (exit 1 if one differs)."""
+    from motion.pipeline.errors import FramesDifferError
+    from motion.pipeline.shot.compare import compare_render
+
+    result, written = compare_render(report, ref_dir, allow_different_settings=allow)
+    for f in result.failed:
+        click.echo(f.message(), err=True)
+    click.echo(result.summary(), err=True)
+    click.echo(f"compare report: {written['html']}", err=True)
+    if result.failed:
+        raise FramesDifferError(f"{len(result.failed)} of {len(result.frames)} frames differ from the references in {ref_dir}")
 
 
 def summary(report: dict) -> dict:

@@ -82,6 +82,19 @@ class FrameIOError(MotionError):
     """An EXR frame is missing, truncated, unreadable or inconsistent with its sequence."""
 
 
+class ReferenceMismatchError(MotionError):
+    """`motion compare`: the new frames and the references were made from different
+    scene versions or settings (the line names the difference), or cannot be compared
+    pixel for pixel (resolution, frames); exit 2."""
+
+
+class FramesDifferError(MotionError):
+    """`motion compare`: some frames differ from their references beyond noise, or are
+    missing (the line names the worst); exit 1, as a test run that failed."""
+
+    exit_code = 1
+
+
 class InputFileError(MotionError):
     """An input file (scene, preset, baked motion, asset) is not a regular file within the
     size limit, or cannot be read at all. Callers usually re-raise it as their own error."""

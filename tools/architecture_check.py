@@ -28,7 +28,7 @@ STAGES: list[tuple[str, ...]] = [
     ("motion.pipeline.bake",),
     ("motion.pipeline.variant", "motion.pipeline.presets", "motion.pipeline.frame_output"),
     ("motion.pipeline.render",),
-    ("motion.pipeline.telecine",),
+    ("motion.pipeline.telecine", "motion.pipeline.compare"),  # compare reads frames, makes its report images through telecine's view
     ("motion.pipeline.farm",),
     ("motion.pipeline.shot",),
     ("motion.cli",),

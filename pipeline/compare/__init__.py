@@ -1,0 +1,13 @@
+"""The compare stage: new frames against references, noise-aware (docs/compare.md).
+
+`compare_sequences(new_dir, ref_dir)` tests each frame (stats.compare_frame: identical, equal
+within noise, or different, with the regions), `bless(new_dir, golden_dir)` makes a managed
+reference set, `write_reports` writes the HTML, JUnit and JSON reports.
+"""
+
+from .golden import Manifest, bless, read_manifest
+from .report import write_html, write_json, write_junit, write_reports
+from .sequence import Comparison, FrameOutcome, compare_sequences
+from .stats import FrameTest, Region, compare_frame
+
+__all__ = ["Comparison", "FrameOutcome", "FrameTest", "Manifest", "Region", "bless", "compare_sequences", "read_manifest", "compare_frame", "write_html", "write_json", "write_junit", "write_reports"]
