@@ -208,7 +208,7 @@ def test_golden_set_bless_and_compare(shots: Path, reference: Path, tmp_path: Pa
 
 
 def test_render_with_compare_fails_on_a_regression(shots: Path, reference: Path) -> None:
-    _render(shots, "material")  # writes material.yaml (and its frames)
+    _render(shots, "material", **REGRESSIONS["material"][0])  # writes material.yaml (and its frames)
     out = shots / "out-material-compare"
     res = motion("render", shots / "material.yaml", "-o", out, "--frames", FRAMES, "--no-progress", "--workers", "1",
                  "--compare", reference, "--allow-different-settings")
