@@ -112,7 +112,7 @@ def test_stale_frames_are_named_by_the_dry_run_and_the_run(tmp_path: Path) -> No
     edited = tmp_path / "farm-tiny.yaml"
     edited.write_text(yaml.safe_dump(doc))
     dry = motion("render", edited, "-o", out, "--frames", "2-3", *TINY, "--dry-run", "--json")
-    assert json.loads(dry.stdout)["replace"] == [{"frames": "2,3", "reason": "were made from another version of the scene or its settings"}]
+    assert json.loads(dry.stdout)["replace"] == [{"frames": "2,3", "reason": "were made from another version of the scene (material ball changed)"}]
 
 
 def test_a_texture_edited_under_the_same_name_makes_its_frames_stale_and_is_named(tmp_path: Path) -> None:
@@ -146,7 +146,7 @@ def test_a_texture_edited_under_the_same_name_makes_its_frames_stale_and_is_name
     (shot / "glow.ppm").write_bytes(b"P6 1 1 255\n" + bytes([9, 9, 9]))
     (shot / "s.yaml").write_text((shot / "s.yaml").read_text().replace("material: m}", "material: m, emission: {radiance: {file: glow.ppm}}}"))
     dry = motion("render", shot / "s.yaml", "-o", out, *TINY, "--dry-run", "--json")
-    assert json.loads(dry.stdout)["replace"] == [{"frames": "0-3", "reason": "were made from another version of the scene or its settings"}], dry.stdout
+    assert json.loads(dry.stdout)["replace"] == [{"frames": "0-3", "reason": "were made from another version of the scene (object s changed)"}], dry.stdout
 
 
 def test_the_dry_run_shows_resolved_settings_with_their_source_and_an_estimate(tmp_path: Path) -> None:

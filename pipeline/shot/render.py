@@ -31,13 +31,13 @@ from ..farm.scheduler import Scheduler
 from ..farm.task import TaskContext
 from ..limits import check_env_sizes
 from ..presets import Preset, load_preset, overrides_from, spread
-from ..render.job import RenderJob, expected_meta, file_digests, frame_path, render_settings, scene_hashes
+from ..render.job import RenderJob, file_digests, frame_key, frame_path, render_settings, scene_hashes
 from ..scene.loader import LoadedScene, load_scene
 from .deliver import DeliverPlan, check_deliver, deliver_and_record, deliver_plan
 from .estimate import estimate, samples_of
 from .estimate import record as record_cost
 from .dry_run import check_only, plan, resolved_settings
-from .stale import FrameStates, frame_states
+from .stale import CurrentKeys, FrameStates, frame_states
 from .request import RenderRequest
 
 
@@ -120,6 +120,10 @@ def make_job(req: RenderRequest, loaded: LoadedScene, overrides: dict[str, Any],
         from ..farm.local import threads_per_worker
 
         threads = req.threads or threads_per_worker(workers)
+    from ..bake import Order
+    from ..render.look import look_hash, look_parts
+
+    parts = look_parts(loaded)
     job = RenderJob(
         scene_path=str(loaded.path),
         overrides=overrides,
@@ -131,6 +135,9 @@ def make_job(req: RenderRequest, loaded: LoadedScene, overrides: dict[str, Any],
         variant=loaded.scene.render.variant,
         fields=req.fields,
         files=json.dumps(file_digests(loaded), sort_keys=True),
+        look_hash=look_hash(parts),
+        look_parts=json.dumps(parts, sort_keys=True),
+        order=Order.of(loaded.scene),
     )
     return job, workers, threads
 
@@ -198,14 +205,18 @@ def motion_inputs(req: RenderRequest, loaded: LoadedScene, sel: Selection) -> Se
     return inputs
 
 
-def complete_frames(req: RenderRequest, job: RenderJob, job_scene: Any, out_dir: Path, frames: list[int], paths: dict[int, str], by_frame: Mapping[int, BakedFrame]) -> FrameStates:
+def complete_frames(req: RenderRequest, job: RenderJob, loaded: LoadedScene, out_dir: Path, frames: list[int], paths: dict[int, str], by_frame: Mapping[int, BakedFrame]) -> FrameStates:
     """The frames on disk: those --resume keeps (complete and made from this scene, motion
     and settings) and the stale ones this run replaces, each with the reason (shot/stale.py).
     Existing frames with neither --resume nor --overwrite are a UsageError."""
     existing = [f for f in frames if os.path.exists(paths[f])]
     if not req.resume and not req.overwrite and existing:
         raise UsageError(f"{out_dir}: frames {format_frames(existing)} exist; pass --resume to keep complete ones or --overwrite to re-render them")
-    states = frame_states(existing, paths, {f: expected_meta(job, by_frame[f]) for f in existing}, render_settings(job_scene), json.loads(job.files or "{}"))
+    from ..render.look import part_names
+
+    keys = {f: frame_key(job, by_frame[f]) for f in existing}
+    now = CurrentKeys(render_settings(loaded.scene), json.loads(job.files or "{}"), json.loads(job.look_parts or "{}"), {f: k[1] for f, k in keys.items()}, part_names(loaded))
+    states = frame_states(existing, paths, {f: k[0] for f, k in keys.items()}, now)
     if req.overwrite:
         return FrameStates(complete=[], stale={f: "--overwrite" for f in existing})
     return states
@@ -335,7 +346,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     by_frame = by_number(inputs)  # each frame made from the bake's arrays when a task needs it
     paths = {f: str(frame_path(job, loaded, f)) for f in frames}
 
-    states = complete_frames(req, job, loaded.scene, out_dir, frames, paths, by_frame)
+    states = complete_frames(req, job, loaded, out_dir, frames, paths, by_frame)
     skipped = states.complete
     todo = [f for f in frames if f not in set(skipped)]
     if req.check:

@@ -1,0 +1,96 @@
+"""Reruns re-render only what changed (issue 38): a frame is stale when what it shows can
+have changed (its own baked motion, the look: scene content, render settings and the files
+it reads), never for a name, a comment or a key outside its shutter (docs/reruns.md)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from farm_util import TINY, motion, report
+
+SHOT = {
+    "name": "keys",
+    "timeline": {"fps": 24, "first": 0, "last": 7},
+    "camera": {"position": [0, 1.5, 4], "look_at": [0, 0.3, 0], "fov": 40, "shutter": {"angle": 180}},
+    "lights": [{"type": "constant", "radiance": 0.5}, {"type": "point", "name": "key", "position": [1, 3, 2], "intensity": 30}],
+    "materials": [{"name": "red", "type": "diffuse", "color": [0.7, 0.2, 0.1]}, {"name": "grey", "type": "diffuse", "color": 0.5}],
+    "objects": [
+        {"name": "floor", "shape": "rectangle", "width": 6, "height": 6, "material": "grey", "transform": {"rotate": {"euler": [-90, 0, 0]}}},
+        {"name": "box", "shape": "cube", "size": [0.5, 0.5, 0.5], "material": "red", "transform": {"translate": [0, 0.25, 0]},
+         "motion": {"type": "keyframes", "channels": {"translate": {"keys": [
+             {"time": 0, "value": [-1, 0.25, 0]}, {"time": 4, "value": [0, 0.25, 0]}, {"time": 7, "value": [1, 0.25, 0]}]}}}},
+    ],
+    "render": {"resolution": [16, 12], "spp": 1, "max_depth": 2, "shutter_samples": 2},
+}
+
+
+def _write(path: Path, doc: dict) -> Path:
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def _replace(scene: Path, out: Path) -> list[dict]:
+    dry = motion("render", scene, "-o", out, *TINY, "--resume", "--dry-run", "--json")
+    assert dry.returncode == 0, dry.stderr
+    return json.loads(dry.stdout)["replace"]
+
+
+def _pixels(path: Path) -> np.ndarray:
+    from motion.pipeline.frame_output import read_frame
+
+    return read_frame(path).rgba
+
+
+def test_moving_one_key_re_renders_exactly_the_frames_whose_shutter_it_touches(tmp_path: Path) -> None:
+    """Keys at 0, 4, 7 (linear): moving the last one changes the motion in (4, 7], which
+    the shutters of frames 4-7 touch (frame 4's opens at 3.75, closes at 4.25). Those four
+    are re-rendered and named with whose motion changed; frames 0-3 are kept, and are bit
+    for bit what the edited scene renders from scratch. Before, all 8 were re-rendered
+    ("made from another version of the scene or its settings")."""
+    out = tmp_path / "out"
+    scene = _write(tmp_path / "keys.yaml", SHOT)
+    assert motion("render", scene, "-o", out, *TINY).returncode == 0
+    doc = json.loads(json.dumps(SHOT))
+    doc["objects"][1]["motion"]["channels"]["translate"]["keys"][2]["value"] = [1.5, 0.6, 0]
+    _write(scene, doc)
+    assert _replace(scene, out) == [{"frames": "4-7", "reason": "were made from other motion (motion of box changed)"}]
+    run = motion("render", scene, "-o", out, *TINY, "--resume")
+    assert run.returncode == 0, run.stderr
+    assert "frames 4-7 exist but were made from other motion (motion of box changed): they will be replaced" in run.stderr, run.stderr
+    totals = report(out)["totals"]
+    assert (totals["rendered"], totals["skipped"]) == (4, 4)
+    fresh = tmp_path / "fresh"
+    assert motion("render", scene, "-o", fresh, *TINY).returncode == 0
+    for f in range(8):
+        name = f"keys.{f:04d}.exr"
+        assert np.array_equal(_pixels(out / name), _pixels(fresh / name)), f
+
+
+def test_a_rename_or_a_comment_re_renders_nothing_and_a_material_everything(tmp_path: Path) -> None:
+    """Renaming an object, a material and a light (and their references), the scene's
+    output comment and a key moved outside every frame's shutter (the timeline ends at 7;
+    keys at 30 and 40, the one at 40 moved): nothing is stale. A material's colour: every frame, named.
+    Before, the rename re-rendered all 8 to bit-identical pixels."""
+    out = tmp_path / "out"
+    doc = json.loads(json.dumps(SHOT))
+    doc["objects"][1]["motion"]["channels"]["translate"]["keys"] += [{"time": 30, "value": [1, 0.25, 0]}, {"time": 40, "value": [2, 0.25, 0]}]
+    scene = _write(tmp_path / "keys.yaml", doc)
+    assert motion("render", scene, "-o", out, *TINY).returncode == 0
+    renamed = json.loads(json.dumps(doc))
+    renamed["objects"][1]["name"] = "crate"
+    renamed["materials"][0]["name"] = "rust"
+    renamed["objects"][1]["material"] = "rust"
+    renamed["lights"][1]["name"] = "fill"
+    renamed["output"] = {"comments": "take 2"}
+    renamed["objects"][1]["motion"]["channels"]["translate"]["keys"][4]["value"] = [3, 2, 1]
+    _write(scene, renamed)
+    assert _replace(scene, out) == []
+    run = motion("render", scene, "-o", out, *TINY, "--resume")
+    assert run.returncode == 0 and report(out)["totals"]["rendered"] == 0, run.stderr
+    renamed["materials"][1]["color"] = 0.3
+    _write(scene, renamed)
+    assert _replace(scene, out) == [{"frames": "0-7", "reason": "were made from another version of the scene (material grey changed)"}]
