@@ -94,3 +94,61 @@ def test_a_rename_or_a_comment_re_renders_nothing_and_a_material_everything(tmp_
     renamed["materials"][1]["color"] = 0.3
     _write(scene, renamed)
     assert _replace(scene, out) == [{"frames": "0-7", "reason": "were made from another version of the scene (material grey changed)"}]
+
+
+def test_a_second_scene_file_with_the_same_name_is_refused_its_folder(tmp_path: Path) -> None:
+    """Two scene files named `keys` share out/keys: the second is refused with one line
+    naming both (exit 2, nothing written; before, it replaced the first one's frames as
+    "made with other settings"); --overwrite takes the folder over; a scene file renamed
+    keeps its folder (the old name is gone: nothing competes for it)."""
+    for sub in ("a", "b"):
+        (tmp_path / sub).mkdir()
+    a = _write(tmp_path / "a" / "shot.yaml", SHOT)
+    doc = json.loads(json.dumps(SHOT))
+    doc["render"]["spp"] = 2
+    b = _write(tmp_path / "b" / "shot.yaml", doc)
+    out = tmp_path / "out" / "keys"
+    assert motion("render", a, "--frames", "0-1", *TINY, cwd=tmp_path).returncode == 0
+    made = {p.name: p.stat().st_mtime_ns for p in out.glob("*.exr")}
+    for extra in ([], ["--resume"], ["--dry-run"]):
+        refused = motion("render", b, "--frames", "0-1", *TINY, *extra, cwd=tmp_path)
+        assert refused.returncode == 2, refused.stderr
+        lines = refused.stderr.strip().splitlines()
+        assert len(lines) == 1 and str(a) in lines[0] and str(b) in lines[0], refused.stderr
+    assert {p.name: p.stat().st_mtime_ns for p in out.glob("*.exr")} == made
+    taken = motion("render", b, "--frames", "0-1", *TINY, "--overwrite", cwd=tmp_path)
+    assert taken.returncode == 0 and f"held the frames of {a}" in taken.stderr, taken.stderr
+    assert motion("render", a, "--frames", "0-1", *TINY, "--resume", cwd=tmp_path).returncode == 2
+    moved = b.rename(tmp_path / "b" / "shot-v2.yaml")
+    again = motion("render", moved, "--frames", "0-1", *TINY, "--resume", cwd=tmp_path)
+    assert again.returncode == 0 and report(out)["totals"]["skipped"] == 2, again.stderr
+    assert json.loads((out / ".motion-shot.json").read_text())["scene"] == "../../b/shot-v2.yaml"
+
+
+def test_keys_before_a_shot_at_1001_are_named_and_old_frames_are_foreign(tmp_path: Path) -> None:
+    """`first: 1001` with keys written as frames 0, 4, 7: validation warns naming them
+    (it said ok and the box stood still); the frames 0-7 of the earlier timeline stay in
+    the folder as foreign, named, out of the folder's record and of the deliverables
+    (before: `folder.complete` "0-7,1001-1008" and a contact sheet of 16)."""
+    scene = _write(tmp_path / "keys.yaml", SHOT)
+    out = tmp_path / "out"
+    assert motion("render", scene, "-o", out, *TINY).returncode == 0
+    doc = json.loads(json.dumps(SHOT))
+    doc["timeline"].update(first=1001, last=1008)
+    _write(scene, doc)
+    checked = motion("validate", scene)
+    assert checked.returncode == 0, checked.stderr
+    assert ("warning: objects[1].motion.channels.translate: keys at frames 0, 4, 7 lie outside the timeline (frames 1001-1008): all lie before it: "
+            "the shot holds the value of the last one (a key's time counts from frame 0, not from timeline.first)") in checked.stderr, checked.stderr
+    run = motion("render", scene, "-o", out, *TINY, "--deliver", "24p,contact")
+    assert run.returncode == 0, run.stderr
+    assert "frames 0-7 lie outside the timeline 1001-1008: foreign" in run.stderr, run.stderr
+    rep = report(out)
+    assert rep["folder"]["complete"] == "1001-1008" and rep["foreign"] == "0-7"
+    manifest = json.loads((out / "deliver" / "manifest.json").read_text())
+    assert {fmt: m["frames"] for fmt, m in manifest["formats"].items()} == {"24p": "1001-1008", "contact": "1001-1008"}
+    from motion.pipeline.scene import load_scene
+    from motion.pipeline.shot.stale import folder_frames
+
+    found = folder_frames(out, load_scene(scene))
+    assert sorted(found.timeline) == list(range(1001, 1009)) and sorted(found.foreign) == list(range(8))

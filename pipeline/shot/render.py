@@ -35,9 +35,10 @@ from ..render.job import RenderJob, file_digests, frame_key, frame_path, render_
 from ..scene.loader import LoadedScene, load_scene
 from .deliver import DeliverPlan, check_deliver, deliver_and_record, deliver_plan
 from .estimate import estimate, samples_of
+from .identity import check_owner, record_owner
 from .estimate import record as record_cost
 from .dry_run import check_only, plan, resolved_settings
-from .stale import CurrentKeys, FrameStates, frame_states
+from .stale import CurrentKeys, FrameStates, folder_frames, frame_states
 from .request import RenderRequest
 
 
@@ -327,6 +328,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         check_deliver(req, loaded, frames, out_dir, wanted.formats)  # every check that can fail, before the first task
     job, workers, threads = make_job(req, loaded, overrides, out_dir, frames)
     preflight(req, loaded, job, out_dir, frames)
+    taken_from = check_owner(out_dir, loaded.path, req.overwrite)  # another scene file's folder: refused, one line
     if req.scheduler and not req.check:
         from ..farm.address import probe_scheduler
 
@@ -349,8 +351,15 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     states = complete_frames(req, job, loaded, out_dir, frames, paths, by_frame)
     skipped = states.complete
     todo = [f for f in frames if f not in set(skipped)]
+    foreign = sorted(folder_frames(out_dir, loaded).foreign)
+    if foreign:
+        logging.getLogger("motion").warning(
+            f"motion: {out_dir}: frames {format_frames(foreign)} lie outside the timeline {loaded.scene.timeline.first}-{loaded.scene.timeline.last}: "
+            "foreign, left as they are and in no deliverable")
     if req.check:
         result = check_only(loaded.name, out_dir, frames, todo, paths, states.stale)
+        if foreign:
+            result["foreign"] = format_frames(foreign)
         if wanted:
             say = Progress(total=0, live=False).log
             say_outputs(wanted, frames, paths, say)
@@ -373,9 +382,14 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
                        Path(req.report or out_dir / default_name), states.stale, wanted, resolved_settings(req, loaded, preset), cost)
         if inline:
             planned["executor"]["kind"] = "inline"
+        if foreign:
+            planned["foreign"] = format_frames(foreign)
         return planned
 
     out_dir.mkdir(parents=True, exist_ok=True)
+    record_owner(out_dir, loaded.path)
+    if taken_from is not None:
+        logging.getLogger("motion").warning(f"motion: {out_dir} held the frames of {taken_from}; it is now {loaded.path}'s folder")
     run_id = new_run_id()
     ctx = TaskContext(run_id=run_id, paths=paths, resume=req.resume and not req.overwrite, stale_after_s=cfg.stale_after_s)
     clear_stale([paths[f] for f in skipped], cfg.stale_after_s)
@@ -413,7 +427,11 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     report["report"] = str(req.report or out_dir / default_name)
     if states.stale:
         report["replaced"] = [{"frame": f, "reason": why} for f, why in sorted(states.stale.items())]
-    merge_previous(report, Path(req.report or out_dir / default_name), lambda f: os.path.exists(frame_path(job, loaded, f)))
+    timeline = loaded.scene.timeline
+    # the folder's record holds the timeline's frames; others are foreign (shot/stale.py: folder_frames)
+    merge_previous(report, Path(req.report or out_dir / default_name), lambda f: timeline.first <= f <= timeline.last and os.path.exists(frame_path(job, loaded, f)))
+    if foreign:
+        report["foreign"] = format_frames(foreign)
     record_cost(loaded.name, job.settings_hash, samples_of(loaded.scene), report)
     report_path, report_fault = write_report_somewhere(report, req.report or out_dir / default_name, run_id)
     progress.log(summary_line(label, report["totals"], report_path))

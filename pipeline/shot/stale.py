@@ -13,7 +13,9 @@ nothing is replaced silently.
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Mapping
 
 from ..errors import FrameIOError
@@ -157,3 +159,36 @@ def frame_states(existing: list[int], paths: Mapping[int, str], expect: Mapping[
         else:
             states.stale[f] = why
     return states
+
+
+@dataclass(frozen=True)
+class FolderFrames:
+    """The frame files of a scene in its output folder (by the scene's own file naming):
+    those of its timeline, and the foreign ones outside it (a render from before the
+    timeline moved, `first: 1001` after keys written at 0-23) that a run leaves alone and
+    no deliverable takes."""
+
+    timeline: dict[int, Path] = field(default_factory=dict)
+    foreign: dict[int, Path] = field(default_factory=dict)
+
+
+def folder_frames(out_dir: Path, loaded: Any) -> FolderFrames:
+    """The frame files named as `loaded` names its frames in `out_dir`, split into those
+    of its timeline (first..last) and the foreign ones. A name whose frame number sits in
+    a folder part of `output.filename` is not looked for (nothing is found)."""
+    scene = loaded.scene
+    pattern = scene.output.filename.replace("{name}", loaded.name)
+    folder, name = (out_dir / pattern).parent, Path(pattern).name
+    run = re.search(r"#+", name)
+    if run is None or not folder.is_dir():
+        return FolderFrames()
+    number = re.compile(re.escape(name[: run.start()]) + r"(-?\d+)" + re.escape(name[run.end():]) + r"\Z")
+    out = FolderFrames()
+    first, last = scene.timeline.first, scene.timeline.last
+    for path in folder.iterdir():
+        m = number.match(path.name)
+        if m is None or not path.is_file():
+            continue
+        frame = int(m.group(1))
+        (out.timeline if first <= frame <= last else out.foreign)[frame] = path
+    return out
