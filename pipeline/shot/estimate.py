@@ -11,12 +11,22 @@ the line through them; at one from that run shifted by this machine's cost per s
 machine's cost per sample; a machine that has rendered nothing from built-in figures
 (`basis` says which). bench/bench_estimate.py measures the estimate against the real time
 on the examples.
+
+The cold costs are estimated apart (issue 38: a first run on a new machine took 99.8 s
+against 10.4 s estimated). A worker's first frame compiles the renderer's kernels unless
+drjit's kernel cache holds them (minutes on 2 cores), and converts the scene's assets
+unless the asset cache holds them. A run records whether its cold frames compiled and
+how many kernel files the cache held after it; a job whose scene has not run here, or
+whose cache has lost files since (cleared, a new machine, a fresh CI runner), is estimated
+to compile: from this machine's runs that compiled, else a built-in figure. The first ETA
+(before frames are measured) spreads these cold costs over the frames (`eta_frame_s`).
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import statistics
 from pathlib import Path
 from typing import Any
@@ -32,7 +42,8 @@ MAX_RUNS = 8  # observations kept per scene (one per settings)
 # frames (921,600 samples, denoised) about 0.15 s.
 DEFAULT_FRAME_OVERHEAD_S = 0.012
 DEFAULT_S_PER_SAMPLE = 1.5e-7
-DEFAULT_COLD_EXTRA_S = 0.8
+DEFAULT_COLD_EXTRA_S = 0.8  # a cold first frame's extra cost with its kernels in the cache
+DEFAULT_COMPILE_EXTRA_S = 30.0  # ... and compiling them (no kernel cache: a new machine), measured below
 DEFAULT_STARTUP_S = 0.8
 BIG_FRAME = 100_000  # samples above which a frame's cost says something about the machine's rate
 
@@ -73,9 +84,11 @@ def record(scene_name: str, settings_hash: str, samples: int, report: dict[str, 
     workers = max(1, len(report.get("workers") or []) or 1)
     farm_s = float(report.get("totals", {}).get("farm_s", 0.0))
     startup = max(0.0, farm_s - sum(cost(r) for r in rows) / workers)
+    compiled = any(int(r.get("kernels_compiled", 0) or 0) > 0 for r in rows if r.get("cold"))
     data = _read() or {"version": 2, "scenes": {}}
     runs = [r for r in data["scenes"].pop(scene_name, []) if isinstance(r, dict) and r.get("settings_hash") != settings_hash]
-    runs.append({"settings_hash": settings_hash, "samples": samples, "warm_s": warm_s, "cold_extra_s": cold_extra, "startup_s": startup})
+    runs.append({"settings_hash": settings_hash, "samples": samples, "warm_s": warm_s, "cold_extra_s": cold_extra, "startup_s": startup,
+                 "compiled": compiled, "kernel_files": kernel_files()})
     data["scenes"][scene_name] = runs[-MAX_RUNS:]
     while len(data["scenes"]) > MAX_SCENES:
         data["scenes"].pop(next(iter(data["scenes"])))
@@ -109,27 +122,68 @@ def warm_frame(runs: list[dict[str, Any]], settings_hash: str, samples: int, rat
     return max(DEFAULT_FRAME_OVERHEAD_S, w0 + rate * (samples - s0)), "this scene's last run, rescaled by this machine's cost per sample"
 
 
+def kernel_files() -> int:
+    """Files in drjit's kernel cache (0 when it is missing or unreadable)."""
+    from ..cache import kernels_dir
+
+    try:
+        return sum(1 for e in os.scandir(kernels_dir()) if e.is_file())
+    except OSError:
+        return 0
+
+
+def will_compile(runs: list[dict[str, Any]], files_now: int) -> bool:
+    """Whether this job's workers compile the kernels: the scene has not run on this
+    machine, or the kernel cache holds fewer files than after its last run (cleared, or
+    another machine's history on a fresh one)."""
+    if not runs:
+        return True
+    return files_now < int(runs[-1].get("kernel_files", 0) or 0) or files_now == 0
+
+
+def cold_extra_of(runs: list[dict[str, Any]], everything: list[dict[str, Any]], compiles: bool) -> tuple[float, str]:
+    """A worker's cold first frame's extra cost, and what it comes from: when it compiles,
+    from this machine's runs that compiled (else the built-in figure); when it does not,
+    from this scene's last run unless that one compiled, else from this machine's runs
+    that did not."""
+    def fig(r: dict[str, Any]) -> float:
+        return float(r.get("cold_extra_s", 0.0) or 0.0)
+
+    if compiles:
+        seen = [fig(r) for r in everything if r.get("compiled")]
+        if seen:
+            return statistics.median(seen), f"kernels compiled on first use, as in {len(seen)} runs here"
+        return DEFAULT_COMPILE_EXTRA_S, "kernels compiled on first use (built-in figure)"
+    if runs and not runs[-1].get("compiled"):
+        return fig(runs[-1]), "kernels from the cache"
+    cached = [fig(r) for r in everything if not r.get("compiled")]
+    return (statistics.median(cached) if cached else DEFAULT_COLD_EXTRA_S), "kernels from the cache"
+
+
 def estimate(scene_name: str, settings_hash: str, samples: int, frames: int, workers: int, bake_s: float = 0.0) -> dict[str, Any]:
     """The job's expected wall time: bake, the farm's start-up, each worker's cold first
-    frame, then warm frames shared among the workers. Returns the figures and their basis."""
+    frame (with its kernels compiled or from the cache: `will_compile`), then warm frames
+    shared among the workers. Returns the figures and their basis."""
     scenes = _read().get("scenes", {})
     runs = [r for r in scenes.get(scene_name, []) if isinstance(r, dict) and r.get("samples")]
+    everything = [r for rs in scenes.values() for r in rs if isinstance(r, dict)]
     rate = machine_rate(scenes)
+    compiles = will_compile(runs, kernel_files())
     if runs:
         warm, basis = warm_frame(runs, settings_hash, samples, rate)
-        startup, cold_extra = float(runs[-1]["startup_s"]), float(runs[-1]["cold_extra_s"])
+        startup = float(runs[-1]["startup_s"])
     else:
-        everything = [r for rs in scenes.values() for r in rs if isinstance(r, dict)]
         warm = DEFAULT_FRAME_OVERHEAD_S + rate * samples
         if everything:
             startup = statistics.median(float(r["startup_s"]) for r in everything)
-            cold_extra = statistics.median(float(r["cold_extra_s"]) for r in everything)
             basis = f"this machine's cost per sample ({len(everything)} runs recorded)"
         else:
-            startup, cold_extra = DEFAULT_STARTUP_S, DEFAULT_COLD_EXTRA_S
+            startup = DEFAULT_STARTUP_S
             basis = "built-in figures (no run recorded on this machine yet)"
+    cold_extra, cold_basis = cold_extra_of(runs, everything, compiles)
     workers = max(1, min(workers, frames)) if frames else 1
     per_worker = math.ceil(frames / workers) if frames else 0
     render_s = (startup + cold_extra + per_worker * warm) if frames else 0.0
     return {"seconds": bake_s + render_s, "bake_s": bake_s, "warm_frame_s": warm, "cold_extra_s": cold_extra, "startup_s": startup,
-            "per_frame_s": warm / workers, "basis": basis}
+            "per_frame_s": warm / workers, "eta_frame_s": render_s / frames if frames else 0.0, "compiles_kernels": compiles,
+            "basis": f"{basis}; {cold_basis}"}

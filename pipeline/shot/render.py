@@ -394,7 +394,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     ctx = TaskContext(run_id=run_id, paths=paths, resume=req.resume and not req.overwrite, stale_after_s=cfg.stale_after_s)
     clear_stale([paths[f] for f in skipped], cfg.stale_after_s)
     label = f"{loaded.name}" + (f" shard {shard_spec[0]}/{shard_spec[1]}" if shard_spec else "")
-    progress = Progress(total=len(frames), already=len(skipped), label=label, live=req.progress, estimate_s=cost["per_frame_s"] if todo else None)
+    progress = Progress(total=len(frames), already=len(skipped), label=label, live=req.progress, estimate_s=cost["eta_frame_s"] if todo else None)
     progress.note(
         f"motion: {label}: {len(frames)} frames ({format_frames(frames) or 'none'}) -> {out_dir}; "
         f"{len(skipped)} already complete, {len(todo)} to render in {len(chunk_list)} chunks of <= {chunk_size}"
