@@ -152,3 +152,50 @@ def test_keys_before_a_shot_at_1001_are_named_and_old_frames_are_foreign(tmp_pat
 
     found = folder_frames(out, load_scene(scene))
     assert sorted(found.timeline) == list(range(1001, 1009)) and sorted(found.foreign) == list(range(8))
+
+
+def _dry_estimate(scene: Path, out: Path, cache: Path, kernels: Path) -> dict:
+    import os
+    import subprocess
+
+    from farm_util import MOTION
+
+    env = {**os.environ, "MOTION_CACHE_DIR": str(cache), "DRJIT_CACHE_DIR": str(kernels)}
+    res = subprocess.run([MOTION, "render", str(scene), "-o", str(out), *TINY, "--dry-run", "--json"], capture_output=True, text=True, env=env, timeout=120)
+    assert res.returncode == 0, res.stderr
+    return json.loads(res.stdout)["estimate"]
+
+
+def test_a_new_machine_estimates_compiling_every_kernel(tmp_path: Path) -> None:
+    """A machine with an empty kernel cache and no history (a fresh clone, a fresh CI
+    runner) is estimated to compile every kernel in each worker's first frame (the first
+    run took 99.8 s against 10.4 s estimated: the built-in cold frame was 0.8 s); with
+    kernels in the cache the cold frame is the short one. Once a run that compiled is
+    recorded, the machine's own figure replaces the built-in one. The first ETA spreads
+    the cold costs over the frames."""
+    from motion.pipeline.shot.estimate import DEFAULT_COLD_EXTRA_S, DEFAULT_COMPILE_EXTRA_S
+
+    scene = _write(tmp_path / "keys.yaml", SHOT)
+    fresh = _dry_estimate(scene, tmp_path / "out", tmp_path / "cache", tmp_path / "kernels")
+    assert fresh["compiles_kernels"] and fresh["cold_extra_s"] == DEFAULT_COMPILE_EXTRA_S and "empty kernel cache" in fresh["basis"], fresh
+    assert fresh["seconds"] > DEFAULT_COMPILE_EXTRA_S
+    assert abs(fresh["eta_frame_s"] * 8 - (fresh["seconds"] - fresh["bake_s"])) < 1e-6
+    kernels = tmp_path / "warm-kernels"
+    kernels.mkdir()
+    (kernels / "0123.llvm.v6.bin").write_bytes(bytes(100_000))  # what drjit leaves after compiling a render's kernels
+    cached = _dry_estimate(scene, tmp_path / "out", tmp_path / "cache", kernels)
+    assert not cached["compiles_kernels"] and cached["cold_extra_s"] == DEFAULT_COLD_EXTRA_S, cached
+
+    import os
+
+    os.environ["MOTION_CACHE_DIR"] = str(tmp_path / "cache")
+    try:
+        from motion.pipeline.shot.estimate import record
+
+        rows = [{"frame": 0, "status": "rendered", "cold": True, "render_s": 40.0, "kernels_compiled": 12},
+                *({"frame": f, "status": "rendered", "cold": False, "render_s": 1.0, "kernels_compiled": 0} for f in (1, 2))]
+        record("other-shot", "h", 1000, {"frames": rows, "workers": [{}], "totals": {"farm_s": 44.0}}, compiled_all=True)
+    finally:
+        del os.environ["MOTION_CACHE_DIR"]
+    learned = _dry_estimate(scene, tmp_path / "out", tmp_path / "cache", tmp_path / "empty")
+    assert learned["compiles_kernels"] and learned["cold_extra_s"] == 39.0 and "as in 1 runs here" in learned["basis"], learned

@@ -34,7 +34,7 @@ from ..presets import Preset, load_preset, overrides_from, spread
 from ..render.job import RenderJob, file_digests, frame_key, frame_path, render_settings, scene_hashes
 from ..scene.loader import LoadedScene, load_scene
 from .deliver import DeliverPlan, check_deliver, deliver_and_record, deliver_plan
-from .estimate import estimate, samples_of
+from .estimate import denoised_pixels, estimate, samples_of
 from .identity import check_owner, record_owner
 from .estimate import record as record_cost
 from .dry_run import check_only, plan, resolved_settings
@@ -366,7 +366,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
             result["deliverables"] = deliver_and_record(req, out_dir, [Path(paths[f]) for f in frames], wanted.formats, result, None, say)
         return result
     chunk_size = cfg.chunk_size or default_chunk_size(len(todo), workers if not req.scheduler else 2)
-    cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), workers if not req.scheduler else 1, bake_s)
+    cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), workers if not req.scheduler else 1, bake_s, denoised_pixels(loaded.scene))
     inline = choose_inline(req, cost, todo)
     if inline:
         from ..farm.local import threads_per_worker
@@ -432,7 +432,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     merge_previous(report, Path(req.report or out_dir / default_name), lambda f: timeline.first <= f <= timeline.last and os.path.exists(frame_path(job, loaded, f)))
     if foreign:
         report["foreign"] = format_frames(foreign)
-    record_cost(loaded.name, job.settings_hash, samples_of(loaded.scene), report)
+    record_cost(loaded.name, job.settings_hash, samples_of(loaded.scene), report, compiled_all=bool(cost.get("compiles_kernels")))
     report_path, report_fault = write_report_somewhere(report, req.report or out_dir / default_name, run_id)
     progress.log(summary_line(label, report["totals"], report_path))
     stop_on_disk_fault(sched, report, report_path, report_fault)
