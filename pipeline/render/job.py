@@ -194,7 +194,7 @@ def expected_meta(job: RenderJob, baked: BakedFrame) -> dict[str, Any]:
     return frame_key(job, baked)[0]
 
 
-MAX_PARTS = 4096  # moving things listed by digest in a header; a larger scene keeps its one hash
+MAX_PARTS = 1024  # parts listed by digest in a header (about 30 bytes each); a larger scene keeps its hashes only
 
 
 def frame_key(job: RenderJob, baked: BakedFrame) -> tuple[dict[str, Any], dict[str, str]]:

@@ -19,8 +19,8 @@ holds them. Kernels are mostly shared between scenes (on a 2-core EPYC a second 
 first run cost 4 s more than its next, the first scene's 19 s), so what decides is whether
 the kernel cache is empty (a new machine, a fresh CI runner, a cleared cache): then every
 kernel is compiled, estimated from this machine's runs that did so, else a built-in
-figure. A run records whether it did. The first ETA (before frames are measured) spreads
-these cold costs over the frames (`eta_frame_s`).
+figure. A run records whether it did. The first ETA (before frames are measured) counts
+these cold costs down (farm/progress.py `overhead_s`) before the warm frames.
 """
 
 from __future__ import annotations
@@ -202,5 +202,5 @@ def estimate(scene_name: str, settings_hash: str, samples: int, frames: int, wor
     per_worker = math.ceil(frames / workers) if frames else 0
     render_s = (startup + cold_extra + per_worker * warm) if frames else 0.0
     return {"seconds": bake_s + render_s, "bake_s": bake_s, "warm_frame_s": warm, "cold_extra_s": cold_extra, "startup_s": startup,
-            "per_frame_s": warm / workers, "eta_frame_s": render_s / frames if frames else 0.0, "compiles_kernels": compiles,
+            "per_frame_s": warm / workers, "compiles_kernels": compiles,
             "basis": f"{basis}; {cold_basis}"}

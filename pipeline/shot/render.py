@@ -31,7 +31,7 @@ from ..farm.scheduler import Scheduler
 from ..farm.task import TaskContext
 from ..limits import check_env_sizes
 from ..presets import Preset, load_preset, overrides_from, spread
-from ..render.job import RenderJob, file_digests, frame_key, frame_path, render_settings, scene_hashes
+from ..render.job import MAX_PARTS, RenderJob, file_digests, frame_key, frame_path, render_settings, scene_hashes
 from ..scene.loader import LoadedScene, load_scene
 from .deliver import DeliverPlan, check_deliver, deliver_and_record, deliver_plan
 from .estimate import denoised_pixels, estimate, samples_of
@@ -137,7 +137,7 @@ def make_job(req: RenderRequest, loaded: LoadedScene, overrides: dict[str, Any],
         fields=req.fields,
         files=json.dumps(file_digests(loaded), sort_keys=True),
         look_hash=look_hash(parts),
-        look_parts=json.dumps(parts, sort_keys=True),
+        look_parts=json.dumps(parts, sort_keys=True) if len(parts) <= MAX_PARTS else "",
         order=Order.of(loaded.scene),
     )
     return job, workers, threads
@@ -394,7 +394,8 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     ctx = TaskContext(run_id=run_id, paths=paths, resume=req.resume and not req.overwrite, stale_after_s=cfg.stale_after_s)
     clear_stale([paths[f] for f in skipped], cfg.stale_after_s)
     label = f"{loaded.name}" + (f" shard {shard_spec[0]}/{shard_spec[1]}" if shard_spec else "")
-    progress = Progress(total=len(frames), already=len(skipped), label=label, live=req.progress, estimate_s=cost["eta_frame_s"] if todo else None)
+    progress = Progress(total=len(frames), already=len(skipped), label=label, live=req.progress, estimate_s=cost["per_frame_s"] if todo else None,
+                        overhead_s=cost["startup_s"] + cost["cold_extra_s"] if todo else 0.0)
     progress.note(
         f"motion: {label}: {len(frames)} frames ({format_frames(frames) or 'none'}) -> {out_dir}; "
         f"{len(skipped)} already complete, {len(todo)} to render in {len(chunk_list)} chunks of <= {chunk_size}"
