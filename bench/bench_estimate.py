@@ -9,6 +9,11 @@ then the ETA printed by the first progress line at or past 10% of the frames aga
 time the job really had left then. Runs twice per scene with a fresh estimate history
 (`MOTION_CACHE_DIR`'s estimates.json removed): the first estimate comes from the built-in
 figures or the other scenes measured before it, the second from the scene's own first run.
+With `--fresh` the compiled kernels start empty too (a new machine, a fresh clone: the first
+run compiles every kernel; issue 38 measured 10.4 s estimated for a 99.8 s first run);
+without it they are shared with the user's cache, and the first run is not a compile test.
+
+    python bench/bench_estimate.py --fresh --scenes spinning-top --frames 0-11
 """
 
 from __future__ import annotations
@@ -60,14 +65,18 @@ def main() -> None:
     ap.add_argument("--scenes", default="bouncing-balls,spinning-top,walk-cycle")
     ap.add_argument("--frames", default="0-23")
     ap.add_argument("--preset", default="preview")
+    ap.add_argument("--fresh", action="store_true", help="start with no compiled kernels either (a new machine)")
     args = ap.parse_args()
-    print(f"# estimate vs real time ({cpu_model()}), preset {args.preset}, frames {args.frames}")
+    print(f"# estimate vs real time ({cpu_model()}), preset {args.preset}, frames {args.frames}{', fresh kernel cache' if args.fresh else ''}")
     print(f"{'scene':16} {'run':5} {'estimate':>9} {'real':>8} {'ratio':>6} {'ETA@10%':>8} {'left':>7} {'ratio':>6}  basis")
     with tempfile.TemporaryDirectory() as tmp:
         cache = Path(tmp) / "cache"
         os.environ["MOTION_CACHE_DIR"] = str(cache)
         # share compiled kernels with the user's cache, so the first run is not a compile benchmark
-        os.environ.setdefault("DRJIT_CACHE_DIR", str(Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "motion" / "kernels"))
+        if args.fresh:
+            os.environ["DRJIT_CACHE_DIR"] = str(cache / "kernels")
+        else:
+            os.environ.setdefault("DRJIT_CACHE_DIR", str(Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "motion" / "kernels"))
         for scene in args.scenes.split(","):
             for attempt in (1, 2):
                 r = run(scene, Path(tmp) / f"{scene}-{attempt}", args.frames, args.preset)

@@ -217,4 +217,9 @@ class RotationValueError(MotionError):
     and procedural stages report it located (TrackError, ExpressionValueError)."""
 
 
+class ShotFolderTakenError(UsageError):
+    """An output folder already holds the frames of another scene file (two scenes with
+    the same `name:` share `out/<name>`): refused, naming both (shot/identity.py)."""
+
+
 # --- deliverables, telecine, examples ---

@@ -20,14 +20,16 @@ class Progress:
     """Counts frames as the scheduler reports them and shows them."""
 
     def __init__(self, total: int, already: int = 0, label: str = "render", stream: TextIO | None = None, live: bool | None = None,
-                 estimate_s: float | None = None) -> None:
+                 estimate_s: float | None = None, overhead_s: float = 0.0) -> None:
         """`live`: True draws the bar, None draws it on a terminal (plain lines every 2 s
         elsewhere, for CI logs), False (--no-progress) shows neither: only the warnings
         and the summary. `estimate_s`: the plan's estimate of a frame's cost in worker
-        seconds divided by the workers (the ETA before two frames are done)."""
+        seconds divided by the workers (the ETA before two frames are done); `overhead_s`:
+        the plan's start-up and cold first frames, counted down from the start until then."""
         self.stream = stream or sys.stderr
         self.quiet = live is False
         self.estimate_s = estimate_s
+        self.overhead_s = overhead_s
         self._first_done: float | None = None  # when this run's first frame was done
         self.total = total
         self.done = already
@@ -54,7 +56,8 @@ class Progress:
         """Seconds until every frame is done. The rate is measured from the first frame
         done, not from the start: start-up and the workers' cold first frames (kernel
         compilation) would otherwise make the first ETAs several times too long. Before a
-        second frame, the plan's estimate per frame, if any; else None."""
+        second frame, the plan's estimate per frame and what is left of its start-up and
+        cold costs, if any; else None."""
         left = self.total - self.done - self.failed
         run_done = self.done - self.already
         if self._first_done is not None and run_done >= 2:
@@ -62,7 +65,7 @@ class Progress:
             if dt > 0:
                 return left * dt / (run_done - 1)
         if self.estimate_s is not None:
-            return left * self.estimate_s
+            return max(0.0, self.overhead_s - (time.monotonic() - self.t0)) + left * self.estimate_s
         return None
 
     def __enter__(self) -> "Progress":

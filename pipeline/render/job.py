@@ -23,7 +23,7 @@ from typing import Any, Mapping, Protocol, Sequence
 
 import numpy as np
 
-from ..bake import BakedFrame, fingerprint
+from ..bake import BakedFrame, Order, frame_digests
 from ..field_model import parity_of
 from ..frame_output import write_frame
 from ..scene.loader import LoadedScene, load_scene
@@ -49,6 +49,16 @@ class RenderJob:
     fields: str | None = None  # tff/bff: each frame is a field, only its rows are drawn
     files: str = ""  # JSON {name: digest} of the files the scene names (`file_digests`), kept in each frame's header
     shipped: SceneSource | None = None  # ship mode: the parsed scene and its assets travel with the job
+    # a frame's key (docs/reruns.md): what it looks like apart from motion (render/look.py),
+    # and the order that makes its motion's digest independent of names
+    look_hash: str = ""  # empty: the settings hash stands for it
+    look_parts: str = ""  # JSON {part: digest}, kept in each frame's header
+    order: Order | None = None
+
+    @property
+    def look(self) -> str:
+        """The look half of a frame's key (the settings hash for a job made without one)."""
+        return self.look_hash or self.settings_hash
 
     @property
     def key(self) -> str:
@@ -178,9 +188,19 @@ def scene_reference(scene_path: str | Path, frame_path: str | Path) -> str:
 
 def expected_meta(job: RenderJob, baked: BakedFrame) -> dict[str, Any]:
     """The attributes a complete frame of this job carries (what --resume compares): the
-    frame, the settings hash and the hash of this frame's own baked motion (`fingerprint`,
-    every animated value)."""
-    return {"frame": baked.frame, "settings_hash": job.settings_hash, "motion_hash": fingerprint([baked])[:16]}
+    frame and its key, the look (render/look.py) and the hash of this frame's own baked
+    motion (`fingerprint`, every animated value, objects and lights by their place in the
+    scene). Neither depends on names, keys outside the frame's shutter or comments."""
+    return frame_key(job, baked)[0]
+
+
+MAX_PARTS = 1024  # parts listed by digest in a header (about 30 bytes each); a larger scene keeps its hashes only
+
+
+def frame_key(job: RenderJob, baked: BakedFrame) -> tuple[dict[str, Any], dict[str, str]]:
+    """(`expected_meta`, {moving thing: digest}) of one frame, from one walk of its motion."""
+    motion_hash, parts = frame_digests(baked, job.order)
+    return {"frame": baked.frame, "look_hash": job.look, "motion_hash": motion_hash[:16]}, parts
 
 
 
@@ -288,8 +308,12 @@ def _header(job: RenderJob, baked: BakedFrame, loaded: LoadedScene, variant: str
     """Step 3, header: motion's attributes (what `--resume` and stale-frame checks compare,
     docs/architecture.md) and the standard ones (capDate, owner, comments)."""
     scene = loaded.scene
+    key, parts = frame_key(job, baked)
     meta = {
-        **expected_meta(job, baked),
+        **key,
+        "settings_hash": job.settings_hash,
+        **({"look_parts": job.look_parts} if job.look_parts else {}),
+        **({"motion_parts": json.dumps(parts, sort_keys=True)} if len(parts) <= MAX_PARTS else {}),
         "time": float(baked.time),
         "shutter_open": float(baked.shutter[0]),
         "shutter_close": float(baked.shutter[1]),

@@ -181,8 +181,10 @@ def process_frame(path: str, neighbours: list[tuple[int, str]]) -> dict[str, Any
     return {"frame": int(_meta(header, "frame")), "blended": float((count > 1).mean())}
 
 
-def _neighbour_state(path: Path, settings_hash: str) -> str | None:
-    """`motion_hash` of a complete frame of these settings (None if absent or other)."""
+def _neighbour_state(path: Path, look: str) -> str | None:
+    """`motion_hash` of a complete frame of this look (its key's half that is not motion:
+    render/look.py; a frame kept from a run of an edit that did not change it counts),
+    None if absent or other."""
     from ..errors import FrameIOError
     from ..frame_output import META_PREFIX, read_header
 
@@ -190,7 +192,7 @@ def _neighbour_state(path: Path, settings_hash: str) -> str | None:
         header = read_header(path)
     except FrameIOError:
         return None
-    if header.get(META_PREFIX + "settings_hash") != settings_hash or f"{META_PREFIX}temporal" not in header:
+    if header.get(META_PREFIX + "look_hash") != look or f"{META_PREFIX}temporal" not in header:
         return None
     return f"{header.get(META_PREFIX + 'frame')}:{header.get(META_PREFIX + 'motion_hash')}"
 
@@ -207,11 +209,11 @@ def temporal_pass(loaded: Any, job: Any, out_dir: Path, frames: Sequence[int], w
     pending: list[int] = []
     for f in frames:
         path = frame_path(job, loaded, f)
-        me = _neighbour_state(path, job.settings_hash)
+        me = _neighbour_state(path, job.look)
         if me is None:
             continue  # not rendered (failed, interrupted): nothing to do
         near = [(d, frame_path(job, loaded, f + d)) for d in range(-RADIUS, RADIUS + 1) if d and first <= f + d <= last]
-        states = [_neighbour_state(p, job.settings_hash) for _, p in near]
+        states = [_neighbour_state(p, job.look) for _, p in near]
         if any(s is None for s in states):
             pending.append(f)
             continue

@@ -593,7 +593,8 @@ def _dark(value: object) -> bool:
 def scene_warnings(scene: Scene) -> list[str]:
     """What is valid but almost surely not meant: a scene with nothing in it, nothing
     visible in it, or no light (no light, no emissive object, no environment; lights and
-    emission all of strength 0 and not animated) renders black frames."""
+    emission all of strength 0 and not animated) renders black frames; keys outside the
+    timeline (`key_warnings`)."""
     out = []
     shown = [o for o in scene.objects if o.visible and o.shape != "empty"]
     if not scene.objects:
@@ -608,7 +609,7 @@ def scene_warnings(scene: Scene) -> list[str]:
     from .dynamics_schema import penalty_warnings
 
     out.extend(penalty_warnings(scene))
-    return out
+    return out + key_warnings(scene)
 
 
 NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
@@ -648,3 +649,74 @@ def numeric_range_problems(data: Any, source: "SourceMap", scene: Scene) -> list
 
     walk(data, (), False)
     return problems
+
+
+def _keyed_blocks(node: Any, loc: tuple) -> Iterator[tuple[tuple, Any]]:
+    """Every record of the scene with a `time_unit` (keyframe motion, blend shapes, an IK
+    constraint's weight keys), with its YAML path, at any depth."""
+    from pydantic import BaseModel
+
+    if isinstance(node, BaseModel):
+        if "time_unit" in type(node).model_fields:
+            yield loc, node
+        for name in type(node).model_fields:
+            yield from _keyed_blocks(getattr(node, name), (*loc, name))
+    elif isinstance(node, (list, tuple)):
+        for i, v in enumerate(node):
+            yield from _keyed_blocks(v, (*loc, i))
+    elif isinstance(node, dict):
+        for k, v in node.items():
+            yield from _keyed_blocks(v, (*loc, k))
+
+
+def _key_tracks(block: Any) -> Iterator[tuple[str, list[float], str, str]]:
+    """Each track of keys of a keyed record: (name, key times in its own unit,
+    interpolation, extrapolation); a keyframe block's channels, a blend shape's keys, an
+    IK constraint's weight keys."""
+    for name, ch in (getattr(block, "channels", None) or {}).items():
+        yield f"channels.{name}", [k.time for k in ch.keys], ch.interpolation or block.interpolation, ch.extrapolation or block.extrapolation
+    for field_name in ("keys", "weight"):
+        value = getattr(block, field_name, None)
+        if isinstance(value, list) and value and hasattr(value[0], "time"):
+            yield field_name, [k.time for k in value], getattr(block, "interpolation", "linear"), getattr(block, "extrapolation", "hold")
+
+
+# keys on each side of a span that an interpolation reads for the values inside it
+REACH = {"hold": 1, "nearest": 1, "linear": 1}
+
+
+def key_warnings(scene: Scene) -> list[str]:
+    """Keys that the shot never sees (issue 38), one line per track naming them. A key's
+    time counts from frame 0 (`time_unit: frames`) or second 0, whatever the timeline's
+    `first`: keys written as 0, 12, 23 in a shot of frames 1001-1024 all lie before it, and
+    the shot holds the last one's value. The shot's span is the first frame's shutter open
+    to the last frame's close; the keys just outside it that an interpolation reads (one
+    on each side, two for a spline) shape what the shot sees and are not named."""
+    tl = scene.timeline.timeline()
+    shutter = scene.camera.shutter
+    fps = float(tl.fps)
+    start = float(tl.shutter(tl.first, shutter.angle, shutter.position)[0]) * fps  # in frames
+    end = float(tl.shutter(tl.last, shutter.angle, shutter.position)[1]) * fps
+    out = []
+    for loc, block in _keyed_blocks(scene, ()):
+        in_frames = block.time_unit == "frames"
+        for track, times, interpolation, extrapolation in _key_tracks(block):
+            frames = sorted(t if in_frames else t * fps for t in times)
+            before = [t for t in frames if t < start - 1e-9]
+            after = [t for t in frames if t > end + 1e-9]
+            if len(before) == len(frames) or len(after) == len(frames):
+                if extrapolation != "hold":
+                    continue  # a cycle or a line carries them into the shot
+                unseen, why = frames, f"all lie {'before' if before else 'after'} it: the shot holds the value of the {'last' if before else 'first'} one"
+            else:
+                reach = REACH.get(interpolation, 2)
+                unseen = before[:-reach] + after[reach:]
+                why = "the shot never reaches them"
+            if not unseen:
+                continue
+            vals = [f"{t:g}" if in_frames else f"{t / fps:g}" for t in unseen]
+            listed = ", ".join(vals[:6]) + (f" and {len(vals) - 6} more" if len(vals) > 6 else "")
+            unit = ("frame" if in_frames else "second") + ("s" if len(vals) > 1 else "")
+            hint = " (a key's time counts from frame 0, not from timeline.first)" if in_frames and tl.first > 0 and before else ""
+            out.append(f"{yaml_path(loc)}.{track}: keys at {unit} {listed} lie outside the timeline (frames {tl.first}-{tl.last}): {why}{hint}")
+    return out

@@ -11,12 +11,23 @@ the line through them; at one from that run shifted by this machine's cost per s
 machine's cost per sample; a machine that has rendered nothing from built-in figures
 (`basis` says which). bench/bench_estimate.py measures the estimate against the real time
 on the examples.
+
+The cold costs are estimated apart (issue 38: a first run on a new machine took 99.8 s
+against 10.4 s estimated). A worker's first frame compiles the renderer's kernels unless
+drjit's kernel cache holds them, and converts the scene's assets unless the asset cache
+holds them. Kernels are mostly shared between scenes (on a 2-core EPYC a second scene's
+first run cost 4 s more than its next, the first scene's 19 s), so what decides is whether
+the kernel cache is empty (a new machine, a fresh CI runner, a cleared cache): then every
+kernel is compiled, estimated from this machine's runs that did so, else a built-in
+figure. A run records whether it did. The first ETA (before frames are measured) counts
+these cold costs down (farm/progress.py `overhead_s`) before the warm frames.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import statistics
 from pathlib import Path
 from typing import Any
@@ -27,13 +38,19 @@ HISTORY_FILE = "estimates.json"
 MAX_SCENES = 200  # scenes kept (the oldest go first)
 MAX_RUNS = 8  # observations kept per scene (one per settings)
 # A warm frame costs a fixed part (the frame's Python, its film and EXR, at small sizes the
-# whole cost) plus a part per camera sample. Built-in figures (nothing recorded on this
-# machine yet) from a 2-core Xeon: ci-smoke frames (9,216 samples) take 10-15 ms, preview
-# frames (921,600 samples, denoised) about 0.15 s.
+# whole cost) plus a part per camera sample, plus the denoiser's part per pixel. Built-in
+# figures (nothing recorded on this machine yet), measured on a 2-core AMD EPYC shared with
+# other jobs (issue 38: the earlier ones, 10x lower, made a first run's estimate 3-20x low):
+# ci-smoke frames (9,216 samples) 10-25 ms; preview frames (320x180, 16 spp, depth 4) render
+# in 0.9-2.0 s and denoise in 1.0-1.3 s; a worker's cold first frame (its scene build, and
+# the kernels compiled when the kernel cache is empty: 14 of them for the examples) costs
+# 2.5-4.4 s more than a warm one; two workers start in about 4 s (spawn, imports).
 DEFAULT_FRAME_OVERHEAD_S = 0.012
-DEFAULT_S_PER_SAMPLE = 1.5e-7
-DEFAULT_COLD_EXTRA_S = 0.8
-DEFAULT_STARTUP_S = 0.8
+DEFAULT_S_PER_SAMPLE = 1.5e-6
+DEFAULT_DENOISE_S_PER_PIXEL = 2.0e-5
+DEFAULT_COLD_EXTRA_S = 3.0  # a cold first frame's extra cost with its kernels in the cache
+DEFAULT_COMPILE_EXTRA_S = 4.5  # ... and with an empty kernel cache (every kernel compiled)
+DEFAULT_STARTUP_S = 2.0
 BIG_FRAME = 100_000  # samples above which a frame's cost says something about the machine's rate
 
 
@@ -50,6 +67,12 @@ def samples_of(scene: Any) -> int:
     return int(w) * int(h) * int(scene.render.spp)
 
 
+def denoised_pixels(scene: Any) -> int:
+    """Pixels the denoiser runs over in one frame (0 when it is off)."""
+    w, h = scene.render.resolution
+    return int(w) * int(h) if scene.render.denoise != "off" else 0
+
+
 def _read() -> dict[str, Any]:
     try:
         data = json.loads(history_path().read_text())
@@ -60,8 +83,10 @@ def _read() -> dict[str, Any]:
     return data
 
 
-def record(scene_name: str, settings_hash: str, samples: int, report: dict[str, Any]) -> None:
-    """Keep what this run measured (best effort: an unwritable cache only loses the record)."""
+def record(scene_name: str, settings_hash: str, samples: int, report: dict[str, Any], compiled_all: bool = False) -> None:
+    """Keep what this run measured (best effort: an unwritable cache only loses the record).
+    `compiled_all`: the run started with an empty kernel cache (its estimate's
+    `compiles_kernels`); it counts as compiling every kernel if its cold frames compiled any."""
     rows = [r for r in report.get("frames", []) if r.get("status") == "rendered" and "render_s" in r]
     cost = lambda r: float(r.get("setup_s", 0.0)) + float(r.get("render_s", 0.0)) + float(r.get("denoise_s", 0.0)) + float(r.get("write_s", 0.0))  # noqa: E731
     warm = [cost(r) for r in rows if not r.get("cold")]
@@ -73,9 +98,11 @@ def record(scene_name: str, settings_hash: str, samples: int, report: dict[str, 
     workers = max(1, len(report.get("workers") or []) or 1)
     farm_s = float(report.get("totals", {}).get("farm_s", 0.0))
     startup = max(0.0, farm_s - sum(cost(r) for r in rows) / workers)
+    compiled = compiled_all and any(int(r.get("kernels_compiled", 0) or 0) > 0 for r in rows if r.get("cold"))
     data = _read() or {"version": 2, "scenes": {}}
     runs = [r for r in data["scenes"].pop(scene_name, []) if isinstance(r, dict) and r.get("settings_hash") != settings_hash]
-    runs.append({"settings_hash": settings_hash, "samples": samples, "warm_s": warm_s, "cold_extra_s": cold_extra, "startup_s": startup})
+    runs.append({"settings_hash": settings_hash, "samples": samples, "warm_s": warm_s, "cold_extra_s": cold_extra, "startup_s": startup,
+                 "compiled": compiled})
     data["scenes"][scene_name] = runs[-MAX_RUNS:]
     while len(data["scenes"]) > MAX_SCENES:
         data["scenes"].pop(next(iter(data["scenes"])))
@@ -109,27 +136,71 @@ def warm_frame(runs: list[dict[str, Any]], settings_hash: str, samples: int, rat
     return max(DEFAULT_FRAME_OVERHEAD_S, w0 + rate * (samples - s0)), "this scene's last run, rescaled by this machine's cost per sample"
 
 
-def estimate(scene_name: str, settings_hash: str, samples: int, frames: int, workers: int, bake_s: float = 0.0) -> dict[str, Any]:
+# A kernel cache holding less than this has none of a render's kernels: the variant probe
+# leaves its own few (5 files, 17 KB); one example rendered leaves about 150 KB.
+EMPTY_KERNEL_CACHE_BYTES = 64 * 1024
+
+
+def kernel_bytes() -> int:
+    """Bytes in drjit's kernel cache (0 when it is missing or unreadable)."""
+    from ..cache import kernels_dir
+
+    total = 0
+    try:
+        for e in os.scandir(kernels_dir()):
+            try:
+                total += e.stat().st_size if e.is_file() else 0
+            except OSError:
+                continue
+    except OSError:
+        return 0
+    return total
+
+
+def cold_extra_of(runs: list[dict[str, Any]], everything: list[dict[str, Any]], compiles: bool) -> tuple[float, str]:
+    """A worker's cold first frame's extra cost, and what it comes from. With an empty
+    kernel cache (`compiles`): from this machine's runs that compiled every kernel, else
+    the built-in figure. With kernels in the cache (most are shared between scenes: a new
+    scene compiles a few seconds' worth): this scene's last run unless it compiled them
+    all, else this machine's runs that did not."""
+    def fig(r: dict[str, Any]) -> float:
+        return float(r.get("cold_extra_s", 0.0) or 0.0)
+
+    if compiles:
+        seen = [fig(r) for r in everything if r.get("compiled")]
+        if seen:
+            return statistics.median(seen), f"an empty kernel cache: every kernel compiled, as in {len(seen)} runs here"
+        return DEFAULT_COMPILE_EXTRA_S, "an empty kernel cache: every kernel compiled (built-in figure)"
+    if runs and not runs[-1].get("compiled"):
+        return fig(runs[-1]), "kernels from the cache"
+    cached = [fig(r) for r in everything if not r.get("compiled")]
+    return (statistics.median(cached) if cached else DEFAULT_COLD_EXTRA_S), "kernels from the cache"
+
+
+def estimate(scene_name: str, settings_hash: str, samples: int, frames: int, workers: int, bake_s: float = 0.0, denoise_pixels: int = 0) -> dict[str, Any]:
     """The job's expected wall time: bake, the farm's start-up, each worker's cold first
-    frame, then warm frames shared among the workers. Returns the figures and their basis."""
+    frame (every kernel compiled when the kernel cache is empty: `cold_extra_of`), then warm frames
+    shared among the workers. Returns the figures and their basis."""
     scenes = _read().get("scenes", {})
     runs = [r for r in scenes.get(scene_name, []) if isinstance(r, dict) and r.get("samples")]
+    everything = [r for rs in scenes.values() for r in rs if isinstance(r, dict)]
     rate = machine_rate(scenes)
+    compiles = kernel_bytes() < EMPTY_KERNEL_CACHE_BYTES  # a new machine, a fresh CI runner, a cleared cache
     if runs:
         warm, basis = warm_frame(runs, settings_hash, samples, rate)
-        startup, cold_extra = float(runs[-1]["startup_s"]), float(runs[-1]["cold_extra_s"])
+        startup = float(runs[-1]["startup_s"])
     else:
-        everything = [r for rs in scenes.values() for r in rs if isinstance(r, dict)]
-        warm = DEFAULT_FRAME_OVERHEAD_S + rate * samples
+        warm = DEFAULT_FRAME_OVERHEAD_S + rate * samples + DEFAULT_DENOISE_S_PER_PIXEL * denoise_pixels
         if everything:
             startup = statistics.median(float(r["startup_s"]) for r in everything)
-            cold_extra = statistics.median(float(r["cold_extra_s"]) for r in everything)
             basis = f"this machine's cost per sample ({len(everything)} runs recorded)"
         else:
-            startup, cold_extra = DEFAULT_STARTUP_S, DEFAULT_COLD_EXTRA_S
+            startup = DEFAULT_STARTUP_S
             basis = "built-in figures (no run recorded on this machine yet)"
+    cold_extra, cold_basis = cold_extra_of(runs, everything, compiles)
     workers = max(1, min(workers, frames)) if frames else 1
     per_worker = math.ceil(frames / workers) if frames else 0
     render_s = (startup + cold_extra + per_worker * warm) if frames else 0.0
     return {"seconds": bake_s + render_s, "bake_s": bake_s, "warm_frame_s": warm, "cold_extra_s": cold_extra, "startup_s": startup,
-            "per_frame_s": warm / workers, "basis": basis}
+            "per_frame_s": warm / workers, "compiles_kernels": compiles,
+            "basis": f"{basis}; {cold_basis}"}

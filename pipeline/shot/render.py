@@ -31,13 +31,14 @@ from ..farm.scheduler import Scheduler
 from ..farm.task import TaskContext
 from ..limits import check_env_sizes
 from ..presets import Preset, load_preset, overrides_from, spread
-from ..render.job import RenderJob, expected_meta, file_digests, frame_path, render_settings, scene_hashes
+from ..render.job import MAX_PARTS, RenderJob, file_digests, frame_key, frame_path, render_settings, scene_hashes
 from ..scene.loader import LoadedScene, load_scene
 from .deliver import DeliverPlan, check_deliver, deliver_and_record, deliver_plan
-from .estimate import estimate, samples_of
+from .estimate import denoised_pixels, estimate, samples_of
+from .identity import check_owner, record_owner
 from .estimate import record as record_cost
 from .dry_run import check_only, plan, resolved_settings
-from .stale import FrameStates, frame_states
+from .stale import CurrentKeys, FrameStates, folder_frames, frame_states
 from .request import RenderRequest
 
 
@@ -120,6 +121,10 @@ def make_job(req: RenderRequest, loaded: LoadedScene, overrides: dict[str, Any],
         from ..farm.local import threads_per_worker
 
         threads = req.threads or threads_per_worker(workers)
+    from ..bake import Order
+    from ..render.look import look_hash, look_parts
+
+    parts = look_parts(loaded)
     job = RenderJob(
         scene_path=str(loaded.path),
         overrides=overrides,
@@ -131,6 +136,9 @@ def make_job(req: RenderRequest, loaded: LoadedScene, overrides: dict[str, Any],
         variant=loaded.scene.render.variant,
         fields=req.fields,
         files=json.dumps(file_digests(loaded), sort_keys=True),
+        look_hash=look_hash(parts),
+        look_parts=json.dumps(parts, sort_keys=True) if len(parts) <= MAX_PARTS else "",
+        order=Order.of(loaded.scene),
     )
     return job, workers, threads
 
@@ -198,14 +206,18 @@ def motion_inputs(req: RenderRequest, loaded: LoadedScene, sel: Selection) -> Se
     return inputs
 
 
-def complete_frames(req: RenderRequest, job: RenderJob, job_scene: Any, out_dir: Path, frames: list[int], paths: dict[int, str], by_frame: Mapping[int, BakedFrame]) -> FrameStates:
+def complete_frames(req: RenderRequest, job: RenderJob, loaded: LoadedScene, out_dir: Path, frames: list[int], paths: dict[int, str], by_frame: Mapping[int, BakedFrame]) -> FrameStates:
     """The frames on disk: those --resume keeps (complete and made from this scene, motion
     and settings) and the stale ones this run replaces, each with the reason (shot/stale.py).
     Existing frames with neither --resume nor --overwrite are a UsageError."""
     existing = [f for f in frames if os.path.exists(paths[f])]
     if not req.resume and not req.overwrite and existing:
         raise UsageError(f"{out_dir}: frames {format_frames(existing)} exist; pass --resume to keep complete ones or --overwrite to re-render them")
-    states = frame_states(existing, paths, {f: expected_meta(job, by_frame[f]) for f in existing}, render_settings(job_scene), json.loads(job.files or "{}"))
+    from ..render.look import part_names
+
+    keys = {f: frame_key(job, by_frame[f]) for f in existing}
+    now = CurrentKeys(render_settings(loaded.scene), json.loads(job.files or "{}"), json.loads(job.look_parts or "{}"), {f: k[1] for f, k in keys.items()}, part_names(loaded))
+    states = frame_states(existing, paths, {f: k[0] for f, k in keys.items()}, now)
     if req.overwrite:
         return FrameStates(complete=[], stale={f: "--overwrite" for f in existing})
     return states
@@ -316,6 +328,7 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         check_deliver(req, loaded, frames, out_dir, wanted.formats)  # every check that can fail, before the first task
     job, workers, threads = make_job(req, loaded, overrides, out_dir, frames)
     preflight(req, loaded, job, out_dir, frames)
+    taken_from = check_owner(out_dir, loaded.path, req.overwrite)  # another scene file's folder: refused, one line
     if req.scheduler and not req.check:
         from ..farm.address import probe_scheduler
 
@@ -335,18 +348,25 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     by_frame = by_number(inputs)  # each frame made from the bake's arrays when a task needs it
     paths = {f: str(frame_path(job, loaded, f)) for f in frames}
 
-    states = complete_frames(req, job, loaded.scene, out_dir, frames, paths, by_frame)
+    states = complete_frames(req, job, loaded, out_dir, frames, paths, by_frame)
     skipped = states.complete
     todo = [f for f in frames if f not in set(skipped)]
+    foreign = sorted(folder_frames(out_dir, loaded).foreign)
+    if foreign:
+        logging.getLogger("motion").warning(
+            f"motion: {out_dir}: frames {format_frames(foreign)} lie outside the timeline {loaded.scene.timeline.first}-{loaded.scene.timeline.last}: "
+            "foreign, left as they are and in no deliverable")
     if req.check:
         result = check_only(loaded.name, out_dir, frames, todo, paths, states.stale)
+        if foreign:
+            result["foreign"] = format_frames(foreign)
         if wanted:
             say = Progress(total=0, live=False).log
             say_outputs(wanted, frames, paths, say)
             result["deliverables"] = deliver_and_record(req, out_dir, [Path(paths[f]) for f in frames], wanted.formats, result, None, say)
         return result
     chunk_size = cfg.chunk_size or default_chunk_size(len(todo), workers if not req.scheduler else 2)
-    cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), workers if not req.scheduler else 1, bake_s)
+    cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), workers if not req.scheduler else 1, bake_s, denoised_pixels(loaded.scene))
     inline = choose_inline(req, cost, todo)
     if inline:
         from ..farm.local import threads_per_worker
@@ -362,14 +382,20 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
                        Path(req.report or out_dir / default_name), states.stale, wanted, resolved_settings(req, loaded, preset), cost)
         if inline:
             planned["executor"]["kind"] = "inline"
+        if foreign:
+            planned["foreign"] = format_frames(foreign)
         return planned
 
     out_dir.mkdir(parents=True, exist_ok=True)
+    record_owner(out_dir, loaded.path)
+    if taken_from is not None:
+        logging.getLogger("motion").warning(f"motion: {out_dir} held the frames of {taken_from}; it is now {loaded.path}'s folder")
     run_id = new_run_id()
     ctx = TaskContext(run_id=run_id, paths=paths, resume=req.resume and not req.overwrite, stale_after_s=cfg.stale_after_s)
     clear_stale([paths[f] for f in skipped], cfg.stale_after_s)
     label = f"{loaded.name}" + (f" shard {shard_spec[0]}/{shard_spec[1]}" if shard_spec else "")
-    progress = Progress(total=len(frames), already=len(skipped), label=label, live=req.progress, estimate_s=cost["per_frame_s"] if todo else None)
+    progress = Progress(total=len(frames), already=len(skipped), label=label, live=req.progress, estimate_s=cost["per_frame_s"] if todo else None,
+                        overhead_s=cost["startup_s"] + cost["cold_extra_s"] if todo else 0.0)
     progress.note(
         f"motion: {label}: {len(frames)} frames ({format_frames(frames) or 'none'}) -> {out_dir}; "
         f"{len(skipped)} already complete, {len(todo)} to render in {len(chunk_list)} chunks of <= {chunk_size}"
@@ -402,8 +428,12 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     report["report"] = str(req.report or out_dir / default_name)
     if states.stale:
         report["replaced"] = [{"frame": f, "reason": why} for f, why in sorted(states.stale.items())]
-    merge_previous(report, Path(req.report or out_dir / default_name), lambda f: os.path.exists(frame_path(job, loaded, f)))
-    record_cost(loaded.name, job.settings_hash, samples_of(loaded.scene), report)
+    timeline = loaded.scene.timeline
+    # the folder's record holds the timeline's frames; others are foreign (shot/stale.py: folder_frames)
+    merge_previous(report, Path(req.report or out_dir / default_name), lambda f: timeline.first <= f <= timeline.last and os.path.exists(frame_path(job, loaded, f)))
+    if foreign:
+        report["foreign"] = format_frames(foreign)
+    record_cost(loaded.name, job.settings_hash, samples_of(loaded.scene), report, compiled_all=bool(cost.get("compiles_kernels")))
     report_path, report_fault = write_report_somewhere(report, req.report or out_dir / default_name, run_id)
     progress.log(summary_line(label, report["totals"], report_path))
     stop_on_disk_fault(sched, report, report_path, report_fault)

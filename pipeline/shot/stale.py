@@ -1,15 +1,21 @@
 """Frames already on disk, before a run: complete (kept by --resume) or stale, and why.
 
-A frame is stale when its header says it was made from another scene, motion or settings
-than this run's (or it does not read back whole). The run replaces stale frames, and says
-so first, naming the setting that differs (`spp 16 -> 4`), in the log, the dry run and the
-report: nothing is replaced silently.
+A frame is stale when what it shows can have changed (docs/reruns.md): its key in the
+header, the look (the scene's content and render settings and the files it reads, names
+left out: render/look.py) and its own baked motion (objects, lights and camera over its
+shutter, by their place in the scene: bake/fingerprint.py), differs from this run's, or it
+does not read back whole. A key moved outside a frame's shutter, a name or a comment keeps
+it. The run replaces stale frames, and says so first, naming what differs (`spp 16 -> 4`,
+`material iron changed`, `motion of box changed`), in the log, the dry run and the report:
+nothing is replaced silently.
 """
 
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Mapping
 
 from ..errors import FrameIOError
@@ -74,25 +80,67 @@ def files_change(stored: Any, current: Mapping[str, str] | None) -> str | None:
     return ", ".join(changes[:3]) + (f" and {len(changes) - 3} more" if len(changes) > 3 else "")
 
 
-def why_stale(path: str, expect: Mapping[str, Any], settings: Mapping[str, Any], files: Mapping[str, str] | None = None) -> str | None:
-    """Why the frame at `path` is not a complete frame of this run, or None if it is.
-    `files`: this run's file digests, to name an asset that changed under the same name."""
+@dataclass(frozen=True)
+class CurrentKeys:
+    """This run's side of the comparison, to name what differs: the render settings, the
+    file digests (`render.job.file_digests`), the look's parts (`render.look.look_parts`),
+    each frame's motion parts (`render.job.frame_key`) and what each part is called in
+    this scene (`render.look.part_names`)."""
+
+    settings: Mapping[str, Any]
+    files: Mapping[str, str] | None = None
+    look_parts: Mapping[str, str] = field(default_factory=dict)
+    motion_parts: Mapping[int, Mapping[str, str]] = field(default_factory=dict)
+    names: Mapping[str, str] = field(default_factory=dict)
+
+
+MAX_NAMED = 3  # things named in one reason; the rest are counted
+
+
+def parts_change(stored: Any, current: Mapping[str, str], names: Mapping[str, str], prefix: str = "") -> list[str] | None:
+    """The names of the parts whose digests differ between a header's (JSON) and this
+    run's, in the order of `names` (a part this scene lacks by its label), or None when the
+    header has none."""
+    before = _stored_dict(stored)
+    if before is None or not current:
+        return None
+    differ = [p for p in sorted(set(before) | set(current)) if before.get(p) != current.get(p)]
+    place = {name: i for i, name in enumerate(names)}
+    differ.sort(key=lambda p: place.get(prefix + p, len(place)))
+    return [names.get(prefix + p, f"{p} (no longer in the scene)" if p not in current else p) for p in differ]
+
+
+def _listed(items: list[str]) -> str:
+    """'a, b, c and 2 more'."""
+    return ", ".join(items[:MAX_NAMED]) + (f" and {len(items) - MAX_NAMED} more" if len(items) > MAX_NAMED else "")
+
+
+def why_stale(path: str, expect: Mapping[str, Any], now: CurrentKeys) -> str | None:
+    """Why the frame at `path` is not a complete frame of this run, or None if it is."""
     try:
         header = read_header(path)
     except FrameIOError:
         return "do not read back as OpenEXR (incomplete or foreign)"
     meta = {k[len("motion:"):]: v for k, v in header.items() if isinstance(k, str) and k.startswith("motion:")}
-    if meta.get("settings_hash") != expect.get("settings_hash"):
-        change = settings_change(meta.get("render_settings"), settings)
+    if meta.get("look_hash") != expect.get("look_hash"):
+        change = settings_change(meta.get("render_settings"), now.settings)
         if change:
             return f"were made with other settings ({change})"
-        edited = files_change(meta.get("files"), files)
+        edited = files_change(meta.get("files"), now.files)
         if edited:
             return f"were made from other files ({edited})"
         if "settings_hash" not in meta:
             return "were not made by motion render (no settings in the header)"
+        if "look_hash" not in meta:
+            return "were made by an earlier version of motion render (no frame key in the header)"
+        parts = parts_change(meta.get("look_parts"), now.look_parts, now.names)
+        if parts:
+            return f"were made from another version of the scene ({_listed([p + ' changed' for p in parts])})"
         return "were made from another version of the scene or its settings"
     if meta.get("motion_hash") != expect.get("motion_hash"):
+        moved = parts_change(meta.get("motion_parts"), now.motion_parts.get(int(expect.get("frame", -1)), {}), now.names, "motion:")
+        if moved:
+            return f"were made from other motion (motion of {_listed(moved)} changed)"
         return "were made from other motion (the scene's animation or simulation changed)"
     if meta.get("frame") != expect.get("frame"):
         return f"hold frame {meta.get('frame')}"
@@ -101,14 +149,46 @@ def why_stale(path: str, expect: Mapping[str, Any], settings: Mapping[str, Any],
     return None
 
 
-def frame_states(existing: list[int], paths: Mapping[int, str], expect: Mapping[int, Mapping[str, Any]], settings: Mapping[str, Any],
-                 files: Mapping[str, str] | None = None) -> FrameStates:
+def frame_states(existing: list[int], paths: Mapping[int, str], expect: Mapping[int, Mapping[str, Any]], now: CurrentKeys) -> FrameStates:
     """Sort the selected frames found on disk into complete and stale (with the reason)."""
     states = FrameStates()
     for f in existing:
-        why = why_stale(paths[f], expect[f], settings, files)
+        why = why_stale(paths[f], expect[f], now)
         if why is None:
             states.complete.append(f)
         else:
             states.stale[f] = why
     return states
+
+
+@dataclass(frozen=True)
+class FolderFrames:
+    """The frame files of a scene in its output folder (by the scene's own file naming):
+    those of its timeline, and the foreign ones outside it (a render from before the
+    timeline moved, `first: 1001` after keys written at 0-23) that a run leaves alone and
+    no deliverable takes."""
+
+    timeline: dict[int, Path] = field(default_factory=dict)
+    foreign: dict[int, Path] = field(default_factory=dict)
+
+
+def folder_frames(out_dir: Path, loaded: Any) -> FolderFrames:
+    """The frame files named as `loaded` names its frames in `out_dir`, split into those
+    of its timeline (first..last) and the foreign ones. A name whose frame number sits in
+    a folder part of `output.filename` is not looked for (nothing is found)."""
+    scene = loaded.scene
+    pattern = scene.output.filename.replace("{name}", loaded.name)
+    folder, name = (out_dir / pattern).parent, Path(pattern).name
+    run = re.search(r"#+", name)
+    if run is None or not folder.is_dir():
+        return FolderFrames()
+    number = re.compile(re.escape(name[: run.start()]) + r"(-?\d+)" + re.escape(name[run.end():]) + r"\Z")
+    out = FolderFrames()
+    first, last = scene.timeline.first, scene.timeline.last
+    for path in folder.iterdir():
+        m = number.match(path.name)
+        if m is None or not path.is_file():
+            continue
+        frame = int(m.group(1))
+        (out.timeline if first <= frame <= last else out.foreign)[frame] = path
+    return out
