@@ -4,7 +4,9 @@ set (one `mi.Scene`, its BVH never rebuilt), the time-sliced groups of non-rigid
 the rigid movers (one rest-frame scene each, posed per path: render/poses.py).
 
 `intersect` finds the nearest hit over all of them and returns it in world space;
-`occluded` answers a shadow ray against the same set at the same time.
+`occluded` answers a shadow ray against the same set at the same time. All of them are
+traced in one kernel: on CUDA they must share one SBT owner (render/sbt.py), which
+`check_shared` verifies before each render, on every variant.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import mitsuba as mi
 import numpy as np
 
 from .poses import MoverTracks, bounding_spheres, may_hit
+from .sbt import SbtOwner, check_shared
 
 
 class World:
@@ -27,6 +30,16 @@ class World:
         self.emissive: list[int] = []  # indices of movers that carry area emitters
         self.emissive_slices: list[int] = []  # indices of slice groups that carry area emitters
         self._spheres: tuple[list[tuple[float, ...]], np.ndarray] | None = None  # (boxes, spheres)
+        self.owner: SbtOwner | None = None  # the SBT owner of every scene traced (render/sbt.py)
+
+    def traced(self, scene: mi.Scene) -> list[mi.Scene]:
+        """Every scene one kernel traces: the static `scene`, the movers, every slice."""
+        return [scene, *self.movers, *(s for group in self.slices for s in group)]
+
+    def check_shared(self, scene: mi.Scene) -> None:
+        """Raise `sbt.SbtOwnerError` unless the scenes traced with the static `scene`
+        share one SBT owner that covers their shape types (render/sbt.py)."""
+        check_shared(self.traced(scene), self.owner)
 
     def set_movers(self, movers: Sequence[mi.Scene]) -> None:
         """The rigid movers' rest-frame scenes (fixed for a job)."""
