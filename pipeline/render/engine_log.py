@@ -39,9 +39,9 @@ class Watch:
         if not self.seen:
             return
         cause, message = self.seen[0]
-        first = " ".join(message.split())
+        first = " ".join(message.split()).split(", which")[0].split(". ")[0]  # its first clause
         times = f" ({len(self.seen)} times)" if len(self.seen) > 1 else ""
-        raise EngineWarningError(f"{cause}{times}; drjit: {first[:200]}")
+        raise EngineWarningError(f"{cause}{times}; drjit: {first[:160]}")
 
 
 _lock = threading.Lock()
