@@ -22,7 +22,7 @@ import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, Mapping
 
 from .cache import cache_root
 from .errors import RendererError
@@ -164,6 +164,43 @@ def probe(variant: str, lib: str | None = None, use_cache: bool = True) -> bool:
         ok = False
     _store_probe(key, ok)
     return ok
+
+
+def gpu_devices(listing: str | None = None, env: Mapping[str, str] | None = None) -> list[str]:
+    """The GPUs this process may use, as CUDA_VISIBLE_DEVICES names them: that variable's
+    entries when it is set (empty, or from an entry starting with '-' on: none, as CUDA
+    reads it), else one index per GPU `nvidia-smi -L` lists (`listing`: its output, given
+    by tests; none when nvidia-smi is absent or fails)."""
+    env = os.environ if env is None else env
+    if "CUDA_VISIBLE_DEVICES" in env:
+        out = []
+        for entry in (e.strip() for e in env["CUDA_VISIBLE_DEVICES"].split(",")):
+            if not entry or entry.startswith("-"):
+                break
+            out.append(entry)
+        return out
+    if listing is None:
+        import shutil
+
+        smi = shutil.which("nvidia-smi")
+        if smi is None:
+            return []
+        try:
+            proc = subprocess.run([smi, "-L"], capture_output=True, text=True, timeout=20)
+        except (OSError, subprocess.TimeoutExpired):
+            return []
+        if proc.returncode != 0:
+            return []
+        listing = proc.stdout
+    return [str(k) for k, _ in enumerate(line for line in listing.splitlines() if line.startswith("GPU "))]
+
+
+def device_of(variant: str) -> str:
+    """What a worker renders on, for the report: `cuda:<its CUDA_VISIBLE_DEVICES, else 0>`
+    on a CUDA variant, else `cpu`."""
+    if variant.startswith("cuda"):
+        return f"cuda:{os.environ.get('CUDA_VISIBLE_DEVICES') or '0'}"
+    return "cpu"
 
 
 def _gpu_present() -> bool:
