@@ -204,6 +204,8 @@ def device_of(variant: str) -> str:
 
 
 def _gpu_present() -> bool:
+    if "CUDA_VISIBLE_DEVICES" in os.environ:  # the user's choice of GPUs: none means none
+        return bool(gpu_devices())
     return any(os.path.exists(p) for p in ("/dev/nvidia0", "/dev/nvidiactl")) or bool(
         glob.glob("/usr/lib/*-linux-gnu/libcuda.so*")
     )
