@@ -142,6 +142,33 @@ def test_scenes_traced_together_without_one_owner_are_refused(monkeypatch: pytes
         meshes_only.scene(ball)
 
 
+def test_a_render_whose_scenes_do_not_share_the_owner_stops_before_tracing() -> None:
+    from _render_support import activate
+
+    if activate() == "scalar_rgb":
+        pytest.skip("the motion_path integrator needs an LLVM or CUDA variant")
+    import mitsuba as mi
+
+    from motion.pipeline.render.integrator import register
+    from motion.pipeline.render.sbt import SbtOwner, SbtOwnerError
+    from motion.pipeline.variant import load_dict
+
+    register()
+    owner = SbtOwner({"Mesh", "Sphere"})
+    scene = owner.scene({"type": "scene", "integrator": {"type": "motion_path"}, "floor": {"type": "rectangle"},
+                         "sensor": {"type": "perspective", "to_world": mi.ScalarTransform4f().translate([0, 0, -4]), "film": {"type": "hdrfilm", "width": 4, "height": 4}}})
+    integrator = scene.integrator()
+    integrator.set_sbt_owner(owner)
+    frame = (np.zeros((1, 2, 3)), np.tile([1.0, 0, 0, 0], (1, 2, 1)), np.zeros((2, 3)), np.tile([1.0, 0, 0, 0], (2, 1)), np.zeros(3))
+    integrator.set_movers([owner.scene({"type": "scene", "ball": {"type": "sphere"}})], 2)
+    integrator.set_frame(*frame)
+    assert np.array(integrator.render(scene, spp=1)).shape == (4, 4, 4)
+    integrator.set_movers([load_dict({"type": "scene", "ball": {"type": "sphere"}})], 2)  # built without the owner
+    integrator.set_frame(*frame)
+    with pytest.raises(SbtOwnerError, match="traced scene 1 of 2 was not built by the kernel's SBT owner"):
+        integrator.render(scene, spp=1)
+
+
 def _jit_log() -> Any:
     """drjit-core's `jit_log(LogLevel, fmt, ...)`: the function its OptiX code generator
     warns with; its message goes to drjit's log callback like the real warning's."""

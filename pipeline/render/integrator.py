@@ -76,7 +76,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
 
     def set_sbt_owner(self, owner: Any) -> None:
         """The SBT owner every traced scene of the job was built against (render/sbt.py)."""
-        self.world.owner = owner
+        self.world.set_owner(owner)
 
     def set_lights(self, lights: Sequence[Any]) -> None:
         """The lights that move (fixed for a job): delta emitters (point, spot, directional)

@@ -31,21 +31,33 @@ class World:
         self.emissive_slices: list[int] = []  # indices of slice groups that carry area emitters
         self._spheres: tuple[list[tuple[float, ...]], np.ndarray] | None = None  # (boxes, spheres)
         self.owner: SbtOwner | None = None  # the SBT owner of every scene traced (render/sbt.py)
+        self._checked: tuple[int, ...] | None = None  # the set of scenes `check_shared` last passed
 
     def traced(self, scene: mi.Scene) -> list[mi.Scene]:
         """Every scene one kernel traces: the static `scene`, the movers, every slice."""
         return [scene, *self.movers, *(s for group in self.slices for s in group)]
 
+    def set_owner(self, owner: SbtOwner | None) -> None:
+        """The SBT owner every traced scene was built against (render/sbt.py)."""
+        self.owner = owner
+        self._checked = None
+
     def check_shared(self, scene: mi.Scene) -> None:
         """Raise `sbt.SbtOwnerError` unless the scenes traced with the static `scene`
-        share one SBT owner that covers their shape types (render/sbt.py)."""
-        check_shared(self.traced(scene), self.owner)
+        share one SBT owner that covers their shape types (render/sbt.py); checked again
+        only when the set of scenes changed."""
+        traced = self.traced(scene)
+        key = (id(self.owner), *map(id, traced))
+        if key != self._checked:  # once per set of scenes, not per frame
+            check_shared(traced, self.owner)
+            self._checked = key
 
     def set_movers(self, movers: Sequence[mi.Scene]) -> None:
         """The rigid movers' rest-frame scenes (fixed for a job)."""
         self.movers = list(movers)
         self.emissive = [k for k, m in enumerate(self.movers) if len(m.emitters()) > 0]
         self._spheres = None
+        self._checked = None
 
     def bounding_spheres(self) -> np.ndarray:
         """The movers' rest-frame bounding spheres [M, 4] (`poses.bounding_spheres`), made
@@ -59,6 +71,7 @@ class World:
     def set_slices(self, groups: Sequence[Sequence[mi.Scene]]) -> None:
         """For each deforming object or particle system, one world-space scene per slice."""
         self.slices = [list(g) for g in groups]
+        self._checked = None
         self.emissive_slices = [k for k, g in enumerate(self.slices) if g and len(g[0].emitters()) > 0]
 
     def slice_hit(self, group: int) -> int:
