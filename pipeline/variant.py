@@ -14,6 +14,7 @@ and the drjit version, so later commands pay nothing.
 from __future__ import annotations
 
 import fnmatch
+import functools
 import glob
 import importlib.metadata
 import json
@@ -180,19 +181,23 @@ def gpu_devices(listing: str | None = None, env: Mapping[str, str] | None = None
             out.append(entry)
         return out
     if listing is None:
-        import shutil
-
-        smi = shutil.which("nvidia-smi")
-        if smi is None:
-            return []
-        try:
-            proc = subprocess.run([smi, "-L"], capture_output=True, text=True, timeout=20)
-        except (OSError, subprocess.TimeoutExpired):
-            return []
-        if proc.returncode != 0:
-            return []
-        listing = proc.stdout
+        listing = _nvidia_smi_listing(os.environ.get("PATH", ""))
     return [str(k) for k, _ in enumerate(line for line in listing.splitlines() if line.startswith("GPU "))]
+
+
+@functools.lru_cache(maxsize=4)
+def _nvidia_smi_listing(path: str) -> str:
+    """`nvidia-smi -L`'s output ('' when it is not on `path` or fails), once per process."""
+    import shutil
+
+    smi = shutil.which("nvidia-smi", path=path)
+    if smi is None:
+        return ""
+    try:
+        proc = subprocess.run([smi, "-L"], capture_output=True, text=True, timeout=20)
+    except (OSError, subprocess.TimeoutExpired):
+        return ""
+    return proc.stdout if proc.returncode == 0 else ""
 
 
 def device_of(variant: str) -> str:
