@@ -14,6 +14,7 @@ and the drjit version, so later commands pay nothing.
 from __future__ import annotations
 
 import fnmatch
+import functools
 import glob
 import importlib.metadata
 import json
@@ -22,7 +23,7 @@ import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, Mapping
 
 from .cache import cache_root
 from .errors import RendererError
@@ -166,7 +167,50 @@ def probe(variant: str, lib: str | None = None, use_cache: bool = True) -> bool:
     return ok
 
 
+def gpu_devices(listing: str | None = None, env: Mapping[str, str] | None = None) -> list[str]:
+    """The GPUs this process may use, as CUDA_VISIBLE_DEVICES names them: that variable's
+    entries when it is set (empty, or from an entry starting with '-' on: none, as CUDA
+    reads it), else one index per GPU `nvidia-smi -L` lists (`listing`: its output, given
+    by tests; none when nvidia-smi is absent or fails)."""
+    env = os.environ if env is None else env
+    if "CUDA_VISIBLE_DEVICES" in env:
+        out = []
+        for entry in (e.strip() for e in env["CUDA_VISIBLE_DEVICES"].split(",")):
+            if not entry or entry.startswith("-"):
+                break
+            out.append(entry)
+        return out
+    if listing is None:
+        listing = _nvidia_smi_listing(os.environ.get("PATH", ""))
+    return [str(k) for k, _ in enumerate(line for line in listing.splitlines() if line.startswith("GPU "))]
+
+
+@functools.lru_cache(maxsize=4)
+def _nvidia_smi_listing(path: str) -> str:
+    """`nvidia-smi -L`'s output ('' when it is not on `path` or fails), once per process."""
+    import shutil
+
+    smi = shutil.which("nvidia-smi", path=path)
+    if smi is None:
+        return ""
+    try:
+        proc = subprocess.run([smi, "-L"], capture_output=True, text=True, timeout=20)
+    except (OSError, subprocess.TimeoutExpired):
+        return ""
+    return proc.stdout if proc.returncode == 0 else ""
+
+
+def device_of(variant: str) -> str:
+    """What a worker renders on, for the report: `cuda:<its CUDA_VISIBLE_DEVICES, else 0>`
+    on a CUDA variant, else `cpu`."""
+    if variant.startswith("cuda"):
+        return f"cuda:{os.environ.get('CUDA_VISIBLE_DEVICES') or '0'}"
+    return "cpu"
+
+
 def _gpu_present() -> bool:
+    if "CUDA_VISIBLE_DEVICES" in os.environ:  # the user's choice of GPUs: none means none
+        return bool(gpu_devices())
     return any(os.path.exists(p) for p in ("/dev/nvidia0", "/dev/nvidiactl")) or bool(
         glob.glob("/usr/lib/*-linux-gnu/libcuda.so*")
     )

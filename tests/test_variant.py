@@ -13,8 +13,9 @@ from _support import SCENES, run_motion
 
 
 def _env(tmp_path: Path, lib: str) -> dict[str, str]:
-    # a private cache folder: probe results of other tests must not leak in
-    return {"DRJIT_LIBLLVM_PATH": lib, "MOTION_CACHE_DIR": str(tmp_path / "cache")}
+    # a private cache folder: probe results of other tests must not leak in; no GPU either
+    # (on a GPU machine `auto` would pick CUDA, never falling back)
+    return {"DRJIT_LIBLLVM_PATH": lib, "MOTION_CACHE_DIR": str(tmp_path / "cache"), "CUDA_VISIBLE_DEVICES": ""}
 
 
 def test_missing_library_falls_back_to_scalar(tmp_path: Path) -> None:

@@ -1,6 +1,8 @@
 """The Dask executor: the same chunks on a Dask distributed cluster.
 
-Start a cluster with `dask scheduler` and one `dask worker` per machine (docs/farm.md).
+Start a cluster with `dask scheduler` and one `dask worker` per machine (docs/farm.md);
+on a GPU machine one per GPU, each advertising it (`CUDA_VISIBLE_DEVICES=N dask worker
+ADDRESS --nthreads 1 --resources GPU=1`): a CUDA job's chunks go only to those.
 Each chunk is pinned to one idle worker (`workers=[address]`, no stealing), so the farm
 knows who runs what and since when, exactly as with local processes. The task is the same
 `run_chunk`; its first-frame cache lives in the Dask worker process (a module-level cache
@@ -59,15 +61,23 @@ def run_chunk_shipped(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame
     return run_chunk_away(lambda c, j, i, x: run_chunk_reporting(c, j, i, x, topic), chunk_id, with_payload(job, payload), inputs, ctx)
 
 
+def gpu_workers(workers: dict[str, Any]) -> list[str]:
+    """The addresses, sorted, of the workers (the scheduler's `scheduler_info()["workers"]`)
+    that advertise at least one GPU resource."""
+    return sorted(a for a, w in workers.items() if float((w.get("resources") or {}).get("GPU", 0)) >= 1)
+
+
 class DaskExecutor:
     """Chunks on a Dask cluster; workers that leave are seen on the next poll."""
 
     kind = "dask"
 
-    def __init__(self, address: str | None = None, scheduler_file: str | None = None, connect_timeout_s: float = 30.0, wait_workers_s: float = 60.0) -> None:
+    def __init__(self, address: str | None = None, scheduler_file: str | None = None, connect_timeout_s: float = 30.0, wait_workers_s: float = 60.0, gpu: bool = False) -> None:
         """Connect to the scheduler and wait for a first worker. A job that carries its
         scene (`RenderJob.shipped`, ship mode) has its assets scattered once, its chunks
-        rendered away from the output folder and its frames published here on return."""
+        rendered away from the output folder and its frames published here on return.
+        `gpu` (a CUDA variant's job): only workers that advertise a GPU resource
+        (`dask worker ... --resources GPU=1`) are used, and each task asks for one."""
         import dask
         from distributed import Client
 
@@ -85,6 +95,7 @@ class DaskExecutor:
         except (TimeoutError, Exception) as exc:  # dask raises its own TimeoutError type
             self.client.close()
             raise UsageError(f"--scheduler: no Dask worker joined {self.address} within {wait_workers_s:g}s ({type(exc).__name__})") from None
+        self.gpu = gpu
         self._running: dict[str, tuple[Any, int]] = {}
         self._written: deque[FrameWritten] = deque()
         self._topic = f"{FRAME_TOPIC}-{uuid.uuid4().hex[:8]}"  # this run's frames only
@@ -97,6 +108,10 @@ class DaskExecutor:
         self.task_bytes = 0  # pickled task arguments sent (job, baked frames, context, payload keys)
         self.frame_bytes = 0  # EXR bytes brought home (ship mode)
         self._refresh(force=True)
+        if gpu and not self._live:
+            self.client.close()
+            raise UsageError(f"--scheduler: the job renders on CUDA and no worker of {self.address} advertises a GPU; start one per GPU with "
+                             f"`CUDA_VISIBLE_DEVICES=N dask worker {self.address} --nthreads 1 --resources GPU=1`")
 
     def _on_frame_event(self, event: tuple[float, Any]) -> None:
         """Called on the client's event loop for each frame a worker logged."""
@@ -109,7 +124,7 @@ class DaskExecutor:
     def _refresh(self, force: bool = False) -> None:
         now = time.monotonic()
         if force or now - self._refreshed > 0.5:
-            self._live = sorted(self.client.scheduler_info(n_workers=-1)["workers"])
+            self._live = gpu_workers(self.client.scheduler_info(n_workers=-1)["workers"]) if self.gpu else sorted(self.client.scheduler_info(n_workers=-1)["workers"])
             self._refreshed = now
 
     def live_workers(self) -> list[str]:
@@ -144,6 +159,7 @@ class DaskExecutor:
             allow_other_workers=False,
             pure=False,
             retries=0,  # the farm retries, on another worker
+            **({"resources": {"GPU": 1}} if self.gpu else {}),
         )
         self._running[worker] = (fut, chunk_id)
 

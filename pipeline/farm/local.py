@@ -4,7 +4,8 @@ Workers are started with the 'spawn' context (never fork: drjit must not be inhe
 half-initialised) and each keeps its own first-frame cache in its process. Each worker has
 its own pipe, so the scheduler knows which chunk each one runs; a worker's death is seen
 through its process sentinel. drjit threads are divided among the workers
-(max(1, cores // N) each) so N workers never oversubscribe the cores.
+(max(1, cores // N) each) so N workers never oversubscribe the cores. On a CUDA variant
+each worker gets one GPU in turn (CUDA_VISIBLE_DEVICES, `worker_devices`).
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ import socket
 import time
 from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
-from typing import Any, Sequence
+from contextlib import contextmanager
+from typing import Any, Iterator, Sequence
 
 from ..bake import BakedFrame
 from ..render.job import RenderJob
@@ -29,6 +31,18 @@ def threads_per_worker(workers: int, cores: int | None = None) -> int:
     if cores is None:
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     return max(1, cores // max(1, workers))
+
+
+def worker_devices(variant: str) -> list[str]:
+    """The GPUs local workers are spread over, one each in turn (CUDA_VISIBLE_DEVICES):
+    the devices this process may use (`variant.gpu_devices`) when `variant` renders on
+    CUDA here (requested, or `auto` with a working GPU); none otherwise."""
+    from ..variant import choose, gpu_devices
+
+    devices = gpu_devices()
+    if not devices or variant in ("llvm_ad_rgb", "scalar_rgb"):
+        return []
+    return devices if choose(variant).variant.startswith("cuda") else []
 
 
 def _on_term(signum: int, frame: Any) -> None:
@@ -63,12 +77,31 @@ def _worker_main(conn: Connection) -> None:
             return
 
 
+@contextmanager
+def _visible_device(device: str | None) -> Iterator[None]:
+    """CUDA_VISIBLE_DEVICES=device in this process's environment for the block (nothing
+    changes for None)."""
+    if device is None:
+        yield
+        return
+    before = os.environ.get("CUDA_VISIBLE_DEVICES")
+    os.environ["CUDA_VISIBLE_DEVICES"] = device
+    try:
+        yield
+    finally:
+        if before is None:
+            del os.environ["CUDA_VISIBLE_DEVICES"]
+        else:
+            os.environ["CUDA_VISIBLE_DEVICES"] = before
+
+
 @dataclass
 class _Worker:
     name: str
     process: Any
     conn: Connection
     chunk: int | None = None
+    device: str | None = None  # its GPU (CUDA_VISIBLE_DEVICES), None: all it sees
 
 
 class LocalExecutor:
@@ -76,24 +109,28 @@ class LocalExecutor:
 
     kind = "local"
 
-    def __init__(self, workers: int, respawns: int | None = None) -> None:
+    def __init__(self, workers: int, respawns: int | None = None, devices: Sequence[str] = ()) -> None:
+        """`devices`: GPUs to give the workers, one each in turn (`worker_devices`); a
+        replacement takes its predecessor's."""
         if workers < 1:
             raise ValueError("workers must be at least 1")
         self.n = workers
+        self.devices = list(devices)
         self._ctx = mp.get_context("spawn")
         self._workers: dict[str, _Worker] = {}
         self._respawns_left = respawns if respawns is not None else 3 * workers
         self.started_at = time.perf_counter()
-        for _ in range(workers):
-            self._spawn()
+        for k in range(workers):
+            self._spawn(self.devices[k % len(self.devices)] if self.devices else None)
 
-    def _spawn(self) -> None:
+    def _spawn(self, device: str | None = None) -> None:
         parent, child = self._ctx.Pipe(duplex=True)
         proc = self._ctx.Process(target=_worker_main, args=(child,), daemon=True, name="motion-farm-worker")
-        proc.start()
+        with _visible_device(device):  # a spawned process starts with this environment
+            proc.start()
         child.close()
         name = f"{socket.gethostname()}:{proc.pid}"
-        self._workers[name] = _Worker(name=name, process=proc, conn=parent)
+        self._workers[name] = _Worker(name=name, process=proc, conn=parent, device=device)
 
     @property
     def pids(self) -> list[int]:
@@ -153,7 +190,7 @@ class LocalExecutor:
                 self._drop(w)
                 if self._respawns_left > 0:
                     self._respawns_left -= 1
-                    self._spawn()
+                    self._spawn(w.device)
         return events
 
     def _drop(self, w: _Worker) -> None:
@@ -173,7 +210,7 @@ class LocalExecutor:
         self._drop(w)
         if self._respawns_left > 0:
             self._respawns_left -= 1
-            self._spawn()
+            self._spawn(w.device)
 
     def close(self, interrupted: bool = False) -> None:
         """Stop every worker: busy ones (or all when interrupted) are terminated, idle ones

@@ -47,7 +47,7 @@ def build_report(
         row: dict[str, Any] = {"frame": f, "status": rec.status, "attempts": rec.attempts, "retries": max(0, rec.attempts - 1)}
         r = rec.result
         if r is not None and r.ok:
-            row.update(worker=r.worker, cold=r.cold, setup_s=r.setup_s, render_s=r.render_s, denoise_s=r.denoise_s, write_s=r.write_s, kernels_compiled=r.kernels_compiled, path=r.path)
+            row.update(worker=r.worker, cold=r.cold, setup_s=r.setup_s, render_s=r.render_s, denoise_s=r.denoise_s, write_s=r.write_s, kernels_compiled=r.kernels_compiled, path=r.path, variant=r.variant, device=r.device)
         if rec.errors:
             row["errors"] = rec.errors
         rows.append(row)

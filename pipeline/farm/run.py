@@ -28,14 +28,17 @@ MAX_THREADS = 1024  # drjit threads per worker
 MAX_RETRIES = 100  # extra attempts per chunk
 
 
-def default_workers(frames: int) -> int:
+def default_workers(frames: int, gpus: int = 0) -> int:
     """All local cores by default: one worker per core (each gets cores // workers drjit
     threads), no more than there are frames, at most MAX_DEFAULT_WORKERS. On 2 cores,
-    2 workers x 1 thread render 1.6x faster than 1 worker x 2 threads (bench_farm)."""
+    2 workers x 1 thread render 1.6x faster than 1 worker x 2 threads (bench_farm).
+    On a CUDA variant (`gpus`: the devices `local.worker_devices` found) one worker per
+    GPU instead: a worker's megakernel fills its GPU, and more workers per GPU only add
+    CUDA contexts, scenes and compiled kernels to its memory."""
     from .local import threads_per_worker
 
-    cores = threads_per_worker(1)
-    return max(1, min(cores, frames, MAX_DEFAULT_WORKERS))
+    units = gpus if gpus > 0 else threads_per_worker(1)
+    return max(1, min(units, frames, MAX_DEFAULT_WORKERS))
 
 
 def run_chunks(
@@ -64,7 +67,7 @@ def run_chunks(
                 from .address import scheduler_target
                 from .cluster import DaskExecutor
 
-                executor = DaskExecutor(**scheduler_target(scheduler))
+                executor = DaskExecutor(**scheduler_target(scheduler), gpu=job.variant.startswith("cuda"))
                 progress.note(f"  executor: dask at {executor.address}, {len(executor.live_workers())} workers")
                 assets = getattr(job.shipped, "assets", None)
                 if assets is not None:
@@ -76,10 +79,11 @@ def run_chunks(
                 executor = InlineExecutor()
                 progress.note(f"  executor: inline (a small job: this process, no worker started) x {threads} threads")
             else:
-                from .local import LocalExecutor
+                from .local import LocalExecutor, worker_devices
 
-                executor = LocalExecutor(min(workers, len(chunk_list)))
-                progress.note(f"  executor: local, {executor.n} worker processes x {threads} threads")
+                executor = LocalExecutor(min(workers, len(chunk_list)), devices=worker_devices(job.variant))
+                gpus = f" on GPUs {', '.join(executor.devices)}" if executor.devices else ""
+                progress.note(f"  executor: local, {executor.n} worker processes x {threads} threads{gpus}")
             sched = Scheduler(executor, job, by_frame, ctx, cfg, notify=progress.event, no_worker_grace_s=120.0 if scheduler else 0.0)
             with progress:
                 sched.run(chunk_list)

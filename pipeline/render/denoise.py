@@ -13,6 +13,12 @@ number of threads once its HDR input scale is given (`input_scale`, computed her
 fixed order); its own auto-exposure is a parallel sum whose last bits follow the threads.
 A missing or broken library is a `DenoiserUnavailableError`: one line naming the package,
 raised before the first frame (`check_available`, a probe in a subprocess) or in the worker.
+
+On a CUDA variant the filter runs on OIDN's CUDA device where OIDN has one (`pick_device`;
+the frame's header names the device), else on the CPU with one line saying so; a CUDA
+device that fails to start or to run falls back to the CPU the same way, never aborting
+the frame. CPU variants keep the CPU device (and their bits). OptiX's own denoiser is not
+used: where the driver lacks its weights (`nvoptix.bin`) it aborts the whole process.
 """
 
 from __future__ import annotations
@@ -22,7 +28,7 @@ import json
 import subprocess
 import sys
 import time
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -99,22 +105,65 @@ def describe(found: Mapping[str, Any]) -> str:
     return f"Intel Open Image Denoise {found['oidn']} ({PACKAGE} {found['version']}, {found.get('device', 'CPU')})"
 
 
+def pick_device(variant: str, devices: Sequence[str]) -> tuple[str, str | None]:
+    """The OIDN device type for frames rendered with `variant`, given the device types
+    OIDN lists here (`devices`, e.g. ["CUDA", "CPU"]): CUDA for a CUDA variant where OIDN
+    has it, else CPU; and the line that says why a CUDA variant denoises on the CPU (None
+    when nothing fell back)."""
+    if not variant.startswith("cuda"):
+        return "CPU", None
+    if "CUDA" in devices:
+        return "CUDA", None
+    return "CPU", f"denoise: {PACKAGE} has no CUDA device here (it lists {', '.join(devices) or 'none'}); denoising on the CPU"
+
+
+def _fell_back(line: str) -> None:
+    """Say once, on stderr, that the denoiser runs on the CPU instead of the GPU."""
+    import logging
+
+    logging.getLogger("motion").warning(f"motion: warning: {line}")
+
+
 class Denoiser:
     """One OIDN device and a filter per image size and guide set, kept by the worker across
-    frames (OIDN's filter setup is the expensive part)."""
+    frames (OIDN's filter setup is the expensive part). `variant`: the Mitsuba variant of
+    the frames (default: the active one), which picks the device (`pick_device`)."""
 
-    def __init__(self) -> None:
+    def __init__(self, variant: str | None = None) -> None:
         try:
             import mitsuba_oidn as oidn
         except Exception as exc:  # ImportError, OSError from a missing .so, ...
             raise _unavailable(f"{type(exc).__name__}: {exc}") from None
         self._oidn = oidn
-        try:
-            self._device = oidn.Device(oidn.DeviceType.CPU)
-        except Exception as exc:
-            raise _unavailable(f"{type(exc).__name__}: {exc}") from None
-        self.version = {"version": oidn.__version__, "oidn": oidn.oidn_version(), "device": "CPU"}
+        if variant is None:
+            import mitsuba as mi
+
+            variant = str(mi.variant() or "")
+        kind, line = pick_device(variant, [str(p.type).split(".")[-1] for p in oidn.physical_devices()])
+        self._device = None
+        if kind == "CUDA":
+            try:
+                self._device = oidn.Device(oidn.DeviceType.CUDA)
+            except Exception as exc:
+                kind, line = "CPU", f"denoise: {PACKAGE}'s CUDA device failed to start ({type(exc).__name__}: {' '.join(str(exc).split())}); denoising on the CPU"
+        if line is not None:
+            _fell_back(line)
+        if self._device is None:
+            try:
+                self._device = oidn.Device(oidn.DeviceType.CPU)
+            except Exception as exc:
+                raise _unavailable(f"{type(exc).__name__}: {exc}") from None
+        self.kind = kind
+        self.version = {"version": oidn.__version__, "oidn": oidn.oidn_version(), "device": kind}
         self._filters: dict[tuple[Any, ...], Any] = {}
+
+    def _on_cpu(self, reason: str) -> None:
+        """The CUDA device failed a frame: this and every later frame on the CPU."""
+        _fell_back(f"denoise: {PACKAGE}'s CUDA device failed ({reason}); denoising on the CPU")
+        self._device = self._oidn.Device(self._oidn.DeviceType.CPU)
+        self._filters.clear()
+        self.kind = "CPU"
+        self.version = {**self.version, "device": "CPU"}
 
     def _filter(self, key: tuple[Any, ...]) -> Any:
         flt = self._filters.get(key)
@@ -135,6 +184,18 @@ class Denoiser:
             guides.append(("albedo", np.ascontiguousarray(np.clip(albedo[..., :3], 0.0, 1.0), dtype=np.float32)))
         if normal is not None:
             guides.append(("normal", np.ascontiguousarray(np.clip(normal[..., :3], -1.0, 1.0), dtype=np.float32)))
+        if self.kind == "CUDA":
+            try:
+                return self._run(color, guides)
+            except Exception as exc:  # OIDN reports its errors as exceptions
+                self._on_cpu(f"{type(exc).__name__}: {' '.join(str(exc).split())}")
+        try:
+            return self._run(color, guides)
+        except Exception as exc:
+            raise _unavailable(f"{type(exc).__name__}: {exc}") from None
+
+    def _run(self, color: np.ndarray, guides: list[tuple[str, np.ndarray]]) -> np.ndarray:
+        """One execution of the frame size's filter on the device."""
         h, w = color.shape[:2]
         flt = self._filter((h, w, tuple(name for name, _ in guides)))
         # OIDN's own HDR auto-exposure sums over the image in parallel, in an order that
@@ -143,15 +204,28 @@ class Denoiser:
         # makes the output independent of the threads (checked at 1, 2 and 3)
         flt.input_scale = input_scale(color)
         out = np.zeros_like(color)
-        flt.set_image("color", color)
-        for name, image in guides:
-            flt.set_image(name, image)
-        flt.set_image("output", out)
-        try:
-            flt.execute()
-        except Exception as exc:
-            raise _unavailable(f"{type(exc).__name__}: {exc}") from None
+        held = [self._bind(flt, "color", color), *(self._bind(flt, name, image) for name, image in guides)]
+        staged_out = self._bind(flt, "output", out, staged=False)
+        flt.execute()
+        del held
+        if staged_out is not None:
+            out[...] = np.from_dlpack(staged_out.view("float32", out.shape))
         return out
+
+    def _bind(self, flt: Any, name: str, image: np.ndarray, staged: bool = True) -> Any:
+        """Bind a float32 [H, W, 3] array: as it is where the device can read it (the CPU),
+        else through a buffer of the device (copied in for an input; host memory the device
+        writes for the output). Returns the buffer (None when bound as it is)."""
+        oidn = self._oidn
+        if self._device.can_share(image):
+            flt.set_image(name, image)
+            return None
+        h, w, c = image.shape
+        buf = self._device.new_buffer(image.nbytes, oidn.Storage.Device if staged else oidn.Storage.Host)
+        if staged:
+            buf.write(image)
+        flt.set_image(name, buf, format=oidn.Format(oidn.Format.Float.value + c - 1), width=w, height=h, pixel_stride=c * image.itemsize)
+        return buf
 
 
 def input_scale(color: np.ndarray) -> float:

@@ -5,8 +5,9 @@ Under an LLVM or CUDA variant a frame goes through the first-frame cache
 (render/scene_cache.py: the scene built once on the cold frame, a warm frame changes only
 what moved) and the motion_path integrator; under a scalar variant through the scalar
 fallback (render/scalar_fallback.py: Mitsuba's `path`, one whole scene per instant).
-Either way the frame's seed depends only on the scene seed and the frame
-(`frame_seed`), `motion_blur: subframes` is the mean of instants (`accumulate_subframes`),
+On LLVM and CUDA an engine warning that means wrong pixels fails the frame
+(render/engine_log.py). Either way the frame's seed depends only on the scene seed and
+the frame (`frame_seed`), `motion_blur: subframes` is the mean of instants (`accumulate_subframes`),
 the AOV channels are split into layers by the AOV table (render/aovs.py), and each frame
 reports its stats: cold or warm, setup vs render seconds, kernels, cache hits.
 """
@@ -24,6 +25,7 @@ from ..bake import BakedFrame
 from ..field_model import Parity, row_offset
 from ..scene.loader import LoadedScene
 from .aovs import split_layers
+from .engine_log import watching
 from .roles import sort_scene
 from .scalar_fallback import ScalarFallback
 from .scene_cache import SceneCache
@@ -174,19 +176,23 @@ class FrameRenderer:
         t0 = time.perf_counter()
         cold = self.cache.scene is None
         updated: tuple[str, ...] = ()
-        if cold:
-            self.cache.build(fi)
-        else:
-            updated = self.cache.update(fi)
-        seed = frame_seed(self.settings.seed, fi.frame, self.settings.seed_policy)
-        dr.kernel_history()  # clear
-        setup_s = time.perf_counter() - t0
-        t1 = time.perf_counter()
-        img = self._render_cached(fi, mode, seed, rows)
-        dr.eval(img)
-        dr.sync_thread()
-        rgba = np.array(img, dtype=np.float32)
-        render_s = time.perf_counter() - t1
+        # an engine warning that means wrong pixels (a disabled trace on CUDA) fails the
+        # frame (render/engine_log.py)
+        with watching() as engine:
+            if cold:
+                self.cache.build(fi)
+            else:
+                updated = self.cache.update(fi)
+            seed = frame_seed(self.settings.seed, fi.frame, self.settings.seed_policy)
+            dr.kernel_history()  # clear
+            setup_s = time.perf_counter() - t0
+            t1 = time.perf_counter()
+            img = self._render_cached(fi, mode, seed, rows)
+            dr.eval(img)
+            dr.sync_thread()
+            rgba = np.array(img, dtype=np.float32)
+            render_s = time.perf_counter() - t1
+        engine.check()
         rgba, aovs = split_layers(rgba, self.cache.integrator.aovs)
         history = dr.kernel_history()
         self._last_history = [h for h in history if h.get("type") == dr.KernelType.JIT]

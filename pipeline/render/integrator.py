@@ -74,6 +74,10 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         self.frame_data.n_samples = max(2, int(n_samples))
         self._eager = None
 
+    def set_sbt_owner(self, owner: Any) -> None:
+        """The SBT owner every traced scene of the job was built against (render/sbt.py)."""
+        self.world.set_owner(owner)
+
     def set_lights(self, lights: Sequence[Any]) -> None:
         """The lights that move (fixed for a job): delta emitters (point, spot, directional)
         built in the light's own frame (at the origin, shining along +Z) with unit intensity;
@@ -373,6 +377,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         Returns [H, W, 4 + AOV channels] (RGBA, alpha = the pixel's coverage)."""
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
+        self.world.check_shared(scene)  # one SBT for the whole kernel, or no render (render/sbt.py)
         # the path loop's state holds read-only locals (@dr.syntax passes every local the
         # body reads): with OptimizeLoops drjit would drop them and trace the body again,
         # every frame; LLVM folds them as well

@@ -28,6 +28,7 @@ from ..field_model import parity_of
 from ..frame_output import write_frame
 from ..scene.loader import LoadedScene, load_scene
 from ..timeline import frame_timecode
+from ..variant import device_of
 from .frame_renderer import FrameRenderer, frame_seed
 
 RENDERER_VERSION = "motion-render-1"
@@ -93,6 +94,8 @@ class FrameResult:
     error: str | None = None
     skipped: bool = False
     disk_fault: bool = False  # the error is the disk refusing the write (docs/farm.md)
+    variant: str = ""  # the Mitsuba variant that rendered it
+    device: str = ""  # what rendered it: cpu, or cuda:<device> (variant.device_of)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data for the report."""
@@ -382,6 +385,8 @@ def _render_one(job: RenderJob, baked: BakedFrame, out: Path | None = None) -> F
             denoise_s=float(drawn.denoise_meta.get("denoise_seconds", 0.0)),
             kernels_compiled=stats.kernels_compiled,
             asset_cache_hits=stats.asset_cache_hits,
+            variant=variant,
+            device=device_of(variant),
         )
     except Exception as exc:  # reported per frame; the farm decides on retries
         from ..errors import DiskFaultError

@@ -23,6 +23,7 @@ from .build import material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
 from .instant import add_lights, add_shapes, light_key, light_record, sensor_record
 from .roles import Roles
+from .sbt import SbtOwner, dict_types
 from .shutter_poses import across_shutter
 from .slices import SlicedGeometry
 
@@ -45,6 +46,7 @@ class SceneCache:
         self._mover_scale: dict[str, np.ndarray] = {}
         self._mover_params: dict[str, Any] = {}
         self.sliced: SlicedGeometry | None = None
+        self.owner: SbtOwner | None = None  # the SBT owner of every scene the kernel traces
 
     @property
     def integrator(self) -> Any:
@@ -79,23 +81,28 @@ class SceneCache:
         static = [o for o in scene.objects if o.name in set(self.roles.static_names)]
         add_shapes(d, loaded, static, fi, materials)
         add_lights(d, loaded, fi, skip=frozenset(i for i, _ in self.roles.moving_lights))
-        self.scene = load_dict(d)
-        self._params = mi.traverse(self.scene)
         # movers: one rest-frame scene each (scale kept in the rest frame)
-        movers = []
+        mover_dicts: list[dict[str, Any]] = []
         self._mover_scale = {}
-        self._mover_params = {}
         for name in self.roles.mover_names:
             obj = next(o for o in scene.objects if o.name == name)
             t, q, s = fi.objects[name]
             md: dict[str, Any] = {"type": "scene"}
             for k, shape in enumerate(object_shapes(obj, loaded, np.diag([*s[0], 1.0]), materials)):
                 md[f"{mitsuba_id(name)}__{k}"] = shape
-            movers.append(load_dict(md))
+            mover_dicts.append(md)
             self._mover_scale[name] = np.array(s[0])
-            self._mover_params[name] = mi.traverse(movers[-1])
+        # every scene the kernel traces is built against one SBT owner covering their
+        # shape types (render/sbt.py: on CUDA the others' traces would be disabled)
+        types = set().union(dict_types(d), *(dict_types(md) for md in mover_dicts), {"Mesh"} if self.roles.slice_names else set())
+        self.owner = SbtOwner(types)
+        self.scene = self.owner.scene(d)
+        self._params = mi.traverse(self.scene)
+        movers = [self.owner.scene(md) for md in mover_dicts]
+        self._mover_params = {name: mi.traverse(m) for name, m in zip(self.roles.mover_names, movers)}
         self._movers = movers
         integrator = self.integrator
+        integrator.set_sbt_owner(self.owner)
         integrator.set_movers(movers, fi.samples)
         integrator.set_lights([load_dict(unit_light_dict(light, loaded)) for _, light in self.roles.moving_lights])
         w, h = settings.resolution
@@ -104,7 +111,7 @@ class SceneCache:
         else:
             x_fov = float(np.asarray(self._params["sensor.x_fov"]).ravel()[0]) if "sensor.x_fov" in self._params else float(fi.fov[0])
             integrator.set_projection("perspective", (w / 2) / np.tan(np.radians(x_fov) / 2), w, h)
-        self.sliced = SlicedGeometry(mi, loaded, self.roles.slice_names, fi, materials, integrator.set_slices)
+        self.sliced = SlicedGeometry(mi, loaded, self.roles.slice_names, fi, materials, integrator.set_slices, self.owner)
         # route the sensor pose through the same parameter update warm frames use, so the
         # first warm frame replays the cold frame's kernels instead of compiling new ones
         self.update(fi)

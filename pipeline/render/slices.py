@@ -35,6 +35,7 @@ from ..scene.loader import LoadedScene
 from ..scene.schema import Mesh, Particles
 from ..variant import load_dict
 from .build import mitsuba_id
+from .sbt import SbtOwner
 
 if TYPE_CHECKING:
     from .stacked import StackedFrame
@@ -146,9 +147,11 @@ class SliceGroup:
 
 
 def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bsdf: Any, slices: int, radius: float = 0.0,
-                mesh: RenderMesh | None = None, smooth: bool = False, rest: np.ndarray | None = None, emitter: dict[str, Any] | None = None) -> SliceGroup:
+                mesh: RenderMesh | None = None, smooth: bool = False, rest: np.ndarray | None = None, emitter: dict[str, Any] | None = None,
+                owner: SbtOwner | None = None) -> SliceGroup:
     """S scenes, each with one mesh of `count` vertices (or particle capacity); a deforming
-    mesh's texture coordinates are written once here, its positions and normals per frame."""
+    mesh's texture coordinates are written once here, its positions and normals per frame.
+    `owner`: the SBT owner the scenes are built against (render/sbt.py)."""
     key = mitsuba_id(name)
     scenes, params = [], []
     uvs = mesh.uvs if mesh is not None else None
@@ -168,7 +171,7 @@ def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bs
         if uvs is not None:
             p["vertex_texcoords"] = mi.Float(np.asarray(uvs, np.float32).ravel())
         p.update()
-        scene = load_dict({"type": "scene", key: shape})
+        scene = (owner.scene if owner is not None else load_dict)({"type": "scene", key: shape})
         scenes.append(scene)
         params.append(mi.traverse(scene))
     return SliceGroup(name, kind, scenes, params, count, faces, radius, key, mesh, smooth, rest, emitter, emitter is not None)
@@ -222,9 +225,11 @@ class SlicedGeometry:
     frame, their vertices rewritten per frame. `on_regroup` gets every group's scenes
     whenever the set of scenes changes (the integrator's `set_slices`)."""
 
-    def __init__(self, mi: Any, loaded: LoadedScene, names: list[str], fi: StackedFrame, materials: dict[str, Any], on_regroup: Callable[[list[list[Any]]], None]) -> None:
+    def __init__(self, mi: Any, loaded: LoadedScene, names: list[str], fi: StackedFrame, materials: dict[str, Any], on_regroup: Callable[[list[list[Any]]], None],
+                 owner: SbtOwner | None = None) -> None:
         self._mi = mi
         self.loaded = loaded
+        self.owner = owner  # every slice scene is built against it (render/sbt.py)
         self._on_regroup = on_regroup
         self.groups = [self._build(name, fi, materials) for name in names]
         on_regroup([g.scenes for g in self.groups])
@@ -241,12 +246,12 @@ class SlicedGeometry:
         if isinstance(obj, Particles):
             n = fi.particles[name][0].shape[1] if name in fi.particles else 0
             capacity = max(64, 1 << int(np.ceil(np.log2(max(n, 1) * 1.5))))
-            return build_group(mi, name, "particles", capacity, np.zeros((0, 3)), bsdf, slices, radius=obj.radius, emitter=emitter)
+            return build_group(mi, name, "particles", capacity, np.zeros((0, 3)), bsdf, slices, radius=obj.radius, emitter=emitter, owner=self.owner)
         from ..motion.deform import bind_mesh
 
         verts, faces = bind_mesh(self.loaded, obj)
         mesh, smooth = render_mesh(self.loaded, obj, len(verts), faces)
-        return build_group(mi, name, "deform", len(mesh.index), np.asarray(mesh.faces, np.uint32), bsdf, slices, mesh=mesh, smooth=smooth, rest=verts, emitter=emitter)
+        return build_group(mi, name, "deform", len(mesh.index), np.asarray(mesh.faces, np.uint32), bsdf, slices, mesh=mesh, smooth=smooth, rest=verts, emitter=emitter, owner=self.owner)
 
     def update(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> None:
         """Each slice's geometry at its time (`slice_samples`): particles from their
@@ -283,5 +288,7 @@ class SlicedGeometry:
         k = self.groups.index(group)
         capacity = 1 << int(np.ceil(np.log2(needed * 1.5)))
         bsdf = group.scenes[0].shapes()[0].bsdf()
-        self.groups[k] = build_group(self._mi, group.name, "particles", capacity, group.faces, bsdf, len(group.scenes), radius=group.radius, emitter=group.emitter)
+        self.groups[k] = build_group(self._mi, group.name, "particles", capacity, group.faces, bsdf, len(group.scenes), radius=group.radius, emitter=group.emitter, owner=self.owner)
+        if self.owner is not None:
+            self.owner.forget(group.scenes)
         self._on_regroup([g.scenes for g in self.groups])

@@ -4,7 +4,9 @@ set (one `mi.Scene`, its BVH never rebuilt), the time-sliced groups of non-rigid
 the rigid movers (one rest-frame scene each, posed per path: render/poses.py).
 
 `intersect` finds the nearest hit over all of them and returns it in world space;
-`occluded` answers a shadow ray against the same set at the same time.
+`occluded` answers a shadow ray against the same set at the same time. All of them are
+traced in one kernel: on CUDA they must share one SBT owner (render/sbt.py), which
+`check_shared` verifies before each render, on every variant.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import mitsuba as mi
 import numpy as np
 
 from .poses import MoverTracks, bounding_spheres, may_hit
+from .sbt import SbtOwner, check_shared
 
 
 class World:
@@ -27,12 +30,34 @@ class World:
         self.emissive: list[int] = []  # indices of movers that carry area emitters
         self.emissive_slices: list[int] = []  # indices of slice groups that carry area emitters
         self._spheres: tuple[list[tuple[float, ...]], np.ndarray] | None = None  # (boxes, spheres)
+        self.owner: SbtOwner | None = None  # the SBT owner of every scene traced (render/sbt.py)
+        self._checked: tuple[int, ...] | None = None  # the set of scenes `check_shared` last passed
+
+    def traced(self, scene: mi.Scene) -> list[mi.Scene]:
+        """Every scene one kernel traces: the static `scene`, the movers, every slice."""
+        return [scene, *self.movers, *(s for group in self.slices for s in group)]
+
+    def set_owner(self, owner: SbtOwner | None) -> None:
+        """The SBT owner every traced scene was built against (render/sbt.py)."""
+        self.owner = owner
+        self._checked = None
+
+    def check_shared(self, scene: mi.Scene) -> None:
+        """Raise `sbt.SbtOwnerError` unless the scenes traced with the static `scene`
+        share one SBT owner that covers their shape types (render/sbt.py); checked again
+        only when the set of scenes changed."""
+        traced = self.traced(scene)
+        key = (id(self.owner), *map(id, traced))
+        if key != self._checked:  # once per set of scenes, not per frame
+            check_shared(traced, self.owner)
+            self._checked = key
 
     def set_movers(self, movers: Sequence[mi.Scene]) -> None:
         """The rigid movers' rest-frame scenes (fixed for a job)."""
         self.movers = list(movers)
         self.emissive = [k for k, m in enumerate(self.movers) if len(m.emitters()) > 0]
         self._spheres = None
+        self._checked = None
 
     def bounding_spheres(self) -> np.ndarray:
         """The movers' rest-frame bounding spheres [M, 4] (`poses.bounding_spheres`), made
@@ -46,6 +71,7 @@ class World:
     def set_slices(self, groups: Sequence[Sequence[mi.Scene]]) -> None:
         """For each deforming object or particle system, one world-space scene per slice."""
         self.slices = [list(g) for g in groups]
+        self._checked = None
         self.emissive_slices = [k for k, g in enumerate(self.slices) if g and len(g[0].emitters()) > 0]
 
     def slice_hit(self, group: int) -> int:

@@ -114,7 +114,14 @@ def make_job(req: RenderRequest, loaded: LoadedScene, overrides: dict[str, Any],
     """The job every worker runs (scene, settings and their hashes) and its size: local
     worker processes and drjit threads per worker."""
     scene_hash, settings_hash = scene_hashes(loaded)
-    workers = 1 if req.scheduler else (req.workers or default_workers(len(frames)))
+    if req.scheduler:
+        workers = 1
+    elif req.workers:
+        workers = req.workers
+    else:
+        from ..farm.local import worker_devices
+
+        workers = default_workers(len(frames), len(worker_devices(loaded.scene.render.variant)))  # one per GPU on CUDA
     if req.scheduler:
         threads = req.threads  # None: each Dask worker uses its machine's cores
     else:
