@@ -57,7 +57,7 @@ def _plant_validators(cache: Path, marker: Path, how: str) -> list[Path]:
             os.environ["MOTION_CACHE_DIR"] = old
     for entry in entries:
         entry.parent.mkdir(parents=True, exist_ok=True)
-        entry.write_bytes(pickle.dumps([(__file__, 0, 0)]) + pickle.dumps(_Payload(marker)))
+        entry.write_bytes(pickle.dumps(_Payload(marker)))  # the first thing an unpickler of the entry loads
         if how == "other user":
             os.chown(entry, OTHER_UID, OTHER_UID)
         elif how == "writable by others":
