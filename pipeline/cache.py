@@ -51,12 +51,6 @@ def check_cache_root() -> None:
         raise UsageError(f"the cache folder {root} is not writable (set MOTION_CACHE_DIR to a writable folder)")
 
 
-def enforce_cap(folder: Path, cap_bytes: int, keep: Path | None = None) -> int:
-    """Hold `folder` to `cap_bytes` by the stores' one eviction policy (`hold_to_cap`);
-    returns the bytes freed."""
-    return hold_to_cap(folder, cap_bytes, None, keep)
-
-
 def validation_dir() -> Path:
     """What validation keeps: the scene's compiled validator (scene/compiled.py) and the
     assets whose bytes passed their checks (checked.py), under the cache root."""

@@ -89,15 +89,6 @@ def info(folder: Path | None = None) -> CacheInfo:
     return CacheInfo(folder, len(files), sum(p.stat().st_size for p in files))
 
 
-def enforce_cap(cap_bytes: int | None = None, keep: Path | None = None) -> int:
-    """Delete least recently used assets until the folder is under the cap (never `keep`);
-    returns bytes freed."""
-    from ..cache import hold_to_cap
-    from ..limits import env_size
-
-    return hold_to_cap(assets_dir(), cap_bytes if cap_bytes is not None else env_size("MOTION_ASSET_CACHE_CAP"), None, keep)
-
-
 def clear(folder: Path) -> int:
     """Remove every file under `folder`; returns the number removed."""
     n = 0
