@@ -314,3 +314,25 @@ def test_a_damaged_cost_history_is_discarded_and_written_again(tmp_path: Path, m
     assert got["basis"].startswith("built-in") and sum("cost history discarded" in r.getMessage() for r in caplog.records) == 1
     estimate.record("s", "h", 100, {"frames": [{"status": "rendered", "render_s": 0.2, "cold": False}], "workers": ["w"], "totals": {"farm_s": 1.0}})
     assert stat.S_ISREG(path.stat().st_mode) and estimate.estimate("s", "h", 100, 4, 1)["basis"].startswith("this scene")
+
+
+def test_a_fifo_in_place_of_a_pass_or_a_converted_asset_is_made_again(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A FIFO where a kept pass or a converted mesh would be: never opened (no hang), not
+    a hit, and replaced by the entry made again."""
+    from motion.pipeline.cache import file_digest
+    from motion.pipeline.render import assets
+    from motion.pipeline.scene import checked
+    from motion.pipeline.variant import activate
+
+    activate("auto", quiet=True)  # mesh_file converts through Mitsuba
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
+    (tmp_path / "tri.obj").write_text(OBJ)
+    kept = checked._key("mesh", ".obj", file_digest(tmp_path / "tri.obj"))
+    kept.parent.mkdir(parents=True)
+    os.mkfifo(kept)
+    load_scene(_mesh_scene(tmp_path, "tri.obj"))
+    assert stat.S_ISREG(kept.lstat().st_mode)  # the pass, kept in its place
+    made = assets.mesh_file(tmp_path / "tri.obj")
+    made.unlink()
+    os.mkfifo(made)
+    assert assets.mesh_file(tmp_path / "tri.obj") == made and stat.S_ISREG(made.lstat().st_mode) and made.stat().st_size > 0
