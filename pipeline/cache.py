@@ -49,6 +49,14 @@ def check_cache_root() -> None:
         raise UsageError(f"the cache folder {root} cannot be made: {exc.strerror} (set MOTION_CACHE_DIR to a writable folder)") from None
     if not os.access(root, os.W_OK | os.X_OK):
         raise UsageError(f"the cache folder {root} is not writable (set MOTION_CACHE_DIR to a writable folder)")
+    if not trusted_folder(root) and str(root) not in _WARNED:
+        import logging
+
+        _WARNED.add(str(root))
+        logging.getLogger("motion").warning(f"motion: warning: the cache folder {root} is not ours alone (another user may write it): nothing kept there is used, everything is made again")
+
+
+_WARNED: set[str] = set()  # cache roots warned about in this process
 
 
 def validation_dir() -> Path:
