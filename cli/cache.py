@@ -10,10 +10,10 @@ import click
 
 
 def _folders() -> dict[str, Path]:
-    from motion.pipeline.cache import kernels_dir, validation_dir
+    from motion.pipeline.cache import STORES, kernels_dir, validation_dir
     from motion.pipeline.render.assets import assets_dir
 
-    return {"assets": assets_dir(), "kernels": kernels_dir(), "validation": validation_dir()}
+    return {"assets": assets_dir(), "kernels": kernels_dir(), "validation": validation_dir(), "shipped": STORES["shipped"].dir()}
 
 
 @click.group("cache")
@@ -23,18 +23,25 @@ def cache() -> None:
 
 @cache.command("info")
 def cache_info() -> None:
-    """Files and bytes in each cache folder."""
+    """Entries, bytes, hits and misses of each cache (one line per store of pipeline/cache.py),
+    then drjit's kernel cache."""
+    from motion.pipeline.cache import STORES, kernels_dir, trusted_folder
     from motion.pipeline.render.assets import info
 
-    for name, folder in _folders().items():
-        i = info(folder)
-        click.echo(f"{name:<8} {i.files:>6} files {i.bytes / 1e6:>10.1f} MB  {folder}")
+    for store in STORES.values():
+        files, size = store.info()
+        ours = "" if not store.dir().is_dir() or trusted_folder(store.dir()) else "  (writable by others: its entries are not used)"
+        click.echo(f"{store.name:<15} {files:>6} files {size / 1e6:>10.1f} MB  {store.dir()}{ours}")
+    k = info(kernels_dir())
+    click.echo(f"{'kernels':<15} {k.files:>6} files {k.bytes / 1e6:>10.1f} MB  {kernels_dir()}")
 
 
 @cache.command("clear")
-@click.option("--what", type=click.Choice(["all", "assets", "kernels", "validation"]), default="all", show_default=True)
+@click.option("--what", type=click.Choice(["all", "assets", "kernels", "validation", "shipped"]), default="all", show_default=True)
 def cache_clear(what: str) -> None:
-    """Delete cached files (they are rebuilt on demand)."""
+    """Delete cached files (they are rebuilt on demand): assets holds the converted assets,
+    imports and import records; validation the kept validators and asset passes; shipped
+    what shipped jobs carried to this worker."""
     from motion.pipeline.render.assets import clear
 
     for name, folder in _folders().items():

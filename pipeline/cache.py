@@ -1,13 +1,25 @@
-"""Where motion keeps its on-disk caches (converted assets, imports, kernels, the variant
-probe): one root, shared by every stage that caches."""
+"""Where motion keeps its on-disk caches, and the one cache layer they all go through.
+
+One root (`cache_root`) holds every cache, shared by the workers of a machine. Each cache
+motion keeps there is a `Store` in `STORES` (converted assets, converted imports, import
+records, kept asset passes, kept validators, shipped files): a content store with one key
+and code-version rule (`Store.key`), one whole-file check and trust rule (`Store.hit`:
+only a regular file we wrote, in folders only we may write, is believed), bounded reads
+(`Store.read`), stats, and one eviction policy (`hold_to_cap`: least recently used first,
+to a byte or entry cap). Nothing read from a store is executed, except a kept validator
+(scene/compiled.py), which is read only through `trusted`. `snapshot` gives a checker or
+converter a private copy of the bytes it hashed. docs/ci-sharding.md ("Caches")."""
 
 from __future__ import annotations
 
 import hashlib
 import os
+import stat
+import threading
 from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator, Sequence
 
 _DIGESTS: dict[tuple[str, int, int], str] = {}
 _RECORDERS: list[dict[str, str]] = []  # open `digests_recorded` blocks, innermost last
@@ -37,33 +49,14 @@ def check_cache_root() -> None:
         raise UsageError(f"the cache folder {root} cannot be made: {exc.strerror} (set MOTION_CACHE_DIR to a writable folder)") from None
     if not os.access(root, os.W_OK | os.X_OK):
         raise UsageError(f"the cache folder {root} is not writable (set MOTION_CACHE_DIR to a writable folder)")
+    if not trusted_folder(root) and str(root) not in _WARNED:
+        import logging
+
+        _WARNED.add(str(root))
+        logging.getLogger("motion").warning(f"motion: warning: the cache folder {root} is not ours alone (another user may write it): nothing kept there is used, everything is made again")
 
 
-def enforce_cap(folder: Path, cap_bytes: int, keep: Path | None = None) -> int:
-    """Delete the least recently used files of a cache folder until it holds at most
-    `cap_bytes` ($MOTION_ASSET_CACHE_CAP, for converted assets and imports alike); returns
-    the bytes freed. Temporary files (named .*) are left to their writers, and `keep` (the
-    entry just made, about to be used) stays whatever the cap."""
-    if not folder.is_dir():
-        return 0
-    entries = []
-    for p in folder.iterdir():
-        try:
-            st = p.stat()
-        except OSError:
-            continue
-        if p.is_file() and not p.name.startswith("."):
-            entries.append((st.st_atime, st.st_size, p))
-    entries.sort()
-    total = sum(size for _, size, _ in entries)
-    entries = [e for e in entries if e[2] != keep]
-    freed = 0
-    for _, size, path in entries:
-        if total - freed <= cap_bytes:
-            break
-        path.unlink(missing_ok=True)
-        freed += size
-    return freed
+_WARNED: set[str] = set()  # cache roots warned about in this process
 
 
 def validation_dir() -> Path:
@@ -119,6 +112,36 @@ def file_digest(path: Path) -> str:
 
 
 @contextmanager
+def snapshot(path: Path, limit: int, what: str) -> Iterator[tuple[str, Path]]:
+    """`with snapshot(path, limit, what) as (digest, copy):` the SHA-256 of `path`'s bytes
+    and a private copy of exactly those bytes (same file name, in a folder only we can
+    reach, removed on leaving), for a check or a conversion whose result is kept by that
+    digest: what is checked is what was hashed, whatever becomes of `path` meanwhile. The
+    file is opened as every input is (`limits.open_bounded`: a FIFO is never waited on);
+    InputFileError otherwise."""
+    import shutil
+    import tempfile
+
+    from .limits import InputFileError, open_bounded
+
+    folder = Path(tempfile.mkdtemp(prefix="motion-snapshot-"))
+    try:
+        copy = folder / Path(path).name
+        h = hashlib.sha256()
+        size = 0
+        with open_bounded(path, limit, what) as src, open(copy, "wb") as dst:
+            for chunk in iter(lambda: src.read(1 << 20), b""):
+                size += len(chunk)
+                if size > limit:
+                    raise InputFileError(str(path), f"{what} is over the limit of {limit} bytes")
+                h.update(chunk)
+                dst.write(chunk)
+        yield h.hexdigest(), copy
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@contextmanager
 def digests_recorded() -> Iterator[dict[str, str]]:
     """Every file `file_digest` reads inside the block, by resolved path, with its digest:
     the inputs of a reader whose output is kept (a USD stage's layers and the textures it
@@ -129,3 +152,250 @@ def digests_recorded() -> Iterator[dict[str, str]]:
         yield seen
     finally:
         del _RECORDERS[next(i for i, r in enumerate(_RECORDERS) if r is seen)]
+
+
+# --- the one cache layer ------------------------------------------------------------------------
+# Every cache motion keeps under the root is a `Store` (one record in STORES): where its entries
+# live, what version of code they depend on, how they are evicted. The store does what every
+# cache needs once: an entry is used only if it is ours (`trusted`), whole (the caller's check)
+# and read bounded (never a FIFO); a miss is made under a temporary name and renamed; then the
+# entry's folder is held to its cap (least recently used first; a hit is a use).
+
+_TRUSTED_FOLDERS: set[tuple[str, int, int]] = set()  # (folder, device, inode) found ours this process
+_SOURCE = Path(__file__).resolve().parent  # pipeline/: a store's `code` is named relative to it
+
+
+def _ours(st: os.stat_result, folder: bool) -> bool:
+    """Owned by this process's user and writable by nobody else (a folder that others may
+    write but not rename in, sticky like /tmp, is enough for the root)."""
+    if st.st_uid != os.geteuid():
+        return False
+    return not st.st_mode & 0o022 or (folder and bool(st.st_mode & stat.S_ISVTX))
+
+
+def trusted_folder(folder: Path, root: Path | None = None) -> bool:
+    """Whether `folder` and every folder from the cache root down to it are ours and
+    writable by nobody else: only then may an entry in it be believed (another user who can
+    write there could plant one). Links below the root are refused; the root may be one. A
+    folder outside the cache root (a caller's own) is judged by itself."""
+    root = root if root is not None else cache_root()
+    try:
+        rel = Path(folder).relative_to(root)
+    except ValueError:
+        root, rel = Path(folder), Path()
+    path = root
+    for i, part in enumerate(("",) + rel.parts):
+        path = path / part if part else path
+        try:
+            st = os.stat(path) if i == 0 else os.lstat(path)
+        except OSError:
+            return False
+        memo = (str(path), st.st_dev, st.st_ino)
+        if memo in _TRUSTED_FOLDERS:
+            continue
+        if not stat.S_ISDIR(st.st_mode) or not _ours(st, folder=i == 0):
+            return False
+        _TRUSTED_FOLDERS.add(memo)
+    return True
+
+
+def trusted(path: Path) -> os.stat_result | None:
+    """The entry's stat if it is a regular file we wrote (ours, writable by nobody else, no
+    link) in a trusted folder (`trusted_folder`); else None: missing, planted, or reachable
+    by another user."""
+    try:
+        st = os.lstat(path)
+    except OSError:
+        return None
+    if not stat.S_ISREG(st.st_mode) or not _ours(st, folder=False) or not trusted_folder(Path(path).parent):
+        return None
+    return st
+
+
+def code_digest(files: Sequence[str]) -> str:
+    """The SHA-256 of source files (named relative to pipeline/): the one code version a
+    store's entries are stamped with."""
+    h = hashlib.sha256()
+    for name in files:
+        h.update(name.encode() + b"\0" + (_SOURCE / name).read_bytes())
+    return h.hexdigest()
+
+
+@dataclass
+class Store:
+    """One on-disk cache under the cache root: `folder` (relative to the root), what it
+    holds (`what`, for `motion cache info`), the version its entries are keyed with (`tag`,
+    plus the digest of the `code` files that make them), and its cap: `cap_bytes` holds each
+    of its folders to $MOTION_ASSET_CACHE_CAP bytes, `cap_files` to that many entries;
+    `shards` spreads entries over 256 folders by their key's first two digits."""
+
+    name: str
+    folder: str
+    what: str
+    tag: str = ""
+    code: tuple[str, ...] = ()
+    cap_bytes: bool = True
+    cap_files: int | None = None
+    shards: bool = False
+    stats: dict[str, int] = field(default_factory=lambda: {"hits": 0, "misses": 0, "refused": 0})
+    _version: str | None = field(default=None, repr=False)
+
+    def dir(self) -> Path:
+        """The store's folder."""
+        return cache_root() / self.folder
+
+    def version(self) -> str:
+        """The code version every key includes: `tag`, then the digest of `code` (read once
+        a process)."""
+        if self._version is None:
+            self._version = self.tag + (":" + code_digest(self.code) if self.code else "")
+        return self._version
+
+    def key(self, *parts: str, length: int = 32) -> str:
+        """The hex key of an entry made from `parts` (content digests, settings) by this
+        version of the code."""
+        return hashlib.sha256("|".join((self.version(),) + parts).encode()).hexdigest()[:length]
+
+    def path(self, key: str, stem: str = "", suffix: str = "") -> Path:
+        """Where the entry of `key` lives (`stem-key.suffix`; in its shard when sharded)."""
+        folder = self.dir() / key[:2] if self.shards else self.dir()
+        return folder / (f"{stem}-{key}{suffix}" if stem else f"{key}{suffix}")
+
+    def hit(self, entry: Path, whole: Callable[[Path], bool] | None = None) -> bool:
+        """Whether `entry` is there, ours (`trusted`) and whole (`whole(entry)`, the store's
+        check that it reads back); a hit is marked used (the cap evicts others first). An
+        entry that is there but not ours or not whole is counted `refused` and made again."""
+        st = trusted(entry)
+        if st is None or (whole is not None and not whole(entry)):
+            with _STATS_LOCK:
+                self.stats["misses"] += 1
+                if st is not None or os.path.lexists(entry):
+                    self.stats["refused"] += 1
+            return False
+        with _STATS_LOCK:
+            self.stats["hits"] += 1
+        try:
+            os.utime(entry)  # least recently used order, on relatime and noatime mounts too
+        except OSError:
+            pass
+        return True
+
+    def make(self, entry: Path, write: Callable[[Path], None], doing: str, verify: Callable[[Path], bool] | None = None) -> Path:
+        """Make `entry` by `write(tmp)` under a temporary name beside it, renamed into place
+        whole (pipeline/files.py: a full disk is one DiskFaultError line and leaves nothing);
+        then its folder is held to the cap."""
+        from .files import writing
+
+        with writing(entry, doing, suffix=entry.suffix or ".tmp", verify=verify) as tmp:
+            write(tmp)
+        self.hold(entry.parent, keep=entry)
+        return entry
+
+    def get_or_make(self, entry: Path, write: Callable[[Path], None], doing: str, whole: Callable[[Path], bool] | None = None,
+                    verify: Callable[[Path], bool] | None = None) -> Path:
+        """`entry` when it is a hit, else made by `write(tmp)` (`make`)."""
+        if self.hit(entry, whole):
+            return entry
+        return self.make(entry, write, doing, verify)
+
+    def put(self, entry: Path, data: bytes, best_effort: bool = False, doing: str = "writing a cache entry") -> bool:
+        """Keep `data` at `entry`; with `best_effort`, a disk that refuses it is False (its
+        loss costs only recomputation), else DiskFaultError."""
+        from .errors import DiskFaultError
+
+        try:
+            entry.parent.mkdir(parents=True, exist_ok=True)
+            self.make(entry, lambda tmp: tmp.write_bytes(data), doing)
+        except (OSError, DiskFaultError):
+            if not best_effort:
+                raise
+            return False
+        return True
+
+    def read(self, entry: Path, limit: int) -> bytes | None:
+        """The bytes of a trusted entry of at most `limit` bytes, else None (missing, not
+        ours, not a regular file: a FIFO is never waited on, over the limit)."""
+        from .limits import InputFileError, read_bounded
+
+        if trusted(entry) is None:
+            if os.path.lexists(entry):
+                with _STATS_LOCK:
+                    self.stats["refused"] += 1
+            return None
+        try:
+            return read_bounded(entry, limit, "cache entry")
+        except InputFileError:
+            return None
+
+    def hold(self, folder: Path, keep: Path | None = None) -> int:
+        """The one eviction policy: over its cap (bytes or entries), a folder's least
+        recently used entries go until it is within it; temporary files (named .*) are left
+        to their writers and `keep` (the entry just made) stays. Returns the bytes freed."""
+        from .limits import env_size
+
+        cap_bytes = env_size("MOTION_ASSET_CACHE_CAP") if self.cap_bytes else None
+        return hold_to_cap(folder, cap_bytes, self.cap_files, keep)
+
+    def entries(self) -> list[Path]:
+        """Every entry of the store (its folder's files, and its shards')."""
+        root = self.dir()
+        folders = [root] + (sorted(p for p in root.iterdir() if p.is_dir() and len(p.name) == 2) if self.shards and root.is_dir() else [])
+        out = []
+        for folder in folders:
+            try:
+                out += [Path(e.path) for e in os.scandir(folder) if e.is_file(follow_symlinks=False) and not e.name.startswith(".")]
+            except OSError:
+                continue
+        return out
+
+    def info(self) -> tuple[int, int]:
+        """(entries, bytes) the store holds."""
+        files = self.entries()
+        size = 0
+        for p in files:
+            try:
+                size += p.lstat().st_size
+            except OSError:
+                pass
+        return len(files), size
+
+
+_STATS_LOCK = threading.Lock()
+
+
+def hold_to_cap(folder: Path, cap_bytes: int | None, cap_files: int | None = None, keep: Path | None = None) -> int:
+    """`Store.hold` for any folder: least recently used entries (by modification time, which
+    a hit renews) go until at most `cap_bytes` bytes and `cap_files` entries remain (None:
+    no bound); never `keep`, never temporary files (.*). Returns the bytes freed."""
+    try:
+        found = [(e.stat(follow_symlinks=False), e.path) for e in os.scandir(folder) if e.is_file(follow_symlinks=False) and not e.name.startswith(".")]
+    except OSError:
+        return 0
+    entries = sorted((st.st_mtime_ns, st.st_size, p) for st, p in found)
+    total, count = sum(size for _, size, _ in entries), len(entries)
+    freed = 0
+    for _, size, path in entries:
+        if (cap_bytes is None or total - freed <= cap_bytes) and (cap_files is None or count <= cap_files):
+            break
+        if keep is not None and path == str(keep):
+            continue
+        try:
+            os.unlink(path)
+        except OSError:
+            continue
+        freed += size
+        count -= 1
+    return freed
+
+
+# Every cache motion keeps under the root; `motion cache info` lists them. A new cache is one
+# entry here and its use through the Store's methods.
+STORES: dict[str, Store] = {s.name: s for s in (
+    Store("assets", "assets", "meshes and roughness textures converted for Mitsuba (render/assets.py)", tag="ply-v1"),
+    Store("imports", "assets/imports", "meshes, textures and skins converted from glTF and USD imports (scene/imports/cache.py)", tag="import-v2"),
+    Store("import-records", "assets/imports/records", "the records of glTF and USD imports (scene/imports/memo.py)", tag="records-v3", cap_files=4096),
+    Store("passes", "validation/assets", "asset files whose bytes passed their checks (scene/checked.py)", tag="pass-v2",
+          code=("images.py", "meshes.py", "limits.py"), cap_bytes=False, cap_files=1024, shards=True),
+    Store("validators", "validation", "the scene format's validators (scene/compiled.py)", tag="validator-v2", cap_bytes=False, cap_files=64),
+    Store("shipped", "shipped", "assets a shipped job carried to this worker (farm/transfer.py)"),
+)}

@@ -176,3 +176,52 @@ def half_problem(value: float) -> str | None:
         return (f"radiance {value:g} is beyond what a half-float EXR holds ({HALF_MAX:g}): "
                 "its pixels would be inf; use output.pixel_type: float, or lower it")
     return None
+
+
+# --- records motion wrote and reads back ------------------------------------------------------
+MAX_RECORD_BYTES = 64 << 20  # one JSON record motion keeps (a cost history, an import's records, a report)
+MAX_RECORD_DEPTH = 64  # nesting of a record: motion's own are a few levels deep
+
+
+def _depth_within(value: object, most: int) -> bool:
+    """Whether `value` nests at most `most` lists and mappings deep (walked without recursion)."""
+    todo: list[tuple[object, int]] = [(value, 1)]
+    while todo:
+        item, depth = todo.pop()
+        if isinstance(item, (dict, list)):
+            if depth > most:
+                return False
+            todo.extend((v, depth + 1) for v in (item.values() if isinstance(item, dict) else item))
+    return True
+
+
+def read_json_record(path: str | Path, what: str, expect: type | tuple[type, ...] = dict, limit: int = MAX_RECORD_BYTES,
+                     depth: int = MAX_RECORD_DEPTH) -> typing.Any:
+    """A JSON record motion wrote earlier (a cost history, a kept import, a manifest, a run
+    report), or None. Missing: None, silently. Damaged (not a regular file: a FIFO is never
+    waited on; over `limit` bytes; not UTF-8 JSON; nested deeper than `depth`; not an
+    `expect`): None, with one warning line naming the file, and the caller makes it again.
+    Never raises for what is in the file."""
+    import json
+    import logging
+
+    try:
+        data = read_bounded(path, limit, what)
+    except InputFileError as exc:
+        if not os.path.lexists(path):
+            return None
+        why = exc.reason
+    else:
+        try:
+            doc = json.loads(data)
+        except (ValueError, RecursionError) as exc:  # RecursionError: nested past the decoder's stack
+            why = f"not a JSON record ({type(exc).__name__})"
+        else:
+            if not _depth_within(doc, depth):
+                why = f"nested more than {depth} deep"
+            elif not isinstance(doc, expect):
+                why = f"a JSON {type(doc).__name__}, not the record expected"
+            else:
+                return doc
+    logging.getLogger("motion").warning(f"motion: warning: {path}: {what} discarded ({why}); it is made again")
+    return None

@@ -211,7 +211,7 @@ def test_an_asset_whose_bytes_passed_is_not_decoded_again_and_a_changed_or_faili
     Image.new("RGB", (4, 4), (10, 200, 10)).save(tex)  # the bytes that passed before: kept
     load_scene(scene)
     assert len(decoded) == 4
-    monkeypatch.setattr(checked, "_checker_digest", "another checker")
+    monkeypatch.setattr(checked.STORE, "_version", "another checker")
     load_scene(scene)
     assert len(decoded) == 5
 
@@ -254,18 +254,21 @@ def test_validate_ends_with_its_output_whole_and_leaves_an_in_process_caller_as_
 
 
 def test_kept_asset_passes_are_held_to_a_bound(tmp_path: Path) -> None:
-    """Each of the 256 folders of kept asset passes holds at most SHARD_CAP of them: over
-    it, the oldest go until half remain (one pass per texture version a machine has seen
-    would otherwise grow without end)."""
+    """Each of the 256 folders of kept asset passes holds at most SHARD_CAP of them, by the
+    stores' one eviction policy: over the cap, the least recently used go until it holds the
+    cap (one pass per texture version a machine has seen would otherwise grow without end);
+    temporary files are left to their writers."""
     import os
 
-    from motion.pipeline.scene.checked import hold_to_cap
+    from motion.pipeline.cache import hold_to_cap
+    from motion.pipeline.scene.checked import SHARD_CAP
 
+    assert SHARD_CAP == 1024
     for i in range(5):
         (tmp_path / f"pass{i}").write_bytes(b"")
         os.utime(tmp_path / f"pass{i}", ns=(i * 10**9, i * 10**9))
     (tmp_path / ".pass.tmp").write_bytes(b"")
-    hold_to_cap(tmp_path, cap=5)
+    hold_to_cap(tmp_path, None, 5)
     assert len(list(tmp_path.iterdir())) == 6
-    hold_to_cap(tmp_path, cap=4)
+    hold_to_cap(tmp_path, None, 2)
     assert sorted(p.name for p in tmp_path.iterdir()) == [".pass.tmp", "pass3", "pass4"]

@@ -42,11 +42,14 @@ def test_manifest_hashes_each_named_file_once(tmp_path: Path) -> None:
     assert got["tri.obj"] == ShippedAsset("tri.obj", hashlib.sha256(OBJ.encode()).hexdigest(), len(OBJ))
 
 
-@pytest.mark.parametrize("hostile", ["../secret.png", "link/secret.png"])
+@pytest.mark.parametrize("hostile", ["../secret.png", "link/secret.png", "alias.png"])
 def test_asset_outside_the_scene_folder_is_refused_before_reading(tmp_path: Path, hostile: str) -> None:
+    """A path with `..`, through a linked folder, or a file that is itself a link to a file
+    outside the scene's folder (docs/farm.md: links out are refused): AssetError, one line."""
     (tmp_path / "secret.png").write_bytes(b"the client's other file")
     path = _scene(tmp_path / "shot", hostile)
     (tmp_path / "shot" / "link").symlink_to(tmp_path)  # a link inside the folder leading out
+    (tmp_path / "shot" / "alias.png").symlink_to(tmp_path / "secret.png")  # the asset itself is a link out
     loaded = load_scene(path, assets=False)
     with pytest.raises(AssetError) as exc:
         asset_manifest(loaded.scene, loaded.base_dir, path)

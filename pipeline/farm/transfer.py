@@ -18,13 +18,15 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
-from ..cache import cache_root, enforce_cap, file_digest
+from ..cache import STORES, file_digest
 from ..bake import BakedFrame
 from ..errors import AssetError, DiskFaultError
 from ..frame_output import is_complete
 from ..render.job import FrameResult, RenderJob, expected_meta
 from ..files import confined, write_atomic, writing
 from ..limits import env_size
+
+STORE = STORES["shipped"]
 from ..scene.checks import named_files, replace_at
 from ..scene.imports.cache import converted_file
 from ..scene.loader import LoadedScene
@@ -73,7 +75,7 @@ def asset_manifest(scene: Scene, base_dir: Path, scene_file: str | Path, sources
     sources = sources or {}
     named = list(named_files(scene))
     for loc, rel, _kind, _deforming in named:
-        if rel not in sources and not confined(base, base / rel):
+        if rel not in sources and not _inside(base, base / rel):
             raise AssetError(f"{scene_file}: {yaml_path(loc)}: {rel} lies outside the scene's folder {base.resolve()}; a shipped job sends only files inside it")
     out: dict[str, ShippedAsset] = {}
     for _loc, rel, _kind, _deforming in named:
@@ -83,9 +85,16 @@ def asset_manifest(scene: Scene, base_dir: Path, scene_file: str | Path, sources
     return list(out.values())
 
 
+def _inside(base: Path, path: Path) -> bool:
+    """Whether `path`, every link on it followed (its last part too: an asset that is a link
+    to a file elsewhere is outside), lies inside `base`."""
+    root, real = base.resolve(), path.resolve()
+    return real == root or root in real.parents
+
+
 def shipped_cache_dir() -> Path:
     """The worker's cache of shipped assets (under the cache root), one file per content hash."""
-    return cache_root() / "shipped"
+    return STORE.dir()
 
 
 def _entry(folder: Path, sha256: str, rel: str) -> Path:
@@ -105,22 +114,16 @@ def store(sha256: str, data: bytes, folder: Path | None = None, rel: str = "") -
     if got != sha256:
         raise AssetError(f"shipped asset {sha256[:16]}: received {len(data)} bytes hashing to {got[:16]}; expected the file with hash {sha256[:16]}")
     target = _entry(folder, sha256, rel)
-    write_atomic(target, data, "caching a shipped asset")
-    enforce_cap(folder, env_size("MOTION_ASSET_CACHE_CAP"), keep=target)
+    STORE.make(target, lambda tmp: tmp.write_bytes(data), "caching a shipped asset")
     return target
 
 
 def cached(asset: ShippedAsset, folder: Path | None = None) -> Path | None:
-    """The cached copy of `asset` when this worker already holds it whole (marked as just
-    used, so the cap evicts others first), else None."""
+    """The cached copy of `asset` when this worker already holds it whole and it is ours
+    (a file another user planted under that hash is not used), marked as just used so the
+    cap evicts others first; else None."""
     path = _entry(folder if folder is not None else shipped_cache_dir(), asset.sha256, asset.rel)
-    try:
-        if path.stat().st_size != asset.size:
-            return None
-        os.utime(path)  # least-recently-used order survives relatime/noatime mounts
-    except OSError:
-        return None
-    return path
+    return path if STORE.hit(path, lambda p: p.stat().st_size == asset.size) else None
 
 
 def check_out(assets: Iterable[ShippedAsset], fetch: Callable[[str], bytes], folder: Path | None = None) -> dict[str, Path]:

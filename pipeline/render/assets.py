@@ -3,54 +3,41 @@
 A mesh is converted once to Mitsuba's fast binary PLY, keyed by a hash of the source bytes
 and the conversion settings; written to a temporary name and renamed, so concurrent
 workers either see a whole file or none (the loser of a race just renames over an
-identical file). The cache has a size cap; the oldest entries (by access time) go first.
+identical file). The store (`cache.STORES["assets"]`) holds the rules every cache shares:
+only an entry we wrote is used, the cap evicts least recently used first.
 """
 
 from __future__ import annotations
 
-import hashlib
-import os
-import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from ..cache import cache_root
-from ..files import writing
-from ..limits import env_size
+from ..cache import STORES, file_digest, snapshot
+from ..limits import MAX_IMAGE_BYTES, MAX_MESH_BYTES
 from ..meshes import cache_entry_whole
 
-CONVERSION_VERSION = "ply-v1"
-
-_stats_lock = threading.Lock()
-STATS = {"hits": 0, "misses": 0}
+STORE = STORES["assets"]
+CONVERSION_VERSION = STORE.tag
+STATS = STORE.stats  # hits, misses (and entries refused: not ours, or not whole)
 
 
 def assets_dir() -> Path:
     """The converted-asset folder (under the cache root)."""
-    return cache_root() / "assets"
-
-
-def _digest(path: Path, settings: str) -> str:
-    h = hashlib.sha256()
-    h.update(settings.encode())
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()[:32]
+    return STORE.dir()
 
 
 def mesh_file(source: Path) -> Path:
     """The cached PLY for a mesh source (.obj or .ply), converting it on first use."""
     source = Path(source)
 
-    def write(tmp: str) -> None:
+    def write(src: Path, tmp: str) -> None:
         import mitsuba as mi
 
         kind = "ply" if source.suffix.lower() == ".ply" else "obj"
-        mi.load_dict({"type": kind, "filename": str(source)}).write_ply(tmp)
+        mi.load_dict({"type": kind, "filename": str(src)}).write_ply(tmp)
 
-    return _converted(source, f"{CONVERSION_VERSION}|{source.suffix.lower()}", ".ply", write)
+    return _converted(source, source.suffix.lower(), ".ply", write, MAX_MESH_BYTES)
 
 
 def alpha_texture(source: Path, raw: bool) -> Path:
@@ -59,34 +46,30 @@ def alpha_texture(source: Path, raw: bool) -> Path:
     rough plugins take alpha, our files perceptual roughness."""
     source = Path(source)
 
-    def write(tmp: str) -> None:
+    def write(src: Path, tmp: str) -> None:
         import mitsuba as mi
         import numpy as np
 
-        image = mi.Bitmap(str(source))
+        image = mi.Bitmap(str(src))
         # raw: the stored values as they are (keep the file's own gamma flag); else decode sRGB
         bitmap = image.convert(mi.Bitmap.PixelFormat.Y, mi.Struct.Type.Float32, image.srgb_gamma() if raw else False)
         rough = np.clip(np.array(bitmap, dtype=np.float32), 0.0, 1.0)
         mi.Bitmap(np.maximum(rough**2, 1e-4)).write(tmp)
 
-    return _converted(source, f"alpha-v2|{raw}", ".exr", write)
+    return _converted(source, f"alpha-v2|{raw}", ".exr", write, MAX_IMAGE_BYTES)
 
 
-def _converted(source: Path, settings: str, suffix: str, write: Callable[[str], None]) -> Path:
-    """The cache file for (`source`'s bytes, `settings`): `write(tmp)` makes it on a miss,
-    then it is renamed into place (concurrent writers: the last rename wins, alike)."""
-    key = _digest(source, settings)
-    target = assets_dir() / f"{source.stem}-{key}{suffix}"
-    if target.is_file() and cache_entry_whole(target):  # (an entry cut short or emptied is made again, never a hit)
-        with _stats_lock:
-            STATS["hits"] += 1
-        os.utime(target)  # recently used: the cap evicts least recently used first
+def _converted(source: Path, settings: str, suffix: str, write: Callable[[Path, str], None], limit: int) -> Path:
+    """The cache file for (`source`'s bytes, `settings`): on a miss, `write(tmp)` converts a
+    private copy of the bytes the key was made from (`cache.snapshot`: a file swapped
+    meanwhile is never kept under another file's key), then it is renamed into place
+    (concurrent writers: the last rename wins, alike)."""
+    target = STORE.path(STORE.key(settings, file_digest(source)), source.stem, suffix)
+    if STORE.hit(target, cache_entry_whole):  # (an entry cut short, emptied or planted is made again, never a hit)
         return target
-    with _stats_lock:
-        STATS["misses"] += 1
-    with writing(target, "writing the converted asset", suffix=suffix, verify=lambda p: cache_entry_whole(p, full=True)) as tmp:  # a full cache disk: one line, and no partial entry
-        write(str(tmp))
-    enforce_cap(keep=target)
+    with snapshot(source, limit, "asset file") as (digest, copy):
+        target = STORE.path(STORE.key(settings, digest), source.stem, suffix)
+        STORE.make(target, lambda tmp: write(copy, str(tmp)), "writing the converted asset", verify=lambda p: cache_entry_whole(p, full=True))
     return target
 
 
@@ -104,14 +87,6 @@ def info(folder: Path | None = None) -> CacheInfo:
     folder = folder or assets_dir()
     files = [p for p in folder.rglob("*") if p.is_file()] if folder.is_dir() else []
     return CacheInfo(folder, len(files), sum(p.stat().st_size for p in files))
-
-
-def enforce_cap(cap_bytes: int | None = None, keep: Path | None = None) -> int:
-    """Delete least recently used assets until the folder is under the cap (never `keep`);
-    returns bytes freed."""
-    from ..cache import enforce_cap as cap_folder
-
-    return cap_folder(assets_dir(), cap_bytes if cap_bytes is not None else env_size("MOTION_ASSET_CACHE_CAP"), keep)
 
 
 def clear(folder: Path) -> int:

@@ -3,86 +3,67 @@
 The validation stage opens and decodes every image and mesh a scene names before any task
 (`images.check_image`, `meshes.load_mesh`): about 0.015 s for a 300 KB JPEG, seconds for a
 shot's textures, paid by every `motion validate` and every render's main process. A check
-is a function of the file's bytes and the checking code, so its passing is kept: one
-empty file in `validation/assets/` under the cache root, named by the SHA-256 of the file's
-bytes, the check's kind and the source of the modules that check. The next check of the
-same bytes reads and hashes them (the settings hash reads them anyway) and decodes nothing.
+is a function of the file's bytes, the reader its suffix picks and the checking code, so its
+passing is kept: one empty file in the `passes` store (`cache.STORES`, under the cache
+root's `validation/assets/`), named by the SHA-256 of the check's kind, the file's suffix,
+the file's bytes and the source of the modules that check. The next check of the same bytes
+by the same reader hashes them (the settings hash reads them anyway) and decodes nothing.
 
-Only a pass is kept: a file that fails is decoded again each time, so its error is always
-today's. A file over its kind's size bound is never hashed here; its check refuses it.
-Losing the folder costs one decode per file (`motion cache clear --what validation`).
-The passes are spread over 256 folders by their names' first two digits, each held to
-SHARD_CAP files (its oldest half goes when it is full: about 262,000 passes in all, one
-per texture version a machine has seen).
+What is checked is what was hashed: on a miss the check reads a private copy of the bytes
+the pass is then kept under (`cache.snapshot`), so a file swapped between the hash and the
+read never leaves a pass for bytes that were not checked. A pass is believed only if we
+wrote it (`cache.trusted`: a pass planted by another user who can write the cache root is
+no pass). Only a pass is kept: a file that fails is decoded again each time, so its error
+is always today's. A file over its kind's size bound is never hashed here; its check refuses
+it. Losing the folder costs one decode per file (`motion cache clear --what passes`). The
+passes are spread over 256 folders by their names' first two digits, each held to the
+store's cap (least recently used first, as every store).
 """
 
 from __future__ import annotations
 
-import hashlib
-import os
 from pathlib import Path
+from typing import Callable
 
-from ..cache import file_digest, validation_dir
+from ..cache import STORES, file_digest, snapshot
 
-FORMAT = 1
-_CHECKERS = ("images.py", "meshes.py", "limits.py")  # pipeline/: the modules whose code a verdict depends on
-_checker_digest: str | None = None
-SHARD_CAP = 1024  # passes kept in one of the 256 folders
-
-
-def _checkers() -> str:
-    """The SHA-256 of the checking modules' source (read once a process)."""
-    global _checker_digest
-    if _checker_digest is None:
-        h = hashlib.sha256(str(FORMAT).encode())
-        for name in _CHECKERS:
-            h.update((Path(__file__).parents[1] / name).read_bytes())
-        _checker_digest = h.hexdigest()
-    return _checker_digest
+STORE = STORES["passes"]
+SHARD_CAP = STORE.cap_files  # passes kept in one of the 256 folders
 
 
-def _entry(path: Path, kind: str) -> Path:
-    key = hashlib.sha256(f"{kind}|{file_digest(path)}|{_checkers()}".encode()).hexdigest()[:40]
-    return validation_dir() / "assets" / key[:2] / key[2:]
+def _key(kind: str, suffix: str, digest: str) -> Path:
+    return STORE.path(STORE.key(kind, suffix.lower(), digest, length=40))
 
 
-def entry(path: Path, kind: str, most_bytes: int) -> Path | None:
-    """Where a pass of the `kind` check on `path`'s present bytes is kept (it is there if
-    they passed before), hashed before the check reads them so that a pass is kept for the
-    bytes it saw. None for a file over `most_bytes` (its check refuses it) or one that
-    cannot be read (its check says why)."""
+def passed(path: Path, kind: str, most_bytes: int) -> bool:
+    """Whether `path`'s present bytes passed the `kind` check before, as read by the reader
+    its suffix picks (a kept pass we wrote). False for a file over `most_bytes` (its check
+    refuses it) or one that cannot be read (its check says why)."""
     try:
         if path.stat().st_size > most_bytes:
-            return None
-        return _entry(path, kind)
+            return False
+        return STORE.hit(_key(kind, path.suffix, file_digest(path)))
     except OSError:
-        return None
+        return False
+
+
+def check(path: Path, kind: str, most_bytes: int, run: Callable[[Path], object]) -> None:
+    """Run the `kind` check `run` on a private copy of `path`'s bytes (same name and
+    suffix) and, when it passes, keep the pass under the digest of exactly those bytes.
+    `run`'s error passes through (naming the copy: callers keep the reason only); a file
+    that cannot be copied (not a regular file, over `most_bytes`, unreadable) is checked in
+    place, which says why, and nothing is kept."""
+    from ..errors import InputFileError
+
+    try:
+        with snapshot(path, most_bytes, f"{kind} file") as (digest, copy):
+            run(copy)
+            remember_pass(_key(kind, path.suffix, digest))
+    except InputFileError:
+        run(path)
 
 
 def remember_pass(kept: Path) -> None:
-    """Keep a pass at `kept` (from `entry`; best effort: its loss costs one decode)."""
-    from ..files import write_best_effort
+    """Keep a pass at `kept` (best effort: its loss costs one decode)."""
+    STORE.put(kept, b"", best_effort=True, doing="keeping an asset's pass")
 
-    try:
-        kept.parent.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return
-    if write_best_effort(kept, b""):
-        hold_to_cap(kept.parent)
-
-
-def hold_to_cap(folder: Path, cap: int | None = None) -> None:
-    """Over `cap` passes (SHARD_CAP) in `folder`: remove the oldest until half remain
-    (a removed pass costs one decode of its file; temporary files, named .*, are left)."""
-    cap = SHARD_CAP if cap is None else cap
-    try:
-        entries = sorted((e.stat().st_mtime_ns, e.path) for e in os.scandir(folder) if e.is_file() and not e.name.startswith("."))
-    except OSError:
-        return
-    if len(entries) <= cap:
-        return
-    for _, old in entries[: len(entries) - cap // 2]:
-        try:
-            os.unlink(old)
-        except OSError:
-            pass

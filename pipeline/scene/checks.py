@@ -286,23 +286,20 @@ def check_asset_files(c: _Check) -> None:
         key = ((base_dir / rel).resolve(), kind + ("-render" if deforming else ""))
         if key not in decoded:
             decoded[key] = None
-            kept = checked.entry(key[0], key[1], MAX_MESH_BYTES if kind == "mesh" else MAX_IMAGE_BYTES)
-            if kept is None or not kept.is_file():  # else these bytes passed this check before (scene/checked.py)
+            most = MAX_MESH_BYTES if kind == "mesh" else MAX_IMAGE_BYTES
+            if not checked.passed(key[0], key[1], most):  # else these bytes passed this check before (scene/checked.py)
                 try:
                     if kind == "mesh":
                         from ..meshes import load_mesh, load_render_mesh
 
                         # a deforming mesh is drawn from its render vertices (uvs, normals)
-                        load_render_mesh(key[0]) if deforming else load_mesh(key[0])
+                        checked.check(key[0], key[1], most, load_render_mesh if deforming else load_mesh)
                     else:
                         from ..images import check_image
 
-                        check_image(key[0])
+                        checked.check(key[0], key[1], most, check_image)
                 except AssetError as exc:
                     decoded[key] = str(exc).split(": ", 1)[-1]
-                else:
-                    if kept is not None:
-                        checked.remember_pass(kept)
         if decoded[key] is not None:
             c.add(loc, f"{kind} file {rel}: {decoded[key]}")
 

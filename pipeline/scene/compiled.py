@@ -12,9 +12,18 @@ config; classes and validator functions by their import names), behind a list of
 files of every `motion` module loaded when it was made, with their size and modification
 time. An entry is used only if every one of those files is unchanged, and only by the same
 Python, pydantic and pydantic-core; else, or if it cannot be read, the validator is made
-again and the entry replaced. Its loss costs only that time (`files.write_best_effort`).
-The cache root is the user's own, like drjit's kernel cache beside it: an entry is trusted
-as code, as those kernels are.
+again and the entry replaced. Its loss costs only that time (the `validators` store keeps
+it best effort).
+
+Unpickling can run code, so an entry is read only if it is ours (`cache.trusted`: a regular
+file owned by this user and writable by nobody else, in folders from the cache root down
+that are ours and writable by nobody else); one planted by another user who can write a
+shared cache root is never opened (one warning line; the validator is made again), and it
+is read bounded (a FIFO in its place is never waited on). Even then the unpickler resolves
+only the names a validator needs (`_Unpickler.find_class`): the scene stage's record
+classes, pydantic-core's SchemaValidator and an attribute lookup on those classes.
+Rebuilding instead of keeping would cost about 0.035 s of every `motion validate`
+(docs/ci-sharding.md, "Caches").
 """
 
 from __future__ import annotations
@@ -29,9 +38,11 @@ from typing import Any, TypeVar
 from pydantic import BaseModel
 from pydantic_core import SchemaValidator
 
-from ..cache import validation_dir
+from ..cache import STORES
 
-FORMAT = 1  # of the entry; part of its name
+STORE = STORES["validators"]
+FORMAT = 2  # of the entry; part of its name (2: read only when ours, names resolved by an allow-list)
+MOST_BYTES = 16 << 20  # an entry is ~64 KB
 _validators: dict[type[BaseModel], SchemaValidator] = {}
 Stamp = tuple[str, int, int]  # a source file, its size and its modification time (ns)
 M = TypeVar("M", bound=BaseModel)
@@ -63,7 +74,7 @@ def entry_path(cls: type[BaseModel]) -> Path:
     import pydantic_core
 
     key = "|".join((str(FORMAT), f"{cls.__module__}.{cls.__qualname__}", sys.version, pydantic.VERSION, pydantic_core.__version__, str(Path(__file__).resolve().parent)))
-    return validation_dir() / f"{cls.__name__}-{hashlib.sha256(key.encode()).hexdigest()[:16]}.pickle"
+    return STORE.dir() / f"{cls.__name__}-{hashlib.sha256(key.encode()).hexdigest()[:16]}.pickle"
 
 
 def _made(cls: type[BaseModel]) -> SchemaValidator:
@@ -92,25 +103,66 @@ def _stamp(file: str) -> Stamp | None:
     return (file, st.st_size, st.st_mtime_ns)
 
 
+_SCENE_STAGE = "motion.pipeline.scene."
+_HOOKS = ("__get_pydantic_json_schema__",)  # the one dunder pydantic-core looks up on a record class
+
+
+def _attribute(owner: Any, name: str) -> Any:
+    """`getattr` as a kept validator may use it: a validator function or hook of one of the
+    scene stage's record classes, nothing else."""
+    if not (isinstance(owner, type) and owner.__module__.startswith(_SCENE_STAGE)) or (name.startswith("__") and name not in _HOOKS):
+        raise pickle.UnpicklingError(f"a kept validator may not look up {name!r} on {owner!r}")
+    return getattr(owner, name)
+
+
+class _Unpickler(pickle.Unpickler):
+    """An unpickler that resolves only what a kept validator names (defence in depth: the
+    entry was already found to be ours)."""
+
+    def find_class(self, module: str, name: str) -> Any:
+        """The scene stage's record classes and validator functions, pydantic-core's
+        SchemaValidator, and `_attribute` for `builtins.getattr`; UnpicklingError otherwise."""
+        if (module, name) == ("builtins", "getattr"):
+            return _attribute
+        if (module, name) == ("pydantic_core._pydantic_core", "SchemaValidator"):
+            return SchemaValidator
+        if module.startswith(_SCENE_STAGE) and not any(part.startswith("__") for part in name.split(".")):
+            found = super().find_class(module, name)
+            if getattr(found, "__module__", None) == module:  # defined there, not imported into it (a module, os.system)
+                return found
+        raise pickle.UnpicklingError(f"a kept validator may not name {module}.{name}")
+
+
 def _load(entry: Path) -> SchemaValidator | None:
-    """The kept validator if the entry reads whole and every source it names is unchanged."""
+    """The kept validator if the entry is ours, reads whole and every source it names is
+    unchanged; None otherwise (a foreign or damaged entry says so in one warning line)."""
+    data = STORE.read(entry, MOST_BYTES)
+    if data is None:
+        if entry.exists() or entry.is_symlink():
+            _discard(entry, "not a regular file of ours that only we may write")
+        return None
     try:
-        with open(entry, "rb") as fh:
-            unpickler = pickle.Unpickler(fh)
-            sources = unpickler.load()
-            if not isinstance(sources, list) or not sources or any(_stamp(s[0]) != tuple(s) for s in sources):
-                return None
-            validator = unpickler.load()
-    except Exception:  # missing, truncated, or naming a class the code no longer has
+        unpickler = _Unpickler(io.BytesIO(data))
+        sources = unpickler.load()
+        if not isinstance(sources, list) or not sources or any(not isinstance(s, (list, tuple)) or len(s) != 3 or _stamp(str(s[0])) != tuple(s) for s in sources):
+            return None
+        validator = unpickler.load()
+    except Exception as exc:  # truncated, naming a class the code no longer has, or a name it may not
+        _discard(entry, f"{type(exc).__name__}")
         return None
     return validator if isinstance(validator, SchemaValidator) else None
+
+
+def _discard(entry: Path, why: str) -> None:
+    import logging
+
+    logging.getLogger("motion").warning(f"motion: warning: {entry}: kept validator discarded ({why}); it is made again")
 
 
 def _keep(entry: Path, validator: SchemaValidator) -> None:
     """Write the entry (best effort). A validator pydantic wrapped for its plugins is not kept."""
     if type(validator) is not SchemaValidator:
         return
-    from ..files import write_best_effort
 
     buf = io.BytesIO()
     try:
@@ -119,8 +171,4 @@ def _keep(entry: Path, validator: SchemaValidator) -> None:
         pickler.dump(validator)
     except Exception:  # a validator function pickle cannot name: keep nothing
         return
-    try:
-        entry.parent.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return
-    write_best_effort(entry, buf.getvalue())
+    STORE.put(entry, buf.getvalue(), best_effort=True, doing="keeping the scene's validator")

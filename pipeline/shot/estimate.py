@@ -73,12 +73,34 @@ def denoised_pixels(scene: Any) -> int:
     return int(w) * int(h) if scene.render.denoise != "off" else 0
 
 
+_NUMBERS = ("samples", "warm_s", "cold_extra_s", "startup_s")  # of each run: finite, not negative
+
+
+def _run_ok(run: Any) -> bool:
+    """Whether a recorded run is one `record` wrote: its settings hash and its numbers."""
+    if not isinstance(run, dict) or not isinstance(run.get("settings_hash"), str):
+        return False
+    values = [run.get(k) for k in _NUMBERS]
+    return all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0 for v in values)
+
+
 def _read() -> dict[str, Any]:
-    try:
-        data = json.loads(history_path().read_text())
-    except (OSError, ValueError):
+    """The recorded costs, or {} when there are none. A history that is not one this code
+    wrote (a FIFO, another type, a bad number, deep nesting) is discarded with one warning
+    line (`limits.read_json_record`); the next finished run writes a new one."""
+    from ..limits import read_json_record
+
+    path = history_path()
+    data = read_json_record(path, "cost history", limit=16 << 20, depth=8)
+    if data is None:
         return {}
-    if not (isinstance(data, dict) and isinstance(data.get("scenes"), dict) and data.get("version") == 2):
+    if data.get("version") != 2:
+        return {}  # another version's history: replaced by the next run, as before
+    scenes = data.get("scenes")
+    if not (isinstance(scenes, dict) and all(isinstance(runs, list) and all(_run_ok(r) for r in runs) for runs in scenes.values())):
+        import logging
+
+        logging.getLogger("motion").warning(f"motion: warning: {path}: cost history discarded (not the record expected); it is made again")
         return {}
     return data
 

@@ -5,25 +5,24 @@ finds it and skips the conversion; writes go to a temporary name and are renamed
 
 from __future__ import annotations
 
-import hashlib
 import re
-import threading
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
-from ...cache import cache_root
+from ...cache import STORES
 
 if TYPE_CHECKING:  # numpy and meshes.py are imported where a file is written or checked: a warm import needs neither
     import numpy as np
 
-CONVERSION_VERSION = "import-v2"  # v2: stricter accessor reading (sparse indices); entries made by a laxer reader are not reused
-_lock = threading.Lock()
-STATS = {"hits": 0, "misses": 0, "records": 0}  # converted-file hits / misses; record-set hits
+STORE = STORES["imports"]
+CONVERSION_VERSION = STORE.tag  # import-v2: stricter accessor reading (sparse indices); entries made by a laxer reader are not reused
+STATS = STORE.stats  # converted-file hits / misses (refused: not ours or not whole); "records": record-set hits (memo.py)
+STATS["records"] = 0
 
 
 def cache_dir() -> Path:
     """Where converted import assets live (beside the renderer's converted meshes)."""
-    return cache_root() / "assets" / "imports"
+    return STORE.dir()
 
 
 def converted_file(path: Path) -> bool:
@@ -34,18 +33,14 @@ def converted_file(path: Path) -> bool:
 
 
 def cached(stem: str, key: str, suffix: str, write: Callable[[Path], None]) -> Path:
-    """The cache file for (`key`, conversion version); `write(tmp_path)` makes it on a miss."""
-    digest = hashlib.sha256(f"{CONVERSION_VERSION}|{key}".encode()).hexdigest()[:32]
-    safe = re.sub(r"[^A-Za-z0-9_.-]", "_", stem)[:48]
-    target = cache_dir() / f"{safe}-{digest}{suffix}"
+    """The cache file for (`key`, conversion version); `write(tmp_path)` makes it on a miss.
+    `key` names the bytes the conversion reads (the callers hash what they convert)."""
     from ...meshes import cache_entry_whole
 
-    if target.is_file() and cache_entry_whole(target):  # (an entry cut short or emptied is made again, never a hit)
-        with _lock:
-            STATS["hits"] += 1
+    safe = re.sub(r"[^A-Za-z0-9_.-]", "_", stem)[:48]
+    target = STORE.path(STORE.key(key), safe, suffix)
+    if STORE.hit(target, cache_entry_whole):  # (an entry cut short, emptied or planted is made again, never a hit)
         return target
-    with _lock:
-        STATS["misses"] += 1
     write_atomic(target, write)
     return target
 
@@ -54,15 +49,10 @@ def write_atomic(target: Path, write: Callable[[Path], None]) -> None:
     """`write(tmp)` to a temporary name beside `target`, then rename it into place (the one
     write policy, pipeline/files.py: a concurrent reader sees the whole file or none, a full
     cache disk is one line and leaves no partial entry); then the cache is held to
-    $MOTION_ASSET_CACHE_CAP, as the converted-asset cache is."""
-    from ...cache import enforce_cap
-    from ...files import writing
-    from ...limits import env_size
+    $MOTION_ASSET_CACHE_CAP (the store's one eviction policy)."""
     from ...meshes import cache_entry_whole
 
-    with writing(target, "writing the import cache", suffix=target.suffix, verify=lambda p: cache_entry_whole(p, full=True)) as tmp:
-        write(tmp)
-    enforce_cap(target.parent, env_size("MOTION_ASSET_CACHE_CAP"), keep=target)
+    STORE.make(target, write, "writing the import cache", verify=lambda p: cache_entry_whole(p, full=True))
 
 
 def write_ply(path: Path, positions: np.ndarray, faces: np.ndarray | None, normals: np.ndarray | None = None, uvs: np.ndarray | None = None) -> None:

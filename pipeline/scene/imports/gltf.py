@@ -96,7 +96,7 @@ class GltfReader:
             if ext not in SUPPORTED_EXTENSIONS:
                 self.fail("extensionsRequired", f"unsupported extension '{ext}' is marked required (supported: {', '.join(SUPPORTED_EXTENSIONS)})")
         self._buffers: dict[int, bytes] = {}
-        self.digest = source_digest(path)
+        self.digest = source_digest(path, raw)  # the bytes read, not the file as it is now
         self.at = "<file>"  # what is being read: the location of an unforeseen malformation
 
     # --- errors and raw data ------------------------------------------------------------
@@ -816,16 +816,17 @@ class GltfReader:
         return rec
 
 
-def source_digest(path: Path) -> str:
-    """sha256 over the glTF file and the external files its buffers and images name (a
-    .gltf's .bin and textures), so a converted asset is stale when any of them changes."""
+def source_digest(path: Path, raw: bytes) -> str:
+    """sha256 over the glTF file's bytes as the reader read them (`raw`: a file swapped after
+    it was read cannot give its converted assets another file's key) and the external files
+    its buffers and images name (a .gltf's .bin and textures), so a converted asset is stale
+    when any of them changes."""
     import hashlib
     import json
     from urllib.parse import unquote
 
-    h = hashlib.sha256(file_digest(path).encode())
+    h = hashlib.sha256(hashlib.sha256(raw).hexdigest().encode())
     try:
-        raw = path.read_bytes()
         if raw[:4] == b"glTF":
             length = struct.unpack_from("<I", raw, 12)[0]
             doc = json.loads(raw[20 : 20 + length])

@@ -18,13 +18,15 @@ import json
 from pathlib import Path
 from typing import Any
 
-from ...cache import digests_recorded, file_digest
-from ...limits import MAX_GLTF_BYTES, MAX_USD_LAYER_BYTES
+from ...cache import STORES, digests_recorded, file_digest, trusted
+from ...limits import MAX_GLTF_BYTES, MAX_RECORD_BYTES, MAX_USD_LAYER_BYTES, read_json_record
 from .records import Expansion, Origin
+
+STORE = STORES["import-records"]
 
 # each reader's code is part of the key: a changed reader rebuilds
 READERS = {"gltf": ("gltf.py", "records.py", "cache.py", "memo.py"), "usd": ("usd.py", "gltf.py", "records.py", "cache.py", "memo.py")}
-FORMAT = 2  # of an entry: 2 adds the digests of the files read
+FORMAT = 3  # of an entry: 2 adds the digests of the files read; 3 the file's suffix in the key
 # no file larger than its reader accepts is hashed here (the reader refuses it unread)
 MOST_BYTES = {"gltf": MAX_GLTF_BYTES, "usd": MAX_USD_LAYER_BYTES}
 
@@ -33,7 +35,7 @@ def read_import(path: Path, shown: str, spec: Any, index: int, base_dir: Path) -
     """The records of one glTF or USD import: kept ones when current, else the reader's (and
     kept); ImportFileError (the file and node or prim) or SpecError (the import entry's
     field) otherwise."""
-    from .cache import STATS, cache_dir, write_atomic
+    from .cache import STATS
 
     kind = "gltf" if path.suffix.lower() in (".gltf", ".glb") else "usd"
     if path.stat().st_size > MOST_BYTES[kind]:
@@ -41,8 +43,10 @@ def read_import(path: Path, shown: str, spec: Any, index: int, base_dir: Path) -
     # the entry without its overrides, as text: its repr names every field's value (a dump
     # would build the entry's serializer, 0.01 s, for a key)
     settings = repr(spec.model_copy(update={"overrides": {}}))
-    key = hashlib.sha256(json.dumps([FORMAT, kind, file_digest(path), settings, shown, index, str(base_dir.resolve()), _code(kind)]).encode()).hexdigest()[:32]
-    memo = cache_dir() / f"records-{key}.json"
+    digest = file_digest(path)
+    # what decides the records: the reader (kind and the suffix it goes by), the bytes, the entry
+    key = STORE.key(json.dumps([FORMAT, kind, path.suffix.lower(), digest, settings, shown, index, str(base_dir.resolve()), _code(kind)]))
+    memo = STORE.path(key, "records", ".json")
     kept = _recall(memo, MOST_BYTES[kind])
     if kept is not None:
         STATS["records"] += 1
@@ -50,8 +54,28 @@ def read_import(path: Path, shown: str, spec: Any, index: int, base_dir: Path) -
     with digests_recorded() as read:
         ex = _read_file(kind, path, shown, spec, index, base_dir)
     read.pop(str(path.resolve()), None)  # the key has it
-    write_atomic(memo, lambda tmp: tmp.write_text(json.dumps({"read": read, "records": _to_json(ex)})))
+    if _unchanged({str(path.resolve()): digest, **read}):  # else a file changed while it was read: its records are not kept
+        STORE.put(memo, json.dumps({"read": read, "records": _to_json(ex)}).encode(), best_effort=True, doing="keeping an import's records")
     return ex
+
+
+def _unchanged(read: dict[str, str]) -> bool:
+    """Whether every file still hashes as it did when its reader was given it (hashed
+    afresh, not from the per-process memo): a file swapped between its hash and its read
+    would otherwise keep another file's records under its key."""
+    import hashlib
+
+    for file, digest in read.items():
+        h = hashlib.sha256()
+        try:
+            with open(file, "rb") as fh:
+                for chunk in iter(lambda: fh.read(1 << 20), b""):
+                    h.update(chunk)
+        except OSError:
+            return False
+        if h.hexdigest() != digest:
+            return False
+    return True
 
 
 def _read_file(kind: str, path: Path, shown: str, spec: Any, index: int, base_dir: Path) -> Expansion:
@@ -73,20 +97,35 @@ def _code(kind: str) -> str:
 
 
 def _recall(memo: Path, most_bytes: int) -> Expansion | None:
-    """The kept records if the entry reads whole, every file the reader read has the bytes
-    it had (at the same place: a link put on its way since is a difference; grown past
-    `most_bytes`, it is not hashed) and every converted file the records name is there."""
+    """The kept records if the entry is ours (`cache.trusted`: another user's planted
+    records are never read) and reads whole as a record, every file the reader read has the
+    bytes it had (at the same place: a link put on its way since is a difference; grown past
+    `most_bytes`, it is not hashed) and every converted file the records name is there. A
+    damaged entry (not JSON, nested too deep, not a mapping, a FIFO) is one warning line and
+    is made again."""
+    if trusted(memo) is None:
+        if memo.exists() or memo.is_symlink():
+            STORE.stats["refused"] += 1
+        return None
+    doc = read_json_record(memo, "kept import records", limit=MAX_RECORD_BYTES)
+    if doc is None:
+        return None
     try:
-        doc = json.loads(memo.read_text())
         for file, digest in doc["read"].items():
             dep = Path(file)
             if dep.resolve() != dep or not dep.is_file() or dep.stat().st_size > most_bytes or file_digest(dep) != digest:
                 return None
         ex = _from_json(doc["records"])
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        records = [r for r, _ in ex.objects + ex.materials + ex.lights]
+        files = _files(records)
+    except OSError:
         return None
-    records = [r for r, _ in ex.objects + ex.materials + ex.lights]
-    return ex if all(Path(f).is_file() for f in _files(records)) else None
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        import logging
+
+        logging.getLogger("motion").warning(f"motion: warning: {memo}: kept import records discarded (not the record expected: {type(exc).__name__}); they are made again")
+        return None
+    return ex if all(Path(f).is_file() for f in files) else None
 
 
 def _files(value: Any) -> list[str]:
