@@ -204,4 +204,9 @@ class RotationValueError(MotionError):
     and procedural stages report it located (TrackError, ExpressionValueError)."""
 
 
+class OutputInUseError(UsageError):
+    """Another version of the scene (other settings or motion) is being rendered into the
+    same output folder by a live run: rendering both would leave a mix of the two."""
+
+
 # --- deliverables, telecine, examples ---

@@ -20,7 +20,7 @@ from typing import Any, Callable
 
 from ..bake import BakedFrame, by_number
 from ..errors import IncompleteJobError, UsageError
-from ..farm.claims import clear_stale, new_run_id
+from ..farm.claims import Claimant, RunLock, clear_stale, new_run_id, release_run_lock, take_run_lock
 from ..farm.config import FarmConfig, load_farm_config
 from ..farm.frames import chunks as make_chunks
 from ..farm.frames import default_chunk_size, format_frames, parse_frames, parse_shard, shard
@@ -298,7 +298,34 @@ def say_outputs(wanted: DeliverPlan, frames: list[int], paths: dict[int, str], s
 
 def run_render(req: RenderRequest) -> dict[str, Any]:
     """Render the request; returns the report. Raises IncompleteJobError (exit 3) if any
-    frame failed everywhere, KeyboardInterrupt after a clean stop on Ctrl-C."""
+    frame failed everywhere, KeyboardInterrupt after a clean stop on Ctrl-C (or SIGTERM),
+    OutputInUseError when a live run of another version of the scene renders into the same
+    output folder (farm/claims.py: the run lock, held from before the bake to the end)."""
+    held: list[RunLock] = []
+    try:
+        return _run_render(req, held)
+    finally:
+        for lock in held:
+            release_run_lock(lock)
+
+
+def version_of(req: RenderRequest, job: RenderJob) -> str:
+    """What a frame of this run is made from, for the output folder's run lock: the
+    settings hash (the scene with every override, each file it names by its bytes) and,
+    with --motion, the motion file (its path, size and time: never read here, where a
+    FIFO would hang)."""
+    if not req.motion_file:
+        return job.settings_hash
+    path = Path(req.motion_file).resolve()
+    try:
+        st = path.stat()
+        return f"{job.settings_hash}+{path}:{st.st_size}:{st.st_mtime_ns}"
+    except OSError:
+        return f"{job.settings_hash}+{path}"
+
+
+def _run_render(req: RenderRequest, held: list[RunLock]) -> dict[str, Any]:
+    """run_render's steps; the run lock it takes goes into `held`."""
     t_start = time.perf_counter()
     cfg: FarmConfig = load_farm_config().with_overrides(retries=req.retries, task_timeout_s=req.task_timeout_s, chunk_size=req.chunk_size)
     check_request(req)
@@ -328,6 +355,9 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     if req.check and wanted:
         check_writable(out_dir, "output folder")  # --check --deliver writes the deliverables
     warn_variant(req, loaded)
+    run_id = new_run_id()
+    if not req.check and not req.dry_run:
+        held.append(take_run_lock(out_dir, Claimant.here(run_id), str(loaded.path), version_of(req, job)))
 
     t0 = time.perf_counter()
     inputs = motion_inputs(req, loaded, sel)
@@ -365,7 +395,6 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
         return planned
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    run_id = new_run_id()
     ctx = TaskContext(run_id=run_id, paths=paths, resume=req.resume and not req.overwrite, stale_after_s=cfg.stale_after_s)
     clear_stale([paths[f] for f in skipped], cfg.stale_after_s)
     label = f"{loaded.name}" + (f" shard {shard_spec[0]}/{shard_spec[1]}" if shard_spec else "")
