@@ -23,6 +23,7 @@ MAX_IMAGE_BYTES = 2 * 1024**3  # one texture or environment map file (images.py)
 MAX_MESH_BYTES = 2 * 1024**3  # one mesh file (meshes.py)
 MAX_GLTF_BYTES = 4 << 30  # one .gltf or .glb file (scene/imports/gltf.py)
 MAX_USD_LAYER_BYTES = 2 * 1024**3  # one USD layer file (scene/imports/usd.py)
+MAX_OCIO_CONFIG_BYTES = 256 * 1024**2  # one --ocio config file, .ocio or .ocioz (telecine/movie.py)
 
 
 @contextmanager

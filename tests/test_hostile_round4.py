@@ -14,7 +14,10 @@ import time
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
+from test_scene_validation import _parse_both
 from farm_util import SCENE, SLOW, TINY, frames_in, leftovers, motion, report, start_motion, wait_for, worker_pids
 from motion.pipeline.errors import OutputInUseError
 from motion.pipeline.farm import claims
@@ -119,3 +122,129 @@ def test_run_locks_of_one_version_share_and_of_two_give_way_by_order(tmp_path: P
         (tmp_path / claims.CLAIM_DIR / "run-run-d.lock").unlink(missing_ok=True)
         claims.release_run_lock(claims.take_run_lock(tmp_path, me, "shot.yaml", "v1"))
         assert not junk.exists()
+
+
+# --- 5. bad input found late -----------------------------------------------------------------
+
+BASE = """\
+timeline: {fps: 24, first: 0, last: 1}
+camera: {position: [0, 1, 5], look_at: [0, 0, 0]}
+lights: [{type: constant, radiance: 0.5}]
+render: {resolution: [16, 12], spp: 1, max_depth: 2, shutter_samples: 2, variant: scalar_rgb}
+objects:
+  - {name: ball, shape: sphere, radius: 0.5}
+"""
+
+
+@pytest.mark.parametrize("extra, where", [
+    ('output: {owner: "ann\\ud800"}\n', "7:17: output.owner"),
+    ('output: {comments: "x\\udfff y"}\n', "7:20: output.comments"),
+    ('output: {directory: "out\\udc80"}\n', "7:21: output.directory"),
+    ('"extra\\ud800": 1\n', "7:1: extra\\ud800"),
+])
+def test_a_lone_surrogate_is_a_located_error_at_validation(tmp_path: Path, extra: str, where: str) -> None:
+    scene = tmp_path / "s.yaml"
+    scene.write_text(BASE + extra)
+    res = motion("validate", scene)
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+    assert f"s.yaml:{where}: a lone surrogate" in res.stderr.splitlines()[0], res.stderr
+    res = motion("render", scene, "-o", tmp_path / "out")  # before: every frame failed with UnicodeEncodeError
+    assert res.returncode == 2 and not (tmp_path / "out").exists(), res.stderr
+
+
+def test_names_that_are_not_utf8_are_refused_before_any_frame(tmp_path: Path) -> None:
+    scene = tmp_path / "s.yaml"
+    scene.write_text(BASE)
+    odd = os.fsdecode(b"sc\xffene.yaml")
+    (tmp_path / odd).write_text(BASE)
+    for argv, what in (([scene, "-o", tmp_path / os.fsdecode(b"out\xff")], "output folder"), ([tmp_path / odd, "-o", tmp_path / "o2"], "scene file")):
+        res = motion("render", *argv)
+        assert res.returncode == 2 and f"error: {what} " in res.stderr and "\\xff" in res.stderr and "not UTF-8" in res.stderr, res.stderr
+    assert sorted(os.listdir(tmp_path)) == sorted(["s.yaml", odd])
+
+
+def test_deliver_over_negative_frames_is_refused_before_rendering(tmp_path: Path) -> None:
+    scene = tmp_path / "s.yaml"
+    scene.write_text(BASE.replace("first: 0, last: 1", "first: -2, last: 1"))
+    res = motion("render", scene, "-o", tmp_path / "out", "--deliver", "contact")
+    assert res.returncode == 2 and "frames -2,-1 are negative" in res.stderr, res.stderr
+    assert not (tmp_path / "out").exists()  # before: all four frames rendered, then the deliverable failed (exit 0)
+
+
+def test_an_ocio_config_that_is_not_a_regular_file_is_refused_not_waited_on(tmp_path: Path) -> None:
+    scene = tmp_path / "s.yaml"
+    scene.write_text(BASE)
+    fifo = tmp_path / "config.ocio"
+    os.mkfifo(fifo)
+    for config, why in ((fifo, "not a regular file"), (tmp_path, "is a folder")):
+        res = motion("render", scene, "-o", tmp_path / "out", "--deliver", "review", "--ocio", config, timeout=60)  # before: hung in OCIO's reader
+        assert res.returncode == 2 and why in res.stderr and "OCIO config" in res.stderr, res.stderr
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("argv", [
+    ["render", "{scene}", "-o", ""],
+    ["render", "{scene}", "-o", "  "],
+    ["render", "{scene}", "--report", ""],
+    ["bake", "{scene}", "-o", ""],
+    ["telecine", "{tmp}", "-o", ""],
+])
+def test_an_empty_output_path_is_refused_not_the_current_folder(tmp_path: Path, argv: list[str]) -> None:
+    scene = tmp_path / "s.yaml"
+    scene.write_text(BASE)
+    work = tmp_path / "cwd"
+    work.mkdir()
+    res = motion(*[a.format(scene=scene, tmp=tmp_path) for a in argv], cwd=work)
+    assert res.returncode == 2 and "an empty path" in res.stderr and res.stderr.count("\n") == 1, res.stderr
+    assert not os.listdir(work)  # before: frames and report in the current folder, exit 0
+
+
+# --- 6. two YAML readers, one meaning ----------------------------------------------------------
+
+BOM = "\ufeff"
+DISAGREEING_YAML = {
+    "tab-after-key": "a:\t1\nb: 2\n",
+    "tab-after-key-before-block": "a:\t\n  - 1\n",
+    "tab-before-value": "a: \tx\n",
+    "tab-in-flow": "{a:\t1}\n",
+    "tab-before-colon": "a\t: 1\n",
+    "tab-in-plain-scalar": "a: x\ty\n",
+    "tab-at-end-of-line": "a: x\t\n",
+    "tab-before-comment": "a: 1\t# c\n",
+    "bom-alone-on-a-line": f"a: 1\n{BOM}\nb: 2\n",
+    "two-boms-at-the-start": f"{BOM}{BOM}a: 1\n",
+    "bom-inside-a-line": f"a: x{BOM}y\nb{BOM}: 2\n",
+    "non-specific-tag-empty": "material: !\n",
+    "non-specific-tag-in-flow": "{a: !, b: ! x}\n",
+    "non-specific-tag-on-a-sequence": "a: ! [1, 2]\n",
+    "question-mark-in-a-flow-scalar": "{a: 1, b?c: 2, d? e: 3}\n",
+    "tag-in-a-flow-before-a-comma": "[!x, 1]\n",
+    "comment-after-a-block-indicator": "a: |#\n  text\n",
+    "empty-value-in-a-flow": "{a: ,b}\n",
+    "lone-surrogate": 'a: "\\ud800"\n',
+    "escaped-surrogate-pair": 'a: "\\ud83d\\ude00"\n',
+}
+
+
+@pytest.mark.parametrize("name", sorted(DISAGREEING_YAML))
+def test_libyaml_and_pyyaml_agree_where_they_used_to_differ(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Each document here read differently by the libyaml fast path and by PyYAML (data
+    from one, an error from the other, or other data); now the same outcome."""
+    fast, slow = _parse_both(DISAGREEING_YAML[name], monkeypatch)
+    assert fast == slow
+
+
+_PIECES = ["\t", BOM, "!", " ", "\n", ":", "- ", "#", "'", '"', "[", "]", "{", "}", ",", "&a ", "*a", "? ", "|", ">", "%", "\r", "\\"]
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(st.integers(0, 10_000), st.sampled_from(_PIECES)), min_size=1, max_size=4))
+def test_fuzz_the_two_readers_agree_on_every_mutation(monkeypatch: pytest.MonkeyPatch, edits: list[tuple[int, str]]) -> None:
+    """A scene with tabs, BOMs, tags and YAML punctuation put anywhere: libyaml's fast path
+    and PyYAML alone give the same data and positions, or the same located problems."""
+    text = BASE + "materials: [{name: m, type: diffuse, color: 0.5}]\n"
+    for at, piece in edits:
+        at %= len(text) + 1
+        text = text[:at] + piece + text[at:]
+    fast, slow = _parse_both(text, monkeypatch)
+    assert fast == slow, text

@@ -143,6 +143,14 @@ def preflight(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: 
     from ..scene.checks import bake_budget_problems
 
     check_env_sizes()  # $MOTION_MAX_LANES, $MOTION_ASSET_CACHE_CAP
+    named = [("scene file", loaded.path), ("output folder", out_dir), *[("frame file", frame_path(job, loaded, f)) for f in frames[:1]],
+             ("--report", req.report), ("--motion file", req.motion_file)]
+    for what, path in named:
+        try:
+            str(path).encode("utf-8")
+        except UnicodeEncodeError:  # bytes that are not UTF-8 in a name (Python keeps them as lone surrogates)
+            shown = os.fsencode(str(path)).decode("utf-8", "backslashreplace")
+            raise UsageError(f"{what} {shown}: the name is not UTF-8 text; frame headers and reports cannot hold it (rename it)") from None
     from ..cache import check_cache_root
 
     check_cache_root()  # $MOTION_CACHE_DIR a file or not writable: one line now, not in every worker
