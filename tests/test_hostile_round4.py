@@ -248,3 +248,41 @@ def test_fuzz_the_two_readers_agree_on_every_mutation(monkeypatch: pytest.Monkey
         text = text[:at] + piece + text[at:]
     fast, slow = _parse_both(text, monkeypatch)
     assert fast == slow, text
+
+
+# --- 7. timecode as studios write it ----------------------------------------------------------
+
+
+@pytest.mark.parametrize("written, rate", [
+    ("29.97", "30000/1001"), ("59.94", "60000/1001"), ("23.976", "24000/1001"), ("23.98", "24000/1001"),
+    ('"29.97"', "30000/1001"), ("119.88", "120000/1001"), ("47.952", "48000/1001"),
+    ("29.9", "299/10"), ("30", "30"), ("29.971", "29971/1000"), ('"30000/1001"', "30000/1001"),
+])
+def test_ntsc_rates_written_as_decimals_are_the_exact_ratio(tmp_path: Path, written: str, rate: str) -> None:
+    from motion.pipeline.scene import load_scene
+
+    (tmp_path / "s.yaml").write_text(BASE.replace("fps: 24", f"fps: {written}"))
+    loaded = load_scene(tmp_path / "s.yaml")
+    assert loaded.scene.timeline.fps == rate  # before: 29.97 was 2997/100
+
+
+@pytest.mark.parametrize("fps, frame, code", [("29.97", 1800, "00:01:00;02"), ("59.94", 3600, "00:01:00;04"), ("29.97", 17982, "00:10:00;00")])
+def test_frames_at_29_97_and_59_94_carry_drop_frame_timecode(tmp_path: Path, fps: str, frame: int, code: str) -> None:
+    from motion.pipeline.frame_output import read_header, timecode_str
+
+    scene = tmp_path / "s.yaml"
+    scene.write_text(BASE.replace("fps: 24, first: 0, last: 1", f"fps: {fps}, first: {frame}, last: {frame}"))
+    res = motion("render", scene, "-o", tmp_path / "out")
+    assert res.returncode == 0, res.stderr
+    (path,) = frames_in(tmp_path / "out")
+    assert timecode_str(read_header(path)["timeCode"]) == code  # before: non-drop at 2997/100
+
+
+def test_export_of_frames_below_zero_is_refused_not_half_done(tmp_path: Path) -> None:
+    scene = tmp_path / "s.yaml"
+    scene.write_text(BASE.replace("first: 0, last: 1", "first: -2, last: 1"))
+    assert motion("render", scene, "-o", tmp_path / "out").returncode == 0
+    for command in ("export", "view"):
+        res = motion(command, tmp_path / "out", "-o", tmp_path / command / "index.html" if command == "view" else tmp_path / command)
+        assert res.returncode == 2 and "frames -2,-1 are numbered below 0" in res.stderr, res.stderr  # before: 2 of 4 images, exit 0
+        assert not (tmp_path / command).exists()
