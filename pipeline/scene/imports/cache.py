@@ -33,8 +33,10 @@ def converted_file(path: Path) -> bool:
     return Path(path).resolve().is_relative_to(cache_dir().resolve())
 
 
-def cached(stem: str, key: str, suffix: str, write: Callable[[Path], None]) -> Path:
-    """The cache file for (`key`, conversion version); `write(tmp_path)` makes it on a miss."""
+def cached(stem: str, key: str, suffix: str, write: Callable[[Path], None], hold_cap: bool = True) -> Path:
+    """The cache file for (`key`, conversion version); `write(tmp_path)` makes it on a miss.
+    `hold_cap=False`: one of many writes in a row, whose caller holds the cache to its cap
+    once after the last (`hold_cap`): each hold lists the whole folder."""
     digest = hashlib.sha256(f"{CONVERSION_VERSION}|{key}".encode()).hexdigest()[:32]
     safe = re.sub(r"[^A-Za-z0-9_.-]", "_", stem)[:48]
     target = cache_dir() / f"{safe}-{digest}{suffix}"
@@ -46,23 +48,31 @@ def cached(stem: str, key: str, suffix: str, write: Callable[[Path], None]) -> P
         return target
     with _lock:
         STATS["misses"] += 1
-    write_atomic(target, write)
+    write_atomic(target, write, hold_cap)
     return target
 
 
-def write_atomic(target: Path, write: Callable[[Path], None]) -> None:
+def hold_cap(keep: Path | None = None) -> None:
+    """The import cache held to $MOTION_ASSET_CACHE_CAP (the oldest entries go; `keep` stays)."""
+    from ...cache import enforce_cap
+    from ...limits import env_size
+
+    enforce_cap(cache_dir(), env_size("MOTION_ASSET_CACHE_CAP"), keep=keep)
+
+
+def write_atomic(target: Path, write: Callable[[Path], None], cap: bool = True) -> None:
     """`write(tmp)` to a temporary name beside `target`, then rename it into place (the one
     write policy, pipeline/files.py: a concurrent reader sees the whole file or none, a full
     cache disk is one line and leaves no partial entry); then the cache is held to
-    $MOTION_ASSET_CACHE_CAP, as the converted-asset cache is."""
-    from ...cache import enforce_cap
+    $MOTION_ASSET_CACHE_CAP, as the converted-asset cache is (unless `cap` is False: the
+    caller then holds it once after a run of writes, `hold_cap`)."""
     from ...files import writing
-    from ...limits import env_size
     from ...meshes import cache_entry_whole
 
     with writing(target, "writing the import cache", suffix=target.suffix, verify=lambda p: cache_entry_whole(p, full=True)) as tmp:
         write(tmp)
-    enforce_cap(target.parent, env_size("MOTION_ASSET_CACHE_CAP"), keep=target)
+    if cap:
+        hold_cap(keep=target)
 
 
 def write_ply(path: Path, positions: np.ndarray, faces: np.ndarray | None, normals: np.ndarray | None = None, uvs: np.ndarray | None = None) -> None:
