@@ -440,3 +440,14 @@ def test_a_damaged_report_is_discarded_with_one_warning_and_rebuilt(tmp_path: Pa
     assert len(warnings) == 1 and "a new report is written" in warnings[0], res.stderr
     rep = report(out)
     assert rep["totals"]["rendered"] == 2 and rep["history"] == [] and rep["folder"]["count"] == 2
+
+
+def test_the_run_lock_is_never_written_through_a_link_out_of_the_output_folder(tmp_path: Path) -> None:
+    scene = tmp_path / "s.yaml"
+    scene.write_text(BASE + "output: {filename: 'sub/{name}.####.exr'}\n")
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / claims.CLAIM_DIR).symlink_to(tmp_path / "elsewhere")
+    res = motion("render", scene, "-o", tmp_path / "out")
+    assert res.returncode == 2 and "outside the output folder" in res.stderr, res.stderr
+    assert not os.listdir(tmp_path / "elsewhere") and not frames_in(tmp_path / "out" / "sub")

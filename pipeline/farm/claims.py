@@ -257,10 +257,13 @@ def take_run_lock(out_dir: str | Path, who: Claimant, scene: str, version: str) 
     """Lock `out_dir` for this run of `scene` at `version` (a digest of everything a frame
     is made from). Raises OutputInUseError naming the other run when a live run of another
     version holds it; DiskFaultError when the disk refuses the lock."""
-    from ..errors import OutputInUseError
+    from ..errors import OutputConfinementError, OutputInUseError
+    from ..files import confined
 
     folder = Path(out_dir) / CLAIM_DIR
     path = folder / f"{RUN_LOCK_PREFIX}{who.run_id}{RUN_LOCK_SUFFIX}"
+    if not confined(out_dir, path):  # (frames in a subfolder: preflight never looked at this one)
+        raise OutputConfinementError(f"{folder} is a link to {folder.resolve()}, outside the output folder {out_dir}: the run lock is written only inside it")
     mine = {**asdict(who), "scene": scene, "version": version, "time": time.time()}
     with disk_faults("locking the output folder", path):
         folder.mkdir(parents=True, exist_ok=True)
