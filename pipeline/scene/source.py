@@ -248,7 +248,7 @@ def _compose(text: str) -> tuple[yaml.Node | None, _Loader, list[yaml.Mark]]:
 # non-specific `!` alone is an empty string to libyaml and null to PyYAML; a tag in a flow
 # ends at `,` for libyaml only); NEL and the Unicode line and paragraph separators (line
 # breaks to PyYAML only); a comment right after a block scalar's indicator (`|#`: libyaml
-# takes it). The search starts after the first character (a BOM there is the encoding's).
+# takes it). A BOM as the first character is the encoding's: the search starts after it.
 _READERS_DIFFER = re.compile("[\t?!\ufeff\x85\u2028\u2029]|[|>][-+0-9]*#")
 
 
@@ -258,7 +258,7 @@ def _compose_fast(text: str) -> tuple[yaml.Node | None, _CLoader, list[yaml.Mark
     `_Loader.compose_node` does (libyaml composes recursively, in C), with the same errors.
     A character PyYAML refuses, or any error of libyaml's, raises _Reparse: `_compose`
     then refuses the document in PyYAML's words."""
-    if yaml.reader.Reader.NON_PRINTABLE.search(text) or _READERS_DIFFER.search(text, 1):
+    if yaml.reader.Reader.NON_PRINTABLE.search(text) or _READERS_DIFFER.search(text, 1 if text[:1] == "\ufeff" else 0):
         raise _Reparse
     alias_marks: list[yaml.Mark] = []
     try:
