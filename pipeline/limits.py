@@ -180,3 +180,28 @@ def half_problem(value: float) -> str | None:
         return (f"radiance {value:g} is beyond what a half-float EXR holds ({HALF_MAX:g}): "
                 "its pixels would be inf; use output.pixel_type: float, or lower it")
     return None
+
+
+# What one render worker's address space holds, measured on a worker rendering one pass
+# (VmPeak, scalar_rgb, 1 spp): 1.00 GB at 2048x2048 (4.2M lanes), 1.41 GB at 2900x2900
+# (8.4M lanes): about 100 bytes a lane over a base of 600 MB. A pass covers every pixel, so a
+# frame of more pixels than $MOTION_MAX_LANES runs passes of one sample per pixel that are
+# larger than the lane budget (4096x4096: 2.2 GB).
+PASS_BYTES_PER_LANE = 100
+WORKER_BASE_BYTES = 600 * 1024**2
+
+
+def pass_lanes(width: int, height: int, spp: int) -> int:
+    """Sample lanes in one render pass of a `width` x `height` frame at `spp` (render/film.py:
+    as many samples per pixel as $MOTION_MAX_LANES allows, at least one)."""
+    pixels = max(1, width * height)
+    return pixels * max(1, min(spp, env_size("MOTION_MAX_LANES") // pixels))
+
+
+def address_space_limit() -> int | None:
+    """The address space this process (and every worker it starts) may use: the soft
+    RLIMIT_AS, or None when unlimited."""
+    import resource
+
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    return None if soft == resource.RLIM_INFINITY or soft <= 0 else soft

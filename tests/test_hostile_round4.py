@@ -451,3 +451,23 @@ def test_the_run_lock_is_never_written_through_a_link_out_of_the_output_folder(t
     res = motion("render", scene, "-o", tmp_path / "out")
     assert res.returncode == 2 and "outside the output folder" in res.stderr, res.stderr
     assert not os.listdir(tmp_path / "elsewhere") and not frames_in(tmp_path / "out" / "sub")
+
+
+def _under_2_gib() -> None:
+    import resource
+
+    resource.setrlimit(resource.RLIMIT_AS, (2 << 30, resource.RLIM_INFINITY))
+
+
+def test_a_frame_whose_pass_cannot_fit_the_address_space_is_refused_before_the_bake(tmp_path: Path) -> None:
+    from farm_util import MOTION
+
+    scene = tmp_path / "s.yaml"
+    scene.write_text(BASE.replace("[16, 12]", "[4096, 4096]"))
+    t0 = time.monotonic()
+    res = subprocess.run([MOTION, "render", str(scene), "-o", str(tmp_path / "out")], capture_output=True, text=True, timeout=120, preexec_fn=_under_2_gib)
+    assert res.returncode == 2 and "s.yaml:4:" in res.stderr and "render.resolution: 4096x4096 renders 16777216 sample lanes" in res.stderr, res.stderr
+    assert time.monotonic() - t0 < 30 and not (tmp_path / "out").exists()  # before: std::bad_alloc on 3 attempts after the bake, exit 3
+    scene.write_text(BASE.replace("[16, 12]", "[64, 48]"))  # a frame that fits renders under the same limit
+    res = subprocess.run([MOTION, "render", str(scene), "-o", str(tmp_path / "out")], capture_output=True, text=True, timeout=120, preexec_fn=_under_2_gib)
+    assert res.returncode == 0, res.stderr
