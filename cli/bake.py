@@ -6,10 +6,12 @@ from pathlib import Path
 
 import click
 
+from motion.cli.options import GivenPath
+
 
 @click.command("bake")
 @click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False, path_type=Path),
+@click.option("-o", "--output", "output", required=True, type=GivenPath(dir_okay=False, path_type=Path),
               help="FILE.json (rigid transforms and scalars) or FILE.npz (also vertices and particles across the shutter).")
 @click.option("--frames", help="Frames as for `motion render`: 0-119, 0-119x2, 1,5,9 or mixes (default: the scene's timeline).")
 @click.option("--preset", help="Bake with a render preset applied (its shutter_samples), to match a render that uses it.")

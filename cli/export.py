@@ -7,6 +7,8 @@ from pathlib import Path
 
 import click
 
+from motion.cli.options import GivenPath
+
 _VIEW_OPTIONS = [
     click.option("--exposure", type=float, default=0.0, show_default=True, help="Exposure in stops (as the movies)."),
     click.option("--ocio", "ocio_config", default=None, help="OCIO config for the view transform: a .ocio file or a built-in ocio://NAME (default: ocio://cg-config-latest, ACES 2.0 SDR on sRGB; none: the plain sRGB curve)."),
@@ -29,7 +31,7 @@ def view_options(f):  # type: ignore[no-untyped-def]
 @click.command("export")
 @click.argument("in_dir", type=click.Path(file_okay=False, path_type=Path))
 @click.option("--format", "fmt", type=click.Choice(["png", "jpg"]), default="png", show_default=True, help="Image format (8 bits per channel).")
-@click.option("-o", "--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), help="Folder for the images (default: IN_DIR/png or IN_DIR/jpg).")
+@click.option("-o", "--out", "out_dir", type=GivenPath(file_okay=False, path_type=Path), help="Folder for the images (default: IN_DIR/png or IN_DIR/jpg).")
 @click.option("--quality", type=click.IntRange(1, 95), default=92, show_default=True, help="JPEG quality.")
 @view_options
 def export(in_dir: Path, fmt: str, out_dir: Path | None, quality: int, exposure: float, ocio_config: str | None,
@@ -46,7 +48,7 @@ def export(in_dir: Path, fmt: str, out_dir: Path | None, quality: int, exposure:
 
 @click.command("view")
 @click.argument("in_dir", type=click.Path(file_okay=False, path_type=Path))
-@click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), help="The flipbook page (default: IN_DIR/flipbook/index.html; its images go beside it).")
+@click.option("-o", "--out", "out_path", type=GivenPath(dir_okay=False, path_type=Path), help="The flipbook page (default: IN_DIR/flipbook/index.html; its images go beside it).")
 @click.option("--format", "fmt", type=click.Choice(["jpg", "png"]), default="jpg", show_default=True, help="Image format of the flipbook's frames.")
 @click.option("--open", "open_browser", is_flag=True, help="Open the page in the default web browser.")
 @view_options

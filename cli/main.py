@@ -16,6 +16,7 @@ from __future__ import annotations
 import gc
 import importlib
 import sys
+from typing import Any
 
 import click
 
@@ -152,7 +153,45 @@ def restore_gc() -> None:
         gc.enable()
 
 
+# SIGTERM (a farm's scheduler, `timeout`, a container stopping) ends a command as Ctrl-C
+# does: the handler raises KeyboardInterrupt where the main thread is, so the farm stops its
+# workers, settles the frames in flight as not rendered and writes the report, temporary
+# files and claims go, and the process exits 143 (128 + 15) instead of 130. A second SIGTERM
+# while that stop runs is ignored (the stop is short; SIGKILL is the scheduler's next word).
+_terminated = False
+
+
+def _on_sigterm(signum: int, frame: Any) -> None:
+    global _terminated
+    if _terminated:
+        return
+    _terminated = True
+    raise KeyboardInterrupt
+
+
+def _interrupted() -> int:
+    """The one line and exit code of a stop by Ctrl-C (130) or SIGTERM (143)."""
+    click.echo("terminated" if _terminated else "interrupted", err=True)
+    return 143 if _terminated else 130
+
+
 def _run(argv: list[str] | None) -> int:
+    """Run the CLI with SIGTERM handled as Ctrl-C; returns the process exit code."""
+    global _terminated
+    import signal
+    import threading
+
+    _terminated = False
+    if threading.current_thread() is not threading.main_thread():
+        return _run_command(argv)
+    previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    try:
+        return _run_command(argv)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _run_command(argv: list[str] | None) -> int:
     """Run the CLI; returns the process exit code."""
     try:
         cli.main(args=argv, prog_name="motion", standalone_mode=False)
@@ -164,12 +203,8 @@ def _run(argv: list[str] | None) -> int:
         for line in str(err).splitlines() or [type(err).__name__]:
             click.echo(f"error: {line}", err=True)
         return err.exit_code
-    except click.exceptions.Abort:
-        click.echo("interrupted", err=True)
-        return 130
-    except KeyboardInterrupt:
-        click.echo("interrupted", err=True)
-        return 130
+    except (click.exceptions.Abort, KeyboardInterrupt):
+        return _interrupted()
     except click.ClickException as err:
         # one line, like every other error (click's usage banner is two more)
         hint = f" (see 'motion {err.ctx.command_path.split(' ', 1)[1]} --help')" if isinstance(err, click.UsageError) and err.ctx is not None and " " in err.ctx.command_path else ""

@@ -8,11 +8,13 @@ from pathlib import Path
 
 import click
 
+from motion.cli.options import GivenPath
+
 
 @click.command()
 @click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--what", type=click.Choice(["energy", "trajectory"]), default="energy", show_default=True, help="energy over time (per body), or body trajectories")
-@click.option("-o", "--output", "output", type=click.Path(dir_okay=False, path_type=Path), required=True, help="image file (.png, .pdf, .svg)")
+@click.option("-o", "--output", "output", type=GivenPath(dir_okay=False, path_type=Path), required=True, help="image file (.png, .pdf, .svg)")
 @click.option("--until", type=float, default=None, help="simulate until this time (s); default: the end of the timeline")
 def plot(scene: Path, what: str, output: Path, until: float | None) -> None:
     """Simulate SCENE's dynamics and plot energy (per body, zero stated) or trajectories."""

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from motion.cli.options import MAX_TASK_TIMEOUT_S, FiniteFloat
+from motion.cli.options import GivenPath, MAX_TASK_TIMEOUT_S, FiniteFloat
 from motion.pipeline.errors import UsageError
 
 
@@ -26,7 +26,7 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 
 @click.command("render")
 @click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("-o", "--output", "output_dir", type=click.Path(file_okay=False, path_type=Path), help="Output folder (default: the scene's output.directory, else out/<name>).")
+@click.option("-o", "--output", "output_dir", type=GivenPath(file_okay=False, path_type=Path), help="Output folder (default: the scene's output.directory, else out/<name>).")
 @click.option("--frames", "frames_spec", help="Frames: 0-119, 0-119x2 (every 2nd), 1,5,9 or mixes (default: the scene's timeline).")
 @click.option("--shard", help="I/N: render only the I-th (1-based) of N balanced parts of the frames (CI matrix, farm nodes).")
 @click.option("--preset", help="Render preset: ci-smoke, preview, final, or a path to a preset .yaml.")
@@ -47,7 +47,7 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--task-timeout", "task_timeout_s", type=FiniteFloat(min=0, min_open=True, max=MAX_TASK_TIMEOUT_S), help="Seconds before a chunk is cancelled and retried (at most a week).")
 @click.option("--resume/--no-resume", default=True, show_default=True, help="Skip frames already complete with this scene, motion and settings.")
 @click.option("--overwrite", is_flag=True, help="Re-render every selected frame, replacing complete ones.")
-@click.option("--report", "report_path", type=click.Path(dir_okay=False, path_type=Path), help="Where to write the JSON report (default: OUTPUT/render-report.json).")
+@click.option("--report", "report_path", type=GivenPath(dir_okay=False, path_type=Path), help="Where to write the JSON report (default: OUTPUT/render-report.json).")
 @click.option("--progress/--no-progress", "progress", default=None, help="Live progress bar (default: only on a terminal).")
 @click.option("--check", is_flag=True, help="Render nothing: verify every selected frame is complete (exit 3 if not).")
 @click.option("--no-cache", is_flag=True, help="Naive path for comparison: a fresh Mitsuba scene for every frame.")

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from motion.cli.export import view_options
-from motion.cli.options import FiniteFloat
+from motion.cli.options import GivenPath, FiniteFloat
 from motion.pipeline.errors import UsageError
 from motion.pipeline.progress import count_bar
 
@@ -16,7 +16,7 @@ CODEC_NAMES = ["prores", "prores4444", "h264"]
 
 @click.command("telecine")
 @click.argument("in_dir", type=click.Path(file_okay=False, path_type=Path))
-@click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False, path_type=Path),
+@click.option("-o", "--out", "out_dir", required=True, type=GivenPath(file_okay=False, path_type=Path),
               help="Folder for the output EXR sequence.")
 @click.option("--pattern", default=None,
               help="3:2 (default), 2:3:3:2, 2:2, blend, or field counts (2:3:3:2, 2332). "
@@ -88,7 +88,7 @@ def telecine(in_dir: Path, out_dir: Path, pattern: str | None, field_order: str 
 
 @click.command("contact-sheet")
 @click.argument("in_dir", type=click.Path(file_okay=False, path_type=Path))
-@click.option("-o", "--out", "out_path", required=True, type=click.Path(dir_okay=False, path_type=Path),
+@click.option("-o", "--out", "out_path", required=True, type=GivenPath(dir_okay=False, path_type=Path),
               help="PNG file to write.")
 @click.option("--width", "thumb_width", type=int, default=240, show_default=True, help="Thumbnail width in pixels.")
 @click.option("--columns", type=int, default=None, help="Thumbnails per row (default: about 16:9 overall).")

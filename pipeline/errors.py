@@ -222,4 +222,9 @@ class ShotFolderTakenError(UsageError):
     the same `name:` share `out/<name>`): refused, naming both (shot/identity.py)."""
 
 
+class OutputInUseError(UsageError):
+    """Another version of the scene (other settings or motion) is being rendered into the
+    same output folder by a live run: rendering both would leave a mix of the two."""
+
+
 # --- deliverables, telecine, examples ---

@@ -22,7 +22,11 @@ ErrorFor = Callable[[str], MotionError]  # the caller's own error from "FILE: re
 MAX_IMAGE_BYTES = 2 * 1024**3  # one texture or environment map file (images.py)
 MAX_MESH_BYTES = 2 * 1024**3  # one mesh file (meshes.py)
 MAX_GLTF_BYTES = 4 << 30  # one .gltf or .glb file (scene/imports/gltf.py)
+MAX_GLTF_KEYS = 250_000  # animation keys of one glTF import, all channels (each becomes a keyframe record: 400,000 took 10.6 s and 0.57 GB to validate)
 MAX_USD_LAYER_BYTES = 2 * 1024**3  # one USD layer file (scene/imports/usd.py)
+MAX_USD_POINT_SAMPLES = 10_000  # time samples of one deforming USD mesh's points (each a mesh file and a key)
+MAX_USD_POINT_VALUES = 1 << 28  # coordinates of one deforming USD mesh over all its samples (2 GB as float64)
+MAX_OCIO_CONFIG_BYTES = 256 * 1024**2  # one --ocio config file, .ocio or .ocioz (telecine/movie.py)
 
 
 @contextmanager
@@ -225,3 +229,28 @@ def read_json_record(path: str | Path, what: str, expect: type | tuple[type, ...
                 return doc
     logging.getLogger("motion").warning(f"motion: warning: {path}: {what} discarded ({why}); it is made again")
     return None
+
+
+# What one render worker's address space holds, measured on a worker rendering one pass
+# (VmPeak, scalar_rgb, 1 spp): 1.00 GB at 2048x2048 (4.2M lanes), 1.41 GB at 2900x2900
+# (8.4M lanes): about 100 bytes a lane over a base of 600 MB. A pass covers every pixel, so a
+# frame of more pixels than $MOTION_MAX_LANES runs passes of one sample per pixel that are
+# larger than the lane budget (4096x4096: 2.2 GB).
+PASS_BYTES_PER_LANE = 100
+WORKER_BASE_BYTES = 600 * 1024**2
+
+
+def pass_lanes(width: int, height: int, spp: int) -> int:
+    """Sample lanes in one render pass of a `width` x `height` frame at `spp` (render/film.py:
+    as many samples per pixel as $MOTION_MAX_LANES allows, at least one)."""
+    pixels = max(1, width * height)
+    return pixels * max(1, min(spp, env_size("MOTION_MAX_LANES") // pixels))
+
+
+def address_space_limit() -> int | None:
+    """The address space this process (and every worker it starts) may use: the soft
+    RLIMIT_AS, or None when unlimited."""
+    import resource
+
+    soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    return None if soft == resource.RLIM_INFINITY or soft <= 0 else soft

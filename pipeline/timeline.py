@@ -34,17 +34,43 @@ MAX_FPS = Fraction(100_000)
 MAX_FPS_TERM = 10**9  # numerator and denominator of a rational rate
 
 
+# The NTSC family: N x 1000/1001 frames/s. Studios write these rates as decimals rounded to 2
+# or 3 places (23.976, 23.98, 29.97, 47.952, 59.94, 119.88) and mean the exact ratio, which
+# is what their timecode (drop-frame at 29.97 and 59.94) and every deliverable assume.
+NTSC_BASES = (24, 30, 48, 60, 120, 240)
+
+
+def _ntsc_rate(decimal: str) -> Fraction | None:
+    """N x 1000/1001 when `decimal` is that rate rounded to 2 or 3 places, else None."""
+    whole, dot, places = decimal.strip().partition(".")
+    if len(decimal) > 16 or not dot or len(places) not in (2, 3) or not (whole + places).isdigit():
+        return None
+    written = Fraction(decimal.strip())
+    for n in NTSC_BASES:
+        exact = Fraction(n * 1000, 1001)
+        if round(exact, len(places)) == written:
+            return exact
+    return None
+
+
 def parse_fps(value: int | float | str | Fraction) -> Fraction:
     """Parse a frame rate: an integer, a decimal, or a rational string such as "30000/1001".
+    A decimal that names an NTSC rate as studios write it (23.976, 23.98, 29.97, 59.94 ...)
+    is that rate exactly (N x 1000/1001), never the decimal (2997/100 at 29.97).
 
     Raises ValueError (with the reason) for anything else, or a rate that is not > 0.
 
-    >>> parse_fps(25), parse_fps("24000/1001"), parse_fps("23.976")
-    (Fraction(25, 1), Fraction(24000, 1001), Fraction(2997, 125))
+    >>> parse_fps(25), parse_fps("24000/1001"), parse_fps("23.976"), parse_fps(29.97), parse_fps("59.94")
+    (Fraction(25, 1), Fraction(24000, 1001), Fraction(24000, 1001), Fraction(30000, 1001), Fraction(60000, 1001))
+    >>> parse_fps(29.9), parse_fps("29.970")
+    (Fraction(299, 10), Fraction(30000, 1001))
     """
     shown = repr(value) if len(repr(value)) <= 40 else repr(value)[:37] + "..."
     if isinstance(value, bool):
         raise ValueError("expected a frame rate (integer or 'num/den' string), got a boolean")
+    ntsc = _ntsc_rate(repr(value) if isinstance(value, float) else value) if isinstance(value, (float, str)) else None
+    if ntsc is not None:
+        return ntsc
     try:
         if isinstance(value, float):
             rate = Fraction(value).limit_denominator(1001000)

@@ -415,6 +415,27 @@ HOSTILE_YAML = {
     "unicode": "name: caf\u00e9 \U0001f600\nv: [1.5e3, .inf, -0x1f, 0o17, ~, yes, 2001-12-14]\n",
     "anchors": "base: &b {x: 1, y: [1, 2]}\nother: {<<: *b, y: 3}\n",
     "block-scalars": "a: |\n  line 1\n  line 2\nb: >-\n  folded\n  text\n",
+    # where the two readers differed (issue 36; the fuzz in tests/test_hostile_round4.py finds more)
+    "tab-after-key": "a:\t1\nb: 2\n",
+    "tab-after-key-before-block": "a:\t\n  - 1\n",
+    "tab-before-value": "a: \tx\n",
+    "tab-in-flow": "{a:\t1}\n",
+    "tab-before-colon": "a\t: 1\n",
+    "tab-in-plain-scalar": "a: x\ty\n",
+    "tab-at-end-of-line": "a: x\t\n",
+    "tab-before-comment": "a: 1\t# c\n",
+    "bom-alone-on-a-line": "a: 1\n\ufeff\nb: 2\n",
+    "two-boms-at-the-start": "\ufeff\ufeffa: 1\n",
+    "bom-inside-a-line": "a: x\ufeffy\nb\ufeff: 2\n",
+    "non-specific-tag-empty": "material: !\n",
+    "non-specific-tag-in-flow": "{a: !, b: ! x}\n",
+    "non-specific-tag-on-a-sequence": "a: ! [1, 2]\n",
+    "question-mark-in-a-flow-scalar": "{a: 1, b?c: 2, d? e: 3}\n",
+    "tag-in-a-flow-before-a-comma": "[!x, 1]\n",
+    "comment-after-a-block-indicator": "a: |#\n  text\n",
+    "empty-value-in-a-flow": "{a: ,b}\n",
+    "lone-surrogate": 'a: "\\ud800"\n',
+    "escaped-surrogate-pair": 'a: "\\ud83d\\ude00"\n',
 }
 
 

@@ -9,13 +9,14 @@ import json
 import zipfile
 import zlib
 from pathlib import Path
+from collections.abc import Collection
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..errors import BakeFileError
 from ..files import writing
-from ..timeline import MAX_FRAME_NUMBER
+from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
 from .checks import motion_problems
 from .records import BakedFrame, BakedMotion
 
@@ -124,6 +125,7 @@ def _nest(flat: dict[str, np.ndarray]) -> dict[str, Any]:
 
 
 MAX_BAKE_BYTES = 2 * 1024**3  # a baked-motion file on disk
+MAX_BAKE_FRAMES = MAX_FRAMES  # frames in one baked-motion file (as in one timeline)
 MAX_BAKE_ARRAY_BYTES = 4 * 1024**3  # its arrays once decompressed (NPZ)
 
 
@@ -242,14 +244,17 @@ def _numbers(value: Any, what: str, dtype: Any = np.float64) -> np.ndarray:
     return a.astype(dtype)
 
 
-def read_baked(path: str | Path, half: bool = False) -> BakedMotion:
+def read_baked(path: str | Path, half: bool = False, frames: Collection[int] | None = None) -> BakedMotion:
     """The one reader of bake files (.json or .npz): the typed `BakedMotion`, every frame
     checked (finite times, poses finite with unit rotations, shapes matching the header's
     samples_per_frame). Raises BakeFileError naming the file (and the frame) on a bad one.
 
     JSON carries no vertices or particles; NPZ carries them at the frame time and across
     the shutter (docs/bake-format.md). `half`: the frames it feeds are half-float, so a
-    light's radiance seen directly must be one a half holds (limits.py)."""
+    light's radiance seen directly must be one a half holds (limits.py). `frames`: build
+    and check only these frame numbers (a job's selection): a file of a million frames within
+    its byte budget made a record of every one (100,000 took 33 s and 2 GB) before the job
+    used two. A file of more than MAX_BAKE_FRAMES frames is refused before any is built."""
     path = Path(path)
     doc = read_document(path)
     try:
@@ -260,19 +265,24 @@ def read_baked(path: str | Path, half: bool = False) -> BakedMotion:
         raise BakeFileError(f"{path}: its header (scene, fps, shutter, samples_per_frame) is malformed: {type(exc).__name__}: {exc}") from None
     scene, fps, angle, position, samples = header
     try:
-        records = _npz_records(doc["arrays"]) if "arrays" in doc else list(doc["frames"])
-        numbers = [_whole(r["frame"], f"frames[{k}].frame", -MAX_FRAME_NUMBER, MAX_FRAME_NUMBER) for k, r in enumerate(records)]
+        listed = doc["arrays"]["frames"] if "arrays" in doc else doc["frames"]
+        if len(listed) > MAX_BAKE_FRAMES:
+            raise BakeFileError(f"{path}: {len(listed)} frames; the limit is {MAX_BAKE_FRAMES} (bake fewer frames per file)")
+        numbers = [_whole(r if "arrays" in doc else r["frame"], f"frames[{k}].frame", -MAX_FRAME_NUMBER, MAX_FRAME_NUMBER) for k, r in enumerate(listed)]
+        chosen = None if frames is None else set(frames)
+        wanted = [k for k, n in enumerate(numbers) if chosen is None or n in chosen]
+        records = _npz_records(doc["arrays"], wanted) if "arrays" in doc else [listed[k] for k in wanted]
     except _MALFORMED as exc:
         raise BakeFileError(f"{path}: the frame list is malformed ({type(exc).__name__}: {exc})") from None
-    frames = []
-    for number, rec in zip(numbers, records):
+    baked_frames = []
+    for number, rec in zip([numbers[k] for k in wanted], records):
         try:
             frame = _frame(rec, number)
         except _MALFORMED as exc:
             raise BakeFileError(f"{path}: frame {number} is malformed ({type(exc).__name__}: {exc})") from None
         _check_frame(frame, samples, path, half)
-        frames.append(frame)
-    return BakedMotion(scene, fps, angle, position, frames)
+        baked_frames.append(frame)
+    return BakedMotion(scene, fps, angle, position, baked_frames)
 
 
 def _frame(rec: dict[str, Any], number: int) -> BakedFrame:
@@ -344,11 +354,12 @@ def _check_frame(frame: BakedFrame, samples: int, path: Path, half: bool = False
             raise BakeFileError(f"{path}: frame {frame.frame}: the {what} at the frame time have shape {at_shape}, across the shutter {across_shape}")
 
 
-def _npz_records(arrays: dict[str, np.ndarray]) -> list[dict[str, Any]]:
-    """The NPZ layout (stacked over frames) as the JSON layout, one record per frame;
-    vertices and particles nest like the rest."""
+def _npz_records(arrays: dict[str, np.ndarray], indices: list[int]) -> list[dict[str, Any]]:
+    """The NPZ layout (stacked over frames) as the JSON layout, one record per frame at
+    `indices`; vertices and particles nest like the rest."""
     out = []
-    for k, f in enumerate(arrays["frames"]):
+    for k in indices:
+        f = arrays["frames"][k]
         rec: dict[str, Any] = {"frame": f, "time": arrays["times"][k], "shutter": arrays["shutter"][k], "at_frame": {}, "samples": {}}
         if "sample_times" in arrays:
             rec["sample_times"] = arrays["sample_times"][k]

@@ -30,6 +30,7 @@ import json
 import math
 import os
 import socket
+import threading
 import time
 import uuid
 from dataclasses import asdict, dataclass
@@ -202,3 +203,108 @@ def remove_partials(frame_file: str | Path) -> int:
     except OSError:
         pass  # gone, or a read-only disk: nothing we can remove now
     return n
+
+
+# --- the output folder's run locks -------------------------------------------------------
+#
+# Frame claims keep two renders off one frame; they cannot keep two *versions* of a scene
+# (other settings, other motion) out of one folder: each would render the frames the other
+# had not reached and both would report success over a mix that `--check` refuses. So each
+# run holds `<output>/.motion-claims/run-<run id>.lock` (JSON: run id, host, pid, scene,
+# version, time) from before its bake to after its deliverables. Runs of the same version
+# share the folder (shards, a second machine helping); a run that finds a live lock of
+# another version refuses with one line naming it. Two runs of different versions that
+# start at the same instant both write their lock before looking: the later one (by the time
+# in the lock, then the run id) gives way, so exactly one goes on. A lock is live while its
+# process is alive (same host) or, for another host, while its time is refreshed
+# (every RUN_HEARTBEAT_S by a thread of the holder) within RUN_LOCK_STALE_S.
+
+RUN_LOCK_PREFIX = "run-"
+RUN_LOCK_SUFFIX = ".lock"
+RUN_HEARTBEAT_S = 30.0
+RUN_LOCK_STALE_S = 600.0
+MAX_RUN_LOCKS = 1000  # lock files read at most (a folder flooded with them is refused, not read without end)
+
+
+@dataclass(frozen=True)
+class RunLock:
+    """This run's lock on an output folder (release it with `release_run_lock`)."""
+
+    path: Path
+    run_id: str
+    stop: threading.Event
+
+
+def _lock_live(path: Path, info: dict) -> bool:
+    """Whether another run's lock still stands (see the block comment above)."""
+    try:
+        age = time.time() - path.stat().st_mtime
+    except OSError:
+        return False
+    if not info.get("run_id") or not isinstance(info.get("pid"), int) or isinstance(info.get("pid"), bool):
+        return -WRITE_GRACE_S <= age <= WRITE_GRACE_S  # being written, or garbage
+    if info.get("host") == socket.gethostname() and not _pid_alive(info["pid"]):
+        return False
+    return -MAX_CLOCK_SKEW_S <= age <= RUN_LOCK_STALE_S
+
+
+def _order(info: dict) -> tuple[float, str]:
+    t = info.get("time")
+    return (float(t) if isinstance(t, (int, float)) and not isinstance(t, bool) and math.isfinite(t) else math.inf, str(info.get("run_id")))
+
+
+def take_run_lock(out_dir: str | Path, who: Claimant, scene: str, version: str) -> RunLock:
+    """Lock `out_dir` for this run of `scene` at `version` (a digest of everything a frame
+    is made from). Raises OutputInUseError naming the other run when a live run of another
+    version holds it; DiskFaultError when the disk refuses the lock."""
+    from ..errors import OutputConfinementError, OutputInUseError
+    from ..files import confined
+
+    folder = Path(out_dir) / CLAIM_DIR
+    path = folder / f"{RUN_LOCK_PREFIX}{who.run_id}{RUN_LOCK_SUFFIX}"
+    if not confined(out_dir, path):  # (frames in a subfolder: preflight never looked at this one)
+        raise OutputConfinementError(f"{folder} is a link to {folder.resolve()}, outside the output folder {out_dir}: the run lock is written only inside it")
+    mine = {**asdict(who), "scene": scene, "version": version, "time": time.time()}
+    with disk_faults("locking the output folder", path):
+        folder.mkdir(parents=True, exist_ok=True)
+        write_atomic(path, json.dumps(mine).encode(), "locking the output folder")
+    try:
+        others = sorted(p for p in folder.glob(f"{RUN_LOCK_PREFIX}*{RUN_LOCK_SUFFIX}") if p != path)
+    except OSError:
+        others = []
+    for other in others[:MAX_RUN_LOCKS]:
+        info = read_claim(other)
+        if info is None:
+            continue
+        if not _lock_live(other, info):
+            _break(other)
+            continue
+        if info.get("version") == version or _order(info) > _order(mine):
+            continue  # the same version shares the folder; a later one gives way to us
+        path.unlink(missing_ok=True)
+        raise OutputInUseError(
+            f"{out_dir}: another version of {str(info.get('scene'))[:200]!r} is being rendered here by run {str(info.get('run_id'))[:80]} "
+            f"(pid {info.get('pid')} on {str(info.get('host'))[:80]}, lock {other}); rendering both would mix their frames: "
+            f"wait for it, or render into another -o"
+        )
+    stop = threading.Event()
+
+    def heartbeat() -> None:
+        while not stop.wait(RUN_HEARTBEAT_S):
+            try:
+                os.utime(path)
+            except OSError:
+                return
+
+    threading.Thread(target=heartbeat, name="motion-run-lock", daemon=True).start()
+    return RunLock(path=path, run_id=who.run_id, stop=stop)
+
+
+def release_run_lock(lock: RunLock) -> None:
+    """Stop refreshing the lock and remove it (never raises: a lock a read-only disk keeps
+    names a process that will be gone)."""
+    lock.stop.set()
+    try:
+        lock.path.unlink(missing_ok=True)
+    except OSError:
+        pass

@@ -57,7 +57,7 @@ def file_inputs(loaded: LoadedScene, path: str | Path, frames: Sequence[int]) ->
             "whose geometry a JSON bake does not carry; bake to .npz (motion bake SCENE -o motion.npz)"
         )
     try:
-        baked = read_baked(path, half=loaded.scene.output.pixel_type == "half")
+        baked = read_baked(path, half=loaded.scene.output.pixel_type == "half", frames=frames)
     except BakeFileError as exc:
         raise BakeFileError(f"--motion {exc}") from None
     _check_meta(baked, loaded, path)
@@ -72,5 +72,5 @@ def file_inputs(loaded: LoadedScene, path: str | Path, frames: Sequence[int]) ->
     by_frame = {f.frame: f for f in baked.frames}
     missing = [f for f in frames if f not in by_frame]
     if missing:
-        raise UsageError(f"--motion {path}: frames {format_frames(missing)} are not in the baked file (it has {format_frames(sorted(by_frame))})")
+        raise UsageError(f"--motion {path}: frames {format_frames(missing)} are not in the baked file")
     return [by_frame[f] for f in frames]

@@ -119,11 +119,8 @@ def merge_previous(report: dict[str, Any], path: str | Path, exists: Callable[[i
     the row of the run that rendered them (`rendered_in_run`, worker, times); the earlier
     run joins `history` (newest last, at most HISTORY_LIMIT); `folder` lists every frame of
     the folder that a run of this report rendered and that is still on disk."""
-    try:
-        before = json.loads(Path(path).read_text())
-    except (OSError, ValueError):
-        before = None
-    if not isinstance(before, dict) or before.get("scene_name") != report.get("scene_name"):
+    before = read_previous(path)
+    if before.get("scene_name") != report.get("scene_name"):
         before = {}
     old_rows = {r.get("frame"): r for r in before.get("frames", []) if isinstance(r, dict)}
     for row in report["frames"]:
@@ -148,6 +145,70 @@ def merge_previous(report: dict[str, Any], path: str | Path, exists: Callable[[i
     known |= {r["frame"] for r in report["frames"] if r["status"] in ("rendered", "skipped", "done_elsewhere")}
     frames = sorted(f for f in known if exists(f))
     report["folder"] = {"frames": frames, "complete": format_frames(frames), "count": len(frames)}
+
+
+MAX_REPORT_BYTES = 64 * 1024**2  # a previous render-report.json read back (a million frames' rows are ~150 MB: their history is dropped)
+_SCALAR = (str, int, float, type(None))
+_ROW_FIELDS = {"frame": int, "status": str, "rendered_in_run": (str, type(None)), "worker": (str, type(None)), "render_s": (int, float, type(None)),
+               "setup_s": (int, float, type(None)), "denoise_s": (int, float, type(None)), "path": (str, type(None))}
+
+
+def read_previous(path: str | Path) -> dict[str, Any]:
+    """The report a previous run left at `path`, or {} when there is none. One that cannot
+    be trusted (not a regular file, over MAX_REPORT_BYTES, not JSON, nested past what the
+    parser takes, or a field of the wrong type) is discarded with one warning line and the
+    run writes a new one: it only carries history, and a damaged one stopped every later
+    run with a traceback (a FIFO in its place hung it)."""
+    import logging
+
+    from ..errors import InputFileError
+    from ..limits import read_bounded
+
+    if not os.path.lexists(path):
+        return {}
+    try:
+        before = json.loads(read_bounded(path, MAX_REPORT_BYTES, "previous report"))
+        problem = _report_problem(before)
+    except InputFileError as exc:
+        problem = exc.reason
+    except (ValueError, RecursionError) as exc:  # (UnicodeDecodeError is a ValueError)
+        problem = f"not JSON ({type(exc).__name__}: {str(exc)[:80]})"
+    if problem is None:
+        return before
+    logging.getLogger("motion").warning(f"motion: warning: {path}: {problem}; its history is discarded and a new report is written")
+    return {}
+
+
+def _report_problem(before: Any) -> str | None:
+    """What makes a previous report untrustworthy (the fields merge_previous reads), or None."""
+    if not isinstance(before, dict):
+        return f"the report is a {type(before).__name__}, not an object"
+    for key, kinds in (("scene_name", (str, type(None))), ("run_id", (str, type(None))), ("frames", list), ("history", list), ("folder", (dict, type(None)))):
+        if not isinstance(before.get(key, None if key not in ("frames", "history") else []), kinds):  # type: ignore[arg-type]
+            return f"'{key}' is a {type(before.get(key)).__name__}"
+    for k, row in enumerate(before.get("frames", [])):
+        if not isinstance(row, dict):
+            return f"frames[{k}] is not an object"
+        for field, kinds in _ROW_FIELDS.items():
+            if field in row and (not isinstance(row[field], kinds) or isinstance(row[field], bool)):  # type: ignore[arg-type]
+                return f"frames[{k}].{field} is a {type(row[field]).__name__}"
+    for k, run in enumerate(before.get("history", [])):
+        if not isinstance(run, dict):
+            return f"history[{k}] is not an object"
+        for field, value in run.items():
+            flat = value.values() if isinstance(value, dict) else [value]
+            if not all(isinstance(v, _SCALAR) for v in flat):
+                return f"history[{k}].{str(field)[:40]} holds nested data"
+    folder = before.get("folder") or {}
+    if not isinstance(folder.get("frames", []), list):
+        return "folder.frames is not a list"
+    for key in ("finished", "selection", "shard", "frames_this_job", "settings_hash"):
+        if not isinstance(before.get(key), _SCALAR):
+            return f"'{key}' is a {type(before.get(key)).__name__}"
+    totals = before.get("totals")
+    if totals is not None and not (isinstance(totals, dict) and all(isinstance(v, _SCALAR) for v in totals.values())):
+        return "'totals' is not a flat object"
+    return None
 
 
 def write_report(report: dict[str, Any], path: str | Path) -> Path:

@@ -80,7 +80,7 @@ def deliver_plan(req: RenderRequest, loaded: Any, frames: list[int]) -> DeliverP
 def check_deliver(req: RenderRequest, loaded: Any, frames: list[int], out_dir: Path, wanted: tuple[str, ...]) -> None:
     """What `--deliver` would find wrong after the last frame, found before the first:
     format names, the view transform (OCIO config, display, view), interlaced formats on an
-    odd height, a selection with gaps (the telecine needs a gapless sequence), the movie
+    odd height, negative frames, a selection with gaps (the telecine needs a gapless sequence), the movie
     encoders, a deliver folder that is a file or a link out of the output folder. Nothing
     is created here: a run that fails or renders nothing leaves no empty deliver folder."""
     from ..telecine.movie import CODECS
@@ -90,6 +90,12 @@ def check_deliver(req: RenderRequest, loaded: Any, frames: list[int], out_dir: P
     interlaced = [f for f in wanted if f in ("60i", "50i")]
     if interlaced and height % 2:
         raise UsageError(f"--deliver {','.join(interlaced)}: the render is {height} rows high; interlaced fields need an even height (--resolution)")
+    negative = [f for f in frames if f < 0]
+    if negative:  # the sequence reader of every deliverable numbers frames from 0 (it rendered them all, then refused)
+        raise UsageError(
+            f"--deliver {','.join(wanted)}: frames {format_frames(negative)} are negative; deliverables are made from frames numbered from 0 "
+            f"(render them without --deliver, or start the timeline at 0)"
+        )
     gaps = [b for a, b in zip(frames, frames[1:]) if b != a + 1]
     if gaps and any(f in SEQUENCE_FORMATS for f in wanted):
         raise UsageError(

@@ -20,7 +20,7 @@ from typing import Any, Callable
 
 from ..bake import BakedFrame, by_number
 from ..errors import IncompleteJobError, UsageError
-from ..farm.claims import clear_stale, new_run_id
+from ..farm.claims import Claimant, RunLock, clear_stale, new_run_id, release_run_lock, take_run_lock
 from ..farm.config import FarmConfig, load_farm_config
 from ..farm.frames import chunks as make_chunks
 from ..farm.frames import default_chunk_size, format_frames, parse_frames, parse_shard, shard
@@ -158,6 +158,14 @@ def preflight(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: 
     from ..scene.checks import bake_budget_problems
 
     check_env_sizes()  # $MOTION_MAX_LANES, $MOTION_ASSET_CACHE_CAP
+    named = [("scene file", loaded.path), ("output folder", out_dir), *[("frame file", frame_path(job, loaded, f)) for f in frames[:1]],
+             ("--report", req.report), ("--motion file", req.motion_file)]
+    for what, path in named:
+        try:
+            str(path).encode("utf-8")
+        except UnicodeEncodeError:  # bytes that are not UTF-8 in a name (Python keeps them as lone surrogates)
+            shown = os.fsencode(str(path)).decode("utf-8", "backslashreplace")
+            raise UsageError(f"{what} {shown}: the name is not UTF-8 text; frame headers and reports cannot hold it (rename it)") from None
     from ..cache import check_cache_root
 
     check_cache_root()  # $MOTION_CACHE_DIR a file or not writable: one line now, not in every worker
@@ -174,6 +182,9 @@ def preflight(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: 
             if not confined(out_dir, target):
                 link = next((p for p in [target.parent, *target.parent.parents] if p.is_symlink()), target.parent)
                 raise OutputConfinementError(f"{link} is a link to {link.resolve()}, outside the output folder {out_dir}: frames and claims are written only inside it")
+    problem = worker_memory_problem(loaded)
+    if problem is not None:
+        raise SceneError([problem])
     if not req.motion_file:
         problems = bake_budget_problems(loaded.scene, loaded.source, len(frames))
         if problems:
@@ -183,6 +194,26 @@ def preflight(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: 
     check_writable(out_dir, "output folder")
     if req.report is not None:
         check_writable(Path(req.report).resolve().parent, f"--report {req.report}: folder")
+
+
+def worker_memory_problem(loaded: LoadedScene) -> Any:
+    """A frame whose render pass cannot fit the address space a worker may use (RLIMIT_AS,
+    which workers inherit), located at render.resolution: found here, not as a
+    std::bad_alloc on every attempt after the bake (4096x4096 under 2 GiB: exit 3 after 54 s)."""
+    from ..limits import PASS_BYTES_PER_LANE, WORKER_BASE_BYTES, address_space_limit, pass_lanes
+
+    limit = address_space_limit()
+    if limit is None:
+        return None
+    render = loaded.scene.render
+    width, height = render.resolution
+    lanes = pass_lanes(width, height, render.spp)
+    need = WORKER_BASE_BYTES + PASS_BYTES_PER_LANE * lanes
+    if need <= limit:
+        return None
+    return loaded.source.problem(("render", "resolution"), f"{width}x{height} renders {lanes} sample lanes a pass (a pass covers every pixel), "
+                                 f"about {need / 1e9:.1f} GB for a worker; this process may use {limit / 1e9:.1f} GB of address space (ulimit -v): "
+                                 "lower the resolution or raise the limit")
 
 
 def warn_variant(req: RenderRequest, loaded: LoadedScene) -> None:
@@ -317,7 +348,34 @@ def say_outputs(wanted: DeliverPlan, frames: list[int], paths: dict[int, str], s
 
 def run_render(req: RenderRequest) -> dict[str, Any]:
     """Render the request; returns the report. Raises IncompleteJobError (exit 3) if any
-    frame failed everywhere, KeyboardInterrupt after a clean stop on Ctrl-C."""
+    frame failed everywhere, KeyboardInterrupt after a clean stop on Ctrl-C (or SIGTERM),
+    OutputInUseError when a live run of another version of the scene renders into the same
+    output folder (farm/claims.py: the run lock, held from before the bake to the end)."""
+    held: list[RunLock] = []
+    try:
+        return _run_render(req, held)
+    finally:
+        for lock in held:
+            release_run_lock(lock)
+
+
+def version_of(req: RenderRequest, job: RenderJob) -> str:
+    """What a frame of this run is made from, for the output folder's run lock: the
+    settings hash (the scene with every override, each file it names by its bytes) and,
+    with --motion, the motion file (its path, size and time: never read here, where a
+    FIFO would hang)."""
+    if not req.motion_file:
+        return job.settings_hash
+    path = Path(req.motion_file).resolve()
+    try:
+        st = path.stat()
+        return f"{job.settings_hash}+{path}:{st.st_size}:{st.st_mtime_ns}"
+    except OSError:
+        return f"{job.settings_hash}+{path}"
+
+
+def _run_render(req: RenderRequest, held: list[RunLock]) -> dict[str, Any]:
+    """run_render's steps; the run lock it takes goes into `held`."""
     t_start = time.perf_counter()
     cfg: FarmConfig = load_farm_config().with_overrides(retries=req.retries, task_timeout_s=req.task_timeout_s, chunk_size=req.chunk_size)
     check_request(req)
@@ -348,6 +406,9 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     if req.check and wanted:
         check_writable(out_dir, "output folder")  # --check --deliver writes the deliverables
     warn_variant(req, loaded)
+    run_id = new_run_id()
+    if not req.check and not req.dry_run:
+        held.append(take_run_lock(out_dir, Claimant.here(run_id), str(loaded.path), version_of(req, job)))
 
     t0 = time.perf_counter()
     inputs = motion_inputs(req, loaded, sel)
@@ -397,7 +458,6 @@ def run_render(req: RenderRequest) -> dict[str, Any]:
     record_owner(out_dir, loaded.path)
     if taken_from is not None:
         logging.getLogger("motion").warning(f"motion: {out_dir} held the frames of {taken_from}; it is now {loaded.path}'s folder")
-    run_id = new_run_id()
     ctx = TaskContext(run_id=run_id, paths=paths, resume=req.resume and not req.overwrite, stale_after_s=cfg.stale_after_s)
     clear_stale([paths[f] for f in skipped], cfg.stale_after_s)
     label = f"{loaded.name}" + (f" shard {shard_spec[0]}/{shard_spec[1]}" if shard_spec else "")

@@ -73,6 +73,7 @@ def export_images(
     if not 1 <= int(quality) <= 95:
         raise UsageError(f"--quality must be 1-95, got {quality}")
     view = view or ViewTransform()
+    _refuse_negative_frames(Path(in_dir), prefix)
     seq = discover(in_dir, prefix, require_even_height=False, allow_gaps=True)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -95,6 +96,25 @@ def export_images(
         if progress is not None:
             progress(i + 1, len(seq))
     return Exported(out, tuple(paths), seq.numbers, seq, view.description)
+
+
+def _refuse_negative_frames(in_dir: Path, prefix: str | None) -> None:
+    """Frames numbered below 0 (`shot.-0002.exr`, a timeline that starts before 0) are not
+    part of a sequence the readers find: refuse them by name rather than export only the
+    rest and exit 0 (frames -2..1 wrote two of four images)."""
+    import re
+
+    from ..timeline import format_frames
+
+    name = re.compile(r"^(?P<prefix>.+)\.-(?P<number>\d+)\.exr$", re.IGNORECASE)
+    try:
+        found = [(m["prefix"], -int(m["number"])) for m in map(name.match, os.listdir(in_dir)) if m and not m.string.startswith(".")]
+    except OSError:
+        return  # not a folder: discover says so
+    negative = sorted(n for p, n in found if prefix is None or p == prefix)
+    if negative:
+        raise UsageError(f"{in_dir}: frames {format_frames(negative)} are numbered below 0; export reads frames numbered from 0 "
+                         f"(render the shot from frame 0, or export a folder without them)")
 
 
 def _frame_info(seq: Sequence, index: int, number: int, fps: Fraction | None) -> dict[str, Any]:

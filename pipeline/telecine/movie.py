@@ -148,6 +148,10 @@ class ViewTransform:
             ) from None
         # str, not Path: pathlib would turn ocio://name into ocio:/name.
         name = str(ocio_config)
+        if not name.startswith("ocio://"):  # a FIFO or a device hung OCIO's reader: a regular file only
+            from ..limits import MAX_OCIO_CONFIG_BYTES, open_bounded
+
+            open_bounded(name, MAX_OCIO_CONFIG_BYTES, "OCIO config", UsageError).close()
         try:
             config = OCIO.Config.CreateFromFile(name)
         except Exception as exc:  # OCIO raises its own Exception type for any bad config

@@ -32,27 +32,35 @@ def converted_file(path: Path) -> bool:
     return Path(path).resolve().is_relative_to(cache_dir().resolve())
 
 
-def cached(stem: str, key: str, suffix: str, write: Callable[[Path], None]) -> Path:
+def cached(stem: str, key: str, suffix: str, write: Callable[[Path], None], hold_cap: bool = True) -> Path:
     """The cache file for (`key`, conversion version); `write(tmp_path)` makes it on a miss.
-    `key` names the bytes the conversion reads (the callers hash what they convert)."""
+    `key` names the bytes the conversion reads (the callers hash what they convert).
+    `hold_cap=False`: one of many writes in a row, whose caller holds the cache to its cap
+    once after the last (`hold_cap`): each hold lists the whole folder."""
     from ...meshes import cache_entry_whole
 
     safe = re.sub(r"[^A-Za-z0-9_.-]", "_", stem)[:48]
     target = STORE.path(STORE.key(key), safe, suffix)
     if STORE.hit(target, cache_entry_whole):  # (an entry cut short, emptied or planted is made again, never a hit)
         return target
-    write_atomic(target, write)
+    write_atomic(target, write, hold_cap)
     return target
 
 
-def write_atomic(target: Path, write: Callable[[Path], None]) -> None:
+def hold_cap(keep: Path | None = None) -> None:
+    """The import cache held to $MOTION_ASSET_CACHE_CAP (the oldest entries go; `keep` stays)."""
+    STORE.hold(cache_dir(), keep=keep)
+
+
+def write_atomic(target: Path, write: Callable[[Path], None], cap: bool = True) -> None:
     """`write(tmp)` to a temporary name beside `target`, then rename it into place (the one
     write policy, pipeline/files.py: a concurrent reader sees the whole file or none, a full
     cache disk is one line and leaves no partial entry); then the cache is held to
-    $MOTION_ASSET_CACHE_CAP (the store's one eviction policy)."""
+    $MOTION_ASSET_CACHE_CAP (the store's one eviction policy; unless `cap` is False: the
+    caller then holds it once after a run of writes, `hold_cap`)."""
     from ...meshes import cache_entry_whole
 
-    STORE.make(target, write, "writing the import cache", verify=lambda p: cache_entry_whole(p, full=True))
+    STORE.make(target, write, "writing the import cache", verify=lambda p: cache_entry_whole(p, full=True), hold=cap)
 
 
 def write_ply(path: Path, positions: np.ndarray, faces: np.ndarray | None, normals: np.ndarray | None = None, uvs: np.ndarray | None = None) -> None:

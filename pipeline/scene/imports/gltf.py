@@ -22,7 +22,9 @@ from typing import Any
 import numpy as np
 
 from ...cache import file_digest
+from ...errors import InputFileError
 from ...limits import MAX_GLTF_BYTES as MAX_FILE_BYTES  # refuse absurd files before reading them
+from ...limits import MAX_GLTF_KEYS, MAX_IMAGE_BYTES, read_bounded
 from .records import Expansion, ImportFileError, Origin, SpecError, import_frames
 from .cache import cached, write_atomic, write_ply
 
@@ -75,10 +77,7 @@ class GltfReader:
         import pygltflib
 
         self.path, self.shown, self.spec, self.index = path, shown, spec, index
-        size = path.stat().st_size
-        if size > MAX_FILE_BYTES:
-            self.fail("<file>", f"file is {size} bytes; the limit is {MAX_FILE_BYTES}")
-        raw = path.read_bytes()
+        raw = self._read(path, MAX_FILE_BYTES, "glTF file", "<file>")
         if path.suffix.lower() == ".glb" or raw[:4] == b"glTF":
             self._check_glb(raw)
         self._check_counts(raw)
@@ -96,6 +95,7 @@ class GltfReader:
             if ext not in SUPPORTED_EXTENSIONS:
                 self.fail("extensionsRequired", f"unsupported extension '{ext}' is marked required (supported: {', '.join(SUPPORTED_EXTENSIONS)})")
         self._buffers: dict[int, bytes] = {}
+        self._keys = 0  # animation keys read so far (MAX_GLTF_KEYS)
         self.digest = source_digest(path, raw)  # the bytes read, not the file as it is now
         self.at = "<file>"  # what is being read: the location of an unforeseen malformation
 
@@ -104,6 +104,15 @@ class GltfReader:
     def fail(self, where: str, message: str) -> "None":
         """Raise ImportFileError at `where` in the file."""
         raise ImportFileError(self.shown, where, message)
+
+    def _read(self, file: Path, limit: int, what: str, where: str) -> bytes:
+        """A file of the import read whole, refused unread when it is no regular file or is
+        over `limit` bytes (a FIFO hung; a 5 GB buffer beside the file was a MemoryError)."""
+        try:
+            return read_bounded(file, limit, what)
+        except InputFileError as exc:
+            self.fail(where, exc.reason)
+        raise AssertionError("unreachable")  # (fail raises)
 
     def _check_counts(self, raw: bytes) -> None:
         """The document's sizes, from a plain JSON parse (fast), before pygltflib builds an
@@ -150,6 +159,8 @@ class GltfReader:
             self.fail(f"buffers[{i}]", "no such buffer")
         buf = buffers[i]
         where = f"buffers[{i}]"
+        if not isinstance(buf.byteLength, int) or not 0 <= buf.byteLength <= MAX_FILE_BYTES:
+            self.fail(where, f"byteLength {buf.byteLength} is out of range (at most {MAX_FILE_BYTES} bytes)")
         if buf.uri is None:
             if i != 0 or self.glb_blob is None:
                 self.fail(where, "a buffer without uri must be the GLB binary chunk (buffer 0 of a .glb)")
@@ -161,9 +172,9 @@ class GltfReader:
                 self.fail(where, f"bad data URI: {exc}")
         else:
             file = self.path.parent / buf.uri
-            if not file.is_file():
+            if not file.exists():
                 self.fail(f"{where} '{buf.uri}'", f"file not found (relative to {self.path.parent})")
-            data = file.read_bytes()
+            data = self._read(file, MAX_FILE_BYTES, "buffer file", f"{where} '{buf.uri}'")
         if len(data) < (buf.byteLength or 0):
             self.fail(where, f"has {len(data)} bytes; byteLength says {buf.byteLength} (truncated?)")
         self._buffers[i] = data
@@ -400,6 +411,10 @@ class GltfReader:
             times = self.accessor(s.input, f"{swhere}.input")[:, 0]
             if len(times) == 0:
                 self.fail(f"{swhere}.input", "no key times")
+            self._keys += len(times)
+            if self._keys > MAX_GLTF_KEYS:
+                self.fail(f"{swhere}.input (accessor {s.input})", f"{self._keys} animation keys in this import so far; the limit is {MAX_GLTF_KEYS} "
+                                                                  "(each key becomes a scene record: bake dense motion to a file, `motion render --motion`)")
             if (np.diff(times) <= 0).any():
                 self.fail(f"{swhere}.input (accessor {s.input})", "key times must increase strictly")
             values = self.accessor(s.output, f"{swhere}.output")
@@ -686,9 +701,28 @@ class GltfReader:
         from urllib.parse import unquote
 
         file = self.path.parent / unquote(img.uri)
-        if not file.is_file():
+        if not file.exists():
             self.fail(iwhere, f"texture file not found (relative to {self.path.parent})")
-        return file.read_bytes(), iwhere
+        return self._read(file, MAX_IMAGE_BYTES, "texture file", iwhere), iwhere
+
+    def _check_pixels(self, data: bytes, iwhere: str) -> None:
+        """An image's size from its header, against the image bound (images.py), before a
+        pixel is decoded: a 30000x30000 PNG header escaped as Pillow's DecompressionBombError."""
+        import io
+
+        from PIL import Image, UnidentifiedImageError
+
+        from ...images import MAX_IMAGE_PIXELS
+
+        try:
+            with Image.open(io.BytesIO(data)) as im:
+                width, height = im.size
+        except Image.DecompressionBombError as exc:
+            self.fail(iwhere, f"image over the limit of {MAX_IMAGE_PIXELS} pixels ({exc})")
+        except (UnidentifiedImageError, OSError, ValueError) as exc:
+            self.fail(iwhere, f"cannot decode the image: {exc}")
+        if width * height > MAX_IMAGE_PIXELS:
+            self.fail(iwhere, f"image of {width}x{height} pixels is over the limit of {MAX_IMAGE_PIXELS} pixels")
 
     def _texture(self, tex: int, where: str, scale: np.ndarray, raw: bool, channel: int | None = None, cutoff: float | None = None, linear: bool = False,
                  normal_scale: float | None = None) -> dict[str, Any]:
@@ -705,6 +739,7 @@ class GltfReader:
         if t.source is None:
             self.fail(f"textures[{tex}]", "has no image source")
         data, iwhere = self._image_bytes(t.source, f"textures[{tex}].source")
+        self._check_pixels(data, iwhere)
         import hashlib
 
         key = f"{hashlib.sha256(data).hexdigest()}|{_floats(scale)}|{channel}" + (f"|cut{cutoff}" if cutoff is not None else "") + ("|linear" if linear else "") + (f"|bend{normal_scale}" if normal_scale is not None else "")

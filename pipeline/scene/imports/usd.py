@@ -24,7 +24,8 @@ import numpy as np
 from .records import Expansion, ImportFileError, Origin, SpecError, import_frames
 from ...cache import file_digest
 from ...limits import MAX_USD_LAYER_BYTES as MAX_LAYER_BYTES
-from .cache import cached, write_ply
+from ...limits import MAX_USD_POINT_SAMPLES, MAX_USD_POINT_VALUES
+from .cache import cached, hold_cap, write_ply
 from .gltf import _Names, sanitize
 
 MAX_SAMPLES = 100_000  # time samples per prim we are willing to key
@@ -246,16 +247,22 @@ class UsdReader:
         rec["shape"] = "mesh"
         rec["file"] = str(cached(sanitize(prim.GetName()), f"{self.digest}|usd-mesh|{where}|{times[0] if times else 'default'}", ".ply", lambda tmp: write_ply(tmp, expand(points), faces, None, uvs)))
         if len(times) > 1:
-            if len(times) > MAX_SAMPLES:
-                _fail(self.shown, f"{where}.points", f"{len(times)} time samples; the limit is {MAX_SAMPLES}")
+            # each sample of deforming points is a mesh file and a blend-shape key: bounded in
+            # samples and in values read (99,999 samples hung the import)
+            if len(times) > MAX_USD_POINT_SAMPLES:
+                _fail(self.shown, f"{where}.points", f"{len(times)} time samples of deforming points; the limit is {MAX_USD_POINT_SAMPLES} "
+                                                    "(bake dense motion to a file: `motion render --motion`)")
+            if len(times) * len(points) * 3 > MAX_USD_POINT_VALUES:
+                _fail(self.shown, f"{where}.points", f"{len(times)} time samples of {len(points)} points are {len(times) * len(points) * 3} values; the limit is {MAX_USD_POINT_VALUES}")
             self._count_samples(len(times), f"{where}.points")
             keys = []
             for code in times:
                 pts = np.asarray(points_attr.Get(Usd.TimeCode(code)), dtype=np.float64).reshape(-1, 3)
                 if pts.shape != points.shape or not np.isfinite(pts).all():
                     _fail(self.shown, f"{where}.points (time {code})", f"{len(pts)} points; expected {len(points)} finite (the same topology at every sample)")
-                file = cached(sanitize(prim.GetName()), f"{self.digest}|usd-points|{where}|{code}", ".ply", lambda tmp, pts=pts: write_ply(tmp, expand(pts), faces))
+                file = cached(sanitize(prim.GetName()), f"{self.digest}|usd-points|{where}|{code}", ".ply", lambda tmp, pts=pts: write_ply(tmp, expand(pts), faces), hold_cap=False)
                 keys.append({"time": self.seconds(code), "file": str(file)})
+            hold_cap()  # once for the run of samples (each hold lists the whole cache: quadratic in samples)
             rec["deform"] = {"type": "blend-shapes", "time_unit": "seconds", "interpolation": "linear", "keys": keys}
         material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
         if material:
