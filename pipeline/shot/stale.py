@@ -14,7 +14,7 @@ from typing import Any, Mapping
 
 from ..errors import FrameIOError
 from ..farm.frames import format_frames
-from ..frame_output import is_complete, read_header
+from ..frame_output import is_complete, read_meta
 
 
 @dataclass
@@ -78,10 +78,9 @@ def why_stale(path: str, expect: Mapping[str, Any], settings: Mapping[str, Any],
     """Why the frame at `path` is not a complete frame of this run, or None if it is.
     `files`: this run's file digests, to name an asset that changed under the same name."""
     try:
-        header = read_header(path)
+        meta = read_meta(path)
     except FrameIOError:
         return "do not read back as OpenEXR (incomplete or foreign)"
-    meta = {k[len("motion:"):]: v for k, v in header.items() if isinstance(k, str) and k.startswith("motion:")}
     if meta.get("settings_hash") != expect.get("settings_hash"):
         change = settings_change(meta.get("render_settings"), settings)
         if change:

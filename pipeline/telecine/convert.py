@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import FrameIOError, UsageError
 from ..files import publish_path, staging
-from ..frame_output import Frame, read_header, write_frame
+from ..frame_output import Frame, read_meta, write_frame
 from ..timeline import timecode
 from .cadence import Cadence, Tail, film_rate, output_rate, parse_cadence, plan
 from ..field_model import FieldOrder, check_field_order, weave_frames
@@ -211,8 +211,7 @@ def telecine_sequence(
 
 def read_header_meta(seq: Sequence, index: int) -> dict[str, Any]:
     """Our `motion:` attributes of frame `index` of a sequence."""
-    header = read_header(seq.paths[index])
-    return {k[len("motion:"):]: v for k, v in header.items() if k.startswith("motion:")}
+    return read_meta(seq.paths[index])
 
 
 def _sources_from_metadata(seq: Sequence, order: FieldOrder) -> list[int] | None:

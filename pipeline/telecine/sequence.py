@@ -18,7 +18,7 @@ from typing import Any, Iterator, Literal
 import numpy as np
 
 from ..errors import FrameIOError
-from ..frame_output import Frame, check_data_window, read_frame, read_header
+from ..frame_output import Frame, check_data_window, motion_meta, read_frame, read_header
 
 PixelType = Literal["half", "float"]
 
@@ -156,7 +156,7 @@ def discover(
                     raise ValueError(f"{fps} is out of range")
             except (TypeError, ValueError, ZeroDivisionError):
                 raise FrameIOError(f"{path}: framesPerSecond {rate!r} is not a frame rate") from None
-            first_meta = {k[len("motion:"):]: v for k, v in header.items() if k.startswith("motion:")}
+            first_meta = motion_meta(header)
             if require_even_height and this[1] % 2:
                 raise FrameIOError(
                     f"{path}: odd height {this[1]}; interlaced fields need an even number of rows"
