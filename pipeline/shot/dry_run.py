@@ -79,9 +79,15 @@ def plan(req: RenderRequest, loaded: Any, out_dir: Path, selected: list[int], fr
     first = paths[frames[0]] if frames else None
     deliver = {}
     if wanted:
-        prefix = Path(first).name.rsplit(".", 2)[0] if first else loaded.name
-        names = {"24p": f"{prefix}_24p.mov", "60i": f"{prefix}_60i.mov", "50i": f"{prefix}_50i.mov", "review": f"{prefix}_review.mp4", "contact": f"{prefix}_contact.png"}
-        deliver = {fmt: str(out_dir / "deliver" / names[fmt]) for fmt in wanted.formats}
+        from ..deliverables import FORMATS
+        from .deliver import next_version, read_manifest
+
+        folder = out_dir / "deliver"
+        made = read_manifest(folder, warn=lambda line: None)["deliverables"] if folder.is_dir() else {}
+        for fmt in wanted.formats:  # the version a changed deliverable would get
+            tag = wanted.tag(fmt)
+            number = next_version(folder, loaded.name, tag, made.get(wanted.key(fmt)) or {})
+            deliver[fmt] = str(folder / f"{loaded.name}_{tag}_v{number:03d}{FORMATS[fmt].suffix}")
     by_reason: dict[str, list[int]] = {}
     for f, why in sorted(stale.items()):
         by_reason.setdefault(why, []).append(f)

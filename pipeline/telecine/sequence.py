@@ -13,7 +13,7 @@ import re
 from dataclasses import dataclass, field, replace
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Iterator, Literal
+from typing import Any, Iterator, Literal, Mapping
 
 import numpy as np
 
@@ -39,6 +39,7 @@ class Sequence:
     fps: Fraction | None = None
     first_meta: dict[str, Any] = field(default_factory=dict)
     missing: tuple[int, ...] = ()  # absent frame numbers between first and last (allow_gaps only)
+    padding: int = 4  # digits of the frame number in names made from it (at least 4)
 
     def __len__(self) -> int:
         return len(self.paths)
@@ -47,11 +48,6 @@ class Sequence:
     def first(self) -> int:
         """The first frame number."""
         return self.numbers[0]
-
-    @property
-    def padding(self) -> int:
-        """Digits of the frame number in the file names (at least 4)."""
-        return max(4, len(_NAME.match(self.paths[0].name)["number"]))  # type: ignore[index]
 
     def read(self, index: int) -> Frame:
         """Frame `index` (0-based position in the sequence), pixels as float32."""
@@ -139,7 +135,28 @@ def discover(
         raise FrameIOError(f"missing frame {shown}{more} in sequence {prefix} ({numbers[0]}-{numbers[-1]})")
     if len(items) < min_frames:
         raise FrameIOError(f"{directory}: sequence {prefix} has {len(items)} frames, need at least {min_frames}")
+    return sequence_of(dict(items), prefix, directory=directory, require_even_height=require_even_height, padding=max(4, pad))
 
+
+def sequence_of(
+    frames: Mapping[int, str | Path],
+    prefix: str,
+    *,
+    directory: str | Path | None = None,
+    require_even_height: bool = True,
+    padding: int = 4,
+) -> Sequence:
+    """A validated Sequence of the frames given by number (whatever their file names: the
+    numbers travel with the paths, never parsed back from the names), in number order.
+
+    Reads every header (not the pixels): a missing, foreign or truncated-header frame, a
+    frame of another size or an odd height (when `require_even_height`) is a FrameIOError
+    naming it. Absent numbers between the first and the last are listed in `missing`.
+    """
+    if not frames:
+        raise FrameIOError(f"{directory or '.'}: no frames of sequence {prefix}")
+    items = sorted((int(n), Path(p)) for n, p in frames.items())
+    numbers = [n for n, _ in items]
     size: tuple[int, int] | None = None
     fps: Fraction | None = None
     first_meta: dict[str, Any] = {}
@@ -166,18 +183,19 @@ def discover(
                 f"{path}: resolution {this[0]}x{this[1]} differs from the sequence's "
                 f"{size[0]}x{size[1]} (first frame {items[0][1].name})"
             )
-    assert size is not None
+    width, height = size if size is not None else (0, 0)
     return Sequence(
-        directory=directory,
+        directory=Path(directory) if directory is not None else items[0][1].parent,
         prefix=prefix,
         numbers=tuple(numbers),
         paths=tuple(p for _, p in items),
-        width=size[0],
-        height=size[1],
+        width=width,
+        height=height,
         pixel_type=_pixel_type(items[0][1]),
         fps=fps,
         first_meta=first_meta,
-        missing=tuple(missing),
+        missing=tuple(sorted(set(range(numbers[0], numbers[-1] + 1)) - set(numbers))),
+        padding=padding,
     )
 
 
