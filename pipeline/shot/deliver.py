@@ -160,7 +160,7 @@ def check_deliver(req: RenderRequest, loaded: Any, plan: DeliverPlan, frames: li
     if blocked and plan.explicit:
         run = f"{frames[0]}-{frames[-1]}" if frames and frames == list(range(frames[0], frames[-1] + 1)) else "A-B"
         hint = "" if plan.part else f"; render them too, or make a deliverable of part of the shot with --deliver-frames {run}"
-        raise UsageError(f"--deliver {','.join(blocked)}: a movie is made from every frame: {why}{hint}")
+        raise UsageError(f"--deliver {','.join(blocked)}: a movie is made from a gapless run of frames, the whole shot: {why}{hint}")
     return replace(plan, formats=tuple(f for f in plan.formats if f not in blocked),
                    skipped={**plan.skipped, **{f: f"{why}: not a gapless run" for f in blocked}})
 
