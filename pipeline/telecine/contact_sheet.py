@@ -21,7 +21,7 @@ from ..errors import UsageError
 from ..files import writing
 from ..timeline import rate_label
 from .movie import ViewTransform
-from .sequence import Sequence, discover, read_checked
+from .sequence import Sequence, discover, read_mapped
 
 LABEL_ROWS = 18
 GAP = 4
@@ -111,11 +111,11 @@ def contact_sheet(
     width, height = cols * cell_w + GAP, rows * cell_h + GAP + header
     sheet = np.full((height, width, 3), 0.12, np.float32)
     places = []
-    for n, (index, number) in enumerate(zip(picked, layout.numbers)):
+    thumbs = read_mapped(seq, lambda frame: view(box_resize(frame.rgba, th, tw)), picked)  # read side by side
+    for n, (thumb, number) in enumerate(zip(thumbs, layout.numbers)):
         r, c = divmod(n, cols)
         y, x = header + GAP + r * cell_h, GAP + c * cell_w
-        thumb = box_resize(read_checked(seq, index).rgba, th, tw)
-        sheet[y: y + th, x: x + tw] = view(thumb).astype(np.float32) / 65535.0
+        sheet[y: y + th, x: x + tw] = thumb.astype(np.float32) / 65535.0
         places.append((x, y + th, number))
 
     dpi = 100

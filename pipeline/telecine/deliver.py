@@ -9,18 +9,21 @@ once, before anything is written.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fractions import Fraction
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Iterator
+
+import numpy as np
 
 from ..deliverables import FORMATS, DeliverFormat
 from ..errors import UsageError
-from .cadence import film_rate
+from ..field_model import weave_frames
+from .cadence import film_rate, plan
 from .contact_sheet import contact_sheet
-from .convert import telecine_sequence
-from .movie import ViewTransform, sequence_movie
-from .sequence import Sequence, discover
+from .convert import Result, telecine_sequence
+from .movie import ViewTransform, choose_codec, encode_movie, first_timecode, sequence_movie
+from .sequence import Sequence, discover, read_mapped
 
 # Called as report(format name, step description) before each step.
 Report = Callable[[str, str], None]
@@ -54,10 +57,15 @@ def _speed(fmt: DeliverFormat, opts: Options) -> Fraction:
     return film_rate(fmt.film_speed) if fmt.film_speed else opts.film
 
 
+def _codec(fmt: DeliverFormat, opts: Options) -> str | None:
+    """The record's codec; a forced one (--codec) replaces it for the ProRes .mov masters."""
+    return opts.codec if opts.codec and fmt.suffix == ".mov" else fmt.codec
+
+
 def _movie(fmt: DeliverFormat, seq: Sequence, out_dir: Path, tag: str, opts: Options, say: Report) -> list[Path]:
     movie = out_dir / f"{seq.prefix}_{tag}{fmt.suffix}"
     say(fmt.name, f"movie {movie}")
-    return [sequence_movie(seq, movie, rate=_speed(fmt, opts), field_order=None, codec=opts.codec or fmt.codec, view=opts.view)]
+    return [sequence_movie(seq, movie, rate=_speed(fmt, opts), field_order=None, codec=_codec(fmt, opts), view=opts.view)]
 
 
 def _fields(fmt: DeliverFormat, seq: Sequence, out_dir: Path, tag: str, opts: Options, say: Report) -> list[Path]:
@@ -68,7 +76,33 @@ def _fields(fmt: DeliverFormat, seq: Sequence, out_dir: Path, tag: str, opts: Op
                             overwrite=opts.overwrite, sequence=seq)
     movie = out_dir / f"{seq.prefix}_{tag}{fmt.suffix}"
     say(fmt.name, f"movie {movie}")
-    return list(res.paths) + [sequence_movie(res.out_dir, movie, codec=opts.codec or fmt.codec, view=opts.view)]
+    return list(res.paths) + [woven_movie(seq, res, movie, codec=_codec(fmt, opts), view=opts.view)]
+
+
+def woven_movie(seq: Sequence, res: Result, path: Path, *, codec: str | None, view: ViewTransform) -> Path:
+    """The interlaced movie of a pulldown, woven from the film frames as the pulldown wove
+    its EXR frames: each film frame read and viewed once (the view transform is per pixel,
+    so weaving viewed frames gives the viewed woven frames, bit for bit), instead of
+    reading every woven frame back from disk and viewing each."""
+    if res.cadence.blend or res.field_order is None:
+        return sequence_movie(res.out_dir, path, codec=codec, view=view)
+    frames = plan(len(seq), res.cadence, res.field_order, "pad")
+    need = sorted({i for vf in frames for i in (vf.top, vf.bottom)})
+    viewed = zip(need, read_mapped(seq, lambda frame: view(frame.rgba), need))
+    kept: dict[int, np.ndarray] = {}
+
+    def woven() -> Iterator[np.ndarray]:
+        for vf in frames:
+            while vf.top not in kept or vf.bottom not in kept:
+                index, rgb16 = next(viewed)
+                kept[index] = rgb16
+            yield weave_frames(kept[vf.top], kept[vf.bottom])
+            for index in [k for k in kept if k < min(vf.top, vf.bottom)]:
+                del kept[index]
+
+    chosen, container = choose_codec(path, codec)
+    timecode = first_timecode(replace(seq, paths=res.paths[:1]))
+    return encode_movie(path, chosen, container, woven(), res.rate, seq.width, seq.height, res.field_order, view, timecode, None, len(frames))
 
 
 def _sheet(fmt: DeliverFormat, seq: Sequence, out_dir: Path, tag: str, opts: Options, say: Report) -> list[Path]:

@@ -9,11 +9,12 @@ Each problem is a `FrameIOError` naming the offending frame.
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass, field, replace
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Iterator, Literal, Mapping
+from typing import Any, Callable, Iterable, Iterator, Literal, Mapping, TypeVar
 
 import numpy as np
 
@@ -207,6 +208,51 @@ def select(seq: Sequence, numbers: list[int] | tuple[int, ...]) -> Sequence:
     if absent:
         raise FrameIOError(f"{seq.directory}: frame {absent[0]} of sequence {seq.prefix} is not there" + (f" ({len(absent)} absent)" if len(absent) > 1 else ""))
     return replace(seq, numbers=tuple(numbers), paths=tuple(where[n] for n in numbers), missing=())
+
+
+T = TypeVar("T")
+
+
+def assembly_threads() -> int:
+    """Threads that read and transform frames for a deliverable: the cores this process may
+    use ($MOTION_ASSEMBLY_THREADS overrides), at most 16. OpenEXR's decoder and OpenColorIO's
+    CPU processor run outside Python's lock, so frames are read and viewed side by side
+    while the encoder takes them in order."""
+    env = os.environ.get("MOTION_ASSEMBLY_THREADS", "").strip()
+    if env.isdigit() and int(env) > 0:
+        return min(int(env), 64)
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # (not on Linux)
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, 16))
+
+
+def read_mapped(seq: Sequence, fn: Callable[[Frame], T], indices: Iterable[int] | None = None, threads: int | None = None) -> Iterator[T]:
+    """`fn(frame)` of each frame (checked as read_checked does) in order, computed by a few
+    threads at most 2 x threads frames ahead of the consumer (so memory stays bounded)."""
+    order = list(range(len(seq)) if indices is None else indices)
+    workers = threads or assembly_threads()
+    if workers == 1 or len(order) < 2:
+        for i in order:
+            yield fn(read_checked(seq, i))
+        return
+    from collections import deque
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="assemble") as pool:
+        pending: deque = deque()
+        it = iter(order)
+        try:
+            for i in it:
+                pending.append(pool.submit(lambda k: fn(read_checked(seq, k)), i))
+                if len(pending) >= 2 * workers:
+                    yield pending.popleft().result()
+            while pending:
+                yield pending.popleft().result()
+        finally:
+            for fut in pending:
+                fut.cancel()
 
 
 def read_checked(seq: Sequence, index: int) -> Frame:
