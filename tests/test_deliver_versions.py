@@ -179,3 +179,36 @@ def test_no_format_name_is_written_outside_the_registry() -> None:
     offenders = [str(p.relative_to(ROOT)) for folder in ("shot", "telecine") for p in (ROOT / "pipeline" / folder).rglob("*.py")
                  if pattern.search(p.read_text())]
     assert offenders == []
+
+
+def test_the_contact_sheet_header_is_not_cut(tmp_path: Path) -> None:
+    """Two 16x12 frames made a sheet 44 pixels wide whose header line (name, frames, size,
+    rate, view) ran off its right edge; the sheet is now as wide as its header."""
+    from PIL import Image
+
+    from motion.pipeline.frame_output import write_frame
+    from motion.pipeline.telecine.contact_sheet import contact_sheet
+
+    frames = tmp_path / "frames"
+    for i in range(2):
+        write_frame(frames / f"shot.{i:04d}.exr", np.full((12, 16, 4), 0.2, np.float32), {"frame": i}, fps=Fraction(24))
+    sheet = np.asarray(Image.open(contact_sheet(frames, tmp_path / "sheet.png")).convert("L"), np.float32)
+    header = sheet[:30]
+    assert sheet.shape[1] > 300
+    assert header[:, -3:].max() < 80  # the right margin holds no text: nothing was cut
+    assert header.max() > 200  # (and there is text)
+
+
+def test_quiet_after_the_command_and_the_plan_says_where_output_goes(tmp_path: Path) -> None:
+    """`motion render shot.yaml -q` said "No such option: -q" (it had to come before
+    `render`); the plan names the output folder and where it came from (the default is
+    under the current folder, not the scene's)."""
+    scene = _scene(tmp_path, last=1)
+    quiet = motion("render", scene, "-o", tmp_path / "out", *TINY, "-q")
+    assert quiet.returncode == 0, quiet.stderr
+    assert "rendered" not in quiet.stderr  # the summary line is INFO: -q leaves warnings and errors
+    loud = motion("render", scene, "-o", tmp_path / "out", *TINY)
+    assert "0 rendered, 2 skipped" in loud.stderr
+    plan = motion("render", scene, *TINY, "--dry-run", cwd=tmp_path)
+    assert plan.returncode == 0, plan.stderr
+    assert f"output:    {tmp_path / 'out' / 'farm-tiny'} (out/<name> under the current folder {tmp_path}" in plan.stdout

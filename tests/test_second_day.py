@@ -329,6 +329,7 @@ def test_cache_warm_makes_a_ci_jobs_first_frame_warm(tmp_path: Path) -> None:
     assert key.returncode == 0 and key.stdout.startswith("motion-kernels-") and str(tmp_path / "cache" / "kernels") in key.stdout
     warm = subprocess.run([MOTION, "cache", "warm", str(SCENE), "--preset", "ci-smoke"], capture_output=True, text=True, env=env, timeout=300)
     assert warm.returncode == 0, warm.stderr
+    assert "motion-warm-" not in warm.stdout + warm.stderr  # no path in the folder it removes
     compiled = int(warm.stdout.split("kernels: ")[1].split()[0])
     assert compiled > 0, warm.stdout
     job = subprocess.run([MOTION, "render", str(SCENE), "--preset", "ci-smoke", "-o", str(tmp_path / "out"), "--no-progress"],

@@ -108,10 +108,21 @@ def plan(req: RenderRequest, loaded: Any, out_dir: Path, selected: list[int], fr
         "chunk_size": chunk_size,
         "executor": {"kind": "dask" if req.scheduler else "local", "workers": None if req.scheduler else min(workers, max(1, len(chunk_list))),
                      "threads": threads, "scheduler": req.scheduler},
-        "outputs": {"output_dir": str(out_dir), "first_frame": first, "last_frame": paths[frames[-1]] if frames else None,
+        "outputs": {"output_dir": str(out_dir), "output_from": output_from(req, loaded), "first_frame": first, "last_frame": paths[frames[-1]] if frames else None,
                     "report": str(report_path), "deliverables": deliver,
                     "deliverables_left_out": dict(getattr(wanted, "skipped", {}) or {})},
     }
+
+
+def output_from(req: RenderRequest, loaded: Any) -> str:
+    """Where the output folder came from: -o, the scene's output.directory, or the default
+    out/<name> under the current folder (not the scene's: a render from another folder
+    does not find that folder's frames)."""
+    if req.output_dir:
+        return "-o"
+    if loaded.scene.output.directory:
+        return "the scene's output.directory, from the current folder"
+    return f"out/<name> under the current folder {Path.cwd()}; -o to choose"
 
 
 def plan_text(p: dict[str, Any]) -> str:
@@ -128,6 +139,7 @@ def plan_text(p: dict[str, Any]) -> str:
         f"  executor:  {how}",
         "  settings:  " + ", ".join(f"{k} {_show(v['value'])} ({v['from']})" for k, v in p["settings"].items()),
         f"  estimate:  {_duration(p['estimate']['seconds'])} ({p['estimate']['basis']}; a warm frame {p['estimate']['warm_frame_s']:.2f} s)",
+        f"  output:    {p['outputs']['output_dir']} ({p['outputs'].get('output_from', '-o')})",
         f"  frames to: {p['outputs']['first_frame']} .. {p['outputs']['last_frame']}",
         f"  report:    {p['outputs']['report']}",
     ]
