@@ -102,6 +102,8 @@ def deliver_plan(req: RenderRequest, loaded: Any, frames: list[int]) -> DeliverP
     explicit = bool(req.deliver)
     formats = parse_formats(req.deliver) if req.deliver else tuple(getattr(loaded.scene.output, "deliver", ()) or ())
     if not formats:
+        if req.deliver_frames:
+            raise UsageError(f"--deliver-frames {req.deliver_frames}: no deliverables asked for (--deliver, or the scene's output.deliver)")
         return DeliverPlan()
     shot = shot_frames(loaded)
     part: str | None = None
