@@ -75,9 +75,17 @@ def cache_warm(scene: Path, preset: str | None) -> None:
 
     before = info(kernels_dir()).files
     first = load_scene(scene).scene.timeline.first
+    import logging
+
+    log = logging.getLogger("motion")
+    level = log.level
     with tempfile.TemporaryDirectory(prefix="motion-warm-") as tmp:
-        rep = run_render(RenderRequest(scene=scene, output_dir=Path(tmp), frames=(first,), preset=preset, deliver="none",
-                                       progress=False, report=Path(tmp) / "report.json"))
+        log.setLevel(max(level, logging.WARNING))  # the render's lines name files in a folder removed at once
+        try:
+            rep = run_render(RenderRequest(scene=scene, output_dir=Path(tmp), frames=(first,), preset=preset, deliver="none",
+                                           progress=False, report=Path(tmp) / "report.json"))
+        finally:
+            log.setLevel(level)
     compiled = sum(int(r.get("kernels_compiled") or 0) for r in rep.get("frames", []))
     after = info(kernels_dir()).files
     click.echo(f"kernels: {compiled} compiled for {scene} (frame {first}); {after} files ({after - before:+d}) in {kernels_dir()}")

@@ -60,9 +60,31 @@ class LazyGroup(click.Group):
                 return None  # that capability is not installed in this build
             raise
         command = next((c for c in getattr(module, "commands", []) if c.name == name), None)
+        if command is not None:
+            accept_verbosity_after(command)
         if command is not None and not getattr(command, "start_up_only", False):
             restore_gc()  # a command that works for long collects cycles as usual from here on
         return command
+
+
+def _verbosity_after(ctx: click.Context, param: click.Parameter, value: int) -> None:
+    """-v / -q given after the command (`motion render shot.yaml -q`): added to those given
+    before it, and logging set again from the sum."""
+    if not value:
+        return
+    root = ctx.find_root()
+    counts = root.meta.setdefault("motion.verbosity", {"verbose": root.params.get("verbose", 0), "quiet": root.params.get("quiet", 0)})
+    counts[str(param.name)] += value
+    configure_logging(counts["verbose"], counts["quiet"])
+
+
+def accept_verbosity_after(command: click.Command) -> None:
+    """Give `command` the group's -v/-q too (once), so they work before or after it."""
+    taken = {opt for p in command.params for opt in getattr(p, "opts", [])}
+    for short, name, text in (("-v", "verbose", "More detail on stderr (as `motion -v CMD`)."),
+                              ("-q", "quiet", "Less on stderr (as `motion -q CMD`).")):
+        if short not in taken and f"--{name}" not in taken:
+            command.params.append(click.Option([short, f"--{name}"], count=True, expose_value=False, callback=_verbosity_after, help=text))
 
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})

@@ -51,7 +51,8 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--progress/--no-progress", "progress", default=None, help="Live progress bar (default: only on a terminal).")
 @click.option("--check", is_flag=True, help="Render nothing: verify every selected frame is complete (exit 3 if not).")
 @click.option("--no-cache", is_flag=True, help="Naive path for comparison: a fresh Mitsuba scene for every frame.")
-@click.option("--deliver", "deliver_spec", help="After the last frame, assemble deliverables: 24p,60i,50i,review,contact.")
+@click.option("--deliver", "deliver_spec", help="After the last frame, assemble the shot's deliverables (a new version when its frames changed): 24p,60i,50i,review,review25,contact.")
+@click.option("--deliver-frames", "deliver_frames", help="Make the deliverables of these frames (A-B) instead of the whole shot, named apart.")
 @click.option("--exposure", type=float, default=0.0, show_default=True, help="Deliverables' view transform: exposure in stops.")
 @click.option("--ocio", "ocio_config", help="Deliverables' view transform: an OCIO config file or built-in ocio://NAME (default: ocio://cg-config-latest, ACES 2.0 SDR on sRGB; none: the plain sRGB curve).")
 @click.option("--ocio-display", help="OCIO display (default: the config's default).")
@@ -90,6 +91,7 @@ def render(
     check: bool,
     no_cache: bool,
     deliver_spec: str | None,
+    deliver_frames: str | None,
     exposure: float,
     ocio_config: str | None,
     ocio_display: str | None,
@@ -121,6 +123,7 @@ def render(
         output_overrides={"aovs": list(dict.fromkeys(aovs)) or None},
         cache=not no_cache,
         deliver=deliver_spec,
+        deliver_frames=deliver_frames,
         deliver_view={"exposure": exposure, "ocio_config": ocio_config, "ocio_display": ocio_display, "ocio_view": ocio_view},
         resume=resume,
         overwrite=overwrite,

@@ -50,8 +50,19 @@ class Frame:
     @property
     def meta(self) -> dict[str, Any]:
         """Our own attributes, without the prefix."""
-        n = len(META_PREFIX)
-        return {k[n:]: v for k, v in self.header.items() if k.startswith(META_PREFIX)}
+        return motion_meta(self.header)
+
+
+def motion_meta(header: Mapping[str, Any]) -> dict[str, Any]:
+    """Our own attributes of an EXR header (`motion:<key>`, as `write_frame` stores `meta`),
+    by key without the prefix: the one reader of them (frames, telecine, stale checks)."""
+    n = len(META_PREFIX)
+    return {k[n:]: v for k, v in header.items() if isinstance(k, str) and k.startswith(META_PREFIX)}
+
+
+def read_meta(path: str | Path) -> dict[str, Any]:
+    """Our own attributes of the EXR at `path` (its header only); FrameIOError as read_header."""
+    return motion_meta(read_header(path))
 
 
 def _timecode_attr(tc: str) -> Any:

@@ -22,16 +22,16 @@ def job(tmp_path_factory) -> tuple[Path, Path, object]:
     root = tmp_path_factory.mktemp("conv")
     scene = root / "farm-tiny.yaml"
     shutil.copy(SCENE, scene)
-    res = motion("-v", "render", scene, "-o", root / "out", "--frames", "5-9", *TINY, "--workers", "1", "--chunk-size", "5", "--deliver", "24p", "--json")
+    res = motion("-v", "render", scene, "-o", root / "out", "--frames", "5-9", *TINY, "--workers", "1", "--chunk-size", "5", "--deliver", "24p", "--deliver-frames", "5-9", "--json")
     assert res.returncode == 0, res.stderr
     return root, scene, res
 
 
 def test_dry_run_plans_and_writes_nothing(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    res = motion("render", SCENE, "-o", out, "--frames", "0-9", "--workers", "2", "--deliver", "24p,contact", "--dry-run")
+    res = motion("render", SCENE, "-o", out, "--frames", "0-9", "--workers", "2", "--deliver", "24p,contact", "--deliver-frames", "0-9", "--dry-run")
     assert res.returncode == 0, res.stderr
-    assert "nothing rendered (--dry-run)" in res.stdout and "to render: 0-9 in" in res.stdout and "farm-tiny_24p.mov" in res.stdout
+    assert "nothing rendered (--dry-run)" in res.stdout and "to render: 0-9 in" in res.stdout and "farm-tiny_24p_0-9_v001.mov" in res.stdout
     assert not out.exists()
     res = motion("render", SCENE, "-o", out, "--frames", "0-9", "--workers", "2", "--chunk-size", "3", "--dry-run", "--json")
     plan = json.loads(res.stdout)
@@ -44,7 +44,7 @@ def test_render_json_summary_and_verbose_log(job) -> None:
     root, _, res = job
     summary = json.loads(res.stdout)
     assert summary["totals"]["rendered"] == 5 and summary["report"] == str(root / "out" / "render-report.json")
-    assert summary["deliverables"]["24p"] == [str(root / "out" / "deliver" / "farm-tiny_24p.mov")]
+    assert summary["deliverables"]["24p"] == [str(root / "out" / "deliver" / "farm-tiny_24p_5-9_v001.mov")]
     assert all(f"frame {f}: {root / 'out' / f'farm-tiny.{f:04d}.exr'} in " in res.stderr for f in range(5, 10))  # -v: each frame's path and time
 
 
@@ -76,7 +76,7 @@ def test_exr_chromaticities_and_relative_scene_path(job) -> None:
 
 def test_movie_has_a_timecode_track_from_the_frames(job) -> None:
     root, _, _ = job
-    with av.open(str(root / "out" / "deliver" / "farm-tiny_24p.mov")) as movie:
+    with av.open(str(root / "out" / "deliver" / "farm-tiny_24p_5-9_v001.mov")) as movie:
         data = [s for s in movie.streams if s.type == "data"]
         assert data and data[0].metadata.get("timecode") == "00:00:00:05"  # the first frame is 5 at 24 fps
 

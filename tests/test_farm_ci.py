@@ -78,10 +78,10 @@ def test_ci_recipe_shards_and_gather(ci_run) -> None:
     assert sum(r["totals"]["rendered"] for r in reports) == 12
     # the gather step's `--check --deliver` assembled from the complete frames (issue 23)
     deliver = gather / "frames" / "deliver"
-    assert (deliver / "60i").is_dir() and list((deliver / "60i").glob("*.exr"))
-    assert (deliver / "farm-tiny_contact.png").stat().st_size > 0 and (deliver / "farm-tiny_24p.mov").stat().st_size > 0
-    made = json.loads((deliver / "manifest.json").read_text())["formats"]
-    assert set(made) == {"24p", "60i", "contact"} and all(m["frames"] == "0-11" for m in made.values())
+    assert (deliver / "60i_0-11_v001").is_dir() and list((deliver / "60i_0-11_v001").glob("*.exr"))
+    assert (deliver / "farm-tiny_contact_0-11_v001.png").stat().st_size > 0 and (deliver / "farm-tiny_24p_0-11_v001.mov").stat().st_size > 0
+    made = json.loads((deliver / "manifest.json").read_text())["deliverables"]
+    assert set(made) == {"24p@0-11", "60i@0-11", "contact@0-11"} and all(m["versions"]["v001"]["frames"] == "0-11" for m in made.values())
 
 
 def test_ci_gather_check_fails_on_a_missing_frame(ci_run, tmp_path) -> None:
@@ -92,7 +92,7 @@ def test_ci_gather_check_fails_on_a_missing_frame(ci_run, tmp_path) -> None:
     assert res.returncode == 3, res.stderr
     assert "missing 5" in res.stderr
     # with --deliver: exit 3 and no deliver folder made (it was left empty before, exit 0)
-    res = motion("render", SCENE, "--preset", "ci-smoke", "--frames", FRAMES, "-o", partial, "--check", "--deliver", "24p,contact")
+    res = motion("render", SCENE, "--preset", "ci-smoke", "--frames", FRAMES, "-o", partial, "--check", "--deliver", "24p,contact", "--deliver-frames", FRAMES)
     assert res.returncode == 3 and "missing 5" in res.stderr, res.stderr
     assert not (partial / "deliver").exists()
 

@@ -19,23 +19,23 @@ def test_render_then_deliver_24p_60i_and_contact_sheet(tmp_path: Path) -> None:
     out = tmp_path / "out"
     proc = run_motion(
         "render", str(SCENES / "walk-cycle.yaml"), "--preset", "ci-smoke", "--frames", "0-7",
-        "--resolution", "32x24", "--deliver", "24p,60i,contact", "-o", str(out),
+        "--resolution", "32x24", "--deliver", "24p,60i,contact", "--deliver-frames", "0-7", "-o", str(out),
     )
     assert proc.returncode == 0, proc.stderr
     deliver = out / "deliver"
-    with av.open(str(deliver / "walk-cycle_24p.mov")) as movie:
+    with av.open(str(deliver / "walk-cycle_24p_0-7_v001.mov")) as movie:
         stream = movie.streams.video[0]
         frames = list(movie.decode(stream))
         assert len(frames) == 8
         assert stream.average_rate == Fraction(24000, 1001)  # film speed 23.976 by default
     # 8 film frames -> 10 interlaced video frames by 3:2 pulldown
-    fields = sorted((deliver / "60i").glob("*.exr"))
+    fields = sorted((deliver / "60i_0-7_v001").glob("*.exr"))
     assert len(fields) == 10
     assert read_frame(fields[0]).header["framesPerSecond"] == Fraction(30000, 1001)
-    with av.open(str(deliver / "walk-cycle_60i.mov")) as movie:
+    with av.open(str(deliver / "walk-cycle_60i_0-7_v001.mov")) as movie:
         frames = list(movie.decode(movie.streams.video[0]))
         assert len(frames) == 10 and frames[0].interlaced_frame
-    assert (deliver / "walk-cycle_contact.png").stat().st_size > 0
+    assert (deliver / "walk-cycle_contact_0-7_v001.png").stat().st_size > 0
 
 
 def test_deliver_refuses_shards(tmp_path: Path) -> None:
@@ -56,7 +56,7 @@ def test_deliver_through_an_ocio_view(tmp_path: Path) -> None:
         "--deliver", "contact", "--ocio", "ocio://cg-config-latest", "--ocio-view", "Un-tone-mapped", "-o", str(out),
     )
     assert proc.returncode == 0, proc.stderr
-    assert (out / "deliver" / "walk-cycle_contact.png").is_file()
+    assert (out / "deliver" / "walk-cycle_contact_v001.png").is_file()
     bad = run_motion("render", str(SCENES / "walk-cycle.yaml"), "--preset", "ci-smoke", "--frames", "0-1", "--resolution", "32x24",
                      "--deliver", "contact", "--ocio", "ocio://cg-config-latest", "--ocio-view", "No Such View", "-o", str(tmp_path / "o2"))
     assert bad.returncode == 2 and "No Such View" in bad.stderr and "Traceback" not in bad.stderr

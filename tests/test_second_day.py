@@ -32,12 +32,13 @@ def _movie_frames(path: Path) -> int:
 def test_the_same_command_twice_renders_and_rebuilds_nothing(tmp_path: Path) -> None:
     """The second run of a render with deliverables exits 0, renders nothing and rebuilds
     nothing (it failed with '60i already holds 8 frames; use --overwrite' before);
-    --overwrite rebuilds every deliverable; the report keeps the folder's record."""
+    --overwrite re-renders the frames and so makes a new version of every deliverable,
+    leaving the first as it was; the report keeps the folder's record."""
     out = tmp_path / "out"
-    args = ["render", SCENE, "-o", out, "--frames", "0-5", *TINY, "--deliver", "24p,60i,contact"]
+    args = ["render", SCENE, "-o", out, "--frames", "0-5", *TINY, "--deliver", "24p,60i,contact", "--deliver-frames", "0-5"]
     first = motion(*args)
     assert first.returncode == 0, first.stderr
-    movie = out / "deliver" / "farm-tiny_24p.mov"
+    movie = out / "deliver" / "farm-tiny_24p_0-5_v001.mov"
     made = {p.name: p.stat().st_mtime_ns for p in (out / "deliver").rglob("*") if p.is_file()}
     second = motion(*args)
     assert second.returncode == 0, second.stderr
@@ -52,7 +53,7 @@ def test_the_same_command_twice_renders_and_rebuilds_nothing(tmp_path: Path) -> 
     again = motion(*args, "--overwrite")
     assert again.returncode == 0, again.stderr  # the 60i folder is replaced, not refused
     assert report(out)["deliverables"]["status"] == {"24p": "made", "60i": "made", "contact": "made"}
-    assert movie.stat().st_mtime_ns > made[movie.name]
+    assert movie.stat().st_mtime_ns == made[movie.name] and (out / "deliver" / "farm-tiny_24p_0-5_v002.mov").is_file()
     assert not [p for p in (out / "deliver").iterdir() if p.name.startswith(".")]  # no staging left
 
 
@@ -79,16 +80,16 @@ def test_a_rerun_clears_the_stale_claim_a_stopped_run_left_on_a_complete_frame(t
 
 
 def test_a_deliverable_is_made_from_the_selected_frames_and_rebuilt_when_they_change(tmp_path: Path) -> None:
-    """`--frames 2-5 --deliver 24p` in a folder of frames 0-7: the movie holds the 4 frames
-    selected (it held all 8 before); re-rendering one of them rebuilds it."""
+    """`--frames 2-5 --deliver 24p --deliver-frames 2-5` in a folder of frames 0-7: the movie
+    holds the 4 frames asked for (it held all 8 before); re-rendering them makes a new version."""
     out = tmp_path / "out"
     assert motion("render", SCENE, "-o", out, "--frames", "0-7", *TINY).returncode == 0
-    res = motion("render", SCENE, "-o", out, "--frames", "2-5", *TINY, "--deliver", "24p")
+    res = motion("render", SCENE, "-o", out, "--frames", "2-5", *TINY, "--deliver", "24p", "--deliver-frames", "2-5")
     assert res.returncode == 0, res.stderr
-    movie = out / "deliver" / "farm-tiny_24p.mov"
+    movie = out / "deliver" / "farm-tiny_24p_2-5_v001.mov"
     assert _movie_frames(movie) == 4
-    assert json.loads((out / "deliver" / "manifest.json").read_text())["formats"]["24p"]["frames"] == "2-5"
-    res = motion("render", SCENE, "-o", out, "--frames", "2-5", "--resolution", "16x12", "--spp", "2", "--no-progress", "--deliver", "24p")
+    assert json.loads((out / "deliver" / "manifest.json").read_text())["deliverables"]["24p@2-5"]["versions"]["v001"]["frames"] == "2-5"
+    res = motion("render", SCENE, "-o", out, "--frames", "2-5", "--resolution", "16x12", "--spp", "2", "--no-progress", "--deliver", "24p", "--deliver-frames", "2-5")
     assert res.returncode == 0, res.stderr
     assert "frames 2-5 exist but were made with other settings (spp 1 -> 2): they will be replaced" in res.stderr
     assert report(out)["deliverables"]["status"] == {"24p": "made"}
@@ -253,11 +254,11 @@ def test_a_preset_spread_makes_what_it_can_of_the_scenes_deliverables(tmp_path: 
     scene.write_text(yaml.safe_dump(doc))
     res = motion("render", scene, "-o", tmp_path / "out", "--preset", "ci-smoke", "--no-progress")
     assert res.returncode == 0, res.stderr
-    assert "24p: not made: frames 0,24,47 are not a gapless run" in res.stderr
-    assert (tmp_path / "out" / "deliver" / "farm-tiny_contact.png").is_file()
-    assert not (tmp_path / "out" / "deliver" / "farm-tiny_24p.mov").exists()
-    full = motion("render", scene, "-o", tmp_path / "full", "--frames", "0-3", *TINY)
-    assert full.returncode == 0 and (tmp_path / "full" / "deliver" / "farm-tiny_24p.mov").is_file(), full.stderr
+    assert "24p: not made: the shot (frames 0-47) lacks frames 1-23,25-46" in res.stderr
+    assert (tmp_path / "out" / "deliver" / "farm-tiny_contact_v001.png").is_file()
+    assert not list((tmp_path / "out" / "deliver").glob("farm-tiny_24p*"))
+    part = motion("render", scene, "-o", tmp_path / "full", "--frames", "0-3", "--deliver-frames", "0-3", *TINY)
+    assert part.returncode == 0 and (tmp_path / "full" / "deliver" / "farm-tiny_24p_0-3_v001.mov").is_file(), part.stderr
 
 
 @pytest.mark.render
@@ -329,6 +330,7 @@ def test_cache_warm_makes_a_ci_jobs_first_frame_warm(tmp_path: Path) -> None:
     assert key.returncode == 0 and key.stdout.startswith("motion-kernels-") and str(tmp_path / "cache" / "kernels") in key.stdout
     warm = subprocess.run([MOTION, "cache", "warm", str(SCENE), "--preset", "ci-smoke"], capture_output=True, text=True, env=env, timeout=300)
     assert warm.returncode == 0, warm.stderr
+    assert "motion-warm-" not in warm.stdout + warm.stderr  # no path in the folder it removes
     compiled = int(warm.stdout.split("kernels: ")[1].split()[0])
     assert compiled > 0, warm.stdout
     job = subprocess.run([MOTION, "render", str(SCENE), "--preset", "ci-smoke", "-o", str(tmp_path / "out"), "--no-progress"],
@@ -359,12 +361,12 @@ def test_timecode_comes_from_the_frame_number_and_the_rate_is_named(shot_1001: t
 
     out, res = shot_1001
     assert timecode_str(read_header(out / "tc.1001.exr")["timeCode"]) == "00:00:41:17"
-    with av.open(str(out / "deliver" / "tc_24p.mov")) as c:
+    with av.open(str(out / "deliver" / "tc_24p_v001.mov")) as c:
         assert c.streams.video[0].metadata.get("timecode") == "00:00:41:17"
-    assert "tc_24p.mov (23.976 fps (24000/1001))" in res.stderr
-    assert "tc_60i.mov (29.97 fps (30000/1001) interlaced, 2 fields a frame)" in res.stderr
-    made = json.loads((out / "deliver" / "manifest.json").read_text())["formats"]
-    assert made["24p"]["outputs"][0]["rate"] == "23.976 fps (24000/1001)"
+    assert "tc_24p_v001.mov (23.976 fps (24000/1001))" in res.stderr
+    assert "tc_60i_v001.mov (29.97 fps (30000/1001) interlaced, 2 fields a frame)" in res.stderr
+    made = json.loads((out / "deliver" / "manifest.json").read_text())["deliverables"]
+    assert made["24p"]["versions"]["v001"]["outputs"][0]["rate"] == "23.976 fps (24000/1001)"
 
 
 def test_movies_flipbook_sheet_and_report_name_the_rate_and_the_frames_timecode(shot_1001: tuple[Path, subprocess.CompletedProcess]) -> None:
@@ -378,11 +380,11 @@ def test_movies_flipbook_sheet_and_report_name_the_rate_and_the_frames_timecode(
     from motion.pipeline.telecine.sequence import discover
 
     out, _ = shot_1001
-    interlaced = out / "deliver" / "60i"
-    with av.open(str(out / "deliver" / "tc_60i.mov")) as c:
+    interlaced = out / "deliver" / "60i_v001"
+    with av.open(str(out / "deliver" / "tc_60i_v001.mov")) as c:
         assert c.streams.video[0].metadata.get("timecode") == "00:00:41:21"
         assert c.metadata.get("comment", "").startswith("29.97 fps (30000/1001), interlaced tff; view: OCIO")
-    with av.open(str(out / "deliver" / "tc_24p.mov")) as c:
+    with av.open(str(out / "deliver" / "tc_24p_v001.mov")) as c:
         assert c.metadata.get("comment", "").startswith("23.976 fps (24000/1001), progressive; view: OCIO")
     for folder, first, rate in ((out, "00:00:41:17", "24 fps"), (interlaced, "00:00:41:21", "29.97 fps (30000/1001)")):
         res = motion("view", folder)
@@ -393,8 +395,8 @@ def test_movies_flipbook_sheet_and_report_name_the_rate_and_the_frames_timecode(
         assert data["fps_text"] == rate
     assert sheet_layout(discover(interlaced)).header.endswith("  29.97 fps (30000/1001)")
     rates = report(out)["deliverables"]["rates"]
-    assert rates == {str(out / "deliver" / "tc_24p.mov"): "23.976 fps (24000/1001)",
-                     str(out / "deliver" / "tc_60i.mov"): "29.97 fps (30000/1001) interlaced, 2 fields a frame"}
+    assert rates == {str(out / "deliver" / "tc_24p_v001.mov"): "23.976 fps (24000/1001)",
+                     str(out / "deliver" / "tc_60i_v001.mov"): "29.97 fps (30000/1001) interlaced, 2 fields a frame"}
 
 
 def test_the_default_view_keeps_a_bright_sky_from_clipping() -> None:

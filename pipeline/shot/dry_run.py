@@ -79,9 +79,15 @@ def plan(req: RenderRequest, loaded: Any, out_dir: Path, selected: list[int], fr
     first = paths[frames[0]] if frames else None
     deliver = {}
     if wanted:
-        prefix = Path(first).name.rsplit(".", 2)[0] if first else loaded.name
-        names = {"24p": f"{prefix}_24p.mov", "60i": f"{prefix}_60i.mov", "50i": f"{prefix}_50i.mov", "review": f"{prefix}_review.mp4", "contact": f"{prefix}_contact.png"}
-        deliver = {fmt: str(out_dir / "deliver" / names[fmt]) for fmt in wanted.formats}
+        from ..deliverables import FORMATS
+        from .deliver import next_version, read_manifest
+
+        folder = out_dir / "deliver"
+        made = read_manifest(folder, warn=lambda line: None)["deliverables"] if folder.is_dir() else {}
+        for fmt in wanted.formats:  # the version a changed deliverable would get
+            tag = wanted.tag(fmt)
+            number = next_version(folder, loaded.name, tag, made.get(wanted.key(fmt)) or {})
+            deliver[fmt] = str(folder / f"{loaded.name}_{tag}_v{number:03d}{FORMATS[fmt].suffix}")
     by_reason: dict[str, list[int]] = {}
     for f, why in sorted(stale.items()):
         by_reason.setdefault(why, []).append(f)
@@ -102,10 +108,21 @@ def plan(req: RenderRequest, loaded: Any, out_dir: Path, selected: list[int], fr
         "chunk_size": chunk_size,
         "executor": {"kind": "dask" if req.scheduler else "local", "workers": None if req.scheduler else min(workers, max(1, len(chunk_list))),
                      "threads": threads, "scheduler": req.scheduler},
-        "outputs": {"output_dir": str(out_dir), "first_frame": first, "last_frame": paths[frames[-1]] if frames else None,
+        "outputs": {"output_dir": str(out_dir), "output_from": output_from(req, loaded), "first_frame": first, "last_frame": paths[frames[-1]] if frames else None,
                     "report": str(report_path), "deliverables": deliver,
                     "deliverables_left_out": dict(getattr(wanted, "skipped", {}) or {})},
     }
+
+
+def output_from(req: RenderRequest, loaded: Any) -> str:
+    """Where the output folder came from: -o, the scene's output.directory, or the default
+    out/<name> under the current folder (not the scene's: a render from another folder
+    does not find that folder's frames)."""
+    if req.output_dir:
+        return "-o"
+    if loaded.scene.output.directory:
+        return "the scene's output.directory, from the current folder"
+    return f"out/<name> under the current folder {Path.cwd()}; -o to choose"
 
 
 def plan_text(p: dict[str, Any]) -> str:
@@ -122,11 +139,12 @@ def plan_text(p: dict[str, Any]) -> str:
         f"  executor:  {how}",
         "  settings:  " + ", ".join(f"{k} {_show(v['value'])} ({v['from']})" for k, v in p["settings"].items()),
         f"  estimate:  {_duration(p['estimate']['seconds'])} ({p['estimate']['basis']}; a warm frame {p['estimate']['warm_frame_s']:.2f} s)",
+        f"  output:    {p['outputs']['output_dir']} ({p['outputs'].get('output_from', '-o')})",
         f"  frames to: {p['outputs']['first_frame']} .. {p['outputs']['last_frame']}",
         f"  report:    {p['outputs']['report']}",
     ]
     for fmt, path in p["outputs"]["deliverables"].items():
-        lines.append(f"  {fmt}: {path}")
+        lines.append(f"  {fmt}: {path} (the next version: made when its frames or recipe changed)")
     for fmt, why in p["outputs"].get("deliverables_left_out", {}).items():
         lines.append(f"  {fmt}: not made: {why}")
     return "\n".join(lines)

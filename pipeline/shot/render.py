@@ -330,7 +330,13 @@ def finish(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: Pat
             write_report(report, report_path)
     say_outputs(wanted, frames, paths, say)
     if wanted and frames:
-        report["deliverables"] = deliver_and_record(req, out_dir, [Path(paths[f]) for f in frames], wanted.formats, report, report_path, say)
+        report["deliverables"] = deliver_and_record(req, out_dir, wanted, shot_paths(loaded, out_dir, wanted), loaded.name, report, report_path, say)
+
+
+def shot_paths(loaded: LoadedScene, out_dir: Path, wanted: DeliverPlan) -> dict[int, Path]:
+    """Where each frame the deliverables are made of is (or would be) written: the paths
+    made from the numbers once, the numbers carried with them."""
+    return {f: out_dir / loaded.scene.output.frame_name(loaded.name, f) for f in wanted.frames}
 
 
 def say_outputs(wanted: DeliverPlan, frames: list[int], paths: dict[int, str], say: Callable[[str], None]) -> None:
@@ -389,8 +395,8 @@ def _run_render(req: RenderRequest, held: list[RunLock]) -> dict[str, Any]:
     frames = sel.frames
     out_dir = output_folder(req, loaded)
     wanted = deliver_plan(req, loaded, sel.selected if not req.shard else frames)
-    if wanted:
-        check_deliver(req, loaded, frames, out_dir, wanted.formats)  # every check that can fail, before the first task
+    if wanted:  # every check that can fail, before the first task; a declared format the shot cannot make is left out
+        wanted = check_deliver(req, loaded, wanted, frames, out_dir, shot_paths(loaded, out_dir, wanted).__getitem__)
     job, workers, threads = make_job(req, loaded, overrides, out_dir, frames)
     preflight(req, loaded, job, out_dir, frames)
     taken_from = check_owner(out_dir, loaded.path, req.overwrite)  # another scene file's folder: refused, one line
@@ -431,7 +437,8 @@ def _run_render(req: RenderRequest, held: list[RunLock]) -> dict[str, Any]:
         if wanted:
             say = Progress(total=0, live=False).log
             say_outputs(wanted, frames, paths, say)
-            result["deliverables"] = deliver_and_record(req, out_dir, [Path(paths[f]) for f in frames], wanted.formats, result, None, say)
+            if wanted:
+                result["deliverables"] = deliver_and_record(req, out_dir, wanted, shot_paths(loaded, out_dir, wanted), loaded.name, result, None, say)
         return result
     chunk_size = cfg.chunk_size or default_chunk_size(len(todo), workers if not req.scheduler else 2)
     cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), workers if not req.scheduler else 1, bake_s, denoised_pixels(loaded.scene))

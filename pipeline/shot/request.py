@@ -20,6 +20,7 @@ class RenderRequest:
     output_overrides: dict[str, Any] = field(default_factory=dict)  # e.g. aovs (--aov)
     cache: bool = True
     deliver: str | None = None
+    deliver_frames: str | None = None  # --deliver-frames: deliverables of part of the shot, named apart (default: the whole shot)
     deliver_view: dict[str, Any] = field(default_factory=dict)  # exposure / OCIO for the deliverables
     resume: bool = True
     overwrite: bool = False

@@ -20,7 +20,7 @@ from typing import Any, Mapping
 
 from ..errors import FrameIOError
 from ..farm.frames import format_frames
-from ..frame_output import is_complete, read_header
+from ..frame_output import is_complete, read_meta
 
 
 @dataclass
@@ -118,10 +118,9 @@ def _listed(items: list[str]) -> str:
 def why_stale(path: str, expect: Mapping[str, Any], now: CurrentKeys) -> str | None:
     """Why the frame at `path` is not a complete frame of this run, or None if it is."""
     try:
-        header = read_header(path)
+        meta = read_meta(path)
     except FrameIOError:
         return "do not read back as OpenEXR (incomplete or foreign)"
-    meta = {k[len("motion:"):]: v for k, v in header.items() if isinstance(k, str) and k.startswith("motion:")}
     if meta.get("look_hash") != expect.get("look_hash"):
         change = settings_change(meta.get("render_settings"), now.settings)
         if change:

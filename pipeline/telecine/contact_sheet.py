@@ -21,7 +21,7 @@ from ..errors import UsageError
 from ..files import writing
 from ..timeline import rate_label
 from .movie import ViewTransform
-from .sequence import Sequence, discover, read_checked
+from .sequence import Sequence, discover, read_mapped
 
 LABEL_ROWS = 18
 GAP = 4
@@ -62,6 +62,16 @@ def sheet_layout(seq: Sequence, max_frames: int = 60) -> SheetLayout:
     header = (f"{seq.prefix}  frames {seq.first}-{seq.numbers[-1]} ({count})  {seq.width}x{seq.height}"
               f"{f'  {rate_label(seq.fps)}' if seq.fps else ''}")  # '29.97 fps (30000/1001)', as the movies
     return SheetLayout(picked, tuple(seq.numbers[i] for i in picked), step, len(seq.missing), header)
+
+
+def _text_width(text: str) -> int:
+    """Pixels the sheet's header `text` takes (8-point monospace at 100 dpi), as Agg draws it."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(1, 1), dpi=100)
+    label = fig.text(0, 1, text, fontsize=8, va="top", ha="left", family="monospace")
+    return math.ceil(label.get_window_extent(FigureCanvasAgg(fig).get_renderer()).width)
 
 
 def _ordinal(n: int) -> str:
@@ -108,23 +118,24 @@ def contact_sheet(
     th = max(1, round(seq.height * tw / seq.width))
     header = 30
     cell_w, cell_h = tw + GAP, th + LABEL_ROWS + GAP
-    width, height = cols * cell_w + GAP, rows * cell_h + GAP + header
+    title = f"{layout.header}\n{view.description}{f'  (every {_ordinal(step)} frame)' if step > 1 else ''}"
+    # a sheet of a few small frames is widened to hold its header (it was cut at 160 pixels)
+    width = max(cols * cell_w + GAP, 2 * GAP + _text_width(title))
+    height = rows * cell_h + GAP + header
     sheet = np.full((height, width, 3), 0.12, np.float32)
     places = []
-    for n, (index, number) in enumerate(zip(picked, layout.numbers)):
+    thumbs = read_mapped(seq, lambda frame: view(box_resize(frame.rgba, th, tw)), picked)  # read side by side
+    for n, (thumb, number) in enumerate(zip(thumbs, layout.numbers)):
         r, c = divmod(n, cols)
         y, x = header + GAP + r * cell_h, GAP + c * cell_w
-        thumb = box_resize(read_checked(seq, index).rgba, th, tw)
-        sheet[y: y + th, x: x + tw] = view(thumb).astype(np.float32) / 65535.0
+        sheet[y: y + th, x: x + tw] = thumb.astype(np.float32) / 65535.0
         places.append((x, y + th, number))
 
     dpi = 100
     fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi)
     # figimage puts array row 0 at the bottom of the figure: flip so row 0 is the top.
     fig.figimage(sheet[::-1], 0, 0, origin="lower", resize=False)
-    fig.text(GAP / width, 1 - 4 / height, (
-        f"{layout.header}\n{view.description}{f'  (every {_ordinal(step)} frame)' if step > 1 else ''}"
-    ), color="white", fontsize=8, va="top", ha="left", family="monospace")
+    fig.text(GAP / width, 1 - 4 / height, title, color="white", fontsize=8, va="top", ha="left", family="monospace")
     for x, y, number in places:
         fig.text(x / width, 1 - (y + 2) / height, f"{number:04d}", color="white", fontsize=9,
                  va="top", ha="left", family="monospace")

@@ -22,12 +22,12 @@ import numpy as np
 
 from ..errors import FrameIOError, UsageError
 from ..files import publish_path, staging
-from ..frame_output import Frame, read_header, write_frame
+from ..frame_output import Frame, read_meta, write_frame
 from ..timeline import timecode
 from .cadence import Cadence, Tail, film_rate, output_rate, parse_cadence, plan
 from ..field_model import FieldOrder, check_field_order, weave_frames
 from .inverse import Detection, detect_pulldown, recovery_map
-from .sequence import Sequence, discover, find_sequences, read_checked
+from .sequence import Sequence, assembly_threads, discover, find_sequences, read_checked, read_mapped
 
 Progress = Callable[[int, int], None]
 
@@ -53,18 +53,63 @@ class Result:
 
 
 class _FrameCache:
-    """The last few frames read; pulldown reads each source at most twice in a row."""
+    """The last few frames read; pulldown reads each source at most twice in a row. With
+    `ahead` (the source indices in the order they will be asked for, ascending), the frames
+    are read by a few threads ahead of their use (sequence.read_mapped)."""
 
-    def __init__(self, seq: Sequence, size: int = 3) -> None:
+    def __init__(self, seq: Sequence, size: int = 3, ahead: list[int] | None = None) -> None:
         self.seq, self.size = seq, size
         self.frames: dict[int, Frame] = {}
+        self.coming = iter(zip(ahead, read_mapped(seq, lambda frame: frame, ahead))) if ahead else None
 
     def __call__(self, index: int) -> Frame:
-        if index not in self.frames:
+        while index not in self.frames:
             if len(self.frames) >= self.size:
                 self.frames.pop(min(self.frames))
-            self.frames[index] = read_checked(self.seq, index)
+            got = next(self.coming, None) if self.coming is not None else None
+            if got is None:  # (not among those read ahead)
+                self.frames[index] = read_checked(self.seq, index)
+            else:
+                self.frames[got[0]] = got[1]
         return self.frames[index]
+
+
+class _Writes:
+    """Frames written by a few threads (OpenEXR compresses outside Python's lock), at most
+    2 x threads in flight; `wait()` raises the first write's error."""
+
+    def __init__(self) -> None:
+        from collections import deque
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.threads = assembly_threads()
+        self.pool = ThreadPoolExecutor(max_workers=self.threads, thread_name_prefix="write")
+        self.pending: Any = deque()
+
+    def submit(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> None:
+        """Write in the background (waiting for the oldest write when enough are in flight)."""
+        self.pending.append(self.pool.submit(fn, *args, **kwargs))
+        if len(self.pending) >= 2 * self.threads:
+            self.pending.popleft().result()
+
+    def wait(self) -> None:
+        """Every write finished (the first error raised)."""
+        try:
+            while self.pending:
+                self.pending.popleft().result()
+        finally:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+
+    def __enter__(self) -> "_Writes":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        # on an error, writes not started are dropped and running ones end before the
+        # staging folder goes; otherwise every write's error is raised here
+        if exc[0] is not None:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+        else:
+            self.wait()
 
 
 def _strip(meta: dict[str, Any]) -> dict[str, Any]:
@@ -171,48 +216,48 @@ def telecine_sequence(
         _timecode(0, rate, True)
     start = max(0, seq.first) * round(rate) // max(1, round(film))  # the film's start, in video frames
     ptype = pixel_type or seq.pixel_type
-    load = _FrameCache(seq)
+    load = _FrameCache(seq, ahead=sorted({k for vf in frames for k in (vf.top, vf.bottom, vf.first, vf.second)}))
     names: list[str] = []
     with _Staging(out_dir, name, overwrite) as staging:
-        for i, vf in enumerate(frames):
-            top, bottom = load(vf.top), load(vf.bottom)
-            meta = _strip(load(vf.first).meta)
-            if cadence.blend:
-                rgba, aovs = _blend_layers(load(vf.first), load(vf.second))
-                meta["blendSources"] = f"{seq.numbers[vf.first]},{seq.numbers[vf.second]}"
-                meta["fieldOrder"] = "progressive"
-            else:
-                rgba, aovs = _weave_layers(top, bottom)
+        with _Writes() as writes:
+            for i, vf in enumerate(frames):
+                top, bottom = load(vf.top), load(vf.bottom)
+                meta = _strip(load(vf.first).meta)
+                if cadence.blend:
+                    rgba, aovs = _blend_layers(load(vf.first), load(vf.second))
+                    meta["blendSources"] = f"{seq.numbers[vf.first]},{seq.numbers[vf.second]}"
+                    meta["fieldOrder"] = "progressive"
+                else:
+                    rgba, aovs = _weave_layers(top, bottom)
+                    meta.update(
+                        fieldOrder=order,
+                        topFieldSource=seq.numbers[vf.top],
+                        bottomFieldSource=seq.numbers[vf.bottom],
+                        firstFieldSource=seq.numbers[vf.first],
+                        secondFieldSource=seq.numbers[vf.second],
+                    )
                 meta.update(
-                    fieldOrder=order,
-                    topFieldSource=seq.numbers[vf.top],
-                    bottomFieldSource=seq.numbers[vf.bottom],
-                    firstFieldSource=seq.numbers[vf.first],
-                    secondFieldSource=seq.numbers[vf.second],
+                    cadence=cadence.name,
+                    cadenceCounts=":".join(str(c) for c in cadence.counts),
+                    filmSpeed=film,
+                    videoFrame=i,
+                    tail=tail,
                 )
-            meta.update(
-                cadence=cadence.name,
-                cadenceCounts=":".join(str(c) for c in cadence.counts),
-                filmSpeed=film,
-                videoFrame=i,
-                tail=tail,
-            )
-            fname = f"{name}.{seq.first + i:0{seq.padding}d}.exr"
-            write_frame(
-                staging.dir / fname, rgba, meta, fps=rate, timecode=_timecode(start + i, rate, drop_frame),
-                aovs=aovs or None, pixel_type=ptype, compression=compression,  # type: ignore[arg-type]
-            )
-            names.append(fname)
-            if progress:
-                progress(i + 1, len(frames))
+                fname = f"{name}.{seq.first + i:0{seq.padding}d}.exr"
+                writes.submit(
+                    write_frame, staging.dir / fname, rgba, meta, fps=rate, timecode=_timecode(start + i, rate, drop_frame),
+                    aovs=aovs or None, pixel_type=ptype, compression=compression,
+                )
+                names.append(fname)
+                if progress:
+                    progress(i + 1, len(frames))
         paths = staging.publish(names)
     return Result(out_dir, paths, rate, film, cadence, None if cadence.blend else order)
 
 
 def read_header_meta(seq: Sequence, index: int) -> dict[str, Any]:
     """Our `motion:` attributes of frame `index` of a sequence."""
-    header = read_header(seq.paths[index])
-    return {k[len("motion:"):]: v for k, v in header.items() if k.startswith("motion:")}
+    return read_meta(seq.paths[index])
 
 
 def _sources_from_metadata(seq: Sequence, order: FieldOrder) -> list[int] | None:

@@ -1,28 +1,29 @@
 """Deliverables from a rendered EXR sequence: what `motion render ... --deliver 24p,60i` runs.
 
-Formats (names for `--deliver`):
-  24p      ProRes 422 HQ .mov at the film rate
-  60i      3:2 pulldown (or `pattern`) EXR sequence in `60i/` and its interlaced ProRes .mov
-  50i      2:2 EXR sequence in `50i/` (film speed 25) and its interlaced ProRes .mov
-  review   H.264 .mp4 at the film rate, for review
-  contact  contact sheet PNG
-The sequence is validated once, before anything is written.
+The formats are records in one registry (`pipeline/deliverables.py`: 24p, 60i, 50i,
+review, review25, contact); a deliverable is made by the maker of its record's kind
+(`MAKERS`: a progressive movie, a pulldown to interlaced field frames and their movie, a
+contact sheet), so no code here knows a format by its name. The sequence is validated
+once, before anything is written.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
 from fractions import Fraction
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Iterator
 
+import numpy as np
+
+from ..deliverables import FORMATS, DeliverFormat
 from ..errors import UsageError
-from .cadence import film_rate
+from ..field_model import weave_frames
+from .cadence import film_rate, plan
 from .contact_sheet import contact_sheet
-from .convert import telecine_sequence
-from .movie import ViewTransform, sequence_movie
-from .sequence import Sequence, discover
-
-FORMATS = ("24p", "60i", "50i", "review", "contact")
+from .convert import Result, telecine_sequence
+from .movie import ViewTransform, choose_codec, encode_movie, first_timecode, sequence_movie
+from .sequence import Sequence, discover, read_mapped
 
 # Called as report(format name, step description) before each step.
 Report = Callable[[str, str], None]
@@ -35,6 +36,87 @@ def parse_formats(text: str | Iterable[str]) -> tuple[str, ...]:
     if unknown or not items:
         raise UsageError(f"--deliver: unknown format {', '.join(unknown) or '(none)'}; choose from {', '.join(FORMATS)}")
     return tuple(dict.fromkeys(items))
+
+
+@dataclass(frozen=True)
+class Options:
+    """How a run's deliverables are made, beyond their records: the film speed of a
+    format that takes the run's (23.976 for a 24 fps shot), the pulldown pattern of one
+    at that speed, field order, drop-frame timecode, a forced codec, the view transform."""
+
+    film: Fraction
+    pattern: str
+    field_order: str
+    drop_frame: bool
+    codec: str | None
+    view: ViewTransform
+    overwrite: bool
+
+
+def _speed(fmt: DeliverFormat, opts: Options) -> Fraction:
+    return film_rate(fmt.film_speed) if fmt.film_speed else opts.film
+
+
+def _codec(fmt: DeliverFormat, opts: Options) -> str | None:
+    """The record's codec; a forced one (--codec) replaces it for the ProRes .mov masters."""
+    return opts.codec if opts.codec and fmt.suffix == ".mov" else fmt.codec
+
+
+def _movie(fmt: DeliverFormat, seq: Sequence, out_dir: Path, tag: str, opts: Options, say: Report) -> list[Path]:
+    movie = out_dir / f"{seq.prefix}_{tag}{fmt.suffix}"
+    say(fmt.name, f"movie {movie}")
+    return [sequence_movie(seq, movie, rate=_speed(fmt, opts), field_order=None, codec=_codec(fmt, opts), view=opts.view)]
+
+
+def _fields(fmt: DeliverFormat, seq: Sequence, out_dir: Path, tag: str, opts: Options, say: Report) -> list[Path]:
+    pattern = opts.pattern if fmt.film_speed is None else (fmt.cadence or opts.pattern)
+    say(fmt.name, f"{pattern} pulldown to {out_dir / tag}")
+    res = telecine_sequence(seq.directory, out_dir / tag, pattern=pattern, field_order=opts.field_order,
+                            film_speed=_speed(fmt, opts), drop_frame=opts.drop_frame and fmt.drop_frame_ok,
+                            overwrite=opts.overwrite, sequence=seq)
+    movie = out_dir / f"{seq.prefix}_{tag}{fmt.suffix}"
+    say(fmt.name, f"movie {movie}")
+    return list(res.paths) + [woven_movie(seq, res, movie, codec=_codec(fmt, opts), view=opts.view)]
+
+
+def woven_movie(seq: Sequence, res: Result, path: Path, *, codec: str | None, view: ViewTransform) -> Path:
+    """The interlaced movie of a pulldown, woven from the film frames as the pulldown wove
+    its EXR frames: each film frame read and viewed once (the view transform is per pixel,
+    so weaving viewed frames gives the viewed woven frames, bit for bit), instead of
+    reading every woven frame back from disk and viewing each."""
+    if res.cadence.blend or res.field_order is None:
+        return sequence_movie(res.out_dir, path, codec=codec, view=view)
+    frames = plan(len(seq), res.cadence, res.field_order, "pad")
+    need = sorted({i for vf in frames for i in (vf.top, vf.bottom)})
+    viewed = zip(need, read_mapped(seq, lambda frame: view(frame.rgba), need))
+    kept: dict[int, np.ndarray] = {}
+
+    def woven() -> Iterator[np.ndarray]:
+        for vf in frames:
+            while vf.top not in kept or vf.bottom not in kept:
+                index, rgb16 = next(viewed)
+                kept[index] = rgb16
+            yield weave_frames(kept[vf.top], kept[vf.bottom])
+            for index in [k for k in kept if k < min(vf.top, vf.bottom)]:
+                del kept[index]
+
+    chosen, container = choose_codec(path, codec)
+    timecode = first_timecode(replace(seq, paths=res.paths[:1]))
+    return encode_movie(path, chosen, container, woven(), res.rate, seq.width, seq.height, res.field_order, view, timecode, None, len(frames))
+
+
+def _sheet(fmt: DeliverFormat, seq: Sequence, out_dir: Path, tag: str, opts: Options, say: Report) -> list[Path]:
+    sheet = out_dir / f"{seq.prefix}_{tag}{fmt.suffix}"
+    say(fmt.name, f"contact sheet {sheet}")
+    return [contact_sheet(seq, sheet, view=opts.view)]
+
+
+# kind -> maker(format, sequence, output folder, tag (names the outputs), options, report) -> paths written
+MAKERS: dict[str, Callable[[DeliverFormat, Sequence, Path, str, Options, Report], list[Path]]] = {
+    "movie": _movie,
+    "fields": _fields,
+    "sheet": _sheet,
+}
 
 
 def deliver(
@@ -52,38 +134,18 @@ def deliver(
     overwrite: bool = False,
     report: Report | None = None,
     sequence: Sequence | None = None,
+    tags: dict[str, str] | None = None,
 ) -> dict[str, list[Path]]:
     """Make the requested deliverables of the sequence in `in_dir` (or of `sequence`, a
-    selection of its frames: sequence.select) under `out_dir`.
+    selection of its frames: sequence.select / sequence_of) under `out_dir`.
 
-    Returns, per format, the paths written (movie, contact sheet; for 60i/50i the movie
-    after the EXR frames).
+    `tags` names each format's outputs (`<prefix>_<tag>.mov`, a field folder `<tag>/`);
+    by default the format's name. Returns, per format, the paths written (movie, contact
+    sheet; for a pulldown the field frames, then their movie).
     """
     wanted = parse_formats(formats)
-    seq = sequence or discover(in_dir, prefix, require_even_height=any(f in ("60i", "50i") for f in wanted))
-    out_dir = Path(out_dir)
-    film = film_rate(film_speed)
-    view = view or ViewTransform()  # (a bad OCIO config or view failed when it was made)
+    seq = sequence or discover(in_dir, prefix, require_even_height=any(FORMATS[f].interlaced for f in wanted))
+    opts = Options(film=film_rate(film_speed), pattern=pattern, field_order=field_order, drop_frame=drop_frame,
+                   codec=codec, view=view or ViewTransform(), overwrite=overwrite)  # (a bad OCIO view failed when it was made)
     say = report or (lambda fmt, step: None)
-    done: dict[str, list[Path]] = {}
-    for fmt in wanted:
-        if fmt in ("24p", "review"):
-            ext = ".mov" if fmt == "24p" else ".mp4"
-            movie = out_dir / f"{seq.prefix}_{fmt}{ext}"
-            say(fmt, f"movie {movie}")
-            done[fmt] = [sequence_movie(seq, movie, rate=film, field_order=None,
-                                        codec=codec if fmt == "24p" else "h264", view=view)]
-        elif fmt in ("60i", "50i"):
-            pat, speed = (pattern, film) if fmt == "60i" else ("2:2", Fraction(25))
-            say(fmt, f"{pat} pulldown to {out_dir / fmt}")
-            res = telecine_sequence(seq.directory, out_dir / fmt, pattern=pat, field_order=field_order,
-                                    film_speed=speed, drop_frame=drop_frame and fmt == "60i",
-                                    overwrite=overwrite, sequence=seq)
-            movie = out_dir / f"{seq.prefix}_{fmt}.mov"
-            say(fmt, f"movie {movie}")
-            done[fmt] = list(res.paths) + [sequence_movie(res.out_dir, movie, codec=codec, view=view)]
-        elif fmt == "contact":
-            sheet = out_dir / f"{seq.prefix}_contact.png"
-            say(fmt, f"contact sheet {sheet}")
-            done[fmt] = [contact_sheet(seq, sheet, view=view)]
-    return done
+    return {f: MAKERS[FORMATS[f].kind](FORMATS[f], seq, Path(out_dir), (tags or {}).get(f, f), opts, say) for f in wanted}

@@ -118,10 +118,10 @@ def _refuse_negative_frames(in_dir: Path, prefix: str | None) -> None:
 
 
 def _frame_info(seq: Sequence, index: int, number: int, fps: Fraction | None) -> dict[str, Any]:
-    from ..frame_output import read_header, timecode_str
+    from ..frame_output import motion_meta, read_header, timecode_str
 
     header = read_header(seq.paths[index])
-    meta = {k.split(":", 1)[1]: v for k, v in header.items() if str(k).startswith("motion:")}
+    meta = motion_meta(header)
     info: dict[str, Any] = {"frame": number, "file": seq.paths[index].name}
     # the frame's own timecode (it follows the frame number, and a pulldown's continues the
     # film's: docs/telecine.md); a header without one: the frame number at the nominal rate

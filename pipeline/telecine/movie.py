@@ -30,7 +30,7 @@ from ..errors import FrameIOError, UsageError
 from ..files import writing
 from ..timeline import rate_label
 from ..field_model import FieldOrder, check_field_order
-from .sequence import Sequence, discover, read_checked
+from .sequence import Sequence, discover, read_mapped
 
 Progress = Callable[[int, int], None]
 
@@ -301,14 +301,21 @@ def write_movie(
     chosen, container = choose_codec(path, codec)
     order = check_field_order(field_order) if field_order else None
     view = view or ViewTransform()
+    return encode_movie(path, chosen, container, (view(rgba) for rgba in frames), rate, width, height, order, view, timecode, progress, total)
+
+
+def encode_movie(path: Path, chosen: Codec, container: str, frames: Iterable[np.ndarray], rate: Fraction, width: int, height: int,
+            order: FieldOrder | None, view: ViewTransform, timecode: str | None, progress: Progress | None, total: int) -> Path:
+    """Encode display-referred RGB uint16 frames [H, W, 3] (`view` already applied; it
+    names the movie's colour tags and comment) into a movie, through the write policy."""
     with writing(path, "writing the movie", suffix=path.suffix + ".part") as tmp:
         # the rate named as it plays ('23.976 fps (24000/1001)'), the scan and the view, in the file
         scan = f"interlaced {order}" if order else "progressive"
         comment = f"{rate_label(Fraction(rate))}, {scan}; view: {view.description}"
         encoder = _Encoder(tmp, container, chosen, width, height, Fraction(rate), order, timecode,
                            view.color_tags, comment)
-        for i, rgba in enumerate(frames):
-            encoder.add(view(rgba))
+        for i, rgb16 in enumerate(frames):
+            encoder.add(rgb16)
             if progress:
                 progress(i + 1, total)
         encoder.close()
@@ -341,11 +348,13 @@ def sequence_movie(
         field_order = meta_order if meta_order in ("tff", "bff") else None
     if field_order and seq.height % 2:
         raise FrameIOError(f"{seq.paths[0]}: odd height {seq.height}; interlaced fields need an even number of rows")
-    frames = (read_checked(seq, i).rgba for i in range(len(seq)))
-    return write_movie(
-        path, frames, rate, width=seq.width, height=seq.height, codec=codec, field_order=field_order,
-        view=view, progress=progress, total=len(seq), timecode=first_timecode(seq),
-    )
+    path = Path(path)
+    chosen, container = choose_codec(path, codec)
+    order = check_field_order(field_order) if field_order else None
+    view = view or ViewTransform()
+    # each frame read and viewed once, side by side on the cores, encoded in order
+    frames = read_mapped(seq, lambda frame: view(frame.rgba))
+    return encode_movie(path, chosen, container, frames, rate, seq.width, seq.height, order, view, first_timecode(seq), progress, len(seq))
 
 
 def first_timecode(seq: Sequence) -> str | None:

@@ -9,16 +9,17 @@ Each problem is a `FrameIOError` naming the offending frame.
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass, field, replace
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Iterator, Literal
+from typing import Any, Callable, Iterable, Iterator, Literal, Mapping, TypeVar
 
 import numpy as np
 
 from ..errors import FrameIOError
-from ..frame_output import Frame, check_data_window, read_frame, read_header
+from ..frame_output import Frame, check_data_window, motion_meta, read_frame, read_header
 
 PixelType = Literal["half", "float"]
 
@@ -39,6 +40,7 @@ class Sequence:
     fps: Fraction | None = None
     first_meta: dict[str, Any] = field(default_factory=dict)
     missing: tuple[int, ...] = ()  # absent frame numbers between first and last (allow_gaps only)
+    padding: int = 4  # digits of the frame number in names made from it (at least 4)
 
     def __len__(self) -> int:
         return len(self.paths)
@@ -47,11 +49,6 @@ class Sequence:
     def first(self) -> int:
         """The first frame number."""
         return self.numbers[0]
-
-    @property
-    def padding(self) -> int:
-        """Digits of the frame number in the file names (at least 4)."""
-        return max(4, len(_NAME.match(self.paths[0].name)["number"]))  # type: ignore[index]
 
     def read(self, index: int) -> Frame:
         """Frame `index` (0-based position in the sequence), pixels as float32."""
@@ -139,7 +136,28 @@ def discover(
         raise FrameIOError(f"missing frame {shown}{more} in sequence {prefix} ({numbers[0]}-{numbers[-1]})")
     if len(items) < min_frames:
         raise FrameIOError(f"{directory}: sequence {prefix} has {len(items)} frames, need at least {min_frames}")
+    return sequence_of(dict(items), prefix, directory=directory, require_even_height=require_even_height, padding=max(4, pad))
 
+
+def sequence_of(
+    frames: Mapping[int, str | Path],
+    prefix: str,
+    *,
+    directory: str | Path | None = None,
+    require_even_height: bool = True,
+    padding: int = 4,
+) -> Sequence:
+    """A validated Sequence of the frames given by number (whatever their file names: the
+    numbers travel with the paths, never parsed back from the names), in number order.
+
+    Reads every header (not the pixels): a missing, foreign or truncated-header frame, a
+    frame of another size or an odd height (when `require_even_height`) is a FrameIOError
+    naming it. Absent numbers between the first and the last are listed in `missing`.
+    """
+    if not frames:
+        raise FrameIOError(f"{directory or '.'}: no frames of sequence {prefix}")
+    items = sorted((int(n), Path(p)) for n, p in frames.items())
+    numbers = [n for n, _ in items]
     size: tuple[int, int] | None = None
     fps: Fraction | None = None
     first_meta: dict[str, Any] = {}
@@ -156,7 +174,7 @@ def discover(
                     raise ValueError(f"{fps} is out of range")
             except (TypeError, ValueError, ZeroDivisionError):
                 raise FrameIOError(f"{path}: framesPerSecond {rate!r} is not a frame rate") from None
-            first_meta = {k[len("motion:"):]: v for k, v in header.items() if k.startswith("motion:")}
+            first_meta = motion_meta(header)
             if require_even_height and this[1] % 2:
                 raise FrameIOError(
                     f"{path}: odd height {this[1]}; interlaced fields need an even number of rows"
@@ -166,18 +184,19 @@ def discover(
                 f"{path}: resolution {this[0]}x{this[1]} differs from the sequence's "
                 f"{size[0]}x{size[1]} (first frame {items[0][1].name})"
             )
-    assert size is not None
+    width, height = size if size is not None else (0, 0)
     return Sequence(
-        directory=directory,
+        directory=Path(directory) if directory is not None else items[0][1].parent,
         prefix=prefix,
         numbers=tuple(numbers),
         paths=tuple(p for _, p in items),
-        width=size[0],
-        height=size[1],
+        width=width,
+        height=height,
         pixel_type=_pixel_type(items[0][1]),
         fps=fps,
         first_meta=first_meta,
-        missing=tuple(missing),
+        missing=tuple(sorted(set(range(numbers[0], numbers[-1] + 1)) - set(numbers))),
+        padding=padding,
     )
 
 
@@ -189,6 +208,51 @@ def select(seq: Sequence, numbers: list[int] | tuple[int, ...]) -> Sequence:
     if absent:
         raise FrameIOError(f"{seq.directory}: frame {absent[0]} of sequence {seq.prefix} is not there" + (f" ({len(absent)} absent)" if len(absent) > 1 else ""))
     return replace(seq, numbers=tuple(numbers), paths=tuple(where[n] for n in numbers), missing=())
+
+
+T = TypeVar("T")
+
+
+def assembly_threads() -> int:
+    """Threads that read and transform frames for a deliverable: the cores this process may
+    use ($MOTION_ASSEMBLY_THREADS overrides), at most 16. OpenEXR's decoder and OpenColorIO's
+    CPU processor run outside Python's lock, so frames are read and viewed side by side
+    while the encoder takes them in order."""
+    env = os.environ.get("MOTION_ASSEMBLY_THREADS", "").strip()
+    if env.isdigit() and int(env) > 0:
+        return min(int(env), 64)
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # (not on Linux)
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, 16))
+
+
+def read_mapped(seq: Sequence, fn: Callable[[Frame], T], indices: Iterable[int] | None = None, threads: int | None = None) -> Iterator[T]:
+    """`fn(frame)` of each frame (checked as read_checked does) in order, computed by a few
+    threads at most 2 x threads frames ahead of the consumer (so memory stays bounded)."""
+    order = list(range(len(seq)) if indices is None else indices)
+    workers = threads or assembly_threads()
+    if workers == 1 or len(order) < 2:
+        for i in order:
+            yield fn(read_checked(seq, i))
+        return
+    from collections import deque
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="assemble") as pool:
+        pending: deque = deque()
+        it = iter(order)
+        try:
+            for i in it:
+                pending.append(pool.submit(lambda k: fn(read_checked(seq, k)), i))
+                if len(pending) >= 2 * workers:
+                    yield pending.popleft().result()
+            while pending:
+                yield pending.popleft().result()
+        finally:
+            for fut in pending:
+                fut.cancel()
 
 
 def read_checked(seq: Sequence, index: int) -> Frame:
