@@ -1,11 +1,12 @@
-"""Light records: one class per light type, entered in LIGHT_TYPES (docs/lights.md).
+"""Light records: one class per light type, entered in LIGHT_TYPES (docs/architecture.md,
+"One record per light type").
 
 Each light type is one record: its fields, its emission channel, how its fields make its
 frame (`frame`, given the motion stage's frame makers), whether that frame is rigid,
 whether a moving one is posed per path, and the Mitsuba emitter it becomes (`emitter`,
 plain values; the render stage converts matrices and colours). `@light_type` enters it in
 LIGHT_TYPES, from which the `Light` union is made: adding a light type is one class here
-(docs/lights.md "Adding a light type"). scene/schema.py re-exports these names.
+(docs/architecture.md). scene/schema.py re-exports these names.
 """
 
 # No `from __future__ import annotations` in the schema modules: pydantic would compile and
