@@ -10,7 +10,7 @@ evaluates their `motion` blocks.
 # every process that loads a scene (issue 28, docs/ci-sharding.md).
 
 from fractions import Fraction
-from typing import Annotated, Any, Callable, ClassVar, Literal, Union, get_args
+from typing import Annotated, ClassVar, Literal, Union
 
 from pydantic import Field, field_validator, model_validator
 
