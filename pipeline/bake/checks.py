@@ -92,9 +92,11 @@ def check_motion(loaded: "LoadedScene", motion: "SceneMotion") -> None:
     """Refuse evaluated motion with a non-finite value or a non-unit rotation (an
     overflowing expression or generator would otherwise make an object vanish): SceneError
     at the owner's block, naming the object, the channel and the time."""
+    from ..scene.lights import light_key
+
     scene = loaded.scene
     index = {o.name: i for i, o in enumerate(scene.objects)}
-    light_index = {(light.name or f"light{i}"): i for i, light in enumerate(scene.lights)}
+    light_index = {light_key(light, i): i for i, light in enumerate(scene.lights)}
     where = {
         "camera": lambda n: ("camera", "motion"),
         "objects": lambda n: ("objects", index.get(n, 0), "motion"),

@@ -36,9 +36,9 @@ class Order:
     @classmethod
     def of(cls, scene: Any) -> "Order":
         """The order of a validated scene's objects and lights."""
-        from ..motion.evaluate import light_name
+        from ..scene.lights import light_key
 
-        return cls(tuple(o.name for o in scene.objects), tuple(light_name(light, i) for i, light in enumerate(scene.lights)))
+        return cls(tuple(o.name for o in scene.objects), tuple(light_key(light, i) for i, light in enumerate(scene.lights)))
 
     def labels(self) -> dict[str, dict[str, str]]:
         """For each name-keyed SceneMotion field, name -> label."""

@@ -15,9 +15,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import MotionError, SceneError
+from ..scene.lights import light_key
 from ..scene.schema import Camera
+from ..scene.types import Transform
 from .graph import evaluation_order
-from .local import broadcast, local_pose, object_base, vec3
+from .local import broadcast, local_pose, object_base, transform_base, vec3
 from .pose import Pose, compose
 from .rotation import direction_quat, look_at_quat
 
@@ -64,11 +66,6 @@ def _take_particles(samples: Any, index: slice | np.ndarray) -> Any:
     return samples._replace(positions=samples.positions[index], alive=samples.alive[index])
 
 
-def light_name(light: Any, index: int) -> str:
-    """A light's name in `SceneMotion.lights`: its own, else `light<index>`."""
-    return light.name if light.name is not None else f"light{index}"
-
-
 def has_dynamics(loaded: "LoadedScene") -> bool:
     """True when evaluation needs a simulation (dynamics bodies or particle systems)."""
     return any(o.needs_simulation for o in loaded.scene.objects)
@@ -85,22 +82,36 @@ def _camera_base(cam: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.ones(3)
 
 
-def _light_base(light: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The light's own frame from its fields, by the record's `placement` (scene/schema.py)."""
-    identity = np.array([1.0, 0.0, 0.0, 0.0])
-    if light.placement == "aim":
+class _LightFrames:
+    """The frames a light record makes from its fields (scene/lights.py `LightFrames`), as
+    (translation [3], rotation [4] wxyz, scale [3])."""
+
+    def identity(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The parent's own frame."""
+        return np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.ones(3)
+
+    def transformed(self, transform: Transform) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A `transform:` block."""
+        return transform_base(transform)
+
+    def at(self, position: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """At `position`, unrotated."""
+        return np.asarray(position, dtype=np.float64), np.array([1.0, 0.0, 0.0, 0.0]), np.ones(3)
+
+    def aimed(self, position: Any, look_at: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """At `position`, +Z towards `look_at` (up +Y, or +Z when the aim is vertical)."""
         up = (0.0, 1.0, 0.0)
-        d = np.subtract(light.look_at, light.position)
+        d = np.subtract(look_at, position)
         if np.linalg.norm(np.cross(d, up)) < 1e-9 * max(np.linalg.norm(d), 1e-300):
             up = (0.0, 0.0, 1.0)
-        return np.asarray(light.position, dtype=np.float64), look_at_quat(light.position, light.look_at, up), np.ones(3)
-    if light.placement == "position":
-        return np.asarray(light.position, dtype=np.float64), identity, np.ones(3)
-    if light.placement == "direction":
-        return np.zeros(3), direction_quat(light.direction), np.ones(3)
-    if light.placement == "transform" and light.transform is not None:
-        return object_base(light)
-    return np.zeros(3), identity, np.ones(3)
+        return np.asarray(position, dtype=np.float64), look_at_quat(position, look_at, up), np.ones(3)
+
+    def along(self, direction: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """+Z along `direction`, at the origin."""
+        return np.zeros(3), direction_quat(direction), np.ones(3)
+
+
+_LIGHT_FRAMES = _LightFrames()
 
 
 def _light_scalar_bases(light: Any) -> dict[str, np.ndarray]:
@@ -176,9 +187,9 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
     for i, light in enumerate(scene.lights):
         bases = _light_scalar_bases(light)
         dims = {light.channel: light.channel_size}
-        local = local_pose(loaded, ("lights", i), light.motion, _light_base(light), t, dims)
+        local = local_pose(loaded, ("lights", i), light.motion, light.frame(_LIGHT_FRAMES), t, dims)
         pose = Pose(local.translation, local.rotation, local.scale)
-        name = light_name(light, i)
+        name = light_key(light, i)
         lights[name] = compose(world[light.parent], pose) if light.parent is not None else pose
         scalars = {k: (np.full(count, v[0]) if v.shape == (1,) else broadcast(v, count)) for k, v in bases.items()}
         scalars.update(local.scalars)

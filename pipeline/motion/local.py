@@ -94,5 +94,9 @@ def _vector_or_uniform(channel: Any, motion: KeyframeMotion, seconds: float, t: 
 
 def object_base(obj: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(translation [3], rotation [4] wxyz, scale [3]) of a thing's `transform:` block."""
-    tr = obj.transform
+    return transform_base(obj.transform)
+
+
+def transform_base(tr: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(translation [3], rotation [4] wxyz, scale [3]) of a `transform:` block."""
     return np.asarray(tr.translate, dtype=np.float64), transform_quat(tr.rotate), vec3(tr.scale)

@@ -17,7 +17,6 @@ from ..scene.loader import LoadedScene
 from ..scene.schema import (
     Camera,
     Conductor,
-    RIGID_PLACEMENTS,
     Dielectric,
     Diffuse,
     Plastic,
@@ -231,7 +230,7 @@ def light_dict(light: Any, loaded: LoadedScene, world_from_light: np.ndarray | N
     record's own value otherwise. `loaded` resolves the light's files.
     """
     m = np.eye(4) if world_from_light is None else np.asarray(world_from_light, dtype=float)
-    if light.placement in RIGID_PLACEMENTS:
+    if light.rigid_frame:
         m = _rigid(m)
     value = scalars.get(light.channel)
     value = light.emission if value is None else value

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any, Iterable
 
 import numpy as np
 
+from ..scene.lights import light_key
 from ..scene.loader import LoadedScene
 from .build import light_dict, mitsuba_id, object_shapes, sensor_dict, trs_matrix
 from .shutter_poses import pose_at
@@ -32,15 +33,10 @@ def add_shapes(d: dict[str, Any], loaded: LoadedScene, objects: Iterable[Any], f
             d[f"{mitsuba_id(obj.name)}__{k}"] = shape
 
 
-def light_key(index: int, light: Any) -> str:
-    """The name a light's baked tracks are stored under (its name, or `light<index>`)."""
-    return light.name or f"light{index}"
-
-
 def light_record(loaded: LoadedScene, index: int, light: Any, fi: StackedFrame, u: float | None = None) -> dict[str, Any]:
     """One light at the frame's time (u None) or at shutter fraction u, placed by its baked
     world_from_light frame, with its animated scalars at the frame's time."""
-    key = light_key(index, light)
+    key = light_key(light, index)
     pose = fi.lights.get(key)
     m = None
     if pose is not None:
@@ -56,7 +52,7 @@ def add_lights(d: dict[str, Any], loaded: LoadedScene, fi: StackedFrame, u: floa
     for i, light in enumerate(loaded.scene.lights):
         if i in skip:
             continue
-        d[mitsuba_id(light_key(i, light))] = light_record(loaded, i, light, fi, u)
+        d[mitsuba_id(light_key(light, i))] = light_record(loaded, i, light, fi, u)
 
 
 def sensor_record(loaded: LoadedScene, spp: int, fi: StackedFrame, u: float | None = None, **extra: Any) -> dict[str, Any]:

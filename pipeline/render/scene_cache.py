@@ -17,11 +17,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..motion.pose import quat_mul
+from ..scene.lights import light_key
 from ..scene.loader import LoadedScene
 from ..variant import load_dict
 from .build import material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
-from .instant import add_lights, add_shapes, light_key, light_record, sensor_record
+from .instant import add_lights, add_shapes, light_record, sensor_record
 from .roles import Roles
 from .sbt import SbtOwner, dict_types
 from .shutter_poses import across_shutter
@@ -151,7 +152,7 @@ class SceneCache:
                 record = {k: v for k, v in record.items() if k != "filename"}
                 record["bitmap"] = mi.Bitmap(np.ones((1, 2, 3), dtype=np.float32))
             fresh = mi.traverse(load_dict(record))
-            prefix = mitsuba_id(light_key(i, light))
+            prefix = mitsuba_id(light_key(light, i))
             for k in fresh.keys():
                 target = f"{prefix}.{k}"
                 if target in self._params and not k.endswith("data"):  # never copy an envmap's pixels
@@ -207,7 +208,7 @@ class SceneCache:
         count = len(self.roles.moving_lights)
         lt, lq, rgb = np.zeros((count, n, 3)), np.zeros((count, n, 4)), np.zeros((count, 3))
         for k, (i, light) in enumerate(self.roles.moving_lights):
-            key = light_key(i, light)
+            key = light_key(light, i)
             t, q, _ = fi.lights[key]
             lt[k], lq[k] = across_shutter(t, q, n, mode, u_fixed)
             value = fi.light_scalars.get(key, {}).get(light.channel)

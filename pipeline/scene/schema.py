@@ -10,7 +10,7 @@ evaluates their `motion` blocks.
 # every process that loads a scene (issue 28, docs/ci-sharding.md).
 
 from fractions import Fraction
-from typing import Annotated, Any, Callable, ClassVar, Literal, Union, get_args
+from typing import Annotated, ClassVar, Literal, Union
 
 from pydantic import Field, field_validator, model_validator
 
@@ -18,11 +18,22 @@ from ..deliverables import NAMES as DELIVER_NAMES
 from ..timeline import Timeline, parse_fps
 from .dynamics_schema import DynamicsSettings, ParticleEmitter
 from .imports.spec import ImportSpec
+from .lights import (  # the light records live in lights.py; these names stay importable from here
+    LIGHT_TYPES,
+    ConstantLight,
+    DirectionalLight,
+    EnvmapLight,
+    Light,
+    PointLight,
+    ProjectorLight,
+    SpotLight,
+)
 from .motion_schema import Deformation, IKConstraint, MotionBlock, StaticMotion
 from .types import (
     Color,
     FiniteFloat,
     Model,
+    Name,
     NonNegative,
     Positive,
     Size3,
@@ -30,8 +41,6 @@ from .types import (
     Transform,
     Vec3,
 )
-
-Name = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_.\-]*$", max_length=128)]
 
 
 # --- timeline -----------------------------------------------------------------------------
@@ -104,175 +113,6 @@ class Camera(Model):
         if self.near >= self.far:
             raise ValueError(f"near ({self.near}) must be less than far ({self.far})")
         return self
-
-
-# --- lights -------------------------------------------------------------------------------
-
-# Each light type is one record: its fields, its emission channel, how its fields place it
-# (`placement`, read by the motion stage), whether a moving one is posed per path, and the
-# Mitsuba emitter it becomes (`emitter`, plain values; the render stage converts matrices and
-# colours). `@light_type` enters it in LIGHT_TYPES, from which the `Light` union is made:
-# adding a light type is one class here (docs/lights.md "Adding a light type").
-LIGHT_TYPES: dict[str, type["_Light"]] = {}
-# how a light's own fields place it in its parent's frame (motion/evaluate.py): "none" (the
-# identity), "transform" (an optional `transform`), "position" (at `position`), "aim" (at
-# `position`, +Z towards `look_at`) or "direction" (+Z along `direction`)
-PLACEMENTS = ("none", "transform", "position", "aim", "direction")
-RIGID_PLACEMENTS = ("position", "aim", "direction")  # a scaled parent moves these lights, never stretches them
-
-
-class _Light(Model):
-    """What every light has: a name, a parent, a motion block, and the class facts below."""
-
-    channel: ClassVar[str]  # the emission quantity in the light's own units: the one scalar its motion may key
-    channel_size: ClassVar[int] = 3  # 3: a colour (grey or RGB); 1: a number
-    placement: ClassVar[str] = "none"  # one of PLACEMENTS
-    posed_per_path: ClassVar[bool] = False  # moving: posed at each path's own time by the integrator (a delta light)
-    image_files: ClassVar[tuple[str, ...]] = ()  # fields naming an image file, opened and checked before any task
-
-    name: Name | None = None
-    parent: Name | None = None
-    motion: MotionBlock = StaticMotion.default()
-
-    @property
-    def emission(self) -> Any:
-        """The light's own (unkeyed) value of its emission channel."""
-        return getattr(self, self.channel)
-
-    def emitter(self, value: Any, to_world: Any, asset: Callable[[str], str]) -> dict[str, Any]:
-        """The Mitsuba emitter dictionary at one time: `value` is the emission channel's value
-        then, `to_world` the light's frame (a 4x4 matrix, rigid for RIGID_PLACEMENTS),
-        `asset` resolves a file field to a path."""
-        raise NotImplementedError(f"light type {type(self).__name__} has no emitter")
-
-
-def light_type(cls: type[_Light]) -> type[_Light]:
-    """Enter a light record in LIGHT_TYPES under its `type` literal."""
-    (name,) = get_args(cls.model_fields["type"].annotation)
-    if cls.placement not in PLACEMENTS:
-        raise TypeError(f"{cls.__name__}.placement must be one of {PLACEMENTS}")
-    LIGHT_TYPES[name] = cls
-    return cls
-
-
-@light_type
-class ConstantLight(_Light):
-    """Uniform environment radiance (W sr^-1 m^-2 per channel)."""
-
-    channel = "radiance"
-
-    type: Literal["constant"]
-    radiance: Color = 1.0
-
-    def emitter(self, value: Any, to_world: Any, asset: Callable[[str], str]) -> dict[str, Any]:
-        """Mitsuba `constant`."""
-        return {"type": "constant", "radiance": value}
-
-
-@light_type
-class EnvmapLight(_Light):
-    """Latitude-longitude environment map (EXR/HDR/PNG), path relative to the scene."""
-
-    channel = "scale"
-    channel_size = 1
-    placement = "transform"
-    image_files = ("file",)
-
-    type: Literal["envmap"]
-    file: str
-    scale: NonNegative = 1.0
-    transform: Transform | None = None
-
-    def emitter(self, value: Any, to_world: Any, asset: Callable[[str], str]) -> dict[str, Any]:
-        """Mitsuba `envmap`."""
-        return {"type": "envmap", "filename": asset(self.file), "scale": value, "to_world": to_world}
-
-
-@light_type
-class PointLight(_Light):
-    """Isotropic point light; intensity in W sr^-1 per channel."""
-
-    channel = "intensity"
-    placement = "position"
-    posed_per_path = True
-
-    type: Literal["point"]
-    position: Vec3
-    intensity: Color = 10.0
-
-    def emitter(self, value: Any, to_world: Any, asset: Callable[[str], str]) -> dict[str, Any]:
-        """Mitsuba `point`."""
-        return {"type": "point", "to_world": to_world, "intensity": value}
-
-
-@light_type
-class SpotLight(_Light):
-    """Spot light at `position` shining towards `look_at`; intensity in W sr^-1 per channel on
-    its axis; dark beyond `cutoff_angle`, full inside `beam_width` (default 3/4 of the cutoff,
-    as Mitsuba's), a linear falloff in angle between."""
-
-    channel = "intensity"
-    placement = "aim"
-    posed_per_path = True
-
-    type: Literal["spot"]
-    position: Vec3
-    look_at: Vec3
-    intensity: Color = 10.0
-    cutoff_angle: Annotated[float, Field(gt=0, le=90)] = 20.0  # degrees
-    beam_width: Annotated[float, Field(gt=0, le=90)] | None = None  # degrees, <= cutoff
-
-    def emitter(self, value: Any, to_world: Any, asset: Callable[[str], str]) -> dict[str, Any]:
-        """Mitsuba `spot` (a beam wider than the cutoff is the cutoff)."""
-        d = {"type": "spot", "to_world": to_world, "intensity": value, "cutoff_angle": self.cutoff_angle}
-        if self.beam_width is not None:
-            d["beam_width"] = min(self.beam_width, self.cutoff_angle)
-        return d
-
-
-@light_type
-class DirectionalLight(_Light):
-    """Distant light (the sun); `direction` is where its light travels; irradiance in W m^-2
-    per channel on a surface facing it."""
-
-    channel = "irradiance"
-    placement = "direction"
-    posed_per_path = True
-
-    type: Literal["directional"]
-    direction: Vec3
-    irradiance: Color = 1.0
-
-    def emitter(self, value: Any, to_world: Any, asset: Callable[[str], str]) -> dict[str, Any]:
-        """Mitsuba `directional`."""
-        return {"type": "directional", "to_world": to_world, "irradiance": value}
-
-
-@light_type
-class ProjectorLight(_Light):
-    """A slide projector at `position` aimed at `look_at`: the image `file` spread over a
-    frustum `fov` degrees wide (the image's width), its irradiance in W m^-2 per channel on
-    a surface facing it 1 m away, the image's value times `scale` (Mitsuba `projector`)."""
-
-    channel = "scale"
-    channel_size = 1
-    placement = "aim"
-    posed_per_path = True
-    image_files = ("file",)
-
-    type: Literal["projector"]
-    position: Vec3
-    look_at: Vec3
-    file: str
-    fov: Annotated[float, Field(gt=0, lt=180)] = 30.0  # degrees, horizontal
-    scale: NonNegative = 1.0
-
-    def emitter(self, value: Any, to_world: Any, asset: Callable[[str], str]) -> dict[str, Any]:
-        """Mitsuba `projector` with the image as its irradiance texture."""
-        return {"type": "projector", "to_world": to_world, "irradiance": {"type": "bitmap", "filename": asset(self.file)}, "fov": self.fov, "scale": value}
-
-
-Light = Annotated[Union[tuple(LIGHT_TYPES.values())], Field(discriminator="type")]  # type: ignore[valid-type]
 
 
 # --- materials ----------------------------------------------------------------------------
@@ -615,6 +455,7 @@ __all__ = [
     "EnvmapLight",
     "FiniteFloat",
     "ImportSpec",
+    "LIGHT_TYPES",
     "Light",
     "Material",
     "Mesh",
@@ -622,6 +463,7 @@ __all__ = [
     "OutputSettings",
     "Particles",
     "PointLight",
+    "ProjectorLight",
     "Principled",
     "Plastic",
     "Rectangle",
