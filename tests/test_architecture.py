@@ -30,3 +30,19 @@ def test_the_checker_sees_a_loop_and_an_upward_import() -> None:
     assert check.cycles({"a": {"b"}, "b": {"a"}, "c": set()}) == [["a", "b"]]
     assert check.stage("motion.pipeline.scene.loader") < check.stage("motion.pipeline.render.build")
     assert check.stage("motion.cli.main") == len(check.STAGES) - 1
+
+
+def test_no_assert_in_pipeline_or_cli() -> None:
+    """Checks in pipeline/ and cli/ raise: an `assert` vanishes under `python -O`."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    found = [
+        f"{path.relative_to(root)}:{node.lineno}"
+        for folder in ("pipeline", "cli")
+        for path in sorted((root / folder).rglob("*.py"))
+        for node in ast.walk(ast.parse(path.read_text()))
+        if isinstance(node, ast.Assert)
+    ]
+    assert not found, found

@@ -77,7 +77,8 @@ class Simulation:
         if self.bodies is None:
             return {}
         x, q = self.bodies.interpolate(times)
-        assert q is not None
+        if q is None:
+            raise RuntimeError("rigid-body track without orientations (dynamics/track.py)")
         return {
             name: Pose(np.ascontiguousarray(x[:, i]), np.ascontiguousarray(q[:, i]), np.broadcast_to(self.body_scales[i], (times.size, 3)).copy())
             for i, name in enumerate(self.body_names)

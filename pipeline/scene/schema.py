@@ -417,7 +417,8 @@ class OutputSettings(Model):
 
         pattern = self.filename.replace("{name}", scene_name)
         run = re.search(r"#+", pattern)
-        assert run is not None  # guaranteed by the field pattern
+        if run is None:  # the field pattern guarantees a run of '#'
+            raise ValueError(f"output.filename {self.filename!r} has no run of '#' for the frame number")
         digits = f"{frame:0{len(run.group(0))}d}" if frame >= 0 else f"-{-frame:0{len(run.group(0))}d}"
         return pattern[: run.start()] + digits + pattern[run.end() :]
 
