@@ -146,7 +146,8 @@ def test_keys_before_a_shot_at_1001_are_named_and_old_frames_are_foreign(tmp_pat
     rep = report(out)
     assert rep["folder"]["complete"] == "1001-1008" and rep["foreign"] == "0-7"
     manifest = json.loads((out / "deliver" / "manifest.json").read_text())
-    assert {fmt: m["frames"] for fmt, m in manifest["formats"].items()} == {"24p": "1001-1008", "contact": "1001-1008"}
+    made = {name: entry["versions"][entry["latest"]]["frames"] for name, entry in manifest["deliverables"].items()}
+    assert made == {"24p": "1001-1008", "contact": "1001-1008"}
     from motion.pipeline.scene import load_scene
     from motion.pipeline.shot.stale import folder_frames
 

@@ -79,17 +79,20 @@ def look_hash(parts: dict[str, str]) -> str:
     return _digest(parts)
 
 
+MOVING = "moving/"  # the names of motion parts, apart from the look's parts of the same key
+
+
 def part_names(loaded: LoadedScene) -> dict[str, str]:
     """What each part of a frame's key is called in this scene, for the messages of a
     rerun: look parts (`material iron`, `object box`, `light sun`, `the camera`, ...) and
-    motion parts (`box`, `sun`, `the camera`, `the frame's times`) under `motion:<part>`."""
+    motion parts (`box`, `sun`, `the camera`, `the frame's times`) under `MOVING + <part>`."""
     scene = loaded.scene
     order = Order.of(scene)
     names = {"renderer": "the renderer's version", "render": "the render settings", "camera": "the camera", "roles": "which objects and lights move"}
     names.update({f"m{i}": f"material {m.name}" for i, m in enumerate(scene.materials)})
     names.update({f"o{i}": f"object {n}" for i, n in enumerate(order.objects)})
     names.update({f"l{i}": f"light {n}" for i, n in enumerate(order.lights)})
-    names.update({f"motion:o{i}": n for i, n in enumerate(order.objects)})
-    names.update({f"motion:l{i}": n for i, n in enumerate(order.lights)})
-    names.update({"motion:camera": "the camera", "motion:timing": "the frame's times (frame rate or shutter)"})
+    names.update({f"{MOVING}o{i}": n for i, n in enumerate(order.objects)})
+    names.update({f"{MOVING}l{i}": n for i, n in enumerate(order.lights)})
+    names.update({f"{MOVING}camera": "the camera", f"{MOVING}timing": "the frame's times (frame rate or shutter)"})
     return names

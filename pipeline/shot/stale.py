@@ -21,6 +21,7 @@ from typing import Any, Mapping
 from ..errors import FrameIOError
 from ..farm.frames import format_frames
 from ..frame_output import is_complete, read_meta
+from ..render.look import MOVING
 
 
 @dataclass
@@ -137,7 +138,7 @@ def why_stale(path: str, expect: Mapping[str, Any], now: CurrentKeys) -> str | N
             return f"were made from another version of the scene ({_listed([p + ' changed' for p in parts])})"
         return "were made from another version of the scene or its settings"
     if meta.get("motion_hash") != expect.get("motion_hash"):
-        moved = parts_change(meta.get("motion_parts"), now.motion_parts.get(int(expect.get("frame", -1)), {}), now.names, "motion:")
+        moved = parts_change(meta.get("motion_parts"), now.motion_parts.get(int(expect.get("frame", -1)), {}), now.names, MOVING)
         if moved:
             return f"were made from other motion (motion of {_listed(moved)} changed)"
         return "were made from other motion (the scene's animation or simulation changed)"
