@@ -15,8 +15,12 @@ too). A frame is flagged where a region differs by more than 5% of the frame's m
 timeline on CUDA (frames per minute). Writes DIR/gpu-check.json and prints a table; exits
 1 if any trace was disabled, a render failed or a frame is flagged.
 
-On the device machine (../shared/gpu/README.md): `bash .gpu/run.sh python3
-bench/gpu_check.py --out $OUT/check`, with carry [".gpu"].
+`--reference DIR` reads the reference frames from DIR/<example>/ instead of rendering them
+(a device machine without libLLVM: render them first on a CPU with `--make-reference DIR`,
+which renders only the reference variant).
+
+On the device machine (../shared/gpu/README.md): `bash .gpu/run.sh bash tools/gpu_device.sh`,
+with carry [".gpu"] (the kit, and the references in .gpu/refs).
 """
 
 from __future__ import annotations
@@ -100,11 +104,15 @@ def main() -> int:
     parser.add_argument("--scenes", help="comma-separated example files (default: every scenes/*.yaml)")
     parser.add_argument("--showcase", action="store_true", help="also cannonball-splash's whole timeline on CUDA (frames per minute)")
     parser.add_argument("--variants", default="cuda_ad_rgb,llvm_ad_rgb", help="the variant checked and its reference (llvm_ad_rgb,llvm_ad_rgb tries the script on a CPU)")
+    parser.add_argument("--reference", type=Path, help="read the reference frames from DIR/<example>/ instead of rendering them")
+    parser.add_argument("--render-args", default="", help="more `motion render` options for every render, e.g. '--no-denoise --deliver none' where mitsuba-oidn or PyAV is absent")
+    parser.add_argument("--make-reference", type=Path, help="only render the reference variant's frames into DIR/<example>/, then stop")
     args = parser.parse_args()
     sys.path.insert(0, str(ROOT))
     from motion.pipeline.frame_output import read_frame
 
     checked, reference = args.variants.split(",")
+    extra = args.render_args.split()
     names = args.scenes.split(",") if args.scenes else sorted(p.name for p in (ROOT / "scenes").glob("*.yaml"))
     gpu = subprocess.run(["nvidia-smi", "--query-gpu=name,driver_version,memory.total", "--format=csv,noheader"], capture_output=True, text=True).stdout.strip() if shutil.which("nvidia-smi") else "no nvidia-smi"
     results: dict[str, Any] = {"gpu": gpu, "preset": args.preset, "cores": os.cpu_count(), "scenes": {}}
@@ -112,14 +120,24 @@ def main() -> int:
     print(f"# gpu_check: {gpu}; preset {args.preset}")
     print("| scene | cuda exit | disabled traces | cuda s | llvm exit | llvm s | frames | max z | max rel | flagged | device |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
+    if args.make_reference:
+        for name in names:
+            made = render(ROOT / "scenes" / name, reference, args.make_reference / name.rsplit(".", 1)[0], args.preset, extra)
+            print(f"reference {name}: exit {made['code']}, {made['seconds']} s", *made["errors"], sep="\n    ")
+        return 0
     for name in names:
         scene = ROOT / "scenes" / name
         stem = name.rsplit(".", 1)[0]
-        cuda = render(scene, checked, args.out / "cuda" / stem, args.preset)
-        llvm = render(scene, reference, args.out / "llvm" / stem, args.preset)
+        cuda = render(scene, checked, args.out / "cuda" / stem, args.preset, extra)
+        if args.reference:
+            llvm = {"variant": reference, "code": 0 if (args.reference / stem).is_dir() else 1, "seconds": 0.0, "disabled_traces": 0, "frames": [], "errors": []}
+            ref_dir = args.reference / stem
+        else:
+            llvm = render(scene, reference, args.out / "llvm" / stem, args.preset, extra)
+            ref_dir = args.out / "llvm" / stem
         frames = []
         for exr in sorted((args.out / "cuda" / stem).glob("*.exr")):
-            other = args.out / "llvm" / stem / exr.name
+            other = ref_dir / exr.name
             if other.exists():
                 frames.append({"file": exr.name, **compare(read_frame(exr).rgba, read_frame(other).rgba)})
         entry = {"cuda": cuda, "llvm": llvm, "frames": frames}
@@ -131,8 +149,10 @@ def main() -> int:
               f"{max((f['max_z'] for f in frames), default=float('nan'))} | {max((f['max_rel'] for f in frames), default=float('nan'))} | {flagged} | {','.join(devices)} |")
         for line in cuda["errors"] + llvm["errors"]:
             print(f"    {line}")
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / "gpu-check.json").write_text(json.dumps(results, indent=1))  # so far: a timeout keeps it
     if args.showcase:
-        show = render(ROOT / "scenes" / "cannonball-splash.yaml", checked, args.out / "showcase", "preview", ["--frames", "0-71"])
+        show = render(ROOT / "scenes" / "cannonball-splash.yaml", checked, args.out / "showcase", "preview", ["--frames", "0-71", *extra])
         rendered = sum(1 for f in show["frames"] if f["status"] == "rendered")
         show["frames_per_minute"] = round(60 * rendered / max(show["seconds"], 1e-9), 1)
         results["showcase"] = {k: v for k, v in show.items() if k != "frames"}
