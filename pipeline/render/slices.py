@@ -14,9 +14,9 @@ unborn particle collapses to a point, which no ray can hit.
 A deforming mesh is drawn from its render vertices (`meshes.RenderMesh`: one per distinct
 position/uv/normal corner of the file, as Mitsuba's own readers weld them), so it keeps
 its texture coordinates; deformed positions map onto them through `index`. Its vertex
-normals are computed in one place, Mitsuba's `Mesh`: without file normals each slice's
-mesh recomputes them from the positions written (so a deforming mesh at rest has its
-static twin's normals, to float rounding); with file normals, the file's are carried,
+normals are the engine's: without file normals `vertex_normals` (Mitsuba's own scheme,
+from each slice's world-space positions, so a deforming mesh at rest has its static
+twin's normals to float rounding); with file normals, the file's are carried,
 vertex by vertex, by a local frame (the welded mean face normal and the edge to one
 neighbour) from rest to the slice (`slice_normals`: exact when nothing deforms and for
 any rigid turn; hard edges stay hard); `face_normals: true` stays faceted.
@@ -63,6 +63,33 @@ def particle_mesh(positions: np.ndarray, alive: np.ndarray, radius: float, capac
     return verts.reshape(-1, 3), faces.reshape(-1, 3)
 
 
+def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The engine's vertex normals [R, 3] of a triangle mesh (`positions` [R, 3] of its
+    render vertices, `faces` [F, 3]): Mitsuba 3.9's `Mesh::recompute_vertex_normals`, which
+    its OBJ and PLY readers apply to a static mesh without normals - per render vertex, the
+    unit normals of the faces around it weighted by the face's angle at that corner
+    (Thuermer & Wuethrich 1998), normalised; a face without area adds nothing and a vertex
+    left with nothing gets (1, 0, 0), as Mitsuba's. Equal to Mitsuba's to float rounding
+    (tests/test_render_assets.py); summed in face order (np.bincount), so the bits never
+    depend on the thread count - Mitsuba's own, an atomic scatter-add across drjit's
+    threads, differs from run to run in the last bit on a 65k-triangle mesh."""
+    p = np.asarray(positions, np.float32)
+    f = np.asarray(faces)
+    a, b, c = p[f[:, 0]], p[f[:, 1]], p[f[:, 2]]
+    ab, bc, ca = b - a, c - b, a - c
+    cross = np.cross(ab, -ca)  # the face normal, |.| = twice the area
+    double_area = np.sqrt(np.einsum("ij,ij->i", cross, cross))
+    # each corner's angle between the edges leaving it (slot 0: ab, -ca; 1: bc, -ab; 2: ca, -bc),
+    # as atan2(|e1 x e2|, e1 . e2): Mitsuba's acos of the unit edges' dot, without normalising them
+    dots = -np.stack([np.einsum("ij,ij->i", ab, ca), np.einsum("ij,ij->i", bc, ab), np.einsum("ij,ij->i", ca, bc)])
+    weight = np.divide(np.arctan2(double_area, dots), double_area, out=np.zeros_like(dots), where=double_area > 0)
+    weighted = (cross[None, :, :] * weight[:, :, None]).reshape(-1, 3)  # [3 slots x F, 3]: unit normal x angle
+    corners = f.T.ravel()
+    acc = np.stack([np.bincount(corners, weighted[:, axis], minlength=len(p)) for axis in range(3)], axis=1)
+    length = np.sqrt(np.einsum("ij,ij->i", acc, acc))[:, None]
+    return np.where(length > 0, acc / np.where(length > 0, length, 1.0), np.array([1.0, 0.0, 0.0]))
+
+
 class RestNormals(NamedTuple):
     """A deforming mesh's file normals at rest under one scale, as `slice_normals` carries
     them: each render vertex's unit normal in its file vertex's rest frame (`local` [R, 3])
@@ -80,8 +107,9 @@ def _frame_axes(positions: np.ndarray, mesh: RenderMesh) -> np.ndarray:
     """The axis of each file vertex's carrying frame [V, 3] (`positions` [V, 3]): the unit
     area-weighted mean of the normals of the faces around it, welded by file vertex so that
     the render vertices of a uv seam or a hard edge share one frame. Not a normal anyone
-    draws (those are the file's or Mitsuba's): the direction whose turn from rest to a
-    slice `slice_normals` applies to the file's normals."""
+    draws (those are the file's or `vertex_normals`): the direction whose turn from rest to
+    a slice `slice_normals` applies to the file's normals (area-weighted: the closer
+    estimate of a deformation's turn, docs/rendering.md)."""
     p = positions[mesh.index]
     f = mesh.faces
     face_n = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])  # |.| = 2 area
@@ -112,7 +140,7 @@ def _frames(positions: np.ndarray, axes: np.ndarray, neighbour: np.ndarray) -> t
 
 def rest_normals(rest: np.ndarray, mesh: RenderMesh, scale: np.ndarray) -> RestNormals | None:
     """What `slice_normals` needs of the bind mesh under `scale`; None where the file has
-    no normals (its slices' vertex normals are then Mitsuba's own, `update_group`)."""
+    no normals (its slices' vertex normals are then `vertex_normals`)."""
     if mesh.normals is None:
         return None
     neighbour = neighbours(mesh, len(rest))
@@ -169,7 +197,7 @@ class SliceGroup:
     radius: float = 0.0
     key: str = field(default="")
     mesh: RenderMesh | None = None  # a deforming mesh's render vertices
-    smooth: bool = False  # vertex normals: the file's carried (`slice_normals`), else Mitsuba's own
+    smooth: bool = False  # vertex normals: the file's carried (`slice_normals`), else `vertex_normals`
     rest: np.ndarray | None = None  # the bind mesh's file vertices [V, 3]
     emitter: dict[str, Any] | None = None  # the area emitter every slice carries
     emissive: bool = False
@@ -209,10 +237,10 @@ def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bs
 
 def update_group(mi: Any, group: SliceGroup, per_slice_vertices: list[np.ndarray], per_slice_normals: list[np.ndarray] | None = None) -> None:
     """Write each slice's world-space vertices (rebuilds that slice's small BVH) and, for a
-    mesh whose file has normals, its world-space normals (`slice_normals`). A smooth mesh
-    given no normals gets Mitsuba's own: `Mesh.parameters_changed` recomputes a mesh's
-    vertex normals from new positions (`recompute_vertex_normals`, angle-weighted per render
-    vertex), as its OBJ and PLY readers do for a static mesh (docs/rendering.md)."""
+    smooth mesh, its world-space normals: the file's carried (`slice_normals`) or the
+    engine's (`vertex_normals`). Mitsuba keeps normals written with the positions (given
+    positions alone, `Mesh.parameters_changed` would recompute them itself, by an atomic
+    scatter-add whose last bits vary between runs)."""
     for k, (params, verts) in enumerate(zip(group.params, per_slice_vertices)):
         params[f"{group.key}.vertex_positions"] = mi.Float(np.asarray(verts, np.float32).ravel())
         if per_slice_normals is not None:
@@ -307,13 +335,16 @@ class SlicedGeometry:
                 mesh = g.mesh if g.mesh is not None else plain_render_mesh(g.capacity, g.faces)
                 for i in index:
                     scaled = local[i] * s[i]
-                    per_slice.append(quat_rotate(q[i], scaled[mesh.index]) + t[i])
+                    world = np.asarray(quat_rotate(q[i], scaled[mesh.index]) + t[i], np.float32)
+                    per_slice.append(world)
                     if g.smooth and g.rest is not None and mesh.normals is not None:
                         key = tuple(float(c) for c in s[i])
                         if key not in g.rest_cache:
                             g.rest_cache.clear()
                             g.rest_cache[key] = rest_normals(g.rest, mesh, s[i])
                         normals.append(quat_rotate(q[i], slice_normals(scaled, g.rest_cache[key], mesh)))
+                    elif g.smooth:  # from the positions Mitsuba is given, as it would
+                        normals.append(vertex_normals(world, mesh.faces))
             update_group(self._mi, g, per_slice, normals or None)
 
     def _grow(self, group: SliceGroup, needed: int) -> None:
