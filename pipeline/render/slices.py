@@ -13,11 +13,14 @@ unborn particle collapses to a point, which no ray can hit.
 
 A deforming mesh is drawn from its render vertices (`meshes.RenderMesh`: one per distinct
 position/uv/normal corner of the file, as Mitsuba's own readers weld them), so it keeps
-its texture coordinates; deformed positions map onto them through `index`. Its normals
-per slice (`slice_normals`): the file's normals carried, vertex by vertex, by a local
-frame (the welded smooth normal and the edge to one neighbour) from rest to the slice
-(exact when nothing deforms and for any rigid turn; hard edges stay hard); without file
-normals, the smooth normals themselves; `face_normals: true` stays faceted. An emissive object or particle system
+its texture coordinates; deformed positions map onto them through `index`. Its vertex
+normals are the engine's: without file normals `vertex_normals` (Mitsuba's own scheme,
+from each slice's world-space positions, so a deforming mesh at rest has its static
+twin's normals to float rounding); with file normals, the file's are carried,
+vertex by vertex, by a local frame (the welded mean face normal and the edge to one
+neighbour) from rest to the slice (`slice_normals`: exact when nothing deforms and for
+any rigid turn; hard edges stay hard); `face_normals: true` stays faceted.
+An emissive object or particle system
 carries its area emitter on every slice: the integrator samples the slice of the path's
 time and weights it by MIS (world.py, integrator.py), as it does emissive movers.
 """
@@ -25,7 +28,7 @@ time and weights it by MIS (world.py, integrator.py), as it does emissive movers
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, NamedTuple
 
 import numpy as np
 
@@ -60,17 +63,59 @@ def particle_mesh(positions: np.ndarray, alive: np.ndarray, radius: float, capac
     return verts.reshape(-1, 3), faces.reshape(-1, 3)
 
 
-def smooth_normals(positions: np.ndarray, mesh: RenderMesh, per_file_vertex: bool = False) -> np.ndarray:
-    """Area-weighted vertex normals [R, 3] of the render vertices, welded by file vertex
-    (a uv seam does not crease them): `positions` [V, 3] are the file vertices. With
-    `per_file_vertex`, the welded normals [V, 3] themselves."""
+def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The engine's vertex normals [R, 3] of a triangle mesh (`positions` [R, 3] of its
+    render vertices, `faces` [F, 3]): Mitsuba 3.9's `Mesh::recompute_vertex_normals`, which
+    its OBJ and PLY readers apply to a static mesh without normals - per render vertex, the
+    unit normals of the faces around it weighted by the face's angle at that corner
+    (Thuermer & Wuethrich 1998), normalised; a face without area adds nothing and a vertex
+    left with nothing gets (1, 0, 0), as Mitsuba's. Equal to Mitsuba's to float rounding
+    (tests/test_render_assets.py); summed in face order (np.bincount), so the bits never
+    depend on the thread count - Mitsuba's own, an atomic scatter-add across drjit's
+    threads, differs from run to run in the last bit on a 65k-triangle mesh."""
+    p = np.asarray(positions, np.float32)
+    f = np.asarray(faces)
+    a, b, c = p[f[:, 0]], p[f[:, 1]], p[f[:, 2]]
+    ab, bc, ca = b - a, c - b, a - c
+    cross = np.cross(ab, -ca)  # the face normal, |.| = twice the area
+    double_area = np.sqrt(np.einsum("ij,ij->i", cross, cross))
+    # each corner's angle between the edges leaving it (slot 0: ab, -ca; 1: bc, -ab; 2: ca, -bc),
+    # as atan2(|e1 x e2|, e1 . e2): Mitsuba's acos of the unit edges' dot, without normalising them
+    dots = -np.stack([np.einsum("ij,ij->i", ab, ca), np.einsum("ij,ij->i", bc, ab), np.einsum("ij,ij->i", ca, bc)])
+    weight = np.divide(np.arctan2(double_area, dots), double_area, out=np.zeros_like(dots), where=double_area > 0)
+    weighted = (cross[None, :, :] * weight[:, :, None]).reshape(-1, 3)  # [3 slots x F, 3]: unit normal x angle
+    corners = f.T.ravel()
+    acc = np.stack([np.bincount(corners, weighted[:, axis], minlength=len(p)) for axis in range(3)], axis=1)
+    length = np.sqrt(np.einsum("ij,ij->i", acc, acc))[:, None]
+    return np.where(length > 0, acc / np.where(length > 0, length, 1.0), np.array([1.0, 0.0, 0.0]))
+
+
+class RestNormals(NamedTuple):
+    """A deforming mesh's file normals at rest under one scale, as `slice_normals` carries
+    them: each render vertex's unit normal in its file vertex's rest frame (`local` [R, 3])
+    and itself (`normals` [R, 3]); the frames' axes [V, 3], degeneracy [V] and neighbours
+    [V] (`_frames`)."""
+
+    local: np.ndarray
+    normals: np.ndarray
+    axes: np.ndarray
+    bad: np.ndarray
+    neighbour: np.ndarray
+
+
+def _frame_axes(positions: np.ndarray, mesh: RenderMesh) -> np.ndarray:
+    """The axis of each file vertex's carrying frame [V, 3] (`positions` [V, 3]): the unit
+    area-weighted mean of the normals of the faces around it, welded by file vertex so that
+    the render vertices of a uv seam or a hard edge share one frame. Not a normal anyone
+    draws (those are the file's or `vertex_normals`): the direction whose turn from rest to
+    a slice `slice_normals` applies to the file's normals (area-weighted: the closer
+    estimate of a deformation's turn, docs/rendering.md)."""
     p = positions[mesh.index]
     f = mesh.faces
     face_n = np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]])  # |.| = 2 area
     corners = mesh.index[f].ravel()
     weights = np.repeat(face_n, 3, axis=0)
-    acc = _unit(np.stack([np.bincount(corners, weights[:, c], minlength=len(positions)) for c in range(3)], axis=1))
-    return acc if per_file_vertex else acc[mesh.index]
+    return _unit(np.stack([np.bincount(corners, weights[:, c], minlength=len(positions)) for c in range(3)], axis=1))
 
 
 def neighbours(mesh: RenderMesh, count: int) -> np.ndarray:
@@ -82,43 +127,56 @@ def neighbours(mesh: RenderMesh, count: int) -> np.ndarray:
     return out
 
 
-def _frames(positions: np.ndarray, normals: np.ndarray, neighbour: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _frames(positions: np.ndarray, axes: np.ndarray, neighbour: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A frame [V, 3, 3] per file vertex (columns: the edge to its neighbour made normal to
-    n, their cross product, n) and where it is degenerate (an edge along n)."""
+    the axis, their cross product, the axis) and where it is degenerate (no axis, or an
+    edge along it)."""
     e = positions[neighbour] - positions
-    t = e - np.sum(e * normals, axis=1, keepdims=True) * normals
+    t = e - np.sum(e * axes, axis=1, keepdims=True) * axes
     length = np.linalg.norm(t, axis=1)
     t = _unit(t)
-    return np.stack([t, np.cross(normals, t), normals], axis=2), length < 1e-12
+    return np.stack([t, np.cross(axes, t), axes], axis=2), (length < 1e-12) | ~np.any(axes != 0, axis=1)
 
 
-def rest_normals(rest: np.ndarray, mesh: RenderMesh, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """What `slice_normals` needs of the bind mesh under `scale`: the file normals
-    expressed in each file vertex's rest frame [R, 3] (a normal under a scale S is
-    S^-1 n), the rest frames' degeneracy [V] and the neighbours [V]; None where the file
-    has no normals."""
+def rest_normals(rest: np.ndarray, mesh: RenderMesh, scale: np.ndarray) -> RestNormals | None:
+    """What `slice_normals` needs of the bind mesh under `scale`; None where the file has
+    no normals (its slices' vertex normals are then `vertex_normals`)."""
     if mesh.normals is None:
         return None
     neighbour = neighbours(mesh, len(rest))
-    frames, bad = _frames(rest * scale, smooth_normals(rest * scale, mesh, True), neighbour)
-    n = _unit(mesh.normals / scale)
+    axes = _frame_axes(rest * scale, mesh)
+    frames, bad = _frames(rest * scale, axes, neighbour)
+    n = _unit(mesh.normals / scale)  # a normal under a scale S is S^-1 n
     local = np.einsum("rji,rj->ri", frames[mesh.index], n)  # F_rest^T n
-    return local, bad, neighbour
+    return RestNormals(local, n, axes, bad, neighbour)
 
 
-def slice_normals(positions: np.ndarray, rest: tuple[np.ndarray, np.ndarray, np.ndarray] | None, mesh: RenderMesh) -> np.ndarray:
-    """Object-space normals [R, 3] of a deformed mesh (file vertices [V, 3], scaled): each
-    file normal carried by its vertex's local frame, n' = F_deformed F_rest^T n, the frame
-    being the welded smooth normal and the edge to one neighbour (exact for any rigid
-    turn, and for no deformation: n' = n); the smooth normals themselves where the file
-    has none or a frame is degenerate. `rest`: `rest_normals` under the same scale."""
-    b = smooth_normals(positions, mesh, True)
-    if mesh.normals is None or rest is None:
-        return b[mesh.index]
-    local, bad, neighbour = rest
-    frames, bad_now = _frames(positions, b, neighbour)
-    turned = np.einsum("rij,rj->ri", frames[mesh.index], local)
-    return _unit(np.where((bad | bad_now)[mesh.index][:, None], b[mesh.index], turned))
+def slice_normals(positions: np.ndarray, rest: RestNormals, mesh: RenderMesh) -> np.ndarray:
+    """Object-space normals [R, 3] of a deformed mesh (file vertices [V, 3], scaled) whose
+    file has normals: each file normal carried by its vertex's frame (`_frames`),
+    n' = F_slice F_rest^T n: exact for any rigid turn (twist included) and, with no
+    deformation, n' = n (the static mesh's normals to float rounding); hard edges stay
+    hard. Where a frame is degenerate (at rest or now) the normal takes the shortest turn
+    of the frame's axis instead, and stays as it is at rest where that turn is undefined.
+    `rest`: `rest_normals` under the same scale. No vertex normal is computed here: what is
+    drawn is the file's, turned."""
+    axes = _frame_axes(positions, mesh)
+    frames, bad_now = _frames(positions, axes, rest.neighbour)
+    turned = np.einsum("rij,rj->ri", frames[mesh.index], rest.local)
+    bad = (rest.bad | bad_now)[mesh.index]
+    if bad.any():
+        turned[bad] = _shortest_turn(rest.axes[mesh.index][bad], axes[mesh.index][bad], rest.normals[bad])
+    return _unit(turned)
+
+
+def _shortest_turn(a: np.ndarray, b: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """v [N, 3] turned by the shortest rotation taking unit a to unit b (Rodrigues); v
+    itself where a or b is zero or they are opposite."""
+    c = np.sum(a * b, axis=1, keepdims=True)
+    k = np.cross(a, b)
+    ok = (c > -1.0 + 1e-9) & np.any(a != 0, axis=1, keepdims=True) & np.any(b != 0, axis=1, keepdims=True)
+    turned = c * v + np.cross(k, v) + np.sum(k * v, axis=1, keepdims=True) / np.where(ok, 1.0 + c, 1.0) * k
+    return np.where(ok, turned, v)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -139,7 +197,7 @@ class SliceGroup:
     radius: float = 0.0
     key: str = field(default="")
     mesh: RenderMesh | None = None  # a deforming mesh's render vertices
-    smooth: bool = False  # per-slice vertex normals (`slice_normals`)
+    smooth: bool = False  # vertex normals: the file's carried (`slice_normals`), else `vertex_normals`
     rest: np.ndarray | None = None  # the bind mesh's file vertices [V, 3]
     emitter: dict[str, Any] | None = None  # the area emitter every slice carries
     emissive: bool = False
@@ -179,7 +237,10 @@ def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bs
 
 def update_group(mi: Any, group: SliceGroup, per_slice_vertices: list[np.ndarray], per_slice_normals: list[np.ndarray] | None = None) -> None:
     """Write each slice's world-space vertices (rebuilds that slice's small BVH) and, for a
-    smooth mesh, its world-space normals."""
+    smooth mesh, its world-space normals: the file's carried (`slice_normals`) or the
+    engine's (`vertex_normals`). Mitsuba keeps normals written with the positions (given
+    positions alone, `Mesh.parameters_changed` would recompute them itself, by an atomic
+    scatter-add whose last bits vary between runs)."""
     for k, (params, verts) in enumerate(zip(group.params, per_slice_vertices)):
         params[f"{group.key}.vertex_positions"] = mi.Float(np.asarray(verts, np.float32).ravel())
         if per_slice_normals is not None:
@@ -274,13 +335,16 @@ class SlicedGeometry:
                 mesh = g.mesh if g.mesh is not None else plain_render_mesh(g.capacity, g.faces)
                 for i in index:
                     scaled = local[i] * s[i]
-                    per_slice.append(quat_rotate(q[i], scaled[mesh.index]) + t[i])
-                    if g.smooth and g.rest is not None:
+                    world = np.asarray(quat_rotate(q[i], scaled[mesh.index]) + t[i], np.float32)
+                    per_slice.append(world)
+                    if g.smooth and g.rest is not None and mesh.normals is not None:
                         key = tuple(float(c) for c in s[i])
                         if key not in g.rest_cache:
                             g.rest_cache.clear()
                             g.rest_cache[key] = rest_normals(g.rest, mesh, s[i])
                         normals.append(quat_rotate(q[i], slice_normals(scaled, g.rest_cache[key], mesh)))
+                    elif g.smooth:  # from the positions Mitsuba is given, as it would
+                        normals.append(vertex_normals(world, mesh.faces))
             update_group(self._mi, g, per_slice, normals or None)
 
     def _grow(self, group: SliceGroup, needed: int) -> None:
