@@ -393,7 +393,7 @@ def hold_to_cap(folder: Path, cap_bytes: int | None, cap_files: int | None = Non
 # Every cache motion keeps under the root; `motion cache info` lists them. A new cache is one
 # entry here and its use through the Store's methods.
 STORES: dict[str, Store] = {s.name: s for s in (
-    Store("assets", "assets", "meshes and roughness textures converted for Mitsuba (render/assets.py)", tag="ply-v1"),
+    Store("assets", "assets", "meshes and roughness textures converted for Mitsuba (render/assets.py)", tag="ply-v2"),
     Store("imports", "assets/imports", "meshes, textures and skins converted from glTF and USD imports (scene/imports/cache.py)", tag="import-v2"),
     Store("import-records", "assets/imports/records", "the records of glTF and USD imports (scene/imports/memo.py)", tag="records-v3", cap_files=4096),
     Store("passes", "validation/assets", "asset files whose bytes passed their checks (scene/checked.py)", tag="pass-v2",

@@ -379,3 +379,30 @@ def _ply_binary(data: bytes, offset: int, elements: list[tuple[str, int, list[tu
     if trailing.strip():
         raise MeshFormatError(f"{len(trailing)} bytes after the last declared element (the declared counts do not match the data)")
     return verts, _fan(faces)
+
+
+def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The engine's vertex normals [R, 3] of a triangle mesh (`positions` [R, 3] of its
+    render vertices, `faces` [F, 3]): Mitsuba 3.9's `Mesh::recompute_vertex_normals`, which
+    its OBJ and PLY readers apply to a static mesh without normals - per render vertex, the
+    unit normals of the faces around it weighted by the face's angle at that corner
+    (Thuermer & Wuethrich 1998), normalised; a face without area adds nothing and a vertex
+    left with nothing gets (1, 0, 0), as Mitsuba's. Equal to Mitsuba's to float rounding
+    (tests/test_render_assets.py); the asset cache writes them into a static mesh without file normals (render/assets.py) and the slices of a deforming one (render/slices.py); summed in face order (np.bincount), so the bits never
+    depend on the thread count - Mitsuba's own, an atomic scatter-add across drjit's
+    threads, differs from run to run in the last bit on a 65k-triangle mesh."""
+    p = np.asarray(positions, np.float32)
+    f = np.asarray(faces)
+    a, b, c = p[f[:, 0]], p[f[:, 1]], p[f[:, 2]]
+    ab, bc, ca = b - a, c - b, a - c
+    cross = np.cross(ab, -ca)  # the face normal, |.| = twice the area
+    double_area = np.sqrt(np.einsum("ij,ij->i", cross, cross))
+    # each corner's angle between the edges leaving it (slot 0: ab, -ca; 1: bc, -ab; 2: ca, -bc),
+    # as atan2(|e1 x e2|, e1 . e2): Mitsuba's acos of the unit edges' dot, without normalising them
+    dots = -np.stack([np.einsum("ij,ij->i", ab, ca), np.einsum("ij,ij->i", bc, ab), np.einsum("ij,ij->i", ca, bc)])
+    weight = np.divide(np.arctan2(double_area, dots), double_area, out=np.zeros_like(dots), where=double_area > 0)
+    weighted = (cross[None, :, :] * weight[:, :, None]).reshape(-1, 3)  # [3 slots x F, 3]: unit normal x angle
+    corners = f.T.ravel()
+    acc = np.stack([np.bincount(corners, weighted[:, axis], minlength=len(p)) for axis in range(3)], axis=1)
+    length = np.sqrt(np.einsum("ij,ij->i", acc, acc))[:, None]
+    return np.where(length > 0, acc / np.where(length > 0, length, 1.0), np.array([1.0, 0.0, 0.0]))

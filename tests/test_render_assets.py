@@ -478,7 +478,7 @@ def test_vertex_normals_are_mitsubas(tmp_path: Path) -> None:
     area (Mitsuba's (1, 0, 0))."""
     activate()
     from motion.pipeline.meshes import load_mesh, load_render_mesh
-    from motion.pipeline.render.slices import vertex_normals
+    from motion.pipeline.meshes import vertex_normals
 
     for nu, nv, stretch in ((12, 7, 1.0), (64, 32, 3.0)):
         _write_ball(tmp_path, nu, nv, normals=False)
@@ -489,6 +489,36 @@ def test_vertex_normals_are_mitsubas(tmp_path: Path) -> None:
     p = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [2, 0, 0]], np.float32)
     faces = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [0, 1, 4]])
     np.testing.assert_allclose(vertex_normals(p, faces), _mitsuba_normals(p, faces), atol=1e-6)
+
+
+@pytest.mark.parametrize("normals", [False, True], ids=["no-file-normals", "file-normals"])
+def test_a_static_mesh_gets_the_engines_normals_from_the_asset_cache(tmp_path: Path, normals: bool) -> None:
+    """One computation of vertex normals for static and deforming meshes: the converted PLY
+    of a mesh without `vn` holds `meshes.vertex_normals` of its own vertices, bit for bit
+    (what a deforming mesh's slices hold; Mitsuba's PLY reader normalises them once more on
+    load, a last-bit change), which is Mitsuba's scheme to float rounding; a mesh with `vn`
+    keeps the file's. (Before: the normals Mitsuba's reader computed, whose
+    atomic sum varies with the thread count on large meshes.)"""
+    activate()
+    import mitsuba as mi
+
+    from motion.pipeline.meshes import load_render_mesh, vertex_normals
+    from motion.pipeline.render.assets import mesh_file
+
+    _write_ball(tmp_path, 24, 12, normals=normals)
+    ply = mesh_file(tmp_path / "ball.obj")
+    converted = mi.traverse(mi.load_dict({"type": "ply", "filename": str(ply)}))
+    positions = np.array(converted["vertex_positions"], dtype=np.float32).reshape(-1, 3)
+    faces = np.array(converted["faces"], dtype=np.int64).reshape(-1, 3)
+    got = np.array(converted["vertex_normals"], dtype=np.float32).reshape(-1, 3)
+    if normals:
+        file_n = load_render_mesh(tmp_path / "ball.obj").normals
+        np.testing.assert_allclose(got, file_n / np.linalg.norm(file_n, axis=1, keepdims=True), atol=1e-6)
+    else:
+        ours = vertex_normals(positions, faces).astype(np.float32)
+        np.testing.assert_array_equal(load_render_mesh(ply).normals, ours)  # the file holds ours, bit for bit
+        np.testing.assert_allclose(got, ours, atol=2.5e-7)
+        np.testing.assert_allclose(got, _mitsuba_normals(positions, faces), atol=1e-6)
 
 
 def test_deforming_slice_normals_do_not_depend_on_the_thread_count(tmp_path: Path) -> None:

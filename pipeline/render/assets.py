@@ -15,7 +15,7 @@ from typing import Callable
 
 from ..cache import STORES, file_digest, snapshot
 from ..limits import MAX_IMAGE_BYTES, MAX_MESH_BYTES
-from ..meshes import cache_entry_whole
+from ..meshes import cache_entry_whole, load_render_mesh, vertex_normals
 
 STORE = STORES["assets"]
 CONVERSION_VERSION = STORE.tag
@@ -28,14 +28,26 @@ def assets_dir() -> Path:
 
 
 def mesh_file(source: Path) -> Path:
-    """The cached PLY for a mesh source (.obj or .ply), converting it on first use."""
+    """The cached PLY for a mesh source (.obj or .ply), converting it on first use. A
+    source without normals gets the engine's (`meshes.vertex_normals`, Mitsuba's scheme
+    summed in a fixed order) rather than those Mitsuba's reader computed: the same normals
+    as the slices of the same mesh deforming, and the same bits on every machine whatever
+    its thread count (Mitsuba's own sum is an atomic scatter-add)."""
     source = Path(source)
 
     def write(src: Path, tmp: str) -> None:
         import mitsuba as mi
+        import numpy as np
 
         kind = "ply" if source.suffix.lower() == ".ply" else "obj"
-        mi.load_dict({"type": kind, "filename": str(src)}).write_ply(tmp)
+        mesh = mi.load_dict({"type": kind, "filename": str(src)})
+        if mesh.has_vertex_normals() and load_render_mesh(src).normals is None:
+            params = mi.traverse(mesh)
+            positions = np.array(params["vertex_positions"], dtype=np.float32).reshape(-1, 3)
+            faces = np.array(params["faces"], dtype=np.int64).reshape(-1, 3)
+            params["vertex_normals"] = mi.Float(vertex_normals(positions, faces).astype(np.float32).ravel())
+            params.update()
+        mesh.write_ply(tmp)
 
     return _converted(source, source.suffix.lower(), ".ply", write, MAX_MESH_BYTES)
 

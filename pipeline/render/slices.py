@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any, Callable, NamedTuple
 
 import numpy as np
 
-from ..meshes import RenderMesh, load_render_mesh, plain_render_mesh
+from ..meshes import RenderMesh, load_render_mesh, plain_render_mesh, vertex_normals
 from ..motion.pose import quat_rotate
 from ..scene.loader import LoadedScene
 from ..scene.schema import Mesh, Particles
@@ -61,33 +61,6 @@ def particle_mesh(positions: np.ndarray, alive: np.ndarray, radius: float, capac
     verts = centres[:, None, :] + r[:, None, None] * _OCTA_V[None, :, :]
     faces = _OCTA_F[None, :, :] + (np.arange(capacity, dtype=np.uint32) * _NV)[:, None, None]
     return verts.reshape(-1, 3), faces.reshape(-1, 3)
-
-
-def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """The engine's vertex normals [R, 3] of a triangle mesh (`positions` [R, 3] of its
-    render vertices, `faces` [F, 3]): Mitsuba 3.9's `Mesh::recompute_vertex_normals`, which
-    its OBJ and PLY readers apply to a static mesh without normals - per render vertex, the
-    unit normals of the faces around it weighted by the face's angle at that corner
-    (Thuermer & Wuethrich 1998), normalised; a face without area adds nothing and a vertex
-    left with nothing gets (1, 0, 0), as Mitsuba's. Equal to Mitsuba's to float rounding
-    (tests/test_render_assets.py); summed in face order (np.bincount), so the bits never
-    depend on the thread count - Mitsuba's own, an atomic scatter-add across drjit's
-    threads, differs from run to run in the last bit on a 65k-triangle mesh."""
-    p = np.asarray(positions, np.float32)
-    f = np.asarray(faces)
-    a, b, c = p[f[:, 0]], p[f[:, 1]], p[f[:, 2]]
-    ab, bc, ca = b - a, c - b, a - c
-    cross = np.cross(ab, -ca)  # the face normal, |.| = twice the area
-    double_area = np.sqrt(np.einsum("ij,ij->i", cross, cross))
-    # each corner's angle between the edges leaving it (slot 0: ab, -ca; 1: bc, -ab; 2: ca, -bc),
-    # as atan2(|e1 x e2|, e1 . e2): Mitsuba's acos of the unit edges' dot, without normalising them
-    dots = -np.stack([np.einsum("ij,ij->i", ab, ca), np.einsum("ij,ij->i", bc, ab), np.einsum("ij,ij->i", ca, bc)])
-    weight = np.divide(np.arctan2(double_area, dots), double_area, out=np.zeros_like(dots), where=double_area > 0)
-    weighted = (cross[None, :, :] * weight[:, :, None]).reshape(-1, 3)  # [3 slots x F, 3]: unit normal x angle
-    corners = f.T.ravel()
-    acc = np.stack([np.bincount(corners, weighted[:, axis], minlength=len(p)) for axis in range(3)], axis=1)
-    length = np.sqrt(np.einsum("ij,ij->i", acc, acc))[:, None]
-    return np.where(length > 0, acc / np.where(length > 0, length, 1.0), np.array([1.0, 0.0, 0.0]))
 
 
 class RestNormals(NamedTuple):
