@@ -17,10 +17,11 @@ render-cannonball-full: setup
 	.venv/bin/motion render scenes/cannonball.yaml -o out/cannonball $(ARGS)
 
 # the suite on every core (pytest-xdist; a module's tests stay on one worker, so its shared
-# fixtures are made once); ARGS="-n 0" runs it in one process
+# fixtures are made once); ARGS="-n 0" runs it in one process. Tests marked `slow` are left
+# out; ARGS="-m slow" runs only them (the later -m wins), as CI's second step does (.ci/run)
 test:
 	@bash tools/setup.sh --test
-	.venv/bin/python -m pytest -q -n auto --dist loadscope $(ARGS)
+	.venv/bin/python -m pytest -q -n auto --dist loadscope -m "not slow" $(ARGS)
 
 bench: setup
 	for b in bench/bench_*.py; do echo "== $$b"; .venv/bin/python $$b || exit 1; done

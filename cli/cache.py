@@ -62,33 +62,43 @@ def cache_key() -> None:
 
 @cache.command("warm")
 @click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--preset", help="The preset the CI job renders with (its resolution and depth make its kernels).")
-def cache_warm(scene: Path, preset: str | None) -> None:
-    """Compile SCENE's kernels into the kernel cache by rendering its first frame (into a
-    temporary folder, then removed), so a CI job's first frame is a warm one."""
+@click.option("--preset", help="The preset the CI job renders with (its resolution, depth and frames make its kernels).")
+@click.option("--frames", "frames_spec", metavar="SPEC", help="The frames the job renders (its --frames); default: the preset's frames when it names a count, else the first frame.")
+def cache_warm(scene: Path, preset: str | None, frames_spec: str | None) -> None:
+    """Compile SCENE's kernels into the kernel cache by rendering the frames the CI job
+    renders (into a temporary folder, then removed), so its first frame is a warm one."""
+    import logging
     import tempfile
 
     from motion.pipeline.cache import kernels_dir
-    from motion.pipeline.render.assets import info
+    from motion.pipeline.presets import load_preset
     from motion.pipeline.scene import load_scene
     from motion.pipeline.shot import RenderRequest, run_render
 
-    before = info(kernels_dir()).files
-    first = load_scene(scene).scene.timeline.first
-    import logging
-
+    before = kernel_files(kernels_dir())
+    frames: tuple[int, ...] | None = None
+    if not frames_spec and not (preset and load_preset(preset)[0].frame_count):
+        frames = (load_scene(scene).scene.timeline.first,)  # a whole shot's frames would be the job itself
     log = logging.getLogger("motion")
     level = log.level
     with tempfile.TemporaryDirectory(prefix="motion-warm-") as tmp:
         log.setLevel(max(level, logging.WARNING))  # the render's lines name files in a folder removed at once
         try:
-            rep = run_render(RenderRequest(scene=scene, output_dir=Path(tmp), frames=(first,), preset=preset, deliver="none",
-                                           progress=False, report=Path(tmp) / "report.json"))
+            rep = run_render(RenderRequest(scene=scene, output_dir=Path(tmp), frames=frames, frames_spec=frames_spec, preset=preset,
+                                           deliver="none", progress=False, report=Path(tmp) / "report.json"))
         finally:
             log.setLevel(level)
-    compiled = sum(int(r.get("kernels_compiled") or 0) for r in rep.get("frames", []))
-    after = info(kernels_dir()).files
-    click.echo(f"kernels: {compiled} compiled for {scene} (frame {first}); {after} files ({after - before:+d}) in {kernels_dir()}")
+    rows = rep.get("frames", [])
+    compiled = sum(int(r.get("kernels_compiled") or 0) for r in rows)
+    done = ",".join(str(r["frame"]) for r in rows)
+    after = kernel_files(kernels_dir())
+    click.echo(f"kernels: {compiled} compiled for {scene} (frames {done}); {len(after)} kernel files ({len(after - before):+d}) in {kernels_dir()}")
+
+
+def kernel_files(folder: Path) -> set[str]:
+    """The names of drjit's kernel files in `folder` (`*.bin`: not its `sweep.stamp` nor a
+    writer's `*.tmp`, which come and go beside them)."""
+    return {p.name for p in folder.glob("*.bin")} if folder.is_dir() else set()
 
 
 commands = [cache]

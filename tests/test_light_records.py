@@ -56,3 +56,34 @@ def test_each_record_makes_its_own_frame(tmp_path: Path) -> None:
     np.testing.assert_allclose(quat_rotate(poses["sun"].rotation[0], z), [0.0, 0.0, -1.0], atol=1e-12)
     np.testing.assert_allclose(poses["light2"].translation[0], [3.0, 4.0, 6.0])
     assert {name for name, record in LIGHT_TYPES.items() if record.rigid_frame} == {"point", "spot", "directional", "projector"}
+
+
+def test_a_second_environment_light_is_a_validation_error(tmp_path: Path) -> None:
+    """Mitsuba takes one environment emitter a scene: a constant and an envmap (or two of
+    either) validated fine and then failed every frame ("Only one environment emitter can
+    be specified per scene", 3 attempts each). Now `validate` and `render` say which light,
+    where, and what is expected, in one line each, exit 2, and the render makes nothing."""
+    import subprocess
+
+    from farm_util import MOTION
+
+    from PIL import Image
+
+    Image.new("RGB", (4, 2), (90, 120, 200)).save(tmp_path / "sky.png")
+    scene = tmp_path / "two.yaml"
+    scene.write_text("timeline: {fps: 24, first: 0, last: 1}\ncamera: {position: [0, 0, 5], look_at: [0, 0, 0]}\n"
+                     "lights:\n  - {type: constant, radiance: 0.5}\n  - {type: point, position: [1, 3, 2], intensity: 30}\n"
+                     "  - {name: sky, type: envmap, file: sky.png}\n  - {type: constant, radiance: 0.1}\n"
+                     "objects: [{name: b, shape: sphere, radius: 0.5}]\nrender: {resolution: [16, 12], spp: 1}\n")
+    expected = "expected at most one environment emitter (constant or envmap) in a scene, as Mitsuba allows one"
+    for command in (["validate", str(scene)], ["render", str(scene), "-o", str(tmp_path / "out"), "--no-progress"]):
+        res = subprocess.run([MOTION, *command], capture_output=True, text=True, timeout=120)
+        assert res.returncode == 2, res.stderr
+        assert "Traceback" not in res.stderr
+        lines = [line for line in res.stderr.splitlines() if "environment" in line]
+        assert lines == [f"{scene}:6:5: lights[2]: a second environment light (envmap; the first is lights[0], constant): {expected}",
+                         f"{scene}:7:5: lights[3]: a second environment light (constant; the first is lights[0], constant): {expected}"], res.stderr
+    assert not (tmp_path / "out").exists()
+    one = scene.read_text().replace("  - {name: sky, type: envmap, file: sky.png}\n", "").replace("  - {type: constant, radiance: 0.1}\n", "")
+    scene.write_text(one)
+    assert subprocess.run([MOTION, "validate", str(scene)], capture_output=True, text=True, timeout=120).returncode == 0

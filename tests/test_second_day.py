@@ -336,7 +336,8 @@ def test_cache_warm_makes_a_ci_jobs_first_frame_warm(tmp_path: Path) -> None:
     job = subprocess.run([MOTION, "render", str(SCENE), "--preset", "ci-smoke", "-o", str(tmp_path / "out"), "--no-progress"],
                          capture_output=True, text=True, env=env, timeout=300)
     assert job.returncode == 0, job.stderr
-    assert sum(int(r.get("kernels_compiled") or 0) for r in report(tmp_path / "out")["frames"]) == 0
+    rows = report(tmp_path / "out")["frames"]
+    assert sum(int(r.get("kernels_compiled") or 0) for r in rows) == 0, [(r["frame"], r.get("worker"), r.get("cold"), r.get("kernels_compiled")) for r in rows]
 
 
 # --- deliverables a studio accepts --------------------------------------------------------

@@ -14,10 +14,12 @@ reports its stats: cold or warm, setup vs render seconds, kernels, cache hits.
 
 from __future__ import annotations
 
+import gc
 import hashlib
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -65,6 +67,27 @@ def accumulate_subframes(render_at: Callable[[float, int, int], Any], count: int
         img = render_at((j + 0.5) / count, (seed * 7919 + j) & 0x7FFFFFFF, per)
         acc = img if acc is None else acc + img
     return acc / count
+
+
+@contextmanager
+def _collector_held(cold: bool) -> Iterator[None]:
+    """On a cold frame: collect garbage, then hold Python's collector until the frame's
+    kernels are traced. A kernel's IR holds the registry ids of every live Mitsuba BSDF,
+    shape and emitter of the process (the domains of its virtual calls): a stray instance
+    in a reference cycle, or one the collector frees half way through the build (when it
+    runs depends on allocation counts, which other threads move), gives the scene other
+    ids and so a kernel `motion cache warm` never compiled (issue 38.6)."""
+    if not cold:
+        yield
+        return
+    enabled = gc.isenabled()
+    gc.collect()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
 
 
 def _with_alpha(rgba: np.ndarray) -> np.ndarray:
@@ -178,7 +201,7 @@ class FrameRenderer:
         updated: tuple[str, ...] = ()
         # an engine warning that means wrong pixels (a disabled trace on CUDA) fails the
         # frame (render/engine_log.py)
-        with watching() as engine:
+        with watching() as engine, _collector_held(cold):
             if cold:
                 self.cache.build(fi)
             else:

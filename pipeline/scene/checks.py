@@ -20,6 +20,7 @@ from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
 from . import checked
 from .problems import closest
 from .motion_schema import BlendShapes, JointSkin, KeyframeMotion, MorphTargets, ProceduralMotion, TRANSFORM_CHANNELS
+from .lights import extra_environments
 from .schema import LIGHT_TYPES, Mesh, Particles, Scene, Texture
 from .source import yaml_path
 
@@ -307,6 +308,14 @@ def check_asset_files(c: _Check) -> None:
         check_file(loc, rel, kind, deforming)
 
 
+def check_environment_lights(c: _Check) -> None:
+    """At most one environment light (constant or envmap): Mitsuba takes one a scene."""
+    lights = c.scene.lights
+    for i, first in extra_environments(lights):
+        c.add(("lights", i), f"a second environment light ({lights[i].type}; the first is {yaml_path(('lights', first))}, {lights[first].type}): "
+              "expected at most one environment emitter (constant or envmap) in a scene, as Mitsuba allows one")
+
+
 def check_derived(c: _Check) -> None:
     """What follows from several fields together: the timeline's and the simulation's
     budgets, the output pattern (`derived_problems`)."""
@@ -337,6 +346,7 @@ SEMANTIC_CHECKS: tuple[Callable[[_Check], None], ...] = (
     check_springs,
     check_penalty_stability,
     check_asset_files,
+    check_environment_lights,
     check_derived,
     check_motion_channels,
     check_expressions,

@@ -57,6 +57,7 @@ class _Light(Model):
     rigid_frame: ClassVar[bool] = False  # a scaled parent moves the light, never stretches its frame
     posed_per_path: ClassVar[bool] = False  # moving: posed at each path's own time by the integrator (a delta light)
     image_files: ClassVar[tuple[str, ...]] = ()  # fields naming an image file, opened and checked before any task
+    environment: ClassVar[bool] = False  # a light at infinity around the whole scene: Mitsuba takes one a scene
 
     name: Name | None = None
     parent: Name | None = None
@@ -78,6 +79,14 @@ class _Light(Model):
         raise NotImplementedError(f"light type {type(self).__name__} has no emitter")
 
 
+def extra_environments(lights: Any) -> list[tuple[int, int]]:
+    """(index, index of the first) for every environment light after the first in `lights`:
+    Mitsuba builds a scene with at most one environment emitter and refuses the second at
+    every frame, so validation names each one."""
+    first = next((i for i, light in enumerate(lights) if type(light).environment), None)
+    return [(i, first) for i, light in enumerate(lights) if first is not None and i > first and type(light).environment]
+
+
 def light_type(cls: type[_Light]) -> type[_Light]:
     """Enter a light record in LIGHT_TYPES under its `type` literal."""
     (name,) = get_args(cls.model_fields["type"].annotation)
@@ -90,6 +99,7 @@ class ConstantLight(_Light):
     """Uniform environment radiance (W sr^-1 m^-2 per channel)."""
 
     channel = "radiance"
+    environment = True
 
     type: Literal["constant"]
     radiance: Color = 1.0
@@ -106,6 +116,7 @@ class EnvmapLight(_Light):
     channel = "scale"
     channel_size = 1
     image_files = ("file",)
+    environment = True
 
     type: Literal["envmap"]
     file: str
