@@ -275,6 +275,36 @@ def _sources_from_metadata(seq: Sequence, order: FieldOrder) -> list[int] | None
     return sources
 
 
+def _field_sources(seq: Sequence, order: FieldOrder, pattern: str | Cadence | None, tolerance: float,
+                   use_metadata: bool) -> tuple[list[int], Detection | None]:
+    """The film frame of every field, in field order: from our metadata when every frame
+    has it and no pattern is forced (detection None), else detected over `pattern`."""
+    sources = _sources_from_metadata(seq, order) if (use_metadata and pattern is None) else None
+    if sources is not None:
+        return sources, None
+    frames = (read_checked(seq, i).rgba for i in range(len(seq)))
+    sources, detection = detect_pulldown(frames, len(seq), order, pattern, tolerance)
+    if detection.violations:
+        raise FrameIOError(
+            f"{seq.directory}: sequence {seq.prefix} does not follow {detection.cadence.name} "
+            f"pulldown ({detection.violations} fields that should repeat differ); "
+            "give --pattern, or --tolerance for a lossy source"
+        )
+    return sources, detection
+
+
+def _recovered_film_rate(seq: Sequence, cadence: Cadence, film_speed: str | Fraction | int | None) -> Fraction:
+    """The recovered film's rate: the one asked for, else the frames' `motion:filmSpeed`,
+    else their video rate over the cadence's ratio, else 23.976."""
+    if film_speed is not None:
+        return film_rate(film_speed)
+    if isinstance(seq.first_meta.get("filmSpeed"), Fraction):
+        return seq.first_meta["filmSpeed"]  # type: ignore[no-any-return]
+    if seq.fps is not None:
+        return seq.fps / cadence.rate_ratio
+    return film_rate("23.976")
+
+
 def inverse_sequence(
     in_dir: str | Path,
     out_dir: str | Path,
@@ -307,31 +337,14 @@ def inverse_sequence(
         raise UsageError(f"{seq.paths[0]}: frames are marked {stored!r}, not interlaced; give --field-order to force")
     order = check_field_order(field_order or stored)
 
-    detection: Detection | None = None
-    sources = _sources_from_metadata(seq, order) if (use_metadata and pattern is None) else None
-    numbered_by_source = sources is not None
-    if sources is None:
-        frames = (read_checked(seq, i).rgba for i in range(len(seq)))
-        sources, detection = detect_pulldown(frames, len(seq), order, pattern, tolerance)
-        if detection.violations:
-            raise FrameIOError(
-                f"{seq.directory}: sequence {seq.prefix} does not follow {detection.cadence.name} "
-                f"pulldown ({detection.violations} fields that should repeat differ); "
-                "give --pattern, or --tolerance for a lossy source"
-            )
+    sources, detection = _field_sources(seq, order, pattern, tolerance, use_metadata)
+    numbered_by_source = detection is None
     recovered = recovery_map(sources, order)
     if not recovered:
         raise FrameIOError(f"{seq.directory}: no complete film frame in sequence {seq.prefix}")
 
     cadence = detection.cadence if detection else parse_cadence(str(seq.first_meta.get("cadence", "3:2")))
-    if film_speed is not None:
-        film = film_rate(film_speed)
-    elif isinstance(seq.first_meta.get("filmSpeed"), Fraction):
-        film = seq.first_meta["filmSpeed"]
-    elif seq.fps is not None:
-        film = seq.fps / cadence.rate_ratio
-    else:
-        film = film_rate("23.976")
+    film = _recovered_film_rate(seq, cadence, film_speed)
     ptype = pixel_type or seq.pixel_type
     load = _FrameCache(seq)
     names: list[str] = []
