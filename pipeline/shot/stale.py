@@ -242,3 +242,27 @@ def folder_frames(out_dir: Path, loaded: Any) -> FolderFrames:
         frame = int(m.group(1))
         (out.timeline if first <= frame <= last else out.foreign)[frame] = path
     return out
+
+
+def shot_folder_frames(folder: Path, prefix: str | None = None) -> tuple[Any, FolderFrames] | None:
+    """The scene whose output folder `folder` is (its record, shot/identity.py) and its
+    frame files there, timeline and foreign apart: what `motion telecine` of a shot's
+    folder takes, never mixing a render from before the timeline moved into its
+    deliverable. None when the folder has no record, its scene file is gone or no longer
+    loads, or `prefix` names another sequence than the scene's."""
+    from ..errors import MotionError
+    from ..scene.loader import load_scene
+    from .identity import recorded_scene
+
+    scene = recorded_scene(folder)
+    if scene is None or not scene.is_file():
+        return None
+    try:
+        loaded = load_scene(scene, assets=False)
+    except MotionError:  # an edited scene that no longer validates: the folder is read as it is
+        return None
+    found = folder_frames(folder, loaded)
+    names = {p.name.rsplit(".", 2)[0] for p in [*found.timeline.values(), *found.foreign.values()]}
+    if prefix is not None and names != {prefix}:
+        return None
+    return loaded, found
