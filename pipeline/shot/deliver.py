@@ -324,13 +324,14 @@ def _changed(before: Mapping[str, Any] | None, files: Mapping[str, Any]) -> str:
     return "; ".join(parts) or "the recipe changed"
 
 
-def _make(fmt: str, plan: DeliverPlan, seq: Any, folder: Path, prefix: str, view: Any, number: int) -> list[str]:
-    """Build version `number` of `fmt` in a staging folder and publish its outputs; their names."""
+def _make(fmt: str, plan: DeliverPlan, seq: Any, folder: Path, prefix: str, view: Any, number: int, shared: Any = None) -> list[str]:
+    """Build version `number` of `fmt` in a staging folder and publish its outputs; their
+    names. `shared`: the viewed frames the run's deliverables share (telecine.movie.ViewedFrames)."""
     from ..telecine.deliver import deliver
 
     tag = f"{plan.tag(fmt)}_v{number:03d}"
     with staging(folder, f"making the {fmt} deliverable in", prefix=f".staging-{fmt}-") as staged:
-        done = deliver(seq.directory, staged, (fmt,), view=view, sequence=seq, tags={fmt: tag})[fmt]
+        done = deliver(seq.directory, staged, (fmt,), view=view, sequence=seq, tags={fmt: tag}, shared=shared)[fmt]
         names: list[str] = []
         for p in done:
             top = Path(p).relative_to(staged).parts[0]
@@ -380,13 +381,15 @@ def _shot_sequence(out_dir: Path, plan: DeliverPlan, frame_paths: Mapping[int, P
 @dataclass(frozen=True)
 class _Made:
     """What the deliverables of one run are made from: the sequence, its frames' records
-    (number -> name, size, time, SHA-256), their digest, the frames lacking, the view."""
+    (number -> name, size, time, SHA-256), their digest, the frames lacking, the view and
+    the frames as viewed."""
 
     seq: Any
     frame_files: dict[str, dict[str, Any]]
     made_from: str
     lacking: list[int]
     view: Any
+    shared: Any = None  # the frames as viewed, shared by the run's deliverables (each viewed once)
 
     @property
     def lacks(self) -> str:
@@ -401,7 +404,7 @@ def _new_version(fmt: str, plan: DeliverPlan, made: _Made, folder: Path, prefix:
     numbers, last = list(made.seq.numbers), entry["versions"].get(last_name) if last_name else None
     interlaced = FORMATS[fmt].interlaced
     name = f"v{next_version(folder, prefix, plan.tag(fmt), entry):03d}"
-    names = _make(fmt, plan, made.seq, folder, prefix, made.view, int(name[1:]))
+    names = _make(fmt, plan, made.seq, folder, prefix, made.view, int(name[1:]), made.shared)
     outputs = [{"name": n, "size": (folder / n).stat().st_size if (folder / n).is_file() else None,
                 "rate": movie_rate(folder / n, interlaced)} for n in names]
     entry["versions"][name] = {"frames": format_frames(numbers), "lacks": format_frames(made.lacking) or None, "made_from": made.made_from,
@@ -453,7 +456,9 @@ def deliver_and_record(req: RenderRequest, out_dir: Path, plan: DeliverPlan, fra
     frame_files = {str(n): {"name": p.name, "size": p.stat().st_size, "mtime_ns": p.stat().st_mtime_ns, "sha256": d}
                    for n, p, d in zip(numbers, seq.paths, digests)}
     made_from = hashlib.sha256(json.dumps([[n, d] for n, d in zip(numbers, digests)]).encode()).hexdigest()
-    made = _Made(seq, frame_files, made_from, lacking, view)
+    from ..telecine.movie import ViewedFrames
+
+    made = _Made(seq, frame_files, made_from, lacking, view, ViewedFrames(seq, view))
     record: dict[str, Any] = {}
     status: dict[str, str] = {}
     versions: dict[str, str] = {}

@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -28,6 +28,9 @@ from .cadence import Cadence, Tail, film_rate, output_rate, parse_cadence, plan
 from ..field_model import FieldOrder, check_field_order, weave_frames
 from .inverse import Detection, detect_pulldown, recovery_map
 from .sequence import Sequence, assembly_threads, discover, find_sequences, read_checked, read_mapped
+
+if TYPE_CHECKING:
+    from .movie import ViewedFrames
 
 Progress = Callable[[int, int], None]
 
@@ -57,10 +60,13 @@ class _FrameCache:
     `ahead` (the source indices in the order they will be asked for, ascending), the frames
     are read by a few threads ahead of their use (sequence.read_mapped)."""
 
-    def __init__(self, seq: Sequence, size: int = 3, ahead: list[int] | None = None) -> None:
-        self.seq, self.size = seq, size
+    def __init__(self, seq: Sequence, size: int = 3, ahead: list[int] | None = None, shared: ViewedFrames | None = None) -> None:
+        self.seq, self.size, self.shared = seq, size, shared
         self.frames: dict[int, Frame] = {}
-        self.coming = iter(zip(ahead, read_mapped(seq, lambda frame: frame, ahead))) if ahead else None
+        # with `shared` (a run's deliverables' viewed frames), each frame read is viewed in the same thread, once for the run
+        view = shared.view if shared is not None and ahead and shared.used < shared.budget and any(i not in shared.kept for i in ahead) else None
+        fn: Callable[[Frame], tuple[Frame, Any]] = (lambda frame: (frame, view(frame.rgba))) if view is not None else (lambda frame: (frame, None))
+        self.coming = iter(zip(ahead, read_mapped(seq, fn, ahead))) if ahead else None
 
     def __call__(self, index: int) -> Frame:
         while index not in self.frames:
@@ -70,7 +76,10 @@ class _FrameCache:
             if got is None:  # (not among those read ahead)
                 self.frames[index] = read_checked(self.seq, index)
             else:
-                self.frames[got[0]] = got[1]
+                (number, (frame, rgb16)) = got
+                self.frames[number] = frame
+                if rgb16 is not None:
+                    self.shared.keep(number, rgb16)  # type: ignore[union-attr]
         return self.frames[index]
 
 
@@ -194,8 +203,10 @@ def telecine_sequence(
     overwrite: bool = False,
     progress: Progress | None = None,
     sequence: Sequence | None = None,
+    shared: ViewedFrames | None = None,
 ) -> Result:
-    """Pull a progressive EXR sequence down to interlaced (or, for `blend`, blended) frames.
+    """Pull a progressive EXR sequence down to interlaced (or, for `blend`, blended) frames
+    (`shared`: the run's deliverables' viewed frames, filled as the film frames are read).
 
     Video frame i is numbered `first + i`, where `first` is the input's first frame
     number. Its timecode continues the film's: the film's first frame number, counted at
@@ -216,7 +227,7 @@ def telecine_sequence(
         _timecode(0, rate, True)
     start = max(0, seq.first) * round(rate) // max(1, round(film))  # the film's start, in video frames
     ptype = pixel_type or seq.pixel_type
-    load = _FrameCache(seq, ahead=sorted({k for vf in frames for k in (vf.top, vf.bottom, vf.first, vf.second)}))
+    load = _FrameCache(seq, ahead=sorted({k for vf in frames for k in (vf.top, vf.bottom, vf.first, vf.second)}), shared=shared)
     names: list[str] = []
     with _Staging(out_dir, name, overwrite) as staging:
         with _Writes() as writes:
