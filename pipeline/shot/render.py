@@ -256,6 +256,8 @@ def complete_frames(req: RenderRequest, job: RenderJob, loaded: LoadedScene, out
         raise UsageError(f"{out_dir}: frames {format_frames(existing)} exist; pass --resume to keep complete ones or --overwrite to re-render them")
     from ..render.look import part_names
 
+    if recorded is not None:  # (a frame that appeared since its header was read is not counted complete)
+        existing = [f for f in existing if f in recorded]
     keys = {f: (dict(recorded[f]), {}) for f in existing} if recorded is not None else {f: frame_key(job, by_frame[f]) for f in existing}
     now = CurrentKeys(render_settings(loaded.scene), json.loads(job.files or "{}"), json.loads(job.look_parts or "{}"), {f: k[1] for f, k in keys.items()}, part_names(loaded))
     states = frame_states(existing, paths, {f: k[0] for f, k in keys.items()}, now, decode)
