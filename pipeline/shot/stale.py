@@ -140,7 +140,7 @@ def reads_whole(path: str | Path) -> bool:
 
 def why_stale(path: str, expect: Mapping[str, Any], now: CurrentKeys, decode: bool = True) -> str | None:
     """Why the frame at `path` is not a complete frame of this run, or None if it is.
-    `decode=False`: a frame whose chunks are all there (OpenEXR's own check, no pixel
+    `decode=False`: a frame that `reads_whole` (its chunks all there, the last one
     decoded) counts as whole; for a run whose deliverables decode every frame next and
     name one that does not (`--check --deliver`: each frame decoded once)."""
     try:
