@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import click
 
 from motion.cli.export import view_options
 from motion.cli.options import GivenPath, FiniteFloat
-from motion.pipeline.errors import UsageError
+from motion.pipeline.errors import FrameIOError, UsageError
 from motion.pipeline.progress import count_bar
 
 CODEC_NAMES = ["prores", "prores4444", "h264"]
@@ -71,7 +72,7 @@ def telecine(in_dir: Path, out_dir: Path, pattern: str | None, field_order: str 
             result = telecine_sequence(in_dir, out_dir, pattern=pattern or "3:2", field_order=field_order or "tff",
                                        film_speed=film_speed or "23.976", tail=tail,  # type: ignore[arg-type]
                                        drop_frame=drop_frame, prefix=prefix, pixel_type=pixel_type,
-                                       overwrite=overwrite, progress=progress)
+                                       overwrite=overwrite, progress=progress, sequence=_timeline_sequence(in_dir, prefix, even=pattern != "blend"))
     how = result.cadence.name + (f" phase {result.detection.phase} (detected)" if result.detection else "")
     order = f", {result.field_order}" if result.field_order and not inverse else ""
     from motion.pipeline.timeline import rate_label
@@ -84,6 +85,29 @@ def telecine(in_dir: Path, out_dir: Path, pattern: str | None, field_order: str 
             path = sequence_movie(result.out_dir, movie, rate=result.rate, codec=codec, view=view,
                                   prefix=result.paths[0].name.rsplit(".", 2)[0], progress=progress)
         click.echo(f"wrote {path} ({rate_label(result.rate)}{', interlaced' if result.field_order and not inverse else ''})")
+
+
+def _timeline_sequence(in_dir: Path, prefix: str | None, allow_gaps: bool = False, even: bool = False) -> Any:
+    """A shot's output folder holding frames outside its timeline (a render from before
+    `first: 1001`): the timeline's frames only, the foreign ones named in a warning
+    (shot/stale.py: shot_folder_frames). None otherwise: the folder's one sequence."""
+    from motion.pipeline.shot.stale import shot_folder_frames
+
+    shot = shot_folder_frames(in_dir, prefix)
+    if shot is None or not shot[1].foreign or not shot[1].timeline:
+        return None
+    loaded, found = shot
+    from motion.pipeline.farm.frames import format_frames
+    from motion.pipeline.telecine.sequence import sequence_of
+
+    timeline = loaded.scene.timeline
+    click.echo(f"motion: {in_dir}: warning: frames {format_frames(sorted(found.foreign))} lie outside the timeline {timeline.first}-{timeline.last} "
+               f"of {loaded.path}: foreign, left out", err=True)
+    name = next(iter(found.timeline.values())).name.rsplit(".", 2)[0]
+    seq = sequence_of(found.timeline, name, directory=in_dir, require_even_height=even)
+    if seq.missing and not allow_gaps:
+        raise FrameIOError(f"{in_dir}: frames {format_frames(list(seq.missing))} of sequence {name} ({seq.numbers[0]}-{seq.numbers[-1]}) are missing")
+    return seq
 
 
 @click.command("contact-sheet")
@@ -103,7 +127,7 @@ def contact_sheet(in_dir: Path, out_path: Path, thumb_width: int, columns: int |
     from motion.pipeline.telecine.sequence import discover
 
     view = ViewTransform(exposure, ocio_config, ocio_display, ocio_view, ocio_colorspace)  # bad options first
-    seq = discover(in_dir, prefix, require_even_height=False, allow_gaps=True)
+    seq = _timeline_sequence(in_dir, prefix, allow_gaps=True) or discover(in_dir, prefix, require_even_height=False, allow_gaps=True)
     path = make_sheet(seq, out_path, thumb_width=thumb_width, columns=columns, max_frames=max_frames, view=view)
     missing = f", {len(seq.missing)} missing" if seq.missing else ""
     click.echo(f"wrote {path} ({len(seq)} frames{missing})")

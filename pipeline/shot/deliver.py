@@ -324,13 +324,14 @@ def _changed(before: Mapping[str, Any] | None, files: Mapping[str, Any]) -> str:
     return "; ".join(parts) or "the recipe changed"
 
 
-def _make(fmt: str, plan: DeliverPlan, seq: Any, folder: Path, prefix: str, view: Any, number: int) -> list[str]:
-    """Build version `number` of `fmt` in a staging folder and publish its outputs; their names."""
+def _make(fmt: str, plan: DeliverPlan, seq: Any, folder: Path, prefix: str, view: Any, number: int, shared: Any = None) -> list[str]:
+    """Build version `number` of `fmt` in a staging folder and publish its outputs; their
+    names. `shared`: the viewed frames the run's deliverables share (telecine.movie.ViewedFrames)."""
     from ..telecine.deliver import deliver
 
     tag = f"{plan.tag(fmt)}_v{number:03d}"
     with staging(folder, f"making the {fmt} deliverable in", prefix=f".staging-{fmt}-") as staged:
-        done = deliver(seq.directory, staged, (fmt,), view=view, sequence=seq, tags={fmt: tag})[fmt]
+        done = deliver(seq.directory, staged, (fmt,), view=view, sequence=seq, tags={fmt: tag}, shared=shared)[fmt]
         names: list[str] = []
         for p in done:
             top = Path(p).relative_to(staged).parts[0]
@@ -344,15 +345,8 @@ def _make(fmt: str, plan: DeliverPlan, seq: Any, folder: Path, prefix: str, view
     return names
 
 
-def deliver_and_record(req: RenderRequest, out_dir: Path, plan: DeliverPlan, frame_paths: Mapping[int, Path], prefix: str,
-                       report: dict[str, Any], report_path: Path | None, say: Callable[[str], None]) -> dict[str, Any]:
-    """Assemble the plan's deliverables from `frame_paths` (frame number -> file, the
-    numbers carried, never parsed back from the names): a new version of each whose
-    frames or recipe changed since its last version, none of one unchanged; print where
-    each one is and record them in the report (rewritten in place) and in
-    deliver/manifest.json."""
-    from ..telecine.sequence import sequence_of
-
+def _deliver_folder(out_dir: Path) -> Path:
+    """The deliver folder inside `out_dir`, created: a real folder, never a link out of it."""
     folder = out_dir / "deliver"
     if folder.is_symlink() or not inside(out_dir, folder):
         raise UsageError(f"--deliver: {folder} is a link; deliverables are written only into a real folder inside the output folder")
@@ -363,18 +357,98 @@ def deliver_and_record(req: RenderRequest, out_dir: Path, plan: DeliverPlan, fra
         if fault is not None:
             raise fault from None
         raise UsageError(f"--deliver: cannot create {folder}: {exc.strerror}") from None
-    view = deliver_view(req)
+    return folder
+
+
+def _shot_sequence(out_dir: Path, plan: DeliverPlan, frame_paths: Mapping[int, Path], prefix: str) -> tuple[Any, list[int]]:
+    """The validated sequence of the plan's frames on disk, and the frames it lacks (an
+    error for a format that needs every frame)."""
+    from ..telecine.sequence import sequence_of
+
     there = {n: Path(frame_paths[n]) for n in plan.frames if n in frame_paths and Path(frame_paths[n]).is_file()}
     lacking = [n for n in plan.frames if n not in there]
-    records = {f: FORMATS[f] for f in plan.formats}
-    if lacking and any(r.gapless for r in records.values()):
+    records = [FORMATS[f] for f in plan.formats]
+    if lacking and any(r.gapless for r in records):
         raise UsageError(f"--deliver: frames {format_frames(lacking)} of {format_frames(list(plan.frames))} are not in {out_dir}")
     if not there:
         raise UsageError(f"--deliver: none of frames {format_frames(list(plan.frames))} is in {out_dir}")
     try:
-        seq = sequence_of(there, prefix, directory=out_dir, require_even_height=any(r.interlaced for r in records.values()))
+        return sequence_of(there, prefix, directory=out_dir, require_even_height=any(r.interlaced for r in records)), lacking
     except FrameIOError as exc:
         raise UsageError(f"--deliver: {exc}") from None
+
+
+@dataclass(frozen=True)
+class _Made:
+    """What the deliverables of one run are made from: the sequence, its frames' records
+    (number -> name, size, time, SHA-256), their digest, the frames lacking, the view and
+    the frames as viewed."""
+
+    seq: Any
+    frame_files: dict[str, dict[str, Any]]
+    made_from: str
+    lacking: list[int]
+    view: Any
+    shared: Any = None  # the frames as viewed, shared by the run's deliverables (each viewed once)
+
+    @property
+    def lacks(self) -> str:
+        """' (lacks frames 3-5)' for a log line, or ''."""
+        return f" (lacks frames {format_frames(self.lacking)})" if self.lacking else ""
+
+
+def _new_version(fmt: str, plan: DeliverPlan, made: _Made, folder: Path, prefix: str, manifest: dict[str, Any],
+                 entry: dict[str, Any], last_name: str | None, say: Callable[[str], None]) -> tuple[str, list[str]]:
+    """Make the next version of `fmt`, record it in the manifest (written at once) and say
+    where it is; its name and output names."""
+    numbers, last = list(made.seq.numbers), entry["versions"].get(last_name) if last_name else None
+    interlaced = FORMATS[fmt].interlaced
+    name = f"v{next_version(folder, prefix, plan.tag(fmt), entry):03d}"
+    names = _make(fmt, plan, made.seq, folder, prefix, made.view, int(name[1:]), made.shared)
+    outputs = [{"name": n, "size": (folder / n).stat().st_size if (folder / n).is_file() else None,
+                "rate": movie_rate(folder / n, interlaced)} for n in names]
+    entry["versions"][name] = {"frames": format_frames(numbers), "lacks": format_frames(made.lacking) or None, "made_from": made.made_from,
+                               "recipe": recipe(fmt, made.view), "outputs": outputs, "frame_files": made.frame_files,
+                               "made_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    entry.update(format=fmt, part=plan.part, latest=name)
+    manifest["deliverables"][plan.key(fmt)] = entry
+    write_atomic(folder / MANIFEST, (json.dumps(manifest, indent=2) + "\n").encode(), "writing the deliverables' manifest")
+    why = _changed(last, made.frame_files) if last is not None else ""
+    for o in outputs:
+        p = folder / o["name"]
+        if p.is_dir():
+            say(f"  {fmt}: {name}: {len(list(p.glob('*.exr')))} frames in {p}")
+        else:
+            say(f"  {fmt}: {name}: {p}" + (f" ({o['rate']})" if o["rate"] else "") + made.lacks + (f" ({why} since {last_name})" if why else ""))
+    return name, names
+
+
+def _one_format(fmt: str, plan: DeliverPlan, made: _Made, folder: Path, prefix: str, manifest: dict[str, Any],
+                say: Callable[[str], None]) -> tuple[str, str, list[str]]:
+    """The deliverable `fmt`: its last version when made from these frames with this
+    recipe and still there, else a new version; (status, version, output names)."""
+    entry = manifest["deliverables"].get(plan.key(fmt)) or {"versions": {}}
+    last_name = max(entry["versions"], key=lambda v: int(v[1:]), default=None)
+    last = entry["versions"].get(last_name) if last_name else None
+    if last is not None and last["made_from"] == made.made_from and last["recipe"] == recipe(fmt, made.view) and _outputs_present(last, folder):
+        names = [o["name"] for o in last["outputs"]]
+        say(f"  {fmt}: up to date ({last_name}, frames {format_frames(list(made.seq.numbers))} unchanged{made.lacks}): "
+            + ", ".join(str(folder / n) for n in names))
+        return "up to date", last_name, names  # type: ignore[return-value]
+    name, names = _new_version(fmt, plan, made, folder, prefix, manifest, entry, last_name, say)
+    return "made", name, names
+
+
+def deliver_and_record(req: RenderRequest, out_dir: Path, plan: DeliverPlan, frame_paths: Mapping[int, Path], prefix: str,
+                       report: dict[str, Any], report_path: Path | None, say: Callable[[str], None]) -> dict[str, Any]:
+    """Assemble the plan's deliverables from `frame_paths` (frame number -> file, the
+    numbers carried, never parsed back from the names): a new version of each whose
+    frames or recipe changed since its last version, none of one unchanged; print where
+    each one is and record them in the report (rewritten in place) and in
+    deliver/manifest.json."""
+    folder = _deliver_folder(out_dir)
+    view = deliver_view(req)
+    seq, lacking = _shot_sequence(out_dir, plan, frame_paths, prefix)
     manifest = read_manifest(folder)
     known = {r["name"]: r for e in manifest["deliverables"].values() for v in e["versions"].values() for r in v["frame_files"].values()}
     numbers = list(seq.numbers)
@@ -382,42 +456,15 @@ def deliver_and_record(req: RenderRequest, out_dir: Path, plan: DeliverPlan, fra
     frame_files = {str(n): {"name": p.name, "size": p.stat().st_size, "mtime_ns": p.stat().st_mtime_ns, "sha256": d}
                    for n, p, d in zip(numbers, seq.paths, digests)}
     made_from = hashlib.sha256(json.dumps([[n, d] for n, d in zip(numbers, digests)]).encode()).hexdigest()
-    lacks = f" (lacks frames {format_frames(lacking)})" if lacking else ""
+    from ..telecine.movie import ViewedFrames
+
+    made = _Made(seq, frame_files, made_from, lacking, view, ViewedFrames(seq, view))
     record: dict[str, Any] = {}
     status: dict[str, str] = {}
     versions: dict[str, str] = {}
     for fmt in plan.formats:
-        key = plan.key(fmt)
-        entry = manifest["deliverables"].get(key) or {"versions": {}}
-        how = recipe(fmt, view)
-        last_name = max(entry["versions"], key=lambda v: int(v[1:]), default=None)
-        last = entry["versions"].get(last_name) if last_name else None
-        if last is not None and last["made_from"] == made_from and last["recipe"] == how and _outputs_present(last, folder):
-            names = [o["name"] for o in last["outputs"]]
-            status[fmt], versions[fmt] = "up to date", last_name  # type: ignore[assignment]
-            say(f"  {fmt}: up to date ({last_name}, frames {format_frames(numbers)} unchanged{lacks}): " + ", ".join(str(folder / n) for n in names))
-        else:
-            number = next_version(folder, prefix, plan.tag(fmt), entry)
-            name = f"v{number:03d}"
-            names = _make(fmt, plan, seq, folder, prefix, view, number)
-            outputs = [{"name": n, "size": (folder / n).stat().st_size if (folder / n).is_file() else None,
-                        "rate": movie_rate(folder / n, records[fmt].interlaced)} for n in names]
-            entry["versions"][name] = {"frames": format_frames(numbers), "lacks": format_frames(lacking) or None, "made_from": made_from,
-                                       "recipe": how, "outputs": outputs, "frame_files": frame_files,
-                                       "made_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-            entry.update(format=fmt, part=plan.part, latest=name)
-            manifest["deliverables"][key] = entry
-            write_atomic(folder / MANIFEST, (json.dumps(manifest, indent=2) + "\n").encode(), "writing the deliverables' manifest")
-            status[fmt], versions[fmt] = "made", name
-            why = _changed(last, frame_files) if last is not None else ""
-            for n in names:
-                p = folder / n
-                rate = movie_rate(p, records[fmt].interlaced)
-                if p.is_dir():
-                    say(f"  {fmt}: {name}: {len(list(p.glob('*.exr')))} frames in {p}")
-                else:
-                    say(f"  {fmt}: {name}: {p}" + (f" ({rate})" if rate else "") + lacks + (f" ({why} since {last_name})" if why else ""))
-        rates = {o.get("name"): o.get("rate") for o in manifest["deliverables"][key]["versions"][versions[fmt]]["outputs"]}
+        status[fmt], versions[fmt], names = _one_format(fmt, plan, made, folder, prefix, manifest, say)
+        rates = {o.get("name"): o.get("rate") for o in manifest["deliverables"][plan.key(fmt)]["versions"][versions[fmt]]["outputs"]}
         for n in names:
             p = folder / n
             if p.is_dir():
@@ -426,9 +473,7 @@ def deliver_and_record(req: RenderRequest, out_dir: Path, plan: DeliverPlan, fra
                 record.setdefault(fmt, []).append(str(p))
                 if rates.get(n):  # a movie's rate as read back: '23.976 fps (24000/1001)'
                     record.setdefault("rates", {})[str(p)] = rates[n]
-    record["status"] = status
-    record["versions"] = versions
-    record["frames"] = format_frames(numbers)
+    record.update(status=status, versions=versions, frames=format_frames(numbers))
     if lacking:
         record["lacks"] = format_frames(lacking)
     if plan.part:

@@ -42,15 +42,19 @@ MAX_RUNS = 8  # observations kept per scene (one per settings)
 # figures (nothing recorded on this machine yet), measured on a 2-core AMD EPYC shared with
 # other jobs (issue 38: the earlier ones, 10x lower, made a first run's estimate 3-20x low):
 # ci-smoke frames (9,216 samples) 10-25 ms; preview frames (320x180, 16 spp, depth 4) render
-# in 0.9-2.0 s and denoise in 1.0-1.3 s; a worker's cold first frame (its scene build, and
-# the kernels compiled when the kernel cache is empty: 14 of them for the examples) costs
-# 2.5-4.4 s more than a warm one; two workers start in about 4 s (spawn, imports).
+# in 0.9-2.0 s; OIDN denoises 57,600-129,600 pixels in 4.4-5.0 us a pixel, one frame beside
+# another worker's (the showcase at 480x270: 0.57 s; 960x540: 2.5 us a pixel); a worker's
+# cold first frame (its scene build and asset conversion, and the kernels compiled when the
+# kernel cache is empty: 14 of them for the examples) costs 2.5-4.6 s more than a warm one;
+# two workers start in about 4 s (spawn, imports: 3.9 s measured). With these, a fresh
+# cache's estimate of the showcase at --spp 1 is 41 s against 42 s measured (it was 108 s
+# with 20 us a pixel of denoising and a 2 s start).
 DEFAULT_FRAME_OVERHEAD_S = 0.012
 DEFAULT_S_PER_SAMPLE = 1.5e-6
-DEFAULT_DENOISE_S_PER_PIXEL = 2.0e-5
+DEFAULT_DENOISE_S_PER_PIXEL = 5.0e-6
 DEFAULT_COLD_EXTRA_S = 3.0  # a cold first frame's extra cost with its kernels in the cache
 DEFAULT_COMPILE_EXTRA_S = 4.5  # ... and with an empty kernel cache (every kernel compiled)
-DEFAULT_STARTUP_S = 2.0
+DEFAULT_STARTUP_S = 4.0
 BIG_FRAME = 100_000  # samples above which a frame's cost says something about the machine's rate
 
 

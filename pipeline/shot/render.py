@@ -31,14 +31,14 @@ from ..farm.scheduler import Scheduler
 from ..farm.task import TaskContext
 from ..limits import check_env_sizes
 from ..presets import Preset, load_preset, overrides_from, spread
-from ..render.job import MAX_PARTS, RenderJob, file_digests, frame_key, frame_path, render_settings, scene_hashes
+from ..render.job import MAX_PARTS, RENDERER_VERSION, RenderJob, file_digests, frame_key, frame_path, render_settings, scene_hashes
 from ..scene.loader import LoadedScene, load_scene
 from .deliver import DeliverPlan, check_deliver, deliver_and_record, deliver_plan
 from .estimate import denoised_pixels, estimate, samples_of
 from .identity import check_owner, record_owner
 from .estimate import record as record_cost
 from .dry_run import check_only, plan, resolved_settings
-from .stale import CurrentKeys, FrameStates, folder_frames, frame_states
+from .stale import CurrentKeys, FrameStates, folder_frames, frame_states, recorded_keys
 from .request import RenderRequest
 
 
@@ -244,18 +244,23 @@ def motion_inputs(req: RenderRequest, loaded: LoadedScene, sel: Selection) -> Se
     return inputs
 
 
-def complete_frames(req: RenderRequest, job: RenderJob, loaded: LoadedScene, out_dir: Path, frames: list[int], paths: dict[int, str], by_frame: Mapping[int, BakedFrame]) -> FrameStates:
+def complete_frames(req: RenderRequest, job: RenderJob, loaded: LoadedScene, out_dir: Path, frames: list[int], paths: dict[int, str], by_frame: Mapping[int, BakedFrame],
+                    recorded: Mapping[int, dict[str, Any]] | None = None, decode: bool = True) -> FrameStates:
     """The frames on disk: those --resume keeps (complete and made from this scene, motion
     and settings) and the stale ones this run replaces, each with the reason (shot/stale.py).
-    Existing frames with neither --resume nor --overwrite are a UsageError."""
+    Existing frames with neither --resume nor --overwrite are a UsageError. `recorded`:
+    the keys the frames' headers record (stale.recorded_keys, no bake); `decode` as
+    stale.frame_states'."""
     existing = [f for f in frames if os.path.exists(paths[f])]
     if not req.resume and not req.overwrite and existing:
         raise UsageError(f"{out_dir}: frames {format_frames(existing)} exist; pass --resume to keep complete ones or --overwrite to re-render them")
     from ..render.look import part_names
 
-    keys = {f: frame_key(job, by_frame[f]) for f in existing}
+    if recorded is not None:  # (a frame that appeared since its header was read is not counted complete)
+        existing = [f for f in existing if f in recorded]
+    keys = {f: (dict(recorded[f]), {}) for f in existing} if recorded is not None else {f: frame_key(job, by_frame[f]) for f in existing}
     now = CurrentKeys(render_settings(loaded.scene), json.loads(job.files or "{}"), json.loads(job.look_parts or "{}"), {f: k[1] for f, k in keys.items()}, part_names(loaded))
-    states = frame_states(existing, paths, {f: k[0] for f, k in keys.items()}, now)
+    states = frame_states(existing, paths, {f: k[0] for f, k in keys.items()}, now, decode)
     if req.overwrite:
         return FrameStates(complete=[], stale={f: "--overwrite" for f in existing})
     return states
@@ -417,12 +422,16 @@ def _run_render(req: RenderRequest, held: list[RunLock]) -> dict[str, Any]:
         held.append(take_run_lock(out_dir, Claimant.here(run_id), str(loaded.path), version_of(req, job)))
 
     t0 = time.perf_counter()
-    inputs = motion_inputs(req, loaded, sel)
+    paths = {f: str(frame_path(job, loaded, f)) for f in frames}
+    # --check bakes nothing when every frame's header says it was made from this version (shot/stale.py)
+    recorded = recorded_keys(paths, frames, job.settings_hash, job.look, RENDERER_VERSION) if req.check and not req.motion_file else None
+    inputs = motion_inputs(req, loaded, sel) if recorded is None else []
     bake_s = time.perf_counter() - t0
     by_frame = by_number(inputs)  # each frame made from the bake's arrays when a task needs it
-    paths = {f: str(frame_path(job, loaded, f)) for f in frames}
 
-    states = complete_frames(req, job, loaded, out_dir, frames, paths, by_frame)
+    # --check --deliver: the deliverables decode every frame, so the check reads headers and chunk tables
+    states = complete_frames(req, job, loaded, out_dir, frames, paths, by_frame, recorded,
+                             decode=not (req.check and wanted and set(frames) <= set(wanted.frames)))
     skipped = states.complete
     todo = [f for f in frames if f not in set(skipped)]
     foreign = sorted(folder_frames(out_dir, loaded).foreign)

@@ -13,6 +13,7 @@ nothing is replaced silently.
 from __future__ import annotations
 
 import json
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -116,8 +117,32 @@ def _listed(items: list[str]) -> str:
     return ", ".join(items[:MAX_NAMED]) + (f" and {len(items) - MAX_NAMED} more" if len(items) > MAX_NAMED else "")
 
 
-def why_stale(path: str, expect: Mapping[str, Any], now: CurrentKeys) -> str | None:
-    """Why the frame at `path` is not a complete frame of this run, or None if it is."""
+def reads_whole(path: str | Path) -> bool:
+    """Whether the EXR at `path` is whole without decoding it all: OpenEXR's `isComplete`
+    (every chunk the offset table names starts inside the file) and the file's last
+    scanline chunk decoded, so a copy cut short anywhere is found. A chunk damaged in
+    the middle is found only by decoding it (is_complete)."""
+    import OpenEXR
+
+    try:
+        f = OpenEXR.InputFile(str(path))
+    except Exception:  # the bindings raise their own error for any bad file
+        return False
+    try:
+        header = f.header()
+        last, channel = header["dataWindow"].max.y, next(iter(header["channels"]))
+        return bool(f.isComplete()) and len(f.channel(channel, scanLine1=last, scanLine2=last)) > 0
+    except Exception:  # a chunk that does not decode
+        return False
+    finally:
+        f.close()
+
+
+def why_stale(path: str, expect: Mapping[str, Any], now: CurrentKeys, decode: bool = True) -> str | None:
+    """Why the frame at `path` is not a complete frame of this run, or None if it is.
+    `decode=False`: a frame that `reads_whole` (its chunks all there, the last one
+    decoded) counts as whole; for a run whose deliverables decode every frame next and
+    name one that does not (`--check --deliver`: each frame decoded once)."""
     try:
         meta = read_meta(path)
     except FrameIOError:
@@ -144,21 +169,46 @@ def why_stale(path: str, expect: Mapping[str, Any], now: CurrentKeys) -> str | N
         return "were made from other motion (the scene's animation or simulation changed)"
     if meta.get("frame") != expect.get("frame"):
         return f"hold frame {meta.get('frame')}"
-    if not is_complete(path, expect):
+    if not (is_complete(path, expect) if decode else reads_whole(path)):
         return "do not read back whole (a truncated or damaged file)"
     return None
 
 
-def frame_states(existing: list[int], paths: Mapping[int, str], expect: Mapping[int, Mapping[str, Any]], now: CurrentKeys) -> FrameStates:
-    """Sort the selected frames found on disk into complete and stale (with the reason)."""
+def frame_states(existing: list[int], paths: Mapping[int, str], expect: Mapping[int, Mapping[str, Any]], now: CurrentKeys,
+                 decode: bool = True) -> FrameStates:
+    """Sort the selected frames found on disk into complete and stale (with the reason);
+    `decode` as why_stale's."""
     states = FrameStates()
     for f in existing:
-        why = why_stale(paths[f], expect[f], now)
+        why = why_stale(paths[f], expect[f], now, decode)
         if why is None:
             states.complete.append(f)
         else:
             states.stale[f] = why
     return states
+
+
+def recorded_keys(paths: Mapping[int, str], frames: list[int], settings_hash: str, look: str, renderer: str) -> dict[int, dict[str, Any]] | None:
+    """Each existing frame's key as its header records it, when every one of them says it
+    was made from this version: the same settings hash (the whole scene with every
+    override and each file it names by its bytes, which the bake is a function of), look
+    and renderer. Then the frames' motion is this run's motion and `--check` need not
+    simulate and bake the shot again to know it (frame_states still reads each header and
+    checks that the frame is whole). None when any frame says otherwise (or has no key):
+    the run bakes, compares each frame's motion and names what changed."""
+    out: dict[int, dict[str, Any]] = {}
+    for f in frames:
+        if not os.path.exists(paths[f]):
+            continue
+        try:
+            meta = read_meta(paths[f])
+        except FrameIOError:
+            return None
+        if (meta.get("settings_hash"), meta.get("look_hash"), meta.get("renderer"), meta.get("frame")) != (settings_hash, look, renderer, f) \
+                or not isinstance(meta.get("motion_hash"), str):
+            return None
+        out[f] = {"frame": f, "look_hash": look, "motion_hash": meta["motion_hash"]}
+    return out
 
 
 @dataclass(frozen=True)
@@ -192,3 +242,27 @@ def folder_frames(out_dir: Path, loaded: Any) -> FolderFrames:
         frame = int(m.group(1))
         (out.timeline if first <= frame <= last else out.foreign)[frame] = path
     return out
+
+
+def shot_folder_frames(folder: Path, prefix: str | None = None) -> tuple[Any, FolderFrames] | None:
+    """The scene whose output folder `folder` is (its record, shot/identity.py) and its
+    frame files there, timeline and foreign apart: what `motion telecine` of a shot's
+    folder takes, never mixing a render from before the timeline moved into its
+    deliverable. None when the folder has no record, its scene file is gone or no longer
+    loads, or `prefix` names another sequence than the scene's."""
+    from ..errors import MotionError
+    from ..scene.loader import load_scene
+    from .identity import recorded_scene
+
+    scene = recorded_scene(folder)
+    if scene is None or not scene.is_file():
+        return None
+    try:
+        loaded = load_scene(scene, assets=False)
+    except MotionError:  # an edited scene that no longer validates: the folder is read as it is
+        return None
+    found = folder_frames(folder, loaded)
+    names = {p.name.rsplit(".", 2)[0] for p in [*found.timeline.values(), *found.foreign.values()]}
+    if prefix is not None and names != {prefix}:
+        return None
+    return loaded, found

@@ -16,7 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -28,6 +28,9 @@ from .cadence import Cadence, Tail, film_rate, output_rate, parse_cadence, plan
 from ..field_model import FieldOrder, check_field_order, weave_frames
 from .inverse import Detection, detect_pulldown, recovery_map
 from .sequence import Sequence, assembly_threads, discover, find_sequences, read_checked, read_mapped
+
+if TYPE_CHECKING:
+    from .movie import ViewedFrames
 
 Progress = Callable[[int, int], None]
 
@@ -57,10 +60,13 @@ class _FrameCache:
     `ahead` (the source indices in the order they will be asked for, ascending), the frames
     are read by a few threads ahead of their use (sequence.read_mapped)."""
 
-    def __init__(self, seq: Sequence, size: int = 3, ahead: list[int] | None = None) -> None:
-        self.seq, self.size = seq, size
+    def __init__(self, seq: Sequence, size: int = 3, ahead: list[int] | None = None, shared: ViewedFrames | None = None) -> None:
+        self.seq, self.size, self.shared = seq, size, shared
         self.frames: dict[int, Frame] = {}
-        self.coming = iter(zip(ahead, read_mapped(seq, lambda frame: frame, ahead))) if ahead else None
+        # with `shared` (a run's deliverables' viewed frames), each frame read is viewed in the same thread, once for the run
+        view = shared.view if shared is not None and ahead and shared.used < shared.budget and any(i not in shared.kept for i in ahead) else None
+        fn: Callable[[Frame], tuple[Frame, Any]] = (lambda frame: (frame, view(frame.rgba))) if view is not None else (lambda frame: (frame, None))
+        self.coming = iter(zip(ahead, read_mapped(seq, fn, ahead))) if ahead else None
 
     def __call__(self, index: int) -> Frame:
         while index not in self.frames:
@@ -70,7 +76,10 @@ class _FrameCache:
             if got is None:  # (not among those read ahead)
                 self.frames[index] = read_checked(self.seq, index)
             else:
-                self.frames[got[0]] = got[1]
+                (number, (frame, rgb16)) = got
+                self.frames[number] = frame
+                if rgb16 is not None:
+                    self.shared.keep(number, rgb16)  # type: ignore[union-attr]
         return self.frames[index]
 
 
@@ -194,8 +203,10 @@ def telecine_sequence(
     overwrite: bool = False,
     progress: Progress | None = None,
     sequence: Sequence | None = None,
+    shared: ViewedFrames | None = None,
 ) -> Result:
-    """Pull a progressive EXR sequence down to interlaced (or, for `blend`, blended) frames.
+    """Pull a progressive EXR sequence down to interlaced (or, for `blend`, blended) frames
+    (`shared`: the run's deliverables' viewed frames, filled as the film frames are read).
 
     Video frame i is numbered `first + i`, where `first` is the input's first frame
     number. Its timecode continues the film's: the film's first frame number, counted at
@@ -216,7 +227,7 @@ def telecine_sequence(
         _timecode(0, rate, True)
     start = max(0, seq.first) * round(rate) // max(1, round(film))  # the film's start, in video frames
     ptype = pixel_type or seq.pixel_type
-    load = _FrameCache(seq, ahead=sorted({k for vf in frames for k in (vf.top, vf.bottom, vf.first, vf.second)}))
+    load = _FrameCache(seq, ahead=sorted({k for vf in frames for k in (vf.top, vf.bottom, vf.first, vf.second)}), shared=shared)
     names: list[str] = []
     with _Staging(out_dir, name, overwrite) as staging:
         with _Writes() as writes:
@@ -275,6 +286,36 @@ def _sources_from_metadata(seq: Sequence, order: FieldOrder) -> list[int] | None
     return sources
 
 
+def _field_sources(seq: Sequence, order: FieldOrder, pattern: str | Cadence | None, tolerance: float,
+                   use_metadata: bool) -> tuple[list[int], Detection | None]:
+    """The film frame of every field, in field order: from our metadata when every frame
+    has it and no pattern is forced (detection None), else detected over `pattern`."""
+    sources = _sources_from_metadata(seq, order) if (use_metadata and pattern is None) else None
+    if sources is not None:
+        return sources, None
+    frames = (read_checked(seq, i).rgba for i in range(len(seq)))
+    sources, detection = detect_pulldown(frames, len(seq), order, pattern, tolerance)
+    if detection.violations:
+        raise FrameIOError(
+            f"{seq.directory}: sequence {seq.prefix} does not follow {detection.cadence.name} "
+            f"pulldown ({detection.violations} fields that should repeat differ); "
+            "give --pattern, or --tolerance for a lossy source"
+        )
+    return sources, detection
+
+
+def _recovered_film_rate(seq: Sequence, cadence: Cadence, film_speed: str | Fraction | int | None) -> Fraction:
+    """The recovered film's rate: the one asked for, else the frames' `motion:filmSpeed`,
+    else their video rate over the cadence's ratio, else 23.976."""
+    if film_speed is not None:
+        return film_rate(film_speed)
+    if isinstance(seq.first_meta.get("filmSpeed"), Fraction):
+        return seq.first_meta["filmSpeed"]  # type: ignore[no-any-return]
+    if seq.fps is not None:
+        return seq.fps / cadence.rate_ratio
+    return film_rate("23.976")
+
+
 def inverse_sequence(
     in_dir: str | Path,
     out_dir: str | Path,
@@ -307,31 +348,14 @@ def inverse_sequence(
         raise UsageError(f"{seq.paths[0]}: frames are marked {stored!r}, not interlaced; give --field-order to force")
     order = check_field_order(field_order or stored)
 
-    detection: Detection | None = None
-    sources = _sources_from_metadata(seq, order) if (use_metadata and pattern is None) else None
-    numbered_by_source = sources is not None
-    if sources is None:
-        frames = (read_checked(seq, i).rgba for i in range(len(seq)))
-        sources, detection = detect_pulldown(frames, len(seq), order, pattern, tolerance)
-        if detection.violations:
-            raise FrameIOError(
-                f"{seq.directory}: sequence {seq.prefix} does not follow {detection.cadence.name} "
-                f"pulldown ({detection.violations} fields that should repeat differ); "
-                "give --pattern, or --tolerance for a lossy source"
-            )
+    sources, detection = _field_sources(seq, order, pattern, tolerance, use_metadata)
+    numbered_by_source = detection is None
     recovered = recovery_map(sources, order)
     if not recovered:
         raise FrameIOError(f"{seq.directory}: no complete film frame in sequence {seq.prefix}")
 
     cadence = detection.cadence if detection else parse_cadence(str(seq.first_meta.get("cadence", "3:2")))
-    if film_speed is not None:
-        film = film_rate(film_speed)
-    elif isinstance(seq.first_meta.get("filmSpeed"), Fraction):
-        film = seq.first_meta["filmSpeed"]
-    elif seq.fps is not None:
-        film = seq.fps / cadence.rate_ratio
-    else:
-        film = film_rate("23.976")
+    film = _recovered_film_rate(seq, cadence, film_speed)
     ptype = pixel_type or seq.pixel_type
     load = _FrameCache(seq)
     names: list[str] = []

@@ -22,8 +22,9 @@ from ..field_model import weave_frames
 from .cadence import film_rate, plan
 from .contact_sheet import contact_sheet
 from .convert import Result, telecine_sequence
-from .movie import ViewTransform, choose_codec, encode_movie, first_timecode, sequence_movie
-from .sequence import Sequence, discover, read_mapped
+from .movie import ViewedFrames, ViewTransform, choose_codec, encode_movie, first_timecode, sequence_movie
+from .movie import viewed as viewed_frames
+from .sequence import Sequence, discover
 
 # Called as report(format name, step description) before each step.
 Report = Callable[[str, str], None]
@@ -51,6 +52,7 @@ class Options:
     codec: str | None
     view: ViewTransform
     overwrite: bool
+    shared: ViewedFrames | None = None  # the viewed frames a run's deliverables share
 
 
 def _speed(fmt: DeliverFormat, opts: Options) -> Fraction:
@@ -65,7 +67,7 @@ def _codec(fmt: DeliverFormat, opts: Options) -> str | None:
 def _movie(fmt: DeliverFormat, seq: Sequence, out_dir: Path, tag: str, opts: Options, say: Report) -> list[Path]:
     movie = out_dir / f"{seq.prefix}_{tag}{fmt.suffix}"
     say(fmt.name, f"movie {movie}")
-    return [sequence_movie(seq, movie, rate=_speed(fmt, opts), field_order=None, codec=_codec(fmt, opts), view=opts.view)]
+    return [sequence_movie(seq, movie, rate=_speed(fmt, opts), field_order=None, codec=_codec(fmt, opts), view=opts.view, shared=opts.shared)]
 
 
 def _fields(fmt: DeliverFormat, seq: Sequence, out_dir: Path, tag: str, opts: Options, say: Report) -> list[Path]:
@@ -73,13 +75,13 @@ def _fields(fmt: DeliverFormat, seq: Sequence, out_dir: Path, tag: str, opts: Op
     say(fmt.name, f"{pattern} pulldown to {out_dir / tag}")
     res = telecine_sequence(seq.directory, out_dir / tag, pattern=pattern, field_order=opts.field_order,
                             film_speed=_speed(fmt, opts), drop_frame=opts.drop_frame and fmt.drop_frame_ok,
-                            overwrite=opts.overwrite, sequence=seq)
+                            overwrite=opts.overwrite, sequence=seq, shared=opts.shared)
     movie = out_dir / f"{seq.prefix}_{tag}{fmt.suffix}"
     say(fmt.name, f"movie {movie}")
-    return list(res.paths) + [woven_movie(seq, res, movie, codec=_codec(fmt, opts), view=opts.view)]
+    return list(res.paths) + [woven_movie(seq, res, movie, codec=_codec(fmt, opts), view=opts.view, shared=opts.shared)]
 
 
-def woven_movie(seq: Sequence, res: Result, path: Path, *, codec: str | None, view: ViewTransform) -> Path:
+def woven_movie(seq: Sequence, res: Result, path: Path, *, codec: str | None, view: ViewTransform, shared: ViewedFrames | None = None) -> Path:
     """The interlaced movie of a pulldown, woven from the film frames as the pulldown wove
     its EXR frames: each film frame read and viewed once (the view transform is per pixel,
     so weaving viewed frames gives the viewed woven frames, bit for bit), instead of
@@ -88,7 +90,7 @@ def woven_movie(seq: Sequence, res: Result, path: Path, *, codec: str | None, vi
         return sequence_movie(res.out_dir, path, codec=codec, view=view)
     frames = plan(len(seq), res.cadence, res.field_order, "pad")
     need = sorted({i for vf in frames for i in (vf.top, vf.bottom)})
-    viewed = zip(need, read_mapped(seq, lambda frame: view(frame.rgba), need))
+    viewed = zip(need, viewed_frames(seq, view, need, shared))
     kept: dict[int, np.ndarray] = {}
 
     def woven() -> Iterator[np.ndarray]:
@@ -135,17 +137,21 @@ def deliver(
     report: Report | None = None,
     sequence: Sequence | None = None,
     tags: dict[str, str] | None = None,
+    shared: ViewedFrames | None = None,
 ) -> dict[str, list[Path]]:
     """Make the requested deliverables of the sequence in `in_dir` (or of `sequence`, a
     selection of its frames: sequence.select / sequence_of) under `out_dir`.
 
     `tags` names each format's outputs (`<prefix>_<tag>.mov`, a field folder `<tag>/`);
-    by default the format's name. Returns, per format, the paths written (movie, contact
+    by default the format's name. `shared`: the viewed frames of `sequence` that the
+    run's deliverables share (movie.ViewedFrames), each frame viewed once for them all;
+    by default one for this call's formats. Returns, per format, the paths written (movie, contact
     sheet; for a pulldown the field frames, then their movie).
     """
     wanted = parse_formats(formats)
     seq = sequence or discover(in_dir, prefix, require_even_height=any(FORMATS[f].interlaced for f in wanted))
+    view = view or ViewTransform()  # (a bad OCIO view failed when it was made)
     opts = Options(film=film_rate(film_speed), pattern=pattern, field_order=field_order, drop_frame=drop_frame,
-                   codec=codec, view=view or ViewTransform(), overwrite=overwrite)  # (a bad OCIO view failed when it was made)
+                   codec=codec, view=view, overwrite=overwrite, shared=shared if shared is not None else ViewedFrames(seq, view))
     say = report or (lambda fmt, step: None)
     return {f: MAKERS[FORMATS[f].kind](FORMATS[f], seq, Path(out_dir), (tags or {}).get(f, f), opts, say) for f in wanted}

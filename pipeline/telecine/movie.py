@@ -18,11 +18,12 @@ when no codec is given. Files are encoded to a hidden temporary name and renamed
 from __future__ import annotations
 
 import math
+import os
 
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
-from typing import Callable, Iterable, Mapping
+from typing import Callable, Iterable, Iterator, Mapping
 
 import numpy as np
 
@@ -199,6 +200,55 @@ class ViewTransform:
         return np.round(self.encode(rgba) * 65535.0).astype(np.uint16)
 
 
+DEFAULT_VIEWED_BUDGET_MB = 512  # viewed frames a run's deliverables share ($MOTION_VIEWED_MB): 72 frames of 480x270 take 56 MB
+
+
+class ViewedFrames:
+    """The viewed frames (display-referred RGB uint16, `view(rgba)`) of one sequence, kept
+    while they fit a byte budget and shared by the deliverables made from it in one run:
+    the 24p movie, the 60i pulldown (which views each film frame as it reads it for the
+    field frames) and the 60i movie view each frame once between them, not once each.
+    A frame past the budget is viewed again when asked for; the pixels are the same
+    either way (the view is a pure function of the frame)."""
+
+    def __init__(self, seq: Sequence, view: ViewTransform, budget_bytes: int | None = None) -> None:
+        if budget_bytes is None:
+            env = os.environ.get("MOTION_VIEWED_MB", "").strip()
+            budget_bytes = (int(env) if env.isdigit() else DEFAULT_VIEWED_BUDGET_MB) << 20
+        self.paths, self.view, self.budget = seq.paths, view, budget_bytes
+        self.kept: dict[int, np.ndarray] = {}
+        self.used = 0
+
+    def serves(self, seq: Sequence, view: ViewTransform) -> bool:
+        """Whether these are the frames of `seq` (position for position) under `view`."""
+        return seq.paths == self.paths and view is self.view
+
+    def keep(self, index: int, rgb16: np.ndarray) -> np.ndarray:
+        """Keep frame `index`'s viewed pixels while they fit the budget; returns them."""
+        if index not in self.kept and self.used + rgb16.nbytes <= self.budget:
+            self.kept[index] = rgb16
+            self.used += rgb16.nbytes
+        return rgb16
+
+
+def viewed(seq: Sequence, view: ViewTransform, indices: Iterable[int] | None = None, shared: ViewedFrames | None = None) -> Iterator[np.ndarray]:
+    """`view(frame.rgba)` of frames `indices` (0-based, default all) in order: those
+    `shared` keeps as kept, the others read and viewed side by side on the cores
+    (sequence.read_mapped) and kept there when they fit."""
+    order = list(range(len(seq)) if indices is None else indices)
+    if shared is None or not shared.serves(seq, view):
+        yield from read_mapped(seq, lambda frame: view(frame.rgba), order)
+        return
+    missing = [i for i in order if i not in shared.kept]
+    made = zip(missing, read_mapped(seq, lambda frame: view(frame.rgba), missing))
+    for i in order:
+        if i in shared.kept:
+            yield shared.kept[i]
+        else:
+            index, rgb16 = next(made)
+            yield shared.keep(index, rgb16)
+
+
 class _Encoder:
     """One video stream: RGB48 frames -> scale/format/setfield filter graph -> encoder -> muxer."""
 
@@ -332,8 +382,9 @@ def sequence_movie(
     view: ViewTransform | None = None,
     prefix: str | None = None,
     progress: Progress | None = None,
+    shared: ViewedFrames | None = None,
 ) -> Path:
-    """A movie of an EXR sequence.
+    """A movie of an EXR sequence (`shared`: viewed frames a run's deliverables share).
 
     `rate` defaults to the frames' `framesPerSecond`; `field_order="auto"` takes the
     frames' `motion:fieldOrder` (tff/bff -> interlaced, anything else progressive);
@@ -352,8 +403,8 @@ def sequence_movie(
     chosen, container = choose_codec(path, codec)
     order = check_field_order(field_order) if field_order else None
     view = view or ViewTransform()
-    # each frame read and viewed once, side by side on the cores, encoded in order
-    frames = read_mapped(seq, lambda frame: view(frame.rgba))
+    # each frame read and viewed once (or taken from those the run's deliverables share), side by side on the cores, encoded in order
+    frames = viewed(seq, view, shared=shared)
     return encode_movie(path, chosen, container, frames, rate, seq.width, seq.height, order, view, first_timecode(seq), progress, len(seq))
 
 
