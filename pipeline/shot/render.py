@@ -525,7 +525,7 @@ def report_name(req: RenderRequest, s: Settled) -> Path:
     return Path(req.report or s.out_dir / default_name)
 
 
-def dry_run(req: RenderRequest, s: Settled, at: FramesAtHand, c: Chunking) -> dict[str, Any]:
+def dry_run_plan(req: RenderRequest, s: Settled, at: FramesAtHand, c: Chunking) -> dict[str, Any]:
     """--dry-run: the plan, nothing rendered or written."""
     planned = plan(req, s.loaded, s.out_dir, s.sel.selected, s.frames, s.sel.shard_spec, at.skipped, c.chunk_list, c.chunk_size, s.workers, s.threads, at.paths,
                    report_name(req, s), at.states.stale, s.wanted, resolved_settings(req, s.loaded, s.preset), c.cost)
@@ -612,7 +612,7 @@ def _run_render(req: RenderRequest, held: list[RunLock]) -> dict[str, Any]:
         return check_run(req, s, at)
     s, c = cut_chunks(req, s, at)
     if req.dry_run:
-        return dry_run(req, s, at, c)
+        return dry_run_plan(req, s, at, c)
 
     ctx = open_output(req, s, at)
     label, progress = start_progress(req, s, at, c)
