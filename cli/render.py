@@ -5,11 +5,15 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import click
 
 from motion.cli.options import GivenPath, MAX_TASK_TIMEOUT_S, FiniteFloat
 from motion.pipeline.errors import UsageError
+
+if TYPE_CHECKING:
+    from motion.pipeline.shot import RenderRequest
 
 
 def _resolution(value: str | None) -> tuple[int, int] | None:
@@ -104,63 +108,59 @@ def render(
     allow_different_settings: bool,
 ) -> None:
     """Render SCENE's frames to OpenEXR files."""
-    from motion.pipeline.errors import IncompleteJobError
-    from motion.pipeline.shot import RenderRequest, plan_text, run_render
+    from motion.pipeline.shot import RenderRequest
 
     request = RenderRequest(
-        scene=scene,
-        output_dir=output_dir,
-        frames_spec=frames_spec,
-        preset=preset,
-        render_overrides={
-            "spp": spp,
-            "resolution": _resolution(resolution),
-            "motion_blur": motion_blur,
-            "variant": variant,
-            "denoise": None if denoise is None else ("oidn" if denoise else "off"),
-            "temporal": temporal,
-        },
+        scene=scene, output_dir=output_dir, frames_spec=frames_spec, shard=shard, preset=preset, motion_file=motion_file, report=report_path,
+        render_overrides=_render_overrides(spp, resolution, motion_blur, variant, denoise, temporal),
         output_overrides={"aovs": list(dict.fromkeys(aovs)) or None},
-        cache=not no_cache,
-        deliver=deliver_spec,
-        deliver_frames=deliver_frames,
+        cache=not no_cache, resume=resume, overwrite=overwrite, progress=progress, check=check, dry_run=dry_run,
+        deliver=deliver_spec, deliver_frames=deliver_frames,
         deliver_view={"exposure": exposure, "ocio_config": ocio_config, "ocio_display": ocio_display, "ocio_view": ocio_view},
-        resume=resume,
-        overwrite=overwrite,
-        shard=shard,
-        workers=workers,
-        scheduler=scheduler,
-        transfer=transfer,
-        threads=threads,
-        chunk_size=chunk_size,
-        retries=retries,
-        task_timeout_s=task_timeout_s,
-        motion_file=motion_file,
-        report=report_path,
-        progress=progress,
-        check=check,
-        dry_run=dry_run,
+        workers=workers, scheduler=scheduler, transfer=transfer, threads=threads, chunk_size=chunk_size, retries=retries, task_timeout_s=task_timeout_s,
     )
     if fields:
         from motion.pipeline.shot import run_field_render
 
         if dry_run or as_json or compare_ref:
             raise click.UsageError("--fields does not combine with --dry-run, --json or --compare")
-
         run_field_render(request, fields, field_order)
         return
-    try:
-        result = run_render(request)
-    except IncompleteJobError as err:
-        if as_json and getattr(err, "report", None) is not None:
-            click.echo(json.dumps(summary(err.report), indent=2))  # type: ignore[attr-defined]
-        raise
+    result = _run(request, as_json)
     if dry_run:
+        from motion.pipeline.shot import plan_text
+
         click.echo(json.dumps(result, indent=2) if as_json else plan_text(result))
     elif as_json:
         click.echo(json.dumps(summary(result) if "totals" in result else result, indent=2))
     if compare_ref is not None and not dry_run:
         _compare(result, compare_ref, allow_different_settings)
+
+
+def _render_overrides(spp: int | None, resolution: str | None, motion_blur: str | None, variant: str | None, denoise: bool | None, temporal: str | None) -> dict[str, Any]:
+    """The flags that override the preset's and the scene's `render:` settings (None: not given)."""
+    return {
+        "spp": spp,
+        "resolution": _resolution(resolution),
+        "motion_blur": motion_blur,
+        "variant": variant,
+        "denoise": None if denoise is None else ("oidn" if denoise else "off"),
+        "temporal": temporal,
+    }
+
+
+def _run(request: "RenderRequest", as_json: bool) -> dict[str, Any]:
+    """The render's report (or plan); a job with frames that failed everywhere prints its
+    summary first with --json, then raises (exit 3)."""
+    from motion.pipeline.errors import IncompleteJobError
+    from motion.pipeline.shot import run_render
+
+    try:
+        return run_render(request)
+    except IncompleteJobError as err:
+        if as_json and getattr(err, "report", None) is not None:
+            click.echo(json.dumps(summary(err.report), indent=2))  # type: ignore[attr-defined]
+        raise
 
 
 def _compare(report: dict, ref_dir: Path, allow: bool) -> None:

@@ -245,12 +245,26 @@ def parse_expression(text: str, variables: Sequence[str]) -> Expression:
         if v in FUNCTIONS or v in CONSTANTS or not v.isidentifier():
             raise ExpressionError(f"variable name {v!r} is not usable in expressions")
     shown = text if len(text) <= 60 else text[:57] + "..."
+    fail = _failer(shown)
+    module = _python_tree(text, shown, fail)
+    # Python's parser accepts `1 if t else 2` etc.; everything goes through `build`.
+    return Expression(text=text, variables=variables, tree=_TreeBuilder(variables, fail).build(module.body, 1))
+
+
+def _failer(shown: str) -> Callable[..., ExpressionError]:
+    """The error for the expression `shown`: the message, and the node's column if given."""
 
     def fail(message: str, node: ast.AST | None = None) -> ExpressionError:
         col = getattr(node, "col_offset", None)
         where = f" (column {col + 1})" if col is not None else ""
         return ExpressionError(f"expression {shown!r}: {message}{where}")
 
+    return fail
+
+
+def _python_tree(text: str, shown: str, fail: Callable[..., ExpressionError]) -> ast.Expression:
+    """Python's syntax tree of `text`, after the cheap checks (type, length, emptiness,
+    parenthesis depth) that keep the parser from pathological input."""
     if not isinstance(text, str):
         raise ExpressionError(f"an expression must be text, got {type(text).__name__}")
     if len(text) > MAX_LENGTH:
@@ -268,77 +282,104 @@ def parse_expression(text: str, variables: Sequence[str]) -> Expression:
     try:
         # `^` means power (as in every animation package), with the precedence of `**`;
         # Python would read it as xor with the lowest precedence, so rewrite it first.
-        module = ast.parse(text.strip().replace("^", "**"), mode="eval")
+        return ast.parse(text.strip().replace("^", "**"), mode="eval")
     except SyntaxError as exc:
         col = f" (column {exc.offset})" if exc.offset else ""
         raise ExpressionError(f"expression {shown!r}: syntax error: {exc.msg}{col}") from None
     except (RecursionError, MemoryError, ValueError):
         raise fail("cannot be parsed (too complex)") from None
 
-    count = 0
 
-    def build(node: ast.AST, level: int) -> Node:
-        nonlocal count
-        count += 1
-        if count > MAX_NODES:
+class _TreeBuilder:
+    """Python's syntax tree -> our restricted tree over `variables`, node by node, counting
+    nodes and depth; anything outside the grammar raises through `fail`."""
+
+    def __init__(self, variables: tuple[str, ...], fail: Callable[..., ExpressionError]) -> None:
+        self.variables = variables
+        self.fail = fail
+        self.count = 0
+
+    def build(self, node: ast.AST, level: int) -> Node:
+        """The restricted tree of `node`, at nesting `level`."""
+        fail = self.fail
+        self.count += 1
+        if self.count > MAX_NODES:
             raise fail(f"too many terms (the limit is {MAX_NODES})")
         if level > MAX_DEPTH:
             raise fail(f"nested too deeply (the limit is {MAX_DEPTH} levels)", node)
         if isinstance(node, ast.Constant):
-            if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
-                raise fail(f"only numbers are allowed as literals, got {type(node.value).__name__} {node.value!r}", node)
-            value = float(node.value)
-            if not math.isfinite(value) or abs(value) > MAX_LITERAL:
-                raise fail(f"number {node.value!r} is too large (limit {MAX_LITERAL:g})", node)
-            return Num(value)
+            return self.constant(node)
         if isinstance(node, ast.Name):
-            if node.id in variables:
-                return Var(node.id)
-            if node.id in CONSTANTS:
-                return Num(CONSTANTS[node.id])
-            if node.id in FUNCTIONS:
-                raise fail(f"function '{node.id}' must be called, e.g. {node.id}(t)", node)
-            known = ", ".join([*variables, *CONSTANTS])
-            raise fail(f"unknown name '{node.id}' (known: {known})", node)
+            return self.name(node)
         if isinstance(node, ast.UnaryOp):
-            if isinstance(node.op, ast.USub):
-                inner = build(node.operand, level + 1)
-                return Num(-inner.value) if isinstance(inner, Num) else Neg(inner)
-            if isinstance(node.op, ast.UAdd):
-                return build(node.operand, level + 1)
-            raise fail(f"operator '{type(node.op).__name__}' is not allowed", node)
+            return self.unary(node, level)
         if isinstance(node, ast.BinOp):
-            op = _BINARY.get(type(node.op))
-            if op is None:
-                raise fail(f"operator '{type(node.op).__name__}' is not allowed (use + - * / % **)", node)
-            left = build(node.left, level + 1)
-            right = build(node.right, level + 1)
-            if op == "**":
-                _check_exponent(right, node, fail)
-            return BinOp(op, left, right)
+            return self.binary(node, level)
         if isinstance(node, ast.Call):
-            if not isinstance(node.func, ast.Name):
-                what = _FORBIDDEN.get(type(node.func), type(node.func).__name__)
-                raise fail(f"only whitelisted functions may be called ({what} is not allowed)", node)
-            name = node.func.id
-            if name not in FUNCTIONS:
-                raise fail(f"'{name}' is not an allowed function (allowed: {', '.join(sorted(FUNCTIONS))})", node)
-            if node.keywords:
-                raise fail(f"'{name}' takes no keyword arguments", node)
-            lo, hi = FUNCTIONS[name]
-            n = len(node.args)
-            if not lo <= n <= hi:
-                want = str(lo) if lo == hi else f"{lo} to {hi}"
-                raise fail(f"'{name}' takes {want} arguments, got {n}", node)
-            args = tuple(build(a, level + 1) for a in node.args)
-            if name == "pow":
-                _check_exponent(args[1], node, fail)
-            return Call(name, args)
+            return self.call(node, level)
         what = _FORBIDDEN.get(type(node), type(node).__name__)
         raise fail(f"{what} is not allowed here", node)
 
-    # Python's parser accepts `1 if t else 2` etc.; everything goes through `build`.
-    return Expression(text=text, variables=variables, tree=build(module.body, 1))
+    def constant(self, node: ast.Constant) -> Node:
+        """A finite number no larger than MAX_LITERAL."""
+        if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
+            raise self.fail(f"only numbers are allowed as literals, got {type(node.value).__name__} {node.value!r}", node)
+        value = float(node.value)
+        if not math.isfinite(value) or abs(value) > MAX_LITERAL:
+            raise self.fail(f"number {node.value!r} is too large (limit {MAX_LITERAL:g})", node)
+        return Num(value)
+
+    def name(self, node: ast.Name) -> Node:
+        """A variable or a named constant."""
+        if node.id in self.variables:
+            return Var(node.id)
+        if node.id in CONSTANTS:
+            return Num(CONSTANTS[node.id])
+        if node.id in FUNCTIONS:
+            raise self.fail(f"function '{node.id}' must be called, e.g. {node.id}(t)", node)
+        known = ", ".join([*self.variables, *CONSTANTS])
+        raise self.fail(f"unknown name '{node.id}' (known: {known})", node)
+
+    def unary(self, node: ast.UnaryOp, level: int) -> Node:
+        """-x (folded into a negative number when x is one) or +x."""
+        if isinstance(node.op, ast.USub):
+            inner = self.build(node.operand, level + 1)
+            return Num(-inner.value) if isinstance(inner, Num) else Neg(inner)
+        if isinstance(node.op, ast.UAdd):
+            return self.build(node.operand, level + 1)
+        raise self.fail(f"operator '{type(node.op).__name__}' is not allowed", node)
+
+    def binary(self, node: ast.BinOp, level: int) -> Node:
+        """+ - * / % **, a constant exponent bounded."""
+        op = _BINARY.get(type(node.op))
+        if op is None:
+            raise self.fail(f"operator '{type(node.op).__name__}' is not allowed (use + - * / % **)", node)
+        left = self.build(node.left, level + 1)
+        right = self.build(node.right, level + 1)
+        if op == "**":
+            _check_exponent(right, node, self.fail)
+        return BinOp(op, left, right)
+
+    def call(self, node: ast.Call, level: int) -> Node:
+        """A whitelisted function by name, with its number of positional arguments."""
+        fail = self.fail
+        if not isinstance(node.func, ast.Name):
+            what = _FORBIDDEN.get(type(node.func), type(node.func).__name__)
+            raise fail(f"only whitelisted functions may be called ({what} is not allowed)", node)
+        name = node.func.id
+        if name not in FUNCTIONS:
+            raise fail(f"'{name}' is not an allowed function (allowed: {', '.join(sorted(FUNCTIONS))})", node)
+        if node.keywords:
+            raise fail(f"'{name}' takes no keyword arguments", node)
+        lo, hi = FUNCTIONS[name]
+        n = len(node.args)
+        if not lo <= n <= hi:
+            want = str(lo) if lo == hi else f"{lo} to {hi}"
+            raise fail(f"'{name}' takes {want} arguments, got {n}", node)
+        args = tuple(self.build(a, level + 1) for a in node.args)
+        if name == "pow":
+            _check_exponent(args[1], node, fail)
+        return Call(name, args)
 
 
 def _check_exponent(exponent: Node, node: ast.AST, fail: Callable[..., ExpressionError]) -> None:

@@ -46,3 +46,36 @@ def test_no_assert_in_pipeline_or_cli() -> None:
         if isinstance(node, ast.Assert)
     ]
     assert not found, found
+
+
+def long_functions(root: Path, limit: int = 80) -> list[tuple[str, str, int]]:
+    """(file, name, lines) of every function or method in pipeline/ and cli/ longer than
+    `limit` lines, counted from its `def` line to its last line (decorators excluded)."""
+    import ast
+
+    return [
+        (str(path.relative_to(root)), node.name, node.end_lineno - node.lineno + 1)
+        for folder in ("pipeline", "cli")
+        for path in sorted((root / folder).rglob("*.py"))
+        for node in ast.walk(ast.parse(path.read_text()))
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+        and node.end_lineno - node.lineno + 1 > limit
+    ]
+
+
+def test_no_function_over_80_lines_in_pipeline_or_cli() -> None:
+    """A function a reader can follow: none in pipeline/ or cli/ runs past 80 lines (issue 37)."""
+    found = long_functions(ROOT)
+    assert not found, found
+
+
+def test_the_length_check_counts_from_def_to_last_line(tmp_path: Path) -> None:
+    """The check is live: a decorated 81-line function is reported, an 80-line one is not."""
+    def body(indent: str) -> str:
+        return "".join(f"{indent}x{i} = {i}\n" for i in range(79))
+
+    (tmp_path / "pipeline").mkdir()
+    (tmp_path / "pipeline" / "m.py").write_text(
+        f"@decorator\ndef short():\n{body('    ')}\n\nclass C:\n    def long(self):\n{body('        ')}        return 1\n"
+    )
+    assert long_functions(tmp_path) == [("pipeline/m.py", "long", 81)]

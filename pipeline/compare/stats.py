@@ -207,7 +207,6 @@ def compare_frame(new: np.ndarray, ref: np.ndarray, *, alpha: float = ALPHA, z_m
     # half floats round to 11 bits: a floor under v for frames that differ only by rounding
     # (both frames' rounding, 2^-11 of a block's mean level per pixel)
     sv += 2.0 * (2.0 ** -11 * sr) ** 2 / (b * b)
-    gy, gx = sd.shape[:2]
     if kappa is None:
         # blocks whose every pixel was drawn and most of whose pixels differ: noise to measure
         noisy = _block_sums((d != 0).astype(np.float32), b) > 0.75 * b * b
@@ -218,6 +217,21 @@ def compare_frame(new: np.ndarray, ref: np.ndarray, *, alpha: float = ALPHA, z_m
 
     # pixels that differ at all: a variance made of a few of them has few degrees of freedom
     sn = _block_sums((d != 0).astype(np.float32), b)
+    scales = _window_scales(sd, sv, sn, kappa)
+    tests = sum(z.size for _, z in scales)
+    z_crit = threshold(tests, alpha, z_min)
+    max_z = max(float(np.nanmax(np.abs(z))) for _, z in scales)
+    marked, peak, peak_ch = _mark(scales, z_crit, sd, sv, sn, kappa)
+    regions = _regions(marked, peak, peak_ch, sd, sr, b, h, w, names)
+    return FrameTest("different" if regions else "equal", max_z, z_crit, regions, kappa, rms, max_abs, b, np.abs(scales[0][1]).max(axis=2))
+
+
+def _window_scales(sd: np.ndarray, sv: np.ndarray, sn: np.ndarray, kappa: float) -> list[tuple[int, np.ndarray]]:
+    """(k, z [gy', gx', C]) for square windows of k = 1, 2, 4, ... blocks (up to half the
+    grid), then (0, z [1, 1, C]) for the whole frame: the summed difference over its noise,
+    as a normal deviate. sd, sv, sn: per-block sums of the difference, its variance
+    estimate and the count of pixels that differ."""
+    gy, gx = sd.shape[:2]
     scales: list[tuple[int, np.ndarray]] = []
     padded = np.pad(sv, ((1, 1), (1, 1), (0, 0)), mode="edge")
     padded_n = np.pad(sn, ((1, 1), (1, 1), (0, 0)), mode="edge")
@@ -232,13 +246,16 @@ def compare_frame(new: np.ndarray, ref: np.ndarray, *, alpha: float = ALPHA, z_m
         k *= 2
     whole = sd.sum(axis=(0, 1)) / np.sqrt(kappa * sv.sum(axis=(0, 1)))
     scales.append((0, _as_z(whole, sn.sum(axis=(0, 1)))[None, None, :]))
-    tests = sum(z.size for _, z in scales)
-    z_crit = threshold(tests, alpha, z_min)
-    max_z = max(float(np.nanmax(np.abs(z))) for _, z in scales)
+    return scales
 
-    # blocks marked by the smallest windows that differ; a larger window marks the blocks no
-    # smaller one did when those still differ on their own (a local change also tips the
-    # whole-frame sum, and must not make the whole frame its region)
+
+def _mark(scales: list[tuple[int, np.ndarray]], z_crit: float, sd: np.ndarray, sv: np.ndarray, sn: np.ndarray, kappa: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The blocks that differ [gy, gx], with the deviate and channel that marked each.
+
+    Blocks marked by the smallest windows that differ; a larger window marks the blocks no
+    smaller one did when those still differ on their own (a local change also tips the
+    whole-frame sum, and must not make the whole frame its region)."""
+    gy, gx = sd.shape[:2]
     marked = np.zeros((gy, gx), bool)
     peak = np.zeros((gy, gx))
     peak_ch = np.zeros((gy, gx), int)
@@ -263,8 +280,7 @@ def compare_frame(new: np.ndarray, ref: np.ndarray, *, alpha: float = ALPHA, z_m
             marked |= sub
             peak[sub] = zw[ch]
             peak_ch[sub] = ch
-    regions = _regions(marked, peak, peak_ch, sd, sr, b, h, w, names)
-    return FrameTest("different" if regions else "equal", max_z, z_crit, regions, kappa, rms, max_abs, b, np.abs(scales[0][1]).max(axis=2))
+    return marked, peak, peak_ch
 
 
 def _regions(marked: np.ndarray, peak: np.ndarray, peak_ch: np.ndarray, sd: np.ndarray, sr: np.ndarray, b: int, h: int, w: int, names: tuple[str, ...]) -> list[Region]:

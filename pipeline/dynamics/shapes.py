@@ -261,15 +261,7 @@ def resolve_shaped(b: ContactBodies, c: Contacts, shapes: ShapeSet, q1: np.ndarr
     inv_m = b.inv_mass[i]
     inv_I = b.inv_inertia_world[i] if b.inv_inertia_world is not None else np.zeros((B, 3, 3))
     n = c.normal
-    t1, t2 = _tangents(np.where(c.ok[..., None], n, np.array([0.0, 1.0, 0.0])))
-    D = np.stack((n, t1, t2), axis=2).reshape(B, 3 * m, 3)  # rows: contact a, direction (n, t1, t2)
-    D = D * np.repeat(c.ok, 3, axis=1)[..., None]
-    r = np.repeat(c.lever, 3, axis=1)
-    A = cross(r, D)  # r x d
-    K = inv_m[:, None, None] * np.einsum("bik,bjk->bij", D, D) + np.einsum("bik,bkl,bjl->bij", A, inv_I, A)
-    diag = np.einsum("bii->bi", K)
-    diag = np.where(diag > 1e-300, diag, 1.0)
-    u0 = np.einsum("bik,bk->bi", D, b.v1[i]) + (np.einsum("bik,bk->bi", A, b.w1[i]) if b.w1 is not None else 0.0)
+    D, A, K, u0 = _contact_space(b, c, inv_m, inv_I)
     u0n = u0[:, 0::3]
     rel = np.einsum("bmk,bmk->bm", n, n)  # 1 for real contacts
     impact = c.ok & (-u0n > v_rest)
@@ -277,14 +269,66 @@ def resolve_shaped(b: ContactBodies, c: Contacts, shapes: ShapeSet, q1: np.ndarr
     target = np.where(c.ok & (u0n < 0), -eps * u0n, 0.0) * rel
     mu = np.sqrt(b.friction[i][:, None] * c.mu)
     mu_s = np.sqrt(b.static_friction[i][:, None] * c.mu_s)
+    lam = _warm_start(shapes, c, impact)
+    lam = _solve_impulses(K, u0, target, mu, mu_s, lam, sweeps)
+    shapes.keys.append(c.key[c.ok])
+    shapes.lams.append(lam.reshape(B, m, 3)[c.ok])
+    dv = inv_m[:, None] * np.einsum("bi,bik->bk", lam, D)
+    dw = np.einsum("bkl,bl->bk", inv_I, np.einsum("bi,bik->bk", lam, A))
+    b.v1[i] += dv
+    if b.w1 is not None:
+        b.w1[i] += dw
+    # positions: the rest of the step after an impact; half of it for a support
+    hit_body = impact.any(axis=1)
+    s_first = np.where(c.ok, c.s, 1.0).min(axis=1)
+    lever_t = np.where(hit_body, 1.0 - s_first, 0.5) * h
+    b.x1[i] += lever_t[:, None] * dv
+    q1[i] = _rotate(q1[i], lever_t[:, None] * dw)
+    _depenetrate(b, c, q1, lever_t[:, None] * dv)
+    speed = np.where(impact, -u0n, 0.0)
+    best = np.argmax(speed, axis=1)
+    sel = np.flatnonzero(hit_body)
+    xs = b.x1[i[sel]]
+    return np.concatenate((np.stack((i[sel].astype(np.float64), speed[sel, best[sel]], c.collider[sel, best[sel]].astype(np.float64), s_first[sel])), xs.T))
+
+
+def _contact_space(b: ContactBodies, c: Contacts, inv_m: np.ndarray, inv_I: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The contacts' directions D [B, 3m, 3] (rows: contact a, direction n, t1, t2; zero
+    for padded contacts), their levers' moments A = r x d, the effective mass matrix
+    K = D D^T / m + A I^-1 A^T [B, 3m, 3m], and the velocities along D before the impulses."""
+    i = c.body
+    B, m = c.ok.shape
+    n = c.normal
+    t1, t2 = _tangents(np.where(c.ok[..., None], n, np.array([0.0, 1.0, 0.0])))
+    D = np.stack((n, t1, t2), axis=2).reshape(B, 3 * m, 3)  # rows: contact a, direction (n, t1, t2)
+    D = D * np.repeat(c.ok, 3, axis=1)[..., None]
+    r = np.repeat(c.lever, 3, axis=1)
+    A = cross(r, D)  # r x d
+    K = inv_m[:, None, None] * np.einsum("bik,bjk->bij", D, D) + np.einsum("bik,bkl,bjl->bij", A, inv_I, A)
+    u0 = np.einsum("bik,bk->bi", D, b.v1[i]) + (np.einsum("bik,bk->bi", A, b.w1[i]) if b.w1 is not None else 0.0)
+    return D, A, K, u0
+
+
+def _warm_start(shapes: ShapeSet, c: Contacts, impact: np.ndarray) -> np.ndarray:
+    """The impulses [B, 3m] the iteration starts from: a contact that was there last step
+    (same body, point and collider) and is no new impact starts from last step's
+    impulses; the iteration then corrects them (clamped). Zero otherwise."""
+    B, m = c.ok.shape
     lam = np.zeros((B, 3 * m))
     if shapes.prev_keys.size:
-        # warm start: a contact that was there last step (same body, point and collider)
-        # starts from last step's impulses; the iteration then corrects them (clamped)
         at = np.clip(np.searchsorted(shapes.prev_keys, c.key), 0, shapes.prev_keys.size - 1)
         same = (shapes.prev_keys[at] == c.key) & c.ok & ~impact
         lam = np.where(same[..., None], shapes.prev_lam[at], 0.0).reshape(B, 3 * m)
-    rows = np.arange(B)
+    return lam
+
+
+def _solve_impulses(K: np.ndarray, u0: np.ndarray, target: np.ndarray, mu: np.ndarray, mu_s: np.ndarray, lam: np.ndarray, sweeps: int) -> np.ndarray:
+    """Projected Gauss-Seidel over the contacts, at most `sweeps` sweeps: each contact's
+    normal impulse clamped to push only (towards the target normal speed), its friction
+    impulse to the static cone (mu_s) or else the kinetic one (mu). In place on `lam`."""
+    m = target.shape[1]
+    diag = np.einsum("bii->bi", K)
+    diag = np.where(diag > 1e-300, diag, 1.0)
     # padded contacts have zero rows in K, zero target and u0: their impulses stay 0
     k_rows = [np.ascontiguousarray(K[:, 3 * a : 3 * a + 3, :]) for a in range(m)]
     k_tn = [K[:, 3 * a + 1 : 3 * a + 3, 3 * a] for a in range(m)]
@@ -304,23 +348,18 @@ def resolve_shaped(b: ContactBodies, c: Contacts, shapes: ShapeSet, q1: np.ndarr
         # converged when a sweep changes no contact velocity by more than 1 nm/s
         if np.abs(np.einsum("bij,bj->bi", K, lam - before)).max() <= 1e-9:
             break
-    shapes.keys.append(c.key[c.ok])
-    shapes.lams.append(lam.reshape(B, m, 3)[c.ok])
-    dv = inv_m[:, None] * np.einsum("bi,bik->bk", lam, D)
-    dw = np.einsum("bkl,bl->bk", inv_I, np.einsum("bi,bik->bk", lam, A))
-    b.v1[i] += dv
-    if b.w1 is not None:
-        b.w1[i] += dw
-    # positions: the rest of the step after an impact; half of it for a support
-    hit_body = impact.any(axis=1)
-    s_first = np.where(c.ok, c.s, 1.0).min(axis=1)
-    lever_t = np.where(hit_body, 1.0 - s_first, 0.5) * h
-    b.x1[i] += lever_t[:, None] * dv
-    q1[i] = _rotate(q1[i], lever_t[:, None] * dw)
-    # remove what still penetrates: translate along the deepest contact's normal
+    return lam
+
+
+def _depenetrate(b: ContactBodies, c: Contacts, q1: np.ndarray, moved: np.ndarray) -> None:
+    """Remove what still penetrates after the bodies moved by `moved` [B, 3] and turned to
+    q1: translate each along its deepest contact's normal (three passes at most)."""
+    i = c.body
+    n = c.normal
+    rows = np.arange(c.ok.shape[0])
     rot = quat_to_matrix(q1[i])
     lever_new = np.einsum("bij,bmj->bmi", rot, c.local)
-    depth = c.depth - np.einsum("bmk,bmk->bm", n, lever_new - c.lever) - np.einsum("bmk,bk->bm", n, lever_t[:, None] * dv)
+    depth = c.depth - np.einsum("bmk,bmk->bm", n, lever_new - c.lever) - np.einsum("bmk,bk->bm", n, moved)
     for _ in range(3):
         depth = np.where(c.ok, depth, -np.inf)
         k = np.argmax(depth, axis=1)
@@ -330,8 +369,3 @@ def resolve_shaped(b: ContactBodies, c: Contacts, shapes: ShapeSet, q1: np.ndarr
         move = lift[:, None] * n[rows, k]
         b.x1[i] += move
         depth = depth - np.einsum("bmk,bk->bm", n, move)
-    speed = np.where(impact, -u0n, 0.0)
-    best = np.argmax(speed, axis=1)
-    sel = np.flatnonzero(hit_body)
-    xs = b.x1[i[sel]]
-    return np.concatenate((np.stack((i[sel].astype(np.float64), speed[sel, best[sel]], c.collider[sel, best[sel]].astype(np.float64), s_first[sel])), xs.T))

@@ -431,18 +431,9 @@ def coast(group: Group, integrator: Integrator, ctx: StepContext, t0: float, t1:
     s = system.unpack(group.X)
     if a is None or (system.rotating and np.abs(s.w).max(initial=0.0) > REST_SPIN):
         return 0
-    p = system.props
-    index = ctx.index + np.arange(1, COAST_STEPS + 1)
-    t_end = t0 + index * step  # where each step ends, on the grid
-    starts = np.concatenate(([ctx.t], t_end[:-1]))
-    ok = (t1 - starts >= step) & (starts < t1 - 1e-9 * max(1.0, abs(t1)))
-    later = p.start[p.start > ctx.t + 1e-12]
-    if later.size:
-        ok &= starts + 1e-12 < later.min()  # the active set stays as it is
-    K = int(np.argmin(ok)) if not ok.all() else ok.size
+    t_end, K = _coast_window(ctx, system.props.start, t0, t1, step)
     if K == 0:
         return 0
-    n = system.n
     move = system.moving()
     held = resting(group, s.x, s.v, move, a, step)
     fly = move & ~held
@@ -450,8 +441,47 @@ def coast(group: Group, integrator: Integrator, ctx: StepContext, t0: float, t1:
     k = np.arange(K + 1, dtype=np.float64)[:, None, None]
     xs = s.x[None] + (k * step) * np.where(fly[:, None], s.v, 0.0)[None] + (c(k) * step * step) * acc[None]
     vs = np.where(held[:, None], 0.0, s.v)[None] + (k * step) * acc[None]
-    # the first step with a possible contact ends the coast before it (held bodies lie
-    # on their support: only the bodies in flight are swept against the colliders)
+    # the first step with a possible contact, or past the guard's bound, ends the coast before it
+    first = _first_contact(group, xs, fly, move, K)
+    kinetic, potential = _energies(system, xs, vs, move)
+    total = kinetic.sum(axis=1) + potential.sum(axis=1)
+    bad = ~(np.isfinite(total) & np.isfinite(xs[1:]).all(axis=(1, 2)) & (total <= guard.bound()))
+    if bad.any():
+        first = min(first, int(np.argmax(bad)))
+    if first == 0:
+        return 0
+    K = first
+    if group.shapes is not None and ((group.shapes.shaped() & move).any() or group.pairs[0].size):
+        for _ in range(min(K, 2)):  # what K contact-free collide stages leave of the warm start
+            group.shapes.begin_step()
+    q = s.q.copy() if system.rotating else None
+    w = s.w.copy() if system.rotating else None
+    recorder.record_many(t_end[:K], xs[1 : K + 1], vs[1 : K + 1], q, kinetic[:K], potential[:K], held)
+    group.X = system.pack(xs[K], vs[K], q, w)
+    return K
+
+
+def _coast_window(ctx: StepContext, start: np.ndarray, t0: float, t1: float, step: float) -> tuple[np.ndarray, int]:
+    """Where each of the next COAST_STEPS grid steps ends (t0 + k step), and how many of
+    them are whole steps before t1 and before the next body's start time (the active set
+    stays as it is)."""
+    index = ctx.index + np.arange(1, COAST_STEPS + 1)
+    t_end = t0 + index * step  # where each step ends, on the grid
+    starts = np.concatenate(([ctx.t], t_end[:-1]))
+    ok = (t1 - starts >= step) & (starts < t1 - 1e-9 * max(1.0, abs(t1)))
+    later = start[start > ctx.t + 1e-12]
+    if later.size:
+        ok &= starts + 1e-12 < later.min()  # the active set stays as it is
+    return t_end, int(np.argmin(ok)) if not ok.all() else ok.size
+
+
+def _first_contact(group: Group, xs: np.ndarray, fly: np.ndarray, move: np.ndarray, K: int) -> int:
+    """The first of the K coast steps (states xs [K + 1, n, 3]) with a possible contact,
+    K if none: each step's segment swept against every collider (held bodies lie on their
+    support: only the bodies in flight, `fly`, are swept) and between body pairs (their
+    bounding spheres, as the collide stage's broad phase)."""
+    p = group.system.props
+    n = group.system.n
     x0, x1 = xs[:-1].reshape(-1, 3), xs[1:].reshape(-1, 3)
     moving = np.tile(fly, K)
     first = K
@@ -467,24 +497,16 @@ def coast(group: Group, integrator: Integrator, ctx: StepContext, t0: float, t1:
         hit &= np.tile(inv[i] + inv[j] > 0, K)
         if hit.any():
             first = min(first, int(np.argmax(hit)) // i.size)
-    # energies of each state (no spin: kinetic 1/2 m v^2; gravity only: no shared terms)
+    return first
+
+
+def _energies(system: System, xs: np.ndarray, vs: np.ndarray, move: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Kinetic and potential energy [K, n] of each coast state after the first (no spin:
+    kinetic 1/2 m v^2; gravity only: no shared terms)."""
+    p = system.props
     kinetic = np.where(move, 0.5 * p.mass * np.einsum("kij,kij->ki", vs[1:], vs[1:]), 0.0)
     potential = np.where(move, -p.mass * ((xs[1:] - system.x_ref) @ system.env.gravity), 0.0)
-    total = kinetic.sum(axis=1) + potential.sum(axis=1)
-    bad = ~(np.isfinite(total) & np.isfinite(xs[1:]).all(axis=(1, 2)) & (total <= guard.bound()))
-    if bad.any():
-        first = min(first, int(np.argmax(bad)))
-    if first == 0:
-        return 0
-    K = first
-    if group.shapes is not None and ((group.shapes.shaped() & move).any() or i.size):
-        for _ in range(min(K, 2)):  # what K contact-free collide stages leave of the warm start
-            group.shapes.begin_step()
-    q = s.q.copy() if system.rotating else None
-    w = s.w.copy() if system.rotating else None
-    recorder.record_many(t_end[:K], xs[1 : K + 1], vs[1 : K + 1], q, kinetic[:K], potential[:K], held)
-    group.X = system.pack(xs[K], vs[K], q, w)
-    return K
+    return kinetic, potential
 
 
 def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: float, iterations: int, guard: Guard,

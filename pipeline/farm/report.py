@@ -54,55 +54,10 @@ def build_report(
 ) -> dict[str, Any]:
     """The run's report (render-report.json): scene, selection, executor, timings, totals,
     per-frame and per-worker results, failures and frames not rendered."""
-    rows: list[dict[str, Any]] = []
-    for f in skipped:
-        rows.append({"frame": f, "status": "skipped", "reason": "complete on disk (resume)"})
-    records = sched.frames if sched else {}
-    for f, rec in sorted(records.items()):
-        row: dict[str, Any] = {"frame": f, "status": rec.status, "attempts": rec.attempts, "retries": max(0, rec.attempts - 1)}
-        r = rec.result
-        if r is not None and r.ok:
-            row.update(worker=r.worker, cold=r.cold, setup_s=r.setup_s, render_s=r.render_s, denoise_s=r.denoise_s, write_s=r.write_s, kernels_compiled=r.kernels_compiled, path=r.path, variant=r.variant, device=r.device)
-        elif rec.status == "rendered":  # written before an interrupt, its chunk's result never came: its header has its time
-            row.update(_times_on_disk(job, loaded, f))
-        if rec.errors:
-            row["errors"] = rec.errors
-        rows.append(row)
-    rows.sort(key=lambda r: r["frame"])
-    count = lambda s: sum(1 for r in rows if r["status"] == s)  # noqa: E731
-    rendered = [r for r in rows if r["status"] == "rendered"]
+    rows = _frame_rows(skipped, sched, job, loaded)
     # interrupted frames are `not_rendered` (run.py settles them), never failed
     failed = [{"frame": r["frame"], "error": (r.get("errors") or ["not rendered"])[-1], "attempts": r.get("attempts", 0)} for r in rows if r["status"] in ("failed", "pending")]
     not_rendered = [r["frame"] for r in rows if r["status"] == "not_rendered"]
-    workers = []
-    for w in (sched.workers.values() if sched else []):
-        workers.append(
-            {
-                "worker": w.name,
-                "frames": w.frames,
-                "chunks": w.chunks,
-                "first_frame_s": w.first_frame_s,
-                "warm_render_mean_s": statistics.fmean(w.warm_render_s) if w.warm_render_s else None,
-                "failures": w.failures,
-                "excluded": w.excluded,
-                "lost": w.lost,
-            }
-        )
-    farm_s = timings.get("farm_s", 0.0)
-    totals = {
-        "frames": len(frames),
-        "rendered": len(rendered),
-        "skipped": count("skipped"),
-        "done_elsewhere": count("done_elsewhere"),
-        "failed": len(failed),
-        "not_rendered": len(not_rendered),
-        "retries": sum(r.get("retries", 0) for r in rows),
-        "cold_frames": sum(1 for r in rendered if r.get("cold")),
-        "render_s_sum": sum(r.get("render_s", 0.0) for r in rendered),
-        "setup_s_sum": sum(r.get("setup_s", 0.0) for r in rendered),
-        "frames_per_minute": 60.0 * len(rendered) / farm_s if farm_s > 0 else 0.0,
-        **timings,
-    }
     return {
         "scene": str(loaded.path),
         "scene_name": loaded.name,
@@ -119,11 +74,72 @@ def build_report(
         "config": {"retries": cfg.retries, "task_timeout_s": cfg.task_timeout_s, "max_worker_failures": cfg.max_worker_failures, "claim_stale_s": cfg.stale_after_s},
         "interrupted": interrupted,
         "disk_fault": sched.disk_fault if sched is not None else None,
-        "totals": totals,
+        "totals": _totals(rows, len(frames), len(failed), len(not_rendered), timings),
         "failed": failed,
         "not_rendered": format_frames(not_rendered),
-        "workers": workers,
+        "workers": _worker_rows(sched),
         "frames": rows,
+    }
+
+
+def _frame_rows(skipped: list[int], sched: Scheduler | None, job: RenderJob, loaded: LoadedScene) -> list[dict[str, Any]]:
+    """One row per frame, in frame order: the frames kept (resume) and each frame the
+    scheduler knew, with its status, attempts, errors and the worker's timings."""
+    rows: list[dict[str, Any]] = []
+    for f in skipped:
+        rows.append({"frame": f, "status": "skipped", "reason": "complete on disk (resume)"})
+    records = sched.frames if sched else {}
+    for f, rec in sorted(records.items()):
+        row: dict[str, Any] = {"frame": f, "status": rec.status, "attempts": rec.attempts, "retries": max(0, rec.attempts - 1)}
+        r = rec.result
+        if r is not None and r.ok:
+            row.update(worker=r.worker, cold=r.cold, setup_s=r.setup_s, render_s=r.render_s, denoise_s=r.denoise_s, write_s=r.write_s, kernels_compiled=r.kernels_compiled, path=r.path, variant=r.variant, device=r.device)
+        elif rec.status == "rendered":  # written before an interrupt, its chunk's result never came: its header has its time
+            row.update(_times_on_disk(job, loaded, f))
+        if rec.errors:
+            row["errors"] = rec.errors
+        rows.append(row)
+    rows.sort(key=lambda r: r["frame"])
+    return rows
+
+
+def _worker_rows(sched: Scheduler | None) -> list[dict[str, Any]]:
+    """One row per worker: frames, chunks, first and mean warm frame times, failures."""
+    workers = []
+    for w in (sched.workers.values() if sched else []):
+        workers.append(
+            {
+                "worker": w.name,
+                "frames": w.frames,
+                "chunks": w.chunks,
+                "first_frame_s": w.first_frame_s,
+                "warm_render_mean_s": statistics.fmean(w.warm_render_s) if w.warm_render_s else None,
+                "failures": w.failures,
+                "excluded": w.excluded,
+                "lost": w.lost,
+            }
+        )
+    return workers
+
+
+def _totals(rows: list[dict[str, Any]], frames: int, failed: int, not_rendered: int, timings: dict[str, float]) -> dict[str, Any]:
+    """The report's totals: frame counts by outcome, retries, summed times, throughput."""
+    count = lambda s: sum(1 for r in rows if r["status"] == s)  # noqa: E731
+    rendered = [r for r in rows if r["status"] == "rendered"]
+    farm_s = timings.get("farm_s", 0.0)
+    return {
+        "frames": frames,
+        "rendered": len(rendered),
+        "skipped": count("skipped"),
+        "done_elsewhere": count("done_elsewhere"),
+        "failed": failed,
+        "not_rendered": not_rendered,
+        "retries": sum(r.get("retries", 0) for r in rows),
+        "cold_frames": sum(1 for r in rendered if r.get("cold")),
+        "render_s_sum": sum(r.get("render_s", 0.0) for r in rendered),
+        "setup_s_sum": sum(r.get("setup_s", 0.0) for r in rendered),
+        "frames_per_minute": 60.0 * len(rendered) / farm_s if farm_s > 0 else 0.0,
+        **timings,
     }
 
 

@@ -134,13 +134,28 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
         raise MotionError(f"times must be a 1-D array of seconds, got shape {t.shape}")
     if not np.isfinite(t).all():
         raise MotionError("times must be finite")
-    count = len(t)
     if has_dynamics(loaded) and simulation is None:
         bodies = [o.name for o in scene.objects if o.needs_simulation]
         raise SimulationRequiredError(
             f"{loaded.path}: scene has dynamics ({', '.join(bodies)}); run motion.pipeline.dynamics.simulate "
             "first and pass its result as simulation="
         )
+    world = _object_poses(loaded, t, simulation)
+    camera, camera_scalars = _camera_motion(loaded, t, world)
+    lights, light_scalars = _light_motion(loaded, t, world)
+    particles: dict[str, Any] = {}
+    for obj in scene.objects:
+        if obj.is_particles:
+            particles[obj.name] = simulation.particles(obj.name, t)  # type: ignore[union-attr]
+    vertices = _vertices(loaded, t, world, simulation)
+    return SceneMotion(t, world, camera, camera_scalars, lights, light_scalars, vertices, particles)
+
+
+def _object_poses(loaded: "LoadedScene", t: np.ndarray, simulation: Any | None) -> dict[str, Pose]:
+    """Every object's world pose at `t`, parents first: simulated bodies from
+    `simulation`, planned paths (motion/plan.py), keyed or procedural motion under the
+    parent; then the IK chains (motion/ik.py) over the keyed poses."""
+    scene = loaded.scene
     sampled = simulation.sample(t) if simulation is not None and any(o.motion.type == "dynamics" for o in scene.objects) else {}
 
     index = {o.name: i for i, o in enumerate(scene.objects)}
@@ -171,8 +186,14 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
         from .ik import apply_ik
 
         apply_ik(loaded, t, world, local_poses)
+    return world
 
-    cam = scene.camera
+
+def _camera_motion(loaded: "LoadedScene", t: np.ndarray, world: dict[str, Pose]) -> tuple[Pose, dict[str, np.ndarray]]:
+    """The camera's world pose at `t` (under its parent) and its animated scalars (fov,
+    ortho_width)."""
+    cam = loaded.scene.camera
+    count = len(t)
     local = local_pose(loaded, ("camera",), cam.motion, _camera_base(cam), t, {"fov": 1, "ortho_width": 1})
     camera = Pose(local.translation, local.rotation, local.scale)
     if cam.parent is not None:
@@ -181,10 +202,16 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
     if cam.type == "orthographic":
         camera_scalars["ortho_width"] = np.full(count, float(cam.ortho_width))
     camera_scalars.update(local.scalars)
+    return camera, camera_scalars
 
+
+def _light_motion(loaded: "LoadedScene", t: np.ndarray, world: dict[str, Pose]) -> tuple[dict[str, Pose], dict[str, dict[str, np.ndarray]]]:
+    """Each light's world pose at `t` (placed by its record, under its parent) and its
+    emission channel, keyed by the light key."""
+    count = len(t)
     lights: dict[str, Pose] = {}
     light_scalars: dict[str, dict[str, np.ndarray]] = {}
-    for i, light in enumerate(scene.lights):
+    for i, light in enumerate(loaded.scene.lights):
         bases = _light_scalar_bases(light)
         dims = {light.channel: light.channel_size}
         local = local_pose(loaded, ("lights", i), light.motion, light.frame(_LIGHT_FRAMES), t, dims)
@@ -194,21 +221,21 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
         scalars = {k: (np.full(count, v[0]) if v.shape == (1,) else broadcast(v, count)) for k, v in bases.items()}
         scalars.update(local.scalars)
         light_scalars[name] = scalars
+    return lights, light_scalars
 
-    particles: dict[str, Any] = {}
-    for obj in scene.objects:
-        if obj.is_particles:
-            particles[obj.name] = simulation.particles(obj.name, t)  # type: ignore[union-attr]
 
+def _vertices(loaded: "LoadedScene", t: np.ndarray, world: dict[str, Pose], simulation: Any | None) -> dict[str, Any]:
+    """World-space vertices at `t` of the deforming meshes (motion/deform.py) and of the
+    flocks' agents (simulated by the dynamics stage, dynamics/flock.py)."""
     from .deform import deformed_vertices
 
     vertices = deformed_vertices(loaded, t, world)
-    for i, obj in enumerate(scene.objects):
-        if obj.is_flock:  # agents simulated by the dynamics stage (dynamics/flock.py)
+    for i, obj in enumerate(loaded.scene.objects):
+        if obj.is_flock:
             from .instances import object_vertices
 
             try:
                 vertices[obj.name] = object_vertices(loaded, obj, simulation.flock(obj.name), t, world[obj.name])  # type: ignore[union-attr]
             except ValueError as exc:
                 raise SceneError([loaded.source.problem(("objects", i, "deform"), str(exc))]) from None
-    return SceneMotion(t, world, camera, camera_scalars, lights, light_scalars, vertices, particles)
+    return vertices

@@ -250,6 +250,76 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         lit = (emitter != None) | ~si.is_valid()  # noqa: E711
         return dr.select(lit, glow, surface)
 
+    # --- steps of the path (`sample`); each traces the same operations, in the same order,
+    # as when they were written inline, so the kernel is unchanged -------------------------
+
+    def _primary_ray(self, ray: mi.RayDifferential3f, ci: Any, cf: Any, active: Any) -> mi.Ray3f:
+        """The camera's motion inside the shutter, C(u) C(frame)^-1, applied to the primary
+        ray (ci, cf: the shutter segment of u, `FrameData.segment`)."""
+        data = self.frame_data
+        camera = data.pose("camera_t", "camera_rel", 0, ci, cf, active)
+        cam_origin = data.vec("sensor_origin", 3, mi.UInt32(0), active)
+        ray = mi.Ray3f(ray)
+        ray.o = camera.point_to_world(ray.o - cam_origin)
+        ray.d = camera.vector_to_world(ray.d)
+        return ray
+
+    def _aov_zeros(self) -> dict[str, Any]:
+        """The computed AOVs' starting values, only those asked for: none asked, none carried
+        through the path loop."""
+        zeros = {"depth": mi.Float(0.0), "normal": mi.Vector3f(0.0), "motion": mi.Vector2f(0.0), "albedo": mi.Color3f(0.0)}
+        return {a.name: zeros[a.name] for a in aov_table.computed(self.aovs)}
+
+    def _first_hit_aovs(
+        self, aov: dict[str, Any], scene: mi.Scene, si: Any, ray: Any, data: FrameData, ci: Any, cf: Any, hit_mover: Any, movers: MoverTracks, depth: Any, active: Any
+    ) -> dict[str, Any]:
+        """`aov` with the lanes whose path is at its first vertex set to that vertex's
+        values (the others keep theirs)."""
+        first = active & (depth == 0) & si.is_valid()
+        if "depth" in aov:
+            # camera-space depth along the view axis, with the camera at this time
+            view = data.pose("camera_t", "camera_q", 0, ci, cf, first)
+            aov["depth"] = dr.select(first, view.point_to_rest(si.p).z, aov["depth"])
+        if "normal" in aov:
+            aov["normal"] = dr.select(first, si.sh_frame.n, aov["normal"])
+        if "motion" in aov:
+            aov["motion"] = dr.select(first, self._motion_vector(si, hit_mover, movers, first), aov["motion"])
+        if "albedo" in aov:
+            # misses count too: they see the environment (or nothing)
+            primary = active & (depth == 0)
+            aov["albedo"] = dr.select(primary, self._albedo(scene, si, ray, primary), aov["albedo"])
+        return aov
+
+    def _emission_hit(
+        self, scene: mi.Scene, si: Any, prev_si: Any, prev_bsdf_pdf: Any, prev_bsdf_delta: Any, on_mover: Any, hit_mover: Any, choice: LightChoice, movers: MoverTracks, k_slice: Any, depth: Any
+    ) -> tuple[Any, Any]:
+        """The direction sample of the emitter a BSDF-sampled segment reached, and its MIS
+        weight against emitter sampling of the same emitter: the static scene's (chosen by
+        `choice`), the emissive mover's in its rest frame, or the slice's at the path's time.
+        1 on the first segment."""
+        ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
+        em_pdf = dr.select(~prev_bsdf_delta & ~on_mover, choice.pdf(prev_si, ds, ~prev_bsdf_delta & ~on_mover), 0.0)
+        em_pdf = self._mover_emitter_pdf(ds, prev_si, hit_mover, movers, em_pdf, ~prev_bsdf_delta & on_mover)
+        em_pdf = self.world.slice_emitter_pdf(ds, prev_si, hit_mover, k_slice, em_pdf, ~prev_bsdf_delta & on_mover)
+        return ds, dr.select(depth == 0, 1.0, _mis(prev_bsdf_pdf, em_pdf))
+
+    def _static_light_term(
+        self, scene: mi.Scene, sampler: mi.Sampler, si: Any, bsdf: Any, bsdf_ctx: Any, choice: LightChoice, movers: MoverTracks, k_slice: Any, beta: Any, active_next: Any
+    ) -> Any:
+        """Emitter sampling of the static scene's lights (chosen by contribution: lights.py),
+        the shadow ray tested across all scenes at the path's time, MIS against BSDF
+        sampling; weighted by the path throughput `beta`."""
+        active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+        ds_em, em_weight = choice.sample(scene, si, sampler.next_1d(), sampler.next_2d(), active_em)
+        active_em &= ds_em.pdf != 0.0
+        shadow = si.spawn_ray_to(ds_em.p)
+        occluded = self.world.occluded(scene, shadow, movers, active_em, k_slice)
+        active_em &= ~occluded
+        wo = si.to_local(ds_em.d)
+        bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, wo, active_em)
+        mis_em = dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, bsdf_pdf))
+        return dr.select(active_em, beta * mis_em * bsdf_val * em_weight, 0.0)
+
     # --- the path ------------------------------------------------------------------------
 
     @dr.syntax
@@ -266,13 +336,8 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         in the table's order (`aovs.channel_names(self.aovs)`)."""
         u = mi.Float(ray.time)  # shutter fraction in [0, 1]
         data = self.frame_data
-        # camera motion inside the shutter: C(u) C(frame)^-1 applied to the primary ray
         ci, cf = data.segment(u)
-        camera = data.pose("camera_t", "camera_rel", 0, ci, cf, active)
-        cam_origin = data.vec("sensor_origin", 3, mi.UInt32(0), active)
-        ray = mi.Ray3f(ray)
-        ray.o = camera.point_to_world(ray.o - cam_origin)
-        ray.d = camera.vector_to_world(ray.d)
+        ray = self._primary_ray(ray, ci, cf, active)
 
         movers = MoverTracks(data, len(self.world.movers), u, active, self._eager or ())
         light_poses = data.poses("light_t", "light_q", len(self.lights), u, active)
@@ -289,36 +354,17 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         prev_bsdf_pdf = mi.Float(1.0)
         prev_bsdf_delta = mi.Bool(True)
         valid = mi.Bool(False)
-        # the computed AOVs' values, only those asked for: none asked, none carried
-        # through the loop
-        zeros = {"depth": mi.Float(0.0), "normal": mi.Vector3f(0.0), "motion": mi.Vector2f(0.0), "albedo": mi.Color3f(0.0)}
-        aov = {a.name: zeros[a.name] for a in aov_table.computed(self.aovs)}
+        aov = self._aov_zeros()
         want_aovs = len(aov) > 0  # a Python bool: @dr.syntax keeps it a plain `if`
 
         while dr.hint(active, max_iterations=self.max_depth, label="motion_path"):
             si, on_mover, hit_mover = self.world.intersect(scene, ray, movers, active, k_slice)
             valid |= active & si.is_valid() & (depth == 0)
             if want_aovs:
-                first = active & (depth == 0) & si.is_valid()
-                if "depth" in aov:
-                    # camera-space depth along the view axis, with the camera at this time
-                    view = data.pose("camera_t", "camera_q", 0, ci, cf, first)
-                    aov["depth"] = dr.select(first, view.point_to_rest(si.p).z, aov["depth"])
-                if "normal" in aov:
-                    aov["normal"] = dr.select(first, si.sh_frame.n, aov["normal"])
-                if "motion" in aov:
-                    aov["motion"] = dr.select(first, self._motion_vector(si, hit_mover, movers, first), aov["motion"])
-                if "albedo" in aov:
-                    # misses count too: they see the environment (or nothing)
-                    primary = active & (depth == 0)
-                    aov["albedo"] = dr.select(primary, self._albedo(scene, si, ray, primary), aov["albedo"])
+                aov = self._first_hit_aovs(aov, scene, si, ray, data, ci, cf, hit_mover, movers, depth, active)
             # emission reached by BSDF sampling, MIS-weighted against emitter sampling of the
-            # same emitter: the static scene's, or the emissive mover's in its rest frame
-            ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
-            em_pdf = dr.select(~prev_bsdf_delta & ~on_mover, choice.pdf(prev_si, ds, ~prev_bsdf_delta & ~on_mover), 0.0)
-            em_pdf = self._mover_emitter_pdf(ds, prev_si, hit_mover, movers, em_pdf, ~prev_bsdf_delta & on_mover)
-            em_pdf = self.world.slice_emitter_pdf(ds, prev_si, hit_mover, k_slice, em_pdf, ~prev_bsdf_delta & on_mover)
-            mis_bsdf = dr.select(depth == 0, 1.0, _mis(prev_bsdf_pdf, em_pdf))
+            # same emitter
+            ds, mis_bsdf = self._emission_hit(scene, si, prev_si, prev_bsdf_pdf, prev_bsdf_delta, on_mover, hit_mover, choice, movers, k_slice, depth)
             L += beta * mis_bsdf * ds.emitter.eval(si, active & (prev_bsdf_pdf > 0))
 
             active_next = active & si.is_valid() & (depth + 1 < self.max_depth)
@@ -327,16 +373,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             # emitter sampling (static lights, chosen by contribution: lights.py), shadow
             # test across all scenes at time u
             if has_choice:
-                active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-                ds_em, em_weight = choice.sample(scene, si, sampler.next_1d(), sampler.next_2d(), active_em)
-                active_em &= ds_em.pdf != 0.0
-                shadow = si.spawn_ray_to(ds_em.p)
-                occluded = self.world.occluded(scene, shadow, movers, active_em, k_slice)
-                active_em &= ~occluded
-                wo = si.to_local(ds_em.d)
-                bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, wo, active_em)
-                mis_em = dr.select(ds_em.delta, 1.0, _mis(ds_em.pdf, bsdf_pdf))
-                L += dr.select(active_em, beta * mis_em * bsdf_val * em_weight, 0.0)
+                L += self._static_light_term(scene, sampler, si, bsdf, bsdf_ctx, choice, movers, k_slice, beta, active_next)
             # moving lights and emitters on movers, each at this path's time u
             lit = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
             L += beta * self._moving_light_terms(scene, sampler, si, bsdf, bsdf_ctx, movers, light_poses, k_slice, lit)

@@ -385,9 +385,58 @@ def version_of(req: RenderRequest, job: RenderJob) -> str:
         return f"{job.settings_hash}+{path}"
 
 
-def _run_render(req: RenderRequest, held: list[RunLock]) -> dict[str, Any]:
-    """run_render's steps; the run lock it takes goes into `held`."""
-    t_start = time.perf_counter()
+@dataclass(frozen=True)
+class Settled:
+    """What a run settles before the bake, every check passed: the farm settings, the
+    scene with its preset, the frames, the output folder, the deliverables wanted, the job
+    and its executor's size, the scene file whose folder it takes over (if any), its id."""
+
+    cfg: FarmConfig
+    preset: Preset | None
+    loaded: LoadedScene
+    sel: Selection
+    out_dir: Path
+    wanted: DeliverPlan
+    job: RenderJob
+    workers: int
+    threads: int | None
+    taken_from: Path | None
+    run_id: str
+
+    @property
+    def frames(self) -> list[int]:
+        """This shard's frames."""
+        return self.sel.frames
+
+
+@dataclass(frozen=True)
+class FramesAtHand:
+    """After the bake: its time, each frame's motion, each frame's path, which frames are
+    complete (and kept) and which render, and the folder's frames outside the timeline."""
+
+    bake_s: float
+    by_frame: Mapping[int, BakedFrame]
+    paths: dict[int, str]
+    states: FrameStates
+    skipped: list[int]
+    todo: list[int]
+    foreign: list[int]
+
+
+@dataclass(frozen=True)
+class Chunking:
+    """How the frames to render are cut: chunk size and chunks, the cost estimate they
+    were sized by, and whether the job runs inline in this process."""
+
+    chunk_size: int
+    chunk_list: list[list[int]]
+    cost: dict[str, Any]
+    inline: bool
+
+
+def settle(req: RenderRequest, held: list[RunLock]) -> Settled:
+    """Every check that can fail before the first task, in order; then the output folder's
+    run lock, which goes into `held` (not with --check or --dry-run)."""
     cfg: FarmConfig = load_farm_config().with_overrides(retries=req.retries, task_timeout_s=req.task_timeout_s, chunk_size=req.chunk_size)
     check_request(req)
     preset, overrides, loaded = load_shot(req)
@@ -420,18 +469,25 @@ def _run_render(req: RenderRequest, held: list[RunLock]) -> dict[str, Any]:
     run_id = new_run_id()
     if not req.check and not req.dry_run:
         held.append(take_run_lock(out_dir, Claimant.here(run_id), str(loaded.path), version_of(req, job)))
+    return Settled(cfg, preset, loaded, sel, out_dir, wanted, job, workers, threads, taken_from, run_id)
 
+
+def bake_and_sort(req: RenderRequest, s: Settled) -> FramesAtHand:
+    """Bake the motion once, then sort the frames: complete ones are kept, the others
+    render; frames in the folder outside the timeline are foreign (a warning)."""
+    loaded, out_dir, frames = s.loaded, s.out_dir, s.frames
     t0 = time.perf_counter()
+    job = s.job
     paths = {f: str(frame_path(job, loaded, f)) for f in frames}
     # --check bakes nothing when every frame's header says it was made from this version (shot/stale.py)
     recorded = recorded_keys(paths, frames, job.settings_hash, job.look, RENDERER_VERSION) if req.check and not req.motion_file else None
-    inputs = motion_inputs(req, loaded, sel) if recorded is None else []
+    inputs = motion_inputs(req, loaded, s.sel) if recorded is None else []
     bake_s = time.perf_counter() - t0
     by_frame = by_number(inputs)  # each frame made from the bake's arrays when a task needs it
 
     # --check --deliver: the deliverables decode every frame, so the check reads headers and chunk tables
     states = complete_frames(req, job, loaded, out_dir, frames, paths, by_frame, recorded,
-                             decode=not (req.check and wanted and set(frames) <= set(wanted.frames)))
+                             decode=not (req.check and s.wanted and set(frames) <= set(s.wanted.frames)))
     skipped = states.complete
     todo = [f for f in frames if f not in set(skipped)]
     foreign = sorted(folder_frames(out_dir, loaded).foreign)
@@ -439,18 +495,28 @@ def _run_render(req: RenderRequest, held: list[RunLock]) -> dict[str, Any]:
         logging.getLogger("motion").warning(
             f"motion: {out_dir}: frames {format_frames(foreign)} lie outside the timeline {loaded.scene.timeline.first}-{loaded.scene.timeline.last}: "
             "foreign, left as they are and in no deliverable")
-    if req.check:
-        result = check_only(loaded.name, out_dir, frames, todo, paths, states.stale)
-        if foreign:
-            result["foreign"] = format_frames(foreign)
-        if wanted:
-            say = Progress(total=0, live=False).log
-            say_outputs(wanted, frames, paths, say)
-            if wanted:
-                result["deliverables"] = deliver_and_record(req, out_dir, wanted, shot_paths(loaded, out_dir, wanted), loaded.name, result, None, say)
-        return result
+    return FramesAtHand(bake_s, by_frame, paths, states, skipped, todo, foreign)
+
+
+def check_run(req: RenderRequest, s: Settled, at: FramesAtHand) -> dict[str, Any]:
+    """--check: what a render would do, and the deliverables made from the frames there."""
+    result = check_only(s.loaded.name, s.out_dir, s.frames, at.todo, at.paths, at.states.stale)
+    if at.foreign:
+        result["foreign"] = format_frames(at.foreign)
+    if s.wanted:
+        say = Progress(total=0, live=False).log
+        say_outputs(s.wanted, s.frames, at.paths, say)
+        if s.wanted:
+            result["deliverables"] = deliver_and_record(req, s.out_dir, s.wanted, shot_paths(s.loaded, s.out_dir, s.wanted), s.loaded.name, result, None, say)
+    return result
+
+
+def cut_chunks(req: RenderRequest, s: Settled, at: FramesAtHand) -> tuple[Settled, Chunking]:
+    """The chunks, sized by the cost estimate; a small job runs inline in this process,
+    one worker and one chunk (the returned Settled says so)."""
+    cfg, loaded, job, workers, threads, todo = s.cfg, s.loaded, s.job, s.workers, s.threads, at.todo
     chunk_size = cfg.chunk_size or default_chunk_size(len(todo), workers if not req.scheduler else 2)
-    cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), workers if not req.scheduler else 1, bake_s, denoised_pixels(loaded.scene))
+    cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), workers if not req.scheduler else 1, at.bake_s, denoised_pixels(loaded.scene))
     inline = choose_inline(req, cost, todo)
     if inline:
         from ..farm.local import threads_per_worker
@@ -458,70 +524,117 @@ def _run_render(req: RenderRequest, held: list[RunLock]) -> dict[str, Any]:
         workers, threads = 1, req.threads or threads_per_worker(1)
         job = replace(job, threads=threads)
         chunk_size = max(1, len(todo))
-    chunk_list = make_chunks(todo, chunk_size)
-    shard_spec = sel.shard_spec
+        s = replace(s, job=job, workers=workers, threads=threads)
+    return s, Chunking(chunk_size, make_chunks(todo, chunk_size), cost, inline)
+
+
+def report_name(req: RenderRequest, s: Settled) -> Path:
+    """Where the report goes: --report, else the output folder's (one per shard)."""
+    shard_spec = s.sel.shard_spec
     default_name = f"render-report.shard-{shard_spec[0]}-of-{shard_spec[1]}.json" if shard_spec else "render-report.json"
-    if req.dry_run:
-        planned = plan(req, loaded, out_dir, sel.selected, frames, shard_spec, skipped, chunk_list, chunk_size, workers, threads, paths,
-                       Path(req.report or out_dir / default_name), states.stale, wanted, resolved_settings(req, loaded, preset), cost)
-        if inline:
-            planned["executor"]["kind"] = "inline"
-        if foreign:
-            planned["foreign"] = format_frames(foreign)
-        return planned
+    return Path(req.report or s.out_dir / default_name)
 
-    out_dir.mkdir(parents=True, exist_ok=True)
-    record_owner(out_dir, loaded.path)
-    if taken_from is not None:
-        logging.getLogger("motion").warning(f"motion: {out_dir} held the frames of {taken_from}; it is now {loaded.path}'s folder")
-    ctx = TaskContext(run_id=run_id, paths=paths, resume=req.resume and not req.overwrite, stale_after_s=cfg.stale_after_s)
-    clear_stale([paths[f] for f in skipped], cfg.stale_after_s)
-    label = f"{loaded.name}" + (f" shard {shard_spec[0]}/{shard_spec[1]}" if shard_spec else "")
-    progress = Progress(total=len(frames), already=len(skipped), label=label, live=req.progress, estimate_s=cost["per_frame_s"] if todo else None,
-                        overhead_s=cost["startup_s"] + cost["cold_extra_s"] if todo else 0.0)
+
+def dry_run_plan(req: RenderRequest, s: Settled, at: FramesAtHand, c: Chunking) -> dict[str, Any]:
+    """--dry-run: the plan, nothing rendered or written."""
+    planned = plan(req, s.loaded, s.out_dir, s.sel.selected, s.frames, s.sel.shard_spec, at.skipped, c.chunk_list, c.chunk_size, s.workers, s.threads, at.paths,
+                   report_name(req, s), at.states.stale, s.wanted, resolved_settings(req, s.loaded, s.preset), c.cost)
+    if c.inline:
+        planned["executor"]["kind"] = "inline"
+    if at.foreign:
+        planned["foreign"] = format_frames(at.foreign)
+    return planned
+
+
+def open_output(req: RenderRequest, s: Settled, at: FramesAtHand) -> TaskContext:
+    """The output folder made and recorded as this scene's, stale claims on the kept
+    frames cleared; the tasks' context."""
+    s.out_dir.mkdir(parents=True, exist_ok=True)
+    record_owner(s.out_dir, s.loaded.path)
+    if s.taken_from is not None:
+        logging.getLogger("motion").warning(f"motion: {s.out_dir} held the frames of {s.taken_from}; it is now {s.loaded.path}'s folder")
+    ctx = TaskContext(run_id=s.run_id, paths=at.paths, resume=req.resume and not req.overwrite, stale_after_s=s.cfg.stale_after_s)
+    clear_stale([at.paths[f] for f in at.skipped], s.cfg.stale_after_s)
+    return ctx
+
+
+def start_progress(req: RenderRequest, s: Settled, at: FramesAtHand, c: Chunking) -> tuple[str, Progress]:
+    """The run's label and progress display, opened with the plan and the frames replaced."""
+    frames, shard_spec, todo = s.frames, s.sel.shard_spec, at.todo
+    label = f"{s.loaded.name}" + (f" shard {shard_spec[0]}/{shard_spec[1]}" if shard_spec else "")
+    progress = Progress(total=len(frames), already=len(at.skipped), label=label, live=req.progress, estimate_s=c.cost["per_frame_s"] if todo else None,
+                        overhead_s=c.cost["startup_s"] + c.cost["cold_extra_s"] if todo else 0.0)
     progress.note(
-        f"motion: {label}: {len(frames)} frames ({format_frames(frames) or 'none'}) -> {out_dir}; "
-        f"{len(skipped)} already complete, {len(todo)} to render in {len(chunk_list)} chunks of <= {chunk_size}"
+        f"motion: {label}: {len(frames)} frames ({format_frames(frames) or 'none'}) -> {s.out_dir}; "
+        f"{len(at.skipped)} already complete, {len(todo)} to render in {len(c.chunk_list)} chunks of <= {c.chunk_size}"
     )
-    for line in states.describe():
+    for line in at.states.describe():
         progress.log(f"motion: {line}", logging.WARNING)
-    t_farm = time.perf_counter()
-    sched, interrupted = run_chunks(chunk_list, job, by_frame, ctx, cfg, progress, scheduler=req.scheduler, workers=workers, threads=threads, inline=inline)
-    farm_s = time.perf_counter() - t_farm
-    executor_info = {"kind": "dask" if req.scheduler else ("inline" if inline else "local"), "workers": workers if not req.scheduler else None, "threads": threads, "scheduler": req.scheduler, "chunk_size": chunk_size, "chunks": len(chunk_list)}
-    if sched is not None and hasattr(sched.ex, "transfer_stats"):
-        executor_info["transfer"] = sched.ex.transfer_stats()  # what crossed the network (docs/farm.md)
+    return label, progress
 
+
+def executor_info(req: RenderRequest, s: Settled, c: Chunking, sched: Scheduler | None) -> dict[str, Any]:
+    """The report's executor: kind, size, chunks, and what crossed the network."""
+    info = {"kind": "dask" if req.scheduler else ("inline" if c.inline else "local"), "workers": s.workers if not req.scheduler else None, "threads": s.threads, "scheduler": req.scheduler, "chunk_size": c.chunk_size, "chunks": len(c.chunk_list)}
+    if sched is not None and hasattr(sched.ex, "transfer_stats"):
+        info["transfer"] = sched.ex.transfer_stats()  # what crossed the network (docs/farm.md)
+    return info
+
+
+def make_report(req: RenderRequest, s: Settled, at: FramesAtHand, c: Chunking, sched: Scheduler | None, interrupted: bool, timings: dict[str, float]) -> dict[str, Any]:
+    """The run's report, merged with the previous one's frames still there, its cost
+    recorded for the next estimate."""
+    loaded, job = s.loaded, s.job
     report = build_report(
         loaded=loaded,
         job=job,
-        out_dir=out_dir,
-        frames=frames,
-        selected=sel.selected,
-        shard_spec=shard_spec,
-        skipped=skipped,
+        out_dir=s.out_dir,
+        frames=s.frames,
+        selected=s.sel.selected,
+        shard_spec=s.sel.shard_spec,
+        skipped=at.skipped,
         sched=sched,
-        cfg=cfg,
-        executor_info=executor_info,
-        timings={"bake_s": bake_s, "farm_s": farm_s, "wall_s": time.perf_counter() - t_start},
-        run_id=run_id,
+        cfg=s.cfg,
+        executor_info=executor_info(req, s, c, sched),
+        timings=timings,
+        run_id=s.run_id,
         interrupted=interrupted,
         motion_file=str(req.motion_file) if req.motion_file else None,
     )
-    report["report"] = str(req.report or out_dir / default_name)
-    if states.stale:
-        report["replaced"] = [{"frame": f, "reason": why} for f, why in sorted(states.stale.items())]
+    report["report"] = str(report_name(req, s))
+    if at.states.stale:
+        report["replaced"] = [{"frame": f, "reason": why} for f, why in sorted(at.states.stale.items())]
     timeline = loaded.scene.timeline
     # the folder's record holds the timeline's frames; others are foreign (shot/stale.py: folder_frames)
-    merge_previous(report, Path(req.report or out_dir / default_name), lambda f: timeline.first <= f <= timeline.last and os.path.exists(frame_path(job, loaded, f)))
-    if foreign:
-        report["foreign"] = format_frames(foreign)
-    record_cost(loaded.name, job.settings_hash, samples_of(loaded.scene), report, compiled_all=bool(cost.get("compiles_kernels")))
-    report_path, report_fault = write_report_somewhere(report, req.report or out_dir / default_name, run_id)
+    merge_previous(report, report_name(req, s), lambda f: timeline.first <= f <= timeline.last and os.path.exists(frame_path(job, loaded, f)))
+    if at.foreign:
+        report["foreign"] = format_frames(at.foreign)
+    record_cost(loaded.name, job.settings_hash, samples_of(loaded.scene), report, compiled_all=bool(c.cost.get("compiles_kernels")))
+    return report
+
+
+def _run_render(req: RenderRequest, held: list[RunLock]) -> dict[str, Any]:
+    """run_render's steps; the run lock it takes goes into `held`."""
+    t_start = time.perf_counter()
+    s = settle(req, held)
+    at = bake_and_sort(req, s)
+    if req.check:
+        return check_run(req, s, at)
+    s, c = cut_chunks(req, s, at)
+    if req.dry_run:
+        return dry_run_plan(req, s, at, c)
+
+    ctx = open_output(req, s, at)
+    label, progress = start_progress(req, s, at, c)
+    t_farm = time.perf_counter()
+    sched, interrupted = run_chunks(c.chunk_list, s.job, at.by_frame, ctx, s.cfg, progress, scheduler=req.scheduler, workers=s.workers, threads=s.threads, inline=c.inline)
+    farm_s = time.perf_counter() - t_farm
+    report = make_report(req, s, at, c, sched, interrupted, {"bake_s": at.bake_s, "farm_s": farm_s, "wall_s": time.perf_counter() - t_start})
+    report_path, report_fault = write_report_somewhere(report, report_name(req, s), s.run_id)
     progress.log(summary_line(label, report["totals"], report_path))
     stop_on_disk_fault(sched, report, report_path, report_fault)
     if interrupted:
         raise KeyboardInterrupt
-    raise_failures(report, frames)
-    finish(req, loaded, job, out_dir, frames, workers, report, report_path, progress.log, wanted, paths)
+    raise_failures(report, s.frames)
+    finish(req, s.loaded, s.job, s.out_dir, s.frames, s.workers, report, report_path, progress.log, s.wanted, at.paths)
     return report

@@ -72,61 +72,80 @@ def expand_imports(data: dict[str, Any], source: "SourceMap", base_dir: Path) ->
         except SpecError as exc:
             problems.append(source.problem(("imports", i, exc.field), str(exc)))
             continue
-        # overrides, by (prefixed) name, over the imported records
-        by_name = {rec.get("name"): (kind, j) for kind, recs in (("objects", expansion.objects), ("lights", expansion.lights)) for j, (rec, _) in enumerate(recs)}
-        for name, over in spec.overrides.items():
-            oloc = ("imports", i, "overrides", name)
-            if name not in by_name:
-                import difflib
-
-                close = difflib.get_close_matches(name, [n for n in by_name if n], n=1, cutoff=0.6)
-                hint = f"; did you mean '{close[0]}'?" if close else ""
-                problems.append(source.problem(oloc, f"no imported object or light named '{name}'{hint}", key=True))
-                continue
-            fixed = [k for k in over if k in FIXED_KEYS]
-            if fixed:
-                problems.append(source.problem((*oloc, fixed[0]), f"an override cannot change '{fixed[0]}'", key=True))
-                continue
-            kind, j = by_name[name]
-            recs = expansion.objects if kind == "objects" else expansion.lights
-            rec, origin = recs[j]
-            rec = {**rec, **over}
-            keys = {**origin.yaml_keys, **{k: (*oloc, k) for k in over}}
-            recs[j] = (rec, Origin(origin.file, origin.where, keys, origin.default))
+        problems.extend(_apply_overrides(spec, i, expansion, source))
         for kind, target, recs in (("objects", objects, expansion.objects), ("materials", materials, expansion.materials), ("lights", lights, expansion.lights)):
             for rec, origin in recs:
                 origins[(kind, len(target))] = origin
                 target.append(rec)
-        # the shot's camera: the one named, else the first imported when the scene has none
-        if spec.camera is not None:
-            found = [(rec, o) for name, rec, o in expansion.cameras if name == spec.camera]
-            if not found:
-                names = ", ".join(n for n, _, _ in expansion.cameras) or "none"
-                problems.append(source.problem(("imports", i, "camera"), f"no camera on node '{spec.camera}' in {spec.file} (cameras on: {names})"))
-            else:
-                chosen_camera = found[0]
-        elif chosen_camera is None and expansion.cameras and "camera" not in data:
-            chosen_camera = (expansion.cameras[0][1], expansion.cameras[0][2])
+        chosen_camera = _choose_camera(spec, i, expansion, chosen_camera, "camera" in data, source, problems)
     if problems:
         raise SceneError(problems)
     if chosen_camera is not None:
-        rec, origin = chosen_camera
-        user = data.get("camera")
-        if isinstance(user, dict):
-            # the scene file's camera keys refine the imported camera (shutter, fov, ...)
-            rec = {**rec, **user}
-            if ("position" in user or "look_at" in user) and "transform" not in user:
-                # the scene places the camera itself, in world space
-                rec.pop("transform", None)
-                if "parent" not in user:
-                    rec.pop("parent", None)
-            origin = Origin(origin.file, origin.where, {k: ("camera", k) for k in user})
-        out["camera"] = rec
-        camera_origin = origin
+        out["camera"], camera_origin = _refined_camera(chosen_camera, data.get("camera"))
     out["objects"], out["materials"], out["lights"] = objects, materials, lights
     from .sourcemap import ImportedSourceMap
 
     return out, ImportedSourceMap(source.file, source.positions, origins, camera_origin)
+
+
+def _apply_overrides(spec: Any, index: int, expansion: Expansion, source: "SourceMap") -> list[Problem]:
+    """The entry's overrides, by (prefixed) name, applied over the imported objects and
+    lights in `expansion` (each overridden key located at the override); the problems of
+    those that name nothing imported or change what a record is (FIXED_KEYS)."""
+    problems: list[Problem] = []
+    by_name = {rec.get("name"): (kind, j) for kind, recs in (("objects", expansion.objects), ("lights", expansion.lights)) for j, (rec, _) in enumerate(recs)}
+    for name, over in spec.overrides.items():
+        oloc = ("imports", index, "overrides", name)
+        if name not in by_name:
+            import difflib
+
+            close = difflib.get_close_matches(name, [n for n in by_name if n], n=1, cutoff=0.6)
+            hint = f"; did you mean '{close[0]}'?" if close else ""
+            problems.append(source.problem(oloc, f"no imported object or light named '{name}'{hint}", key=True))
+            continue
+        fixed = [k for k in over if k in FIXED_KEYS]
+        if fixed:
+            problems.append(source.problem((*oloc, fixed[0]), f"an override cannot change '{fixed[0]}'", key=True))
+            continue
+        kind, j = by_name[name]
+        recs = expansion.objects if kind == "objects" else expansion.lights
+        rec, origin = recs[j]
+        rec = {**rec, **over}
+        keys = {**origin.yaml_keys, **{k: (*oloc, k) for k in over}}
+        recs[j] = (rec, Origin(origin.file, origin.where, keys, origin.default))
+    return problems
+
+
+def _choose_camera(
+    spec: Any, index: int, expansion: Expansion, chosen: tuple[dict[str, Any], Origin] | None, scene_has_camera: bool, source: "SourceMap", problems: list[Problem]
+) -> tuple[dict[str, Any], Origin] | None:
+    """The shot's camera after this entry: the one it names (a problem in `problems` if
+    there is none), else the first imported when the scene has none and none was chosen."""
+    if spec.camera is not None:
+        found = [(rec, o) for name, rec, o in expansion.cameras if name == spec.camera]
+        if not found:
+            names = ", ".join(n for n, _, _ in expansion.cameras) or "none"
+            problems.append(source.problem(("imports", index, "camera"), f"no camera on node '{spec.camera}' in {spec.file} (cameras on: {names})"))
+            return chosen
+        return found[0]
+    if chosen is None and expansion.cameras and not scene_has_camera:
+        return (expansion.cameras[0][1], expansion.cameras[0][2])
+    return chosen
+
+
+def _refined_camera(chosen: tuple[dict[str, Any], Origin], user: Any) -> tuple[dict[str, Any], Origin]:
+    """The imported camera record with the scene file's own camera keys over it (shutter,
+    fov, ...), and its origin; a scene that places the camera itself, in world space, drops
+    the imported transform (and parent)."""
+    rec, origin = chosen
+    if isinstance(user, dict):
+        rec = {**rec, **user}
+        if ("position" in user or "look_at" in user) and "transform" not in user:
+            rec.pop("transform", None)
+            if "parent" not in user:
+                rec.pop("parent", None)
+        origin = Origin(origin.file, origin.where, {k: ("camera", k) for k in user})
+    return rec, origin
 
 
 def _read(path: Path, shown: str, spec: Any, index: int, base_dir: Path) -> Expansion:

@@ -252,6 +252,34 @@ class GltfReader:
         nodes = g.nodes or []
         if len(nodes) > MAX_NODES:
             self.fail("nodes", f"{len(nodes)} nodes; the limit is {MAX_NODES}")
+        roots = self._scene_roots(nodes)
+        parent = self._parents(nodes)
+        if spec.nodes is not None:
+            roots = self._named_nodes(nodes)
+        order = self._tree_order(nodes, roots)
+        included = set(order)
+
+        names = _Names()
+        prefix = spec.prefix
+        ex = Expansion()
+        # glTF is metres and +Y up, as we are: a stage frame only where the entry overrides
+        frames, root_name = import_frames(names.take, spec, self.index, self.shown, f"{prefix}{sanitize(self.path.stem)}")
+        node_name = {k: names.take(prefix + sanitize(nodes[k].name or f"node{k}")) for k in order}
+        ex.objects.extend(frames)
+        self.names, self.node_name, self.root_name, self.prefix = names, node_name, root_name, prefix
+        self.material_names: dict[int | None, str] = {}
+        self.motions = self._animations(included)
+        for k in order:
+            par = node_name[parent[k]] if k in parent and parent[k] in included and k not in roots else root_name
+            self._node_records(k, nodes[k], par, ex)
+        for m_index, m_name in self.material_names.items():
+            ex.materials.append((self._material(m_index, m_name), Origin(self.shown, f"materials[{m_index}]" if m_index is not None else "<default material>")))
+        return ex
+
+    def _scene_roots(self, nodes: list[Any]) -> list[int]:
+        """The root nodes of the scene the entry names (by name or index), else the file's
+        default scene, else (no scenes) every node that is no node's child."""
+        g, spec = self.gltf, self.spec
         scenes = g.scenes or []
         if isinstance(spec.scene, str):
             matches = [k for k, s in enumerate(scenes) if s.name == spec.scene]
@@ -266,7 +294,10 @@ class GltfReader:
         for r in roots:
             if not 0 <= r < len(nodes):
                 self.fail(f"scenes[{scene_index}].nodes", f"node {r} does not exist")
-        # parents, and a check that the children form a tree
+        return roots
+
+    def _parents(self, nodes: list[Any]) -> dict[int, int]:
+        """Each child node's parent, and a check that the children form a tree."""
         parent: dict[int, int] = {}
         for k, n in enumerate(nodes):
             for c in n.children or []:
@@ -275,14 +306,21 @@ class GltfReader:
                 if c in parent or c == k:
                     self.fail(f"nodes[{c}] '{nodes[c].name}'", "has more than one parent (the nodes must form a tree)")
                 parent[c] = k
-        if spec.nodes is not None:
-            wanted = []
-            for name in spec.nodes:
-                found = [k for k, n in enumerate(nodes) if n.name == name or sanitize(n.name or "") == name]
-                if not found:
-                    raise SpecError("nodes", f"no node named '{name}' in {self.shown}")
-                wanted.append(found[0])
-            roots = wanted
+        return parent
+
+    def _named_nodes(self, nodes: list[Any]) -> list[int]:
+        """The nodes the entry's `nodes:` names (by name or sanitised name), as roots."""
+        wanted = []
+        for name in self.spec.nodes:
+            found = [k for k, n in enumerate(nodes) if n.name == name or sanitize(n.name or "") == name]
+            if not found:
+                raise SpecError("nodes", f"no node named '{name}' in {self.shown}")
+            wanted.append(found[0])
+        return wanted
+
+    def _tree_order(self, nodes: list[Any], roots: list[int]) -> list[int]:
+        """The nodes under `roots`, depth first, parents before children; a node reached
+        twice is a problem."""
         order: list[int] = []
         stack = list(reversed(roots))
         seen: set[int] = set()
@@ -293,40 +331,28 @@ class GltfReader:
             seen.add(k)
             order.append(k)
             stack.extend(reversed(nodes[k].children or []))
-        included = set(order)
+        return order
 
-        names = _Names()
-        prefix = spec.prefix
-        ex = Expansion()
-        # glTF is metres and +Y up, as we are: a stage frame only where the entry overrides
-        frames, root_name = import_frames(names.take, spec, self.index, self.shown, f"{prefix}{sanitize(self.path.stem)}")
-        node_name = {k: names.take(prefix + sanitize(nodes[k].name or f"node{k}")) for k in order}
-        ex.objects.extend(frames)
-        self.names, self.node_name, self.root_name, self.prefix = names, node_name, root_name, prefix
-        self.material_names: dict[int | None, str] = {}
-        self.motions = self._animations(included)
-        for k in order:
-            n = nodes[k]
-            where = f"nodes[{k}] '{n.name}'" if n.name else f"nodes[{k}]"
-            self.at = where
-            origin = Origin(self.shown, where)
-            par = node_name[parent[k]] if k in parent and parent[k] in included and k not in roots else root_name
-            rec: dict[str, Any] = {"name": node_name[k], "shape": "empty", "parent": par, "transform": self._transform(n, where)}
-            motion = self.motions.get(k, {}).get("transform")
-            if motion:
-                rec["motion"] = motion
-            ex.objects.append((rec, origin))
-            if n.mesh is not None:
-                self._mesh_objects(k, n, rec, where, ex)
-            if n.camera is not None:
-                ex.cameras.append((n.name or node_name[k], self._camera(n.camera, node_name[k]), Origin(self.shown, f"cameras[{n.camera}] on {where}")))
-            ext = (n.extensions or {}).get("KHR_lights_punctual")
-            if ext is not None:
-                light = self._light(ext, node_name[k], where)
-                ex.lights.append((light, Origin(self.shown, f"KHR_lights_punctual.lights[{ext.get('light')}] on {where}")))
-        for m_index, m_name in self.material_names.items():
-            ex.materials.append((self._material(m_index, m_name), Origin(self.shown, f"materials[{m_index}]" if m_index is not None else "<default material>")))
-        return ex
+    def _node_records(self, k: int, n: Any, par: str, ex: Expansion) -> None:
+        """Node k's records into `ex`: an empty carrying its transform and motion under
+        `par`, and its mesh objects, camera and KHR_lights_punctual light."""
+        node_name = self.node_name
+        where = f"nodes[{k}] '{n.name}'" if n.name else f"nodes[{k}]"
+        self.at = where
+        origin = Origin(self.shown, where)
+        rec: dict[str, Any] = {"name": node_name[k], "shape": "empty", "parent": par, "transform": self._transform(n, where)}
+        motion = self.motions.get(k, {}).get("transform")
+        if motion:
+            rec["motion"] = motion
+        ex.objects.append((rec, origin))
+        if n.mesh is not None:
+            self._mesh_objects(k, n, rec, where, ex)
+        if n.camera is not None:
+            ex.cameras.append((n.name or node_name[k], self._camera(n.camera, node_name[k]), Origin(self.shown, f"cameras[{n.camera}] on {where}")))
+        ext = (n.extensions or {}).get("KHR_lights_punctual")
+        if ext is not None:
+            light = self._light(ext, node_name[k], where)
+            ex.lights.append((light, Origin(self.shown, f"KHR_lights_punctual.lights[{ext.get('light')}] on {where}")))
 
     def _transform(self, n: Any, where: str) -> dict[str, Any]:
         if n.matrix is not None and list(n.matrix) != [1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0]:
