@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
-from ..cache import STORES, file_digest
+from ..cache import STORES
 from ..bake import BakedFrame
 from ..errors import AssetError, DiskFaultError
 from ..frame_output import is_complete
@@ -27,7 +27,7 @@ from ..files import confined, write_atomic, writing
 from ..limits import env_size
 
 STORE = STORES["shipped"]
-from ..scene.checks import named_files, replace_at
+from ..scene.files import NamedFile, bytes_digest, file_digest, named_files, readable_digests, renamed
 from ..scene.imports.cache import converted_file
 from ..scene.loader import LoadedScene
 from ..scene.schema import Scene
@@ -56,13 +56,16 @@ def ship_imports(scene: Scene, base_dir: Path) -> tuple[Scene, dict[str, Path]]:
     and where each renamed file lies on this machine. Those files are ours, converted from
     sources inside the scene's folder that the import stage opened and checked."""
     sources: dict[str, Path] = {}
-    for loc, rel, _kind, _deforming in list(named_files(scene)):
-        path = Path(base_dir) / rel
-        if converted_file(path):
-            name = f"{IMPORTED}/{path.name}"
-            sources[name] = path.resolve()
-            scene = replace_at(scene, loc, name)
-    return scene, sources
+
+    def carried(named: NamedFile) -> str | None:
+        path = Path(base_dir) / named.rel
+        if not converted_file(path):
+            return None
+        name = f"{IMPORTED}/{path.name}"
+        sources[name] = path.resolve()
+        return name
+
+    return renamed(scene, carried), sources
 
 
 def asset_manifest(scene: Scene, base_dir: Path, scene_file: str | Path, sources: dict[str, Path] | None = None) -> list[ShippedAsset]:
@@ -110,7 +113,7 @@ def store(sha256: str, data: bytes, folder: Path | None = None, rel: str = "") -
     kept; a full cache disk raises the one-line DiskFaultError (pipeline/files.py); the cache
     is then held to $MOTION_ASSET_CACHE_CAP, least recently used first, keeping this entry."""
     folder = folder if folder is not None else shipped_cache_dir()
-    got = hashlib.sha256(data).hexdigest()
+    got = bytes_digest(data)
     if got != sha256:
         raise AssetError(f"shipped asset {sha256[:16]}: received {len(data)} bytes hashing to {got[:16]}; expected the file with hash {sha256[:16]}")
     target = _entry(folder, sha256, rel)
@@ -243,7 +246,7 @@ class FilesByHash:
         """The file's bytes; AssetError when it changed since the job was planned."""
         path = self.path[sha256]
         data = path.read_bytes()
-        if hashlib.sha256(data).hexdigest() != sha256:
+        if bytes_digest(data) != sha256:
             raise AssetError(f"{path}: changed while the job runs (its hash is no longer {sha256[:16]}); run motion render again")
         return data
 
@@ -403,18 +406,6 @@ def publish_home(pre: ChunkResult, res: ChunkResult, job: RenderJob, ctx: TaskCo
     return res
 
 
-def files_sha256(paths: Sequence[str]) -> list[str | None]:
-    """Each file's SHA-256, or None where this process cannot read it (run on a worker by
-    `workers_see`)."""
-    out: list[str | None] = []
-    for path in paths:
-        try:
-            out.append(file_digest(Path(path)))
-        except OSError:
-            out.append(None)
-    return out
-
-
 def workers_see(target: dict[str, Any], scene_file: str | Path, out_dir: str | Path) -> bool:
     """Whether the cluster's workers see the client's folders (`--transfer auto`): one
     worker hashes, at the client's paths, the scene file and a probe file the client has just
@@ -434,8 +425,8 @@ def workers_see(target: dict[str, Any], scene_file: str | Path, out_dir: str | P
             except Exception:  # dask's own TimeoutError type
                 return True
             workers = sorted(client.scheduler_info(n_workers=-1)["workers"])
-            got = client.run(files_sha256, [scene, str(probe)], workers=workers[:1])
-        return next(iter(got.values())) == files_sha256([scene, str(probe)])
+            got = client.run(readable_digests, [scene, str(probe)], workers=workers[:1])
+        return next(iter(got.values())) == readable_digests([scene, str(probe)])
     finally:
         probe.unlink(missing_ok=True)
 

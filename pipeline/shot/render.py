@@ -31,7 +31,8 @@ from ..farm.scheduler import Scheduler
 from ..farm.task import TaskContext
 from ..limits import check_env_sizes
 from ..presets import Preset, load_preset, overrides_from, spread
-from ..render.job import MAX_PARTS, RenderJob, file_digests, frame_key, frame_path, render_settings, scene_hashes
+from ..render.job import MAX_PARTS, RenderJob, frame_key, frame_path, render_settings, scene_hashes
+from ..scene.files import file_digests
 from ..scene.loader import LoadedScene, load_scene
 from .deliver import DeliverPlan, check_deliver, deliver_and_record, deliver_plan
 from .estimate import denoised_pixels, estimate, samples_of
