@@ -336,5 +336,5 @@ STORES: dict[str, Store] = {s.name: s for s in (
     Store("passes", "validation/assets", "asset files whose bytes passed their checks (scene/checked.py)", tag="pass-v2",
           code=("images.py", "meshes.py", "limits.py"), cap_bytes=False, cap_files=1024, shards=True),
     Store("validators", "validation", "the scene format's validators (scene/compiled.py)", tag="validator-v2", cap_bytes=False, cap_files=64),
-    Store("shipped", "shipped", "assets a shipped job carried to this worker (farm/transfer.py)"),
+    Store("shipped", "shipped", "assets a shipped job carried to this worker (farm/transfer/store.py)"),
 )}

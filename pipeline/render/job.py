@@ -69,7 +69,7 @@ class RenderJob:
 
 
 class SceneSource(Protocol):
-    """A job's scene carried to the worker instead of read by path (farm/transfer.py's
+    """A job's scene carried to the worker instead of read by path (farm/transfer/shipment.py's
     ShippedScene): `checkout()` gives the parsed scene with its assets on this worker."""
 
     def checkout(self) -> LoadedScene:

@@ -407,7 +407,7 @@ def _run_render(req: RenderRequest, held: list[RunLock]) -> dict[str, Any]:
         probe_scheduler(req.scheduler)  # in seconds, before the bake (and in --dry-run)
         if not req.dry_run:
             from ..farm.address import scheduler_target
-            from ..farm.transfer import choose_transfer
+            from ..farm.transfer.choose import choose_transfer
 
             job = choose_transfer(req.transfer, scheduler_target(req.scheduler), job, loaded)  # a hostile asset path stops here
     if req.check and wanted:
