@@ -7,8 +7,9 @@ and code-version rule (`Store.key`), one whole-file check and trust rule (`Store
 only a regular file we wrote, in folders only we may write, is believed), bounded reads
 (`Store.read`), stats, and one eviction policy (`hold_to_cap`: least recently used first,
 to a byte or entry cap). Nothing read from a store is executed, except a kept validator
-(scene/compiled.py), which is read only through `trusted`. `snapshot` gives a checker or
-converter a private copy of the bytes it hashed. docs/ci-sharding.md ("Caches")."""
+(scene/compiled.py), which is read only through `trusted`. The content digests that key
+the stores' entries are scene/files.py's (`file_digest`, `snapshot`). docs/ci-sharding.md
+("Caches")."""
 
 from __future__ import annotations
 
@@ -16,14 +17,9 @@ import hashlib
 import os
 import stat
 import threading
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator, Sequence
-
-_DIGESTS: dict[tuple[str, int, int], str] = {}
-_RECORDERS: list[dict[str, str]] = []  # open `digests_recorded` blocks, innermost last
-
+from typing import Callable, Sequence
 
 def cache_root() -> Path:
     """Root of motion's on-disk caches: $MOTION_CACHE_DIR, else $XDG_CACHE_HOME/motion."""
@@ -93,65 +89,6 @@ def kernel_cache_key() -> str:
     except OSError:
         parts.append(platform.processor())
     return "motion-kernels-" + hashlib.sha256("|".join(parts).encode()).hexdigest()[:16]
-
-
-def file_digest(path: Path) -> str:
-    """sha256 of a file's bytes (memoised per path, size and modification time): the key of
-    every content-addressed cache (imports, validation, shipped assets) and of the settings hash."""
-    st = path.stat()
-    memo = (str(path.resolve()), st.st_size, st.st_mtime_ns)
-    if memo not in _DIGESTS:
-        h = hashlib.sha256()
-        with open(path, "rb") as f:
-            for chunk in iter(lambda: f.read(1 << 20), b""):
-                h.update(chunk)
-        _DIGESTS[memo] = h.hexdigest()
-    for seen in _RECORDERS:
-        seen[memo[0]] = _DIGESTS[memo]
-    return _DIGESTS[memo]
-
-
-@contextmanager
-def snapshot(path: Path, limit: int, what: str) -> Iterator[tuple[str, Path]]:
-    """`with snapshot(path, limit, what) as (digest, copy):` the SHA-256 of `path`'s bytes
-    and a private copy of exactly those bytes (same file name, in a folder only we can
-    reach, removed on leaving), for a check or a conversion whose result is kept by that
-    digest: what is checked is what was hashed, whatever becomes of `path` meanwhile. The
-    file is opened as every input is (`limits.open_bounded`: a FIFO is never waited on);
-    InputFileError otherwise."""
-    import shutil
-    import tempfile
-
-    from .limits import InputFileError, open_bounded
-
-    folder = Path(tempfile.mkdtemp(prefix="motion-snapshot-"))
-    try:
-        copy = folder / Path(path).name
-        h = hashlib.sha256()
-        size = 0
-        with open_bounded(path, limit, what) as src, open(copy, "wb") as dst:
-            for chunk in iter(lambda: src.read(1 << 20), b""):
-                size += len(chunk)
-                if size > limit:
-                    raise InputFileError(str(path), f"{what} is over the limit of {limit} bytes")
-                h.update(chunk)
-                dst.write(chunk)
-        yield h.hexdigest(), copy
-    finally:
-        shutil.rmtree(folder, ignore_errors=True)
-
-
-@contextmanager
-def digests_recorded() -> Iterator[dict[str, str]]:
-    """Every file `file_digest` reads inside the block, by resolved path, with its digest:
-    the inputs of a reader whose output is kept (a USD stage's layers and the textures it
-    converts; a glTF file's buffers and images: imports/memo.py)."""
-    seen: dict[str, str] = {}
-    _RECORDERS.append(seen)
-    try:
-        yield seen
-    finally:
-        del _RECORDERS[next(i for i, r in enumerate(_RECORDERS) if r is seen)]
 
 
 # --- the one cache layer ------------------------------------------------------------------------
@@ -399,5 +336,5 @@ STORES: dict[str, Store] = {s.name: s for s in (
     Store("passes", "validation/assets", "asset files whose bytes passed their checks (scene/checked.py)", tag="pass-v2",
           code=("images.py", "meshes.py", "limits.py"), cap_bytes=False, cap_files=1024, shards=True),
     Store("validators", "validation", "the scene format's validators (scene/compiled.py)", tag="validator-v2", cap_bytes=False, cap_files=64),
-    Store("shipped", "shipped", "assets a shipped job carried to this worker (farm/transfer.py)"),
+    Store("shipped", "shipped", "assets a shipped job carried to this worker (farm/transfer/store.py)"),
 )}

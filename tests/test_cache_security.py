@@ -190,7 +190,7 @@ def test_a_file_swapped_between_its_hash_and_its_check_is_never_passed(tmp_path:
 def test_a_planted_pass_does_not_make_a_malformed_obj_validate(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, how: str) -> None:
     """A pass for a malformed OBJ's bytes, planted by another user (or writable by others),
     is no pass: the OBJ is decoded and refused."""
-    from motion.pipeline.cache import file_digest
+    from motion.pipeline.scene.files import file_digest
     from motion.pipeline.scene import checked
 
     monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
@@ -319,7 +319,7 @@ def test_a_damaged_cost_history_is_discarded_and_written_again(tmp_path: Path, m
 def test_a_fifo_in_place_of_a_pass_or_a_converted_asset_is_made_again(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A FIFO where a kept pass or a converted mesh would be: never opened (no hang), not
     a hit, and replaced by the entry made again."""
-    from motion.pipeline.cache import file_digest
+    from motion.pipeline.scene.files import file_digest
     from motion.pipeline.render import assets
     from motion.pipeline.scene import checked
     from motion.pipeline.variant import activate

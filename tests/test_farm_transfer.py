@@ -1,4 +1,4 @@
-"""Shipped jobs' two ends without a cluster (pipeline/farm/transfer.py): the client's asset
+"""Shipped jobs' two ends without a cluster (pipeline/farm/transfer/): the client's asset
 manifest (content hashes, hostile paths refused before reading) and the worker's
 content-addressed cache (hash-checked, bounded by $MOTION_ASSET_CACHE_CAP, a full disk is
 one line)."""
@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 
 from motion.pipeline.errors import AssetError, DiskFaultError
-from motion.pipeline.farm.transfer import ShippedAsset, asset_manifest, cached, check_out, store
+from motion.pipeline.farm.transfer.manifest import ShippedAsset, asset_manifest
+from motion.pipeline.farm.transfer.store import cached, check_out, store
 from motion.pipeline.scene import load_scene
 
 OBJ = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
@@ -113,7 +114,7 @@ def test_a_shipped_job_renders_the_same_pixels_without_the_scene_folder(tmp_path
     from PIL import Image
 
     from motion.pipeline.bake import evaluate_frames
-    from motion.pipeline.farm.transfer import BytesByHash, ShippedScene
+    from motion.pipeline.farm.transfer.shipment import BytesByHash, ShippedScene
     from motion.pipeline.frame_output import read_frame
     from motion.pipeline.render import job as job_mod
     from motion.pipeline.render.job import RenderJob, render_frames, scene_hashes
@@ -147,7 +148,7 @@ def test_frames_come_home_atomically_and_one_lost_on_the_way_fails(tmp_path: Pat
     this run's claims are released and no temporary file is left."""
     from motion.pipeline.farm.claims import Claimant, claim_path, try_claim
     from motion.pipeline.farm.task import ChunkResult, TaskContext
-    from motion.pipeline.farm.transfer import publish_home
+    from motion.pipeline.farm.transfer.home import publish_home
     from motion.pipeline.render.job import FrameResult, RenderJob
 
     out = tmp_path / "out"
@@ -173,7 +174,9 @@ def test_an_imported_scene_ships_its_converted_meshes(tmp_path: Path) -> None:
     reads them from the cache on the client, and the worker's checkout resolves them."""
     import shutil
 
-    from motion.pipeline.farm.transfer import IMPORTED, BytesByHash, localize, ship_job
+    from motion.pipeline.farm.transfer.localize import localize
+    from motion.pipeline.farm.transfer.manifest import IMPORTED
+    from motion.pipeline.farm.transfer.shipment import BytesByHash, ship_job
     from motion.pipeline.render.job import RenderJob
 
     root = Path(__file__).resolve().parents[1]

@@ -9,7 +9,6 @@ was replaced or cut short is bad input, never a silent pass or failure.
 from __future__ import annotations
 
 import datetime as _dt
-import hashlib
 import json
 import os
 from dataclasses import dataclass
@@ -21,6 +20,7 @@ import numpy as np
 from ..errors import FrameIOError, ReferenceMismatchError
 from ..files import write_atomic
 from ..frame_output import META_PREFIX, read_frame, write_exr
+from ..scene.files import file_digest
 from ..telecine.sequence import discover
 from .frames import differences, frame_facts
 
@@ -60,10 +60,6 @@ def motion_version() -> str:
         return "unknown"
 
 
-def _digest(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def bless(new_dir: str | Path, golden_dir: str | Path, prefix: str | None = None) -> Manifest:
     """Make `golden_dir` the reference set of the frames in `new_dir`: each frame rewritten
     as half floats (RGBA, and the `noisy` layer when the frame has one; its header kept),
@@ -92,7 +88,7 @@ def bless(new_dir: str | Path, golden_dir: str | Path, prefix: str | None = None
                 channels[f"{NOISY_LAYER}.{comp}"] = noisy[..., i].astype(np.float16)
         out = golden / path.name
         write_exr(out, header, channels, doing="writing reference frame")
-        entries.append({"frame": number, "file": path.name, "sha256": _digest(out), "variant": f.variant, "seed": f.seed, "spp": f.spp})
+        entries.append({"frame": number, "file": path.name, "sha256": file_digest(out, memo=False), "variant": f.variant, "seed": f.seed, "spp": f.spp})
     old = read_manifest(golden, verify=False) if (golden / MANIFEST).is_file() else None
     data = {
         "format": FORMAT,
@@ -151,6 +147,6 @@ def read_manifest(golden_dir: str | Path, *, verify: bool = True) -> Manifest | 
             file = Path(golden_dir) / str(entry.get("file"))
             if not file.is_file():
                 raise FrameIOError(f"{file}: reference frame {number} listed in {path.name} is not there")
-            if _digest(file) != entry.get("sha256"):
+            if file_digest(file, memo=False) != entry.get("sha256"):
                 raise FrameIOError(f"{file}: reference frame {number} is not the one blessed (its SHA-256 differs from {path.name}'s); bless again with motion compare --bless")
     return manifest

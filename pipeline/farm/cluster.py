@@ -12,7 +12,7 @@ small `ChunkResult` travels back. Progress moves per frame as with local workers
 logs a `FrameWritten` event to the scheduler as each frame is written
 (`Worker.log_event`), and the client's topic subscription hands it to the farm.
 
-Without a shared disk (`--transfer ship`, farm/transfer.py) the job carries its parsed
+Without a shared disk (`--transfer ship`, farm/transfer/) the job carries its parsed
 scene, the assets go to each worker once as scattered futures, the client claims the
 frames, and the worker returns each EXR's bytes for the client to publish.
 """
@@ -55,8 +55,9 @@ def run_chunk_shipped(chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame
     """Ship mode (`--transfer ship`): `run_chunk_reporting` into the worker's own temporary
     folder, with the asset bytes its cache lacked (`payload`: Dask resolved the scattered
     futures into bytes before the task ran); the finished EXRs' bytes return in the result
-    (farm/transfer.py)."""
-    from .transfer import run_chunk_away, with_payload
+    (farm/transfer/home.py)."""
+    from .transfer.home import run_chunk_away
+    from .transfer.shipment import with_payload
 
     return run_chunk_away(lambda c, j, i, x: run_chunk_reporting(c, j, i, x, topic), chunk_id, with_payload(job, payload), inputs, ctx)
 
@@ -102,7 +103,7 @@ class DaskExecutor:
         self.client.subscribe_topic(self._topic, self._on_frame_event)
         self._live: list[str] = []
         self._refreshed = 0.0
-        self._ship: Any = None  # transfer.Shipment of a job that carries its inputs (ship mode)
+        self._ship: Any = None  # transfer.shipment.Shipment of a job that carries its inputs (ship mode)
         self._claimed: dict[int, Any] = {}  # chunk id -> what the client settled before sending (ship mode)
         self._ready: list[Event] = []  # chunks settled without a task (every frame held, done or refused)
         self.task_bytes = 0  # pickled task arguments sent (job, baked frames, context, payload keys)
@@ -166,8 +167,9 @@ class DaskExecutor:
     def _submit_shipped(self, worker: str, chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext) -> None:
         """Ship mode: claim and resume-check the chunk's frames here (the worker cannot see
         the output folder), then send the frames still to render with the assets `worker`
-        lacks (scattered once per job: `transfer.Shipment`)."""
-        from .transfer import Shipment, claim_home, publish_home
+        lacks (scattered once per job: `transfer.shipment.Shipment`)."""
+        from .transfer.home import claim_home, publish_home
+        from .transfer.shipment import Shipment
 
         if self._ship is None or self._ship.given is not job:
             self._ship = Shipment(self.client, job)
@@ -185,7 +187,7 @@ class DaskExecutor:
         result = fut.result()
         claimed = self._claimed.pop(chunk_id, None)
         if claimed is not None:
-            from .transfer import publish_home
+            from .transfer.home import publish_home
 
             self.frame_bytes += sum(len(b) for b in result.frame_bytes.values())
             result = publish_home(claimed[0], result, self._ship.given, claimed[1])

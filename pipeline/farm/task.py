@@ -51,7 +51,7 @@ def claim_frame(job: RenderJob, baked: BakedFrame, ctx: TaskContext, me: Claiman
     claim and the frame needs rendering. Otherwise `out` says why not (a link leading out of
     the output folder, a claim another render holds, or a complete frame with `resume`,
     whose claim is released again). A disk refusing the claim raises DiskFaultError. Run by
-    the worker (`run_chunk`) or, for a shipped job, by the client (`transfer.claim_home`)."""
+    the worker (`run_chunk`) or, for a shipped job, by the client (`transfer.home.claim_home`)."""
     path = ctx.paths[baked.frame]
     if not (confined(job.output_dir, path) and confined(job.output_dir, claim_path(path))):
         # a link planted in the output folder after the job's checks: nothing is written through it

@@ -26,6 +26,7 @@ import numpy as np
 from ..bake import BakedFrame, Order, frame_digests
 from ..field_model import parity_of
 from ..frame_output import write_frame
+from ..scene.files import bytes_digest, content_named
 from ..scene.loader import LoadedScene, load_scene
 from ..timeline import frame_timecode
 from ..variant import device_of
@@ -48,7 +49,7 @@ class RenderJob:
     threads: int | None = None
     variant: str = "auto"
     fields: str | None = None  # tff/bff: each frame is a field, only its rows are drawn
-    files: str = ""  # JSON {name: digest} of the files the scene names (`file_digests`), kept in each frame's header
+    files: str = ""  # JSON {name: digest} of the files the scene names (`scene.files.file_digests`), kept in each frame's header
     shipped: SceneSource | None = None  # ship mode: the parsed scene and its assets travel with the job
     # a frame's key (docs/reruns.md): what it looks like apart from motion (render/look.py),
     # and the order that makes its motion's digest independent of names
@@ -68,7 +69,7 @@ class RenderJob:
 
 
 class SceneSource(Protocol):
-    """A job's scene carried to the worker instead of read by path (farm/transfer.py's
+    """A job's scene carried to the worker instead of read by path (farm/transfer/shipment.py's
     ShippedScene): `checkout()` gives the parsed scene with its assets on this worker."""
 
     def checkout(self) -> LoadedScene:
@@ -106,60 +107,11 @@ def scene_hashes(loaded: LoadedScene) -> tuple[str, str]:
     """(scene, settings) hashes: the scene file's bytes; the validated scene with every
     override applied, each file it names standing for its contents (`content_named`), plus
     the renderer's version."""
-    scene_hash = hashlib.sha256(loaded.path.read_bytes()).hexdigest()[:16]
+    scene_hash = bytes_digest(loaded.path.read_bytes())[:16]
     # output.deliver says what a full render assembles afterwards: not how a frame looks
     canon = json.dumps(content_named(loaded).model_dump(mode="json", exclude={"output": {"deliver"}}), sort_keys=True)
     settings_hash = hashlib.sha256(f"{RENDERER_VERSION}|{canon}".encode()).hexdigest()[:16]
     return scene_hash, settings_hash
-
-
-def _named_digests(loaded: LoadedScene) -> list[tuple[Any, str, str | None]]:
-    """(YAML path, name as the scene gives it, SHA-256 of its bytes or None when it cannot
-    be read) for each file the scene names (`scene.checks.named_files`), each file read
-    once (`file_digest` keeps them per path, size and modification time)."""
-    from ..scene.checks import named_files
-    from ..cache import file_digest
-
-    digests: dict[str, str | None] = {}
-    out = []
-    for loc, rel, _kind, _deforming in list(named_files(loaded.scene)):
-        if rel not in digests:
-            try:
-                digests[rel] = file_digest(loaded.base_dir / rel)
-            except OSError:
-                digests[rel] = None
-        out.append((loc, rel, digests[rel]))
-    return out
-
-
-def file_digests(loaded: LoadedScene) -> dict[str, str]:
-    """The files the scene names -> the first 16 hex digits of each one's SHA-256, as kept
-    in a frame's header (`motion:files`) so that a rerun can name the file that changed.
-    An import's converted file is named `import:<its name>` (its path lies in this
-    machine's cache folder, which does not belong in a deliverable)."""
-    from ..scene.imports.cache import converted_file
-
-    out = {}
-    for _loc, rel, digest in _named_digests(loaded):
-        path = loaded.base_dir / rel
-        out[f"import:{path.name}" if converted_file(path) else rel] = digest[:16] if digest else "unreadable"
-    return out
-
-
-def content_named(loaded: LoadedScene) -> Any:
-    """The scene with every file it names (meshes, textures, environment maps, an import's
-    converted files) given as `sha256:<digest of its bytes>`: a frame's settings hash then
-    changes when a texture is edited under the same name (`--resume` replaces the frames,
-    a warm worker does not serve the old scene), and does not depend on where the file
-    lies (an import's converted meshes sit in each machine's own cache folder: a worker
-    under another user computed another hash and refused the job). A file that cannot be
-    read stands as `unreadable:<name>` (the asset checks report it before any task)."""
-    from ..scene.checks import replace_at
-
-    scene = loaded.scene
-    for loc, rel, digest in _named_digests(loaded):
-        scene = replace_at(scene, loc, f"sha256:{digest}" if digest else f"unreadable:{rel}")
-    return scene
 
 
 def render_settings(scene: Any) -> dict[str, Any]:

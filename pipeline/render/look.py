@@ -24,7 +24,8 @@ from typing import Any
 
 from ..bake import Order
 from ..scene.loader import LoadedScene
-from .job import RENDERER_VERSION, content_named, render_settings
+from ..scene.files import content_named
+from .job import RENDERER_VERSION, render_settings
 from .roles import sort_scene
 
 # fields of an object, light or camera (at any depth) that reach the renderer only as

@@ -25,7 +25,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-from ..cache import STORES, file_digest, snapshot
+from ..cache import STORES
+from .files import file_digest, snapshot
 
 STORE = STORES["passes"]
 SHARD_CAP = STORE.cap_files  # passes kept in one of the 256 folders

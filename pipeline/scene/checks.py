@@ -11,17 +11,18 @@ import re
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path, PurePosixPath
-from typing import TYPE_CHECKING, Any, Callable, Iterator, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 from ..errors import AssetError, Problem
 from ..expr import ExpressionError, parse_expression
 from ..limits import MAX_IMAGE_BYTES, MAX_MESH_BYTES
 from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
 from . import checked
+from .files import named_files
 from .problems import closest
-from .motion_schema import BlendShapes, JointSkin, KeyframeMotion, MorphTargets, ProceduralMotion, TRANSFORM_CHANNELS
+from .motion_schema import KeyframeMotion, ProceduralMotion, TRANSFORM_CHANNELS
 from .lights import extra_environments
-from .schema import LIGHT_TYPES, Mesh, Particles, Scene, Texture
+from .schema import LIGHT_TYPES, Particles, Scene
 from .source import yaml_path
 
 # Budgets (docs/scene-format.md, "Limits"), checked over the whole timeline before any work.
@@ -217,55 +218,6 @@ def check_penalty_stability(c: _Check) -> None:
 
     for loc, message in penalty_problems(c.scene):
         c.add(loc, message)
-
-
-def named_files(scene: Scene) -> Iterator[tuple["Loc", str, str, bool]]:
-    """Every file the scene names, as (YAML path, path relative to the scene's folder,
-    kind 'mesh', 'image', 'morph' (a morph target's vertices) or 'skin' (a joint skin's
-    arrays), whether the mesh deforms), in
-    file order: what the asset checks open, what a farm that ships its inputs
-    (pipeline/farm/transfer.py) sends and what a frame's settings hash reads."""
-    for i, obj in enumerate(scene.objects):
-        if isinstance(obj, Mesh):
-            yield ("objects", i, "file"), obj.file, "mesh", obj.deform is not None
-        if isinstance(obj.deform, BlendShapes):
-            for k, key in enumerate(obj.deform.keys):
-                if key.file is not None:
-                    yield ("objects", i, "deform", "keys", k, "file"), key.file, "mesh", False
-        if isinstance(obj.deform, JointSkin):
-            yield ("objects", i, "deform", "file"), obj.deform.file, "skin", False
-        morph = obj.deform if isinstance(obj.deform, MorphTargets) else getattr(obj.deform, "morph", None)
-        if isinstance(morph, MorphTargets):
-            at = ("objects", i, "deform") if morph is obj.deform else ("objects", i, "deform", "morph")
-            for k, target in enumerate(morph.targets):
-                yield (*at, "targets", k, "file"), target.file, "morph", False
-        if obj.motion.type == "plan" and obj.motion.grid.image is not None:
-            yield ("objects", i, "motion", "grid", "image"), obj.motion.grid.image, "image", False
-    for i, light in enumerate(scene.lights):
-        for name in light.image_files:
-            yield ("lights", i, name), getattr(light, name), "image", False
-    for i, obj in enumerate(scene.objects):
-        if obj.emission is not None and isinstance(obj.emission.radiance, Texture):
-            yield ("objects", i, "emission", "radiance", "file"), obj.emission.radiance.file, "image", False
-    for i, mat in enumerate(scene.materials):
-        for name in type(mat).model_fields:
-            tex = getattr(mat, name, None)
-            if isinstance(tex, Texture):
-                yield ("materials", i, name, "file"), tex.file, "image", False
-
-
-def replace_at(model: Any, loc: Sequence[Any], value: Any) -> Any:
-    """`model` (a frozen scene record) with the field at YAML path `loc` (as `named_files`
-    gives it) set to `value`."""
-    head, rest = loc[0], loc[1:]
-    if not rest:
-        return model.model_copy(update={head: value})
-    child = getattr(model, head)
-    if isinstance(child, (list, tuple)):
-        items = list(child)
-        items[rest[0]] = replace_at(items[rest[0]], rest[1:], value) if rest[1:] else value
-        return model.model_copy(update={head: type(child)(items)})
-    return model.model_copy(update={head: replace_at(child, rest, value)})
 
 
 def check_asset_files(c: _Check) -> None:

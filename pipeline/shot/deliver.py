@@ -41,6 +41,7 @@ from ..farm.report import write_report
 from ..files import confined, publish_path, staging
 from ..frame_output import disk_fault, inside, write_atomic
 from ..limits import read_bounded
+from ..scene.files import file_digest
 from .request import RenderRequest
 
 MANIFEST = "manifest.json"
@@ -187,11 +188,7 @@ def frame_digests(paths: list[Path], known: Mapping[str, Any]) -> list[str]:
         if isinstance(rec, dict) and rec.get("size") == st.st_size and rec.get("mtime_ns") == st.st_mtime_ns and isinstance(rec.get("sha256"), str):
             out.append(rec["sha256"])
             continue
-        h = hashlib.sha256()
-        with open(p, "rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                h.update(block)
-        out.append(h.hexdigest())
+        out.append(file_digest(p, memo=False))
     return out
 
 

@@ -31,7 +31,8 @@ from ..farm.scheduler import Scheduler
 from ..farm.task import TaskContext
 from ..limits import check_env_sizes
 from ..presets import Preset, load_preset, overrides_from, spread
-from ..render.job import MAX_PARTS, RENDERER_VERSION, RenderJob, file_digests, frame_key, frame_path, render_settings, scene_hashes
+from ..render.job import MAX_PARTS, RENDERER_VERSION, RenderJob, frame_key, frame_path, render_settings, scene_hashes
+from ..scene.files import file_digests
 from ..scene.loader import LoadedScene, load_scene
 from .deliver import DeliverPlan, check_deliver, deliver_and_record, deliver_plan
 from .estimate import denoised_pixels, estimate, samples_of
@@ -460,7 +461,7 @@ def settle(req: RenderRequest, held: list[RunLock]) -> Settled:
         probe_scheduler(req.scheduler)  # in seconds, before the bake (and in --dry-run)
         if not req.dry_run:
             from ..farm.address import scheduler_target
-            from ..farm.transfer import choose_transfer
+            from ..farm.transfer.choose import choose_transfer
 
             job = choose_transfer(req.transfer, scheduler_target(req.scheduler), job, loaded)  # a hostile asset path stops here
     if req.check and wanted:

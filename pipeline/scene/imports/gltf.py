@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from ...cache import file_digest
+from ..files import bytes_digest, file_digest
 from ...errors import InputFileError
 from ...limits import MAX_GLTF_BYTES as MAX_FILE_BYTES  # refuse absurd files before reading them
 from ...limits import MAX_GLTF_KEYS, MAX_IMAGE_BYTES, read_bounded
@@ -766,9 +766,7 @@ class GltfReader:
             self.fail(f"textures[{tex}]", "has no image source")
         data, iwhere = self._image_bytes(t.source, f"textures[{tex}].source")
         self._check_pixels(data, iwhere)
-        import hashlib
-
-        key = f"{hashlib.sha256(data).hexdigest()}|{_floats(scale)}|{channel}" + (f"|cut{cutoff}" if cutoff is not None else "") + ("|linear" if linear else "") + (f"|bend{normal_scale}" if normal_scale is not None else "")
+        key = f"{bytes_digest(data)}|{_floats(scale)}|{channel}" + (f"|cut{cutoff}" if cutoff is not None else "") + ("|linear" if linear else "") + (f"|bend{normal_scale}" if normal_scale is not None else "")
 
         def write(tmp: Path) -> None:
             import io
@@ -886,7 +884,7 @@ def source_digest(path: Path, raw: bytes) -> str:
     import json
     from urllib.parse import unquote
 
-    h = hashlib.sha256(hashlib.sha256(raw).hexdigest().encode())
+    h = hashlib.sha256(bytes_digest(raw).encode())
     try:
         if raw[:4] == b"glTF":
             length = struct.unpack_from("<I", raw, 12)[0]

@@ -5,7 +5,7 @@ An import's records depend only on the bytes of the files its reader reads (the 
 converts), the import entry without its overrides, where it is shown, the scene's folder
 (a USD stage's layers are confined to it) and the readers' code. They are kept as one JSON
 file in the import cache, beside the converted meshes, textures and skins they name, with
-the digest of every file the reader read (`cache.digests_recorded`). A later load checks
+the digest of every file the reader read (`scene/files.digests_recorded`). A later load checks
 those digests and that every converted file is still there, and then never imports the
 reader: numpy and pygltflib (0.05 s of `motion validate`), or usd-core (0.3 s). Any
 difference, or an entry that does not read whole, and the file is read again.
@@ -13,12 +13,12 @@ difference, or an entry that does not read whole, and the file is read again.
 
 from __future__ import annotations
 
-import hashlib
 import json
 from pathlib import Path
 from typing import Any
 
-from ...cache import STORES, digests_recorded, file_digest, trusted
+from ...cache import STORES, code_digest, trusted
+from ..files import digests_recorded, file_digest
 from ...limits import MAX_GLTF_BYTES, MAX_RECORD_BYTES, MAX_USD_LAYER_BYTES, read_json_record
 from .records import Expansion, Origin
 
@@ -63,17 +63,11 @@ def _unchanged(read: dict[str, str]) -> bool:
     """Whether every file still hashes as it did when its reader was given it (hashed
     afresh, not from the per-process memo): a file swapped between its hash and its read
     would otherwise keep another file's records under its key."""
-    import hashlib
-
     for file, digest in read.items():
-        h = hashlib.sha256()
         try:
-            with open(file, "rb") as fh:
-                for chunk in iter(lambda: fh.read(1 << 20), b""):
-                    h.update(chunk)
+            if file_digest(Path(file), memo=False) != digest:
+                return False
         except OSError:
-            return False
-        if h.hexdigest() != digest:
             return False
     return True
 
@@ -90,10 +84,8 @@ def _read_file(kind: str, path: Path, shown: str, spec: Any, index: int, base_di
 
 
 def _code(kind: str) -> str:
-    h = hashlib.sha256()
-    for name in READERS[kind]:
-        h.update(Path(__file__).with_name(name).read_bytes())
-    return h.hexdigest()
+    """The reader's code version (cache.py's one code digest over its source files)."""
+    return code_digest(tuple(f"scene/imports/{name}" for name in READERS[kind]))
 
 
 def _recall(memo: Path, most_bytes: int) -> Expansion | None:
