@@ -195,6 +195,6 @@ def test_a_worker_killed_mid_chunk_is_retried(hidden_cluster) -> None:
     assert proc.returncode == 0, stderr
     rep = report(out)
     assert rep["totals"]["rendered"] == 6 and rep["totals"]["failed"] == 0
-    assert sum(r["attempts"] > 1 for r in rep["frames"]) == 3  # the killed chunk, once more
+    assert sum(r["attempts"] > 1 for r in rep["frames"]) == 3, [(r["frame"], r["attempts"], r.get("worker"), r.get("errors") or r.get("error")) for r in rep["frames"]]  # the killed chunk, once more
     assert [f.name for f in frames_in(out)] == [f"scene.{f:04d}.exr" for f in range(6)]
     assert not leftovers(out)  # the client's claims and temporary files are gone

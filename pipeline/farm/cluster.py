@@ -240,7 +240,7 @@ class DaskExecutor:
                 del self._running[w]
                 try:
                     exc = fut.exception(timeout=1)
-                    why = f"{type(exc).__name__}: {exc}"
+                    why = f"{type(exc).__name__}: {exc}" if exc is not None else f"task {fut.status}"
                 except Exception as e:  # cancelled futures raise on .exception()
                     why = f"task {fut.status} ({type(e).__name__})"
                 self._forget(w, chunk_id)

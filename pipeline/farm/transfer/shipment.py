@@ -84,9 +84,10 @@ class Shipment:
     scene and manifest, without bytes) scattered once, and which workers already hold every
     asset. A worker's first chunk asks its cache what it lacks (`missing_assets`, one
     `client.run`) and takes exactly those assets as futures among its arguments: an asset
-    is scattered (`client.scatter`, to that worker) when a worker first lacks it, and Dask
-    moves it to every later one (from any worker holding it), so each asset crosses to each
-    worker once, never once per frame, and not at all when every disk cache kept it from an
+    is scattered when a worker first lacks it, to every worker at once (`broadcast`: a
+    scattered asset cannot be recomputed, so one held by a single worker would die with it
+    and cancel the chunks elsewhere that needed it), so each asset crosses to each worker
+    once, never once per frame, and not at all when every disk cache kept it from an
     earlier job. The futures are held while the job runs (the cluster drops data nobody holds)."""
 
     def __init__(self, client: Any, job: RenderJob) -> None:
@@ -99,8 +100,11 @@ class Shipment:
         self.fetch = shipped.fetch
         self.futures: dict[str, Any] = {}
         self.sent = with_payload(job, {})
-        # the job (parsed scene, settings) crosses once per worker too: tasks carry its key
-        self._job_future = client.scatter(self.sent, hash=False)
+        # the job (parsed scene, settings) crosses once per worker too: tasks carry its key.
+        # On every worker (broadcast): scattered data cannot be recomputed, so a job held by
+        # one worker alone died with it, and every chunk running elsewhere was "lost" with it
+        # (retried with no cause: test_a_worker_killed_mid_chunk_is_retried, 1 run in 2)
+        self._job_future = client.scatter(self.sent, hash=False, broadcast=True)
         self.stocked: set[str] = set()  # workers that hold every asset (cache or sent)
         self.bytes_sent = 0  # asset bytes handed to workers (each once per worker)
         self.bytes_scattered = 0  # asset bytes the client itself uploaded
@@ -108,16 +112,16 @@ class Shipment:
     def job_future(self, client: Any) -> Any:
         """The scattered job, scattered again if every worker holding it has died."""
         if self._job_future.status != "finished":
-            self._job_future = client.scatter(self.sent, hash=False)
+            self._job_future = client.scatter(self.sent, hash=False, broadcast=True)
         return self._job_future
 
     def _future(self, client: Any, sha256: str, worker: str) -> Any:
         if sha256 not in self.futures or self.futures[sha256].status != "finished":  # new, or every holder died
             data = self.fetch(sha256)
-            try:
-                self.futures[sha256] = client.scatter(data, workers=[worker], hash=False)
-            except KeyError:  # that worker just left the cluster: anywhere will do
-                self.futures[sha256] = client.scatter(data, hash=False)
+            # to every worker (broadcast), as the job: scattered data cannot be recomputed, and
+            # an asset held by the one worker that first lacked it died with that worker,
+            # cancelling every chunk elsewhere that still needed it from there
+            self.futures[sha256] = client.scatter(data, hash=False, broadcast=True)
             self.bytes_scattered += len(data)
         return self.futures[sha256]
 
