@@ -137,6 +137,7 @@ def test_main_process_never_imports_drjit(tmp_path) -> None:
     assert res.returncode == 0, res.stderr
 
 
+@pytest.mark.slow  # seconds to a minute on a busy 2-core host: CI's second step (make test ARGS="-m slow")
 def test_motion_file_from_bake_matches_baking_here(tmp_path) -> None:
     out = tmp_path / "out"
     for ext in ("json", "npz"):

@@ -573,6 +573,7 @@ def test_a_claim_dated_in_the_future_is_stale(tmp_path: Path) -> None:
     assert not is_stale(claim, info, stale_after_s=1800)
 
 
+@pytest.mark.slow  # seconds to a minute on a busy 2-core host: CI's second step (make test ARGS="-m slow")
 def test_names_map_to_safe_file_and_object_names(tmp_path: Path) -> None:
     """An object named `a.b` (or a glTF node named like its file) rendered nothing before:
     Mitsuba reserves '.' in its object paths; a scene file `.x.yaml` wrote hidden frames."""

@@ -336,6 +336,7 @@ def test_a_gltf_texture_of_30000_squared_is_a_located_error(tmp_path: Path) -> N
     _validate_refused(_gltf(tmp_path / "x", edit=_external("big.png", "images")), "a.gltf: images[0] 'big.png'", "over the limit")
 
 
+@pytest.mark.slow  # seconds to a minute on a busy 2-core host: CI's second step (make test ARGS="-m slow")
 def test_gltf_buffers_and_images_over_their_bounds_are_refused_unread(tmp_path: Path) -> None:
     huge = 5 << 30
     (tmp_path / "claim").mkdir()
@@ -391,6 +392,7 @@ def _npz_of(tmp_path: Path, frames: int) -> tuple[Path, Path]:
     return path, scene
 
 
+@pytest.mark.slow  # seconds to a minute on a busy 2-core host: CI's second step (make test ARGS="-m slow")
 def test_an_npz_of_a_million_frames_renders_the_two_asked_for(tmp_path: Path) -> None:
     path, scene = _npz_of(tmp_path, 1_000_000)
     t0 = time.monotonic()

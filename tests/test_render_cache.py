@@ -113,6 +113,7 @@ def test_seed_policy(tmp_path: Path, policy: str) -> None:
         assert not np.array_equal(a, b)  # noise changes every frame (no screen door)
 
 
+@pytest.mark.slow  # seconds to a minute on a busy 2-core host: CI's second step (make test ARGS="-m slow")
 def test_bits_do_not_depend_on_the_thread_count(tmp_path: Path) -> None:
     """1 vs 2 drjit threads (e.g. Dask workers on machines with different core counts):
     the same bits. 160x90 x 16 spp spans many of drjit's work blocks, and the gaussian
