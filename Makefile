@@ -5,7 +5,7 @@ setup:
 	@bash tools/setup.sh
 
 # the showcase shot (3 s, 72 frames at 480x270, denoised) with 24p and 60i movies and a
-# contact sheet; about 2 minutes on 2 cores, deliverables included (docs/showcase.md)
+# contact sheet; under a minute on 2 cores once set up, deliverables included (README)
 # (the scene's output.deliver asks for them); motion prints where its frames and deliverables
 # are. Run twice, the second run renders and rebuilds nothing. ARGS go last, so
 # ARGS="--preset ci-smoke -o out/smoke" replaces the output folder.
