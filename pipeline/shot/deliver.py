@@ -144,11 +144,17 @@ def check_deliver(req: RenderRequest, loaded: Any, plan: DeliverPlan, frames: li
             f"--deliver {','.join(plan.formats)}: frames {format_frames(negative)} are negative; deliverables are made from frames numbered from 0 "
             f"(render them without --deliver, or start the timeline at 0)"
         )
-    import av
-
-    for r in records:
-        if r.codec is None:
-            continue
+    movies = [r for r in records if r.codec is not None]
+    try:
+        import av
+    except ImportError:  # a dependency, but a farm node or a container may have been built without it
+        why = "movies need PyAV (pip install av), which is not installed here"
+        if movies and plan.explicit:
+            raise UsageError(f"--deliver {','.join(r.name for r in movies)}: {why}; install it, or ask only for the contact sheet (--deliver contact)") from None
+        # the scene's own output.deliver: made without its movies, each said why
+        plan = replace(plan, formats=tuple(f for f in plan.formats if FORMATS[f].codec is None), skipped={**plan.skipped, **{r.name: why for r in movies}})
+        records, movies = [r for r in records if r.codec is None], []
+    for r in movies:
         try:
             av.codec.Codec(CODECS[r.codec].encoder, "w")
         except Exception:  # PyAV raises its own UnknownCodecError
