@@ -42,7 +42,7 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--aov", "aovs", multiple=True, type=click.Choice(["depth", "normal", "motion", "albedo"]), help="Extra EXR layer (repeatable): depth (Z), normal (N), motion, albedo. Replaces the scene's output.aovs.")
 @click.option("--variant", type=click.Choice(["auto", "llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb"]), help="Mitsuba variant (default: auto).")
 @click.option("--motion", "motion_file", type=click.Path(dir_okay=False, path_type=Path), help="Baked motion from `motion bake` (.json/.npz) instead of baking here.")
-@click.option("--workers", type=click.IntRange(min=1), help="Local worker processes (default: one per core, at most 8 and at most one per frame); drjit threads are divided among them.")
+@click.option("--workers", type=click.IntRange(min=1), help="Local worker processes (default: one per core on the CPU, one per GPU on cuda_ad_rgb; at most 8 and at most one per frame); drjit threads are divided among them.")
 @click.option("--scheduler", help="Dask cluster: tcp://HOST:PORT or a scheduler file (instead of local workers).")
 @click.option("--transfer", type=click.Choice(["auto", "ship", "shared"]), default="auto", show_default=True, help="With --scheduler: ship the parsed scene and its assets to the workers and bring frames home (no shared disk), use the shared folders, or auto (ship when a worker cannot read the scene file).")
 @click.option("--threads", type=click.IntRange(min=1), help="drjit threads per worker (default: cores // workers locally, all cores on a Dask worker).")
