@@ -9,6 +9,8 @@ import os
 import subprocess
 from pathlib import Path
 
+import pytest
+
 from farm_util import MOTION
 
 REPO = Path(__file__).resolve().parents[1]
@@ -39,3 +41,22 @@ def test_a_fresh_machine_estimates_the_showcase_near_its_measured_first_run(tmp_
     # the cold part is counted apart from the warm frames: 36 frames a worker at the warm cost
     warm_part = 36 * fresh["warm_frame_s"]
     assert abs(fresh["seconds"] - (fresh["bake_s"] + fresh["startup_s"] + fresh["cold_extra_s"] + warm_part)) < 1e-6
+
+
+def test_an_inline_job_is_estimated_without_a_workers_start(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A job that runs in this process starts no worker: its estimate takes the start-up of
+    inline runs (none recorded: the built-in 0.1 s, not the 4 s of two spawned workers), and
+    a cold frame from the kernel cache after a run that compiled them all costs at most what
+    that run's did (was the built-in 3 s: 3.1 s estimated for a 0.7 s ci-smoke job)."""
+    from motion.pipeline.shot import estimate as est
+
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(est, "kernel_bytes", lambda: 10 * est.EMPTY_KERNEL_CACHE_BYTES)
+    assert est.estimate("s", "h", 100, 3, 1, inline=True)["startup_s"] == est.DEFAULT_INLINE_STARTUP_S
+    assert est.estimate("s", "h", 100, 3, 2)["startup_s"] == est.DEFAULT_STARTUP_S
+    frames = [{"frame": f, "status": "rendered", "cold": f == 0, "setup_s": 0.0, "render_s": 0.9 if f == 0 else 0.02, "kernels_compiled": int(f == 0)} for f in range(3)]
+    report = {"frames": frames, "workers": [{}], "totals": {"farm_s": 0.96}, "executor": {"kind": "inline"}}
+    est.record("s", "h", 100, report, compiled_all=True)
+    got = est.estimate("s", "h", 100, 3, 1, inline=True)
+    assert got["startup_s"] < 0.1 and got["cold_extra_s"] < 1.0 and got["seconds"] < 1.5, got
+    assert est.estimate("s", "h", 100, 3, 2)["startup_s"] == est.DEFAULT_STARTUP_S  # workers: no inline figure borrowed

@@ -55,6 +55,7 @@ DEFAULT_DENOISE_S_PER_PIXEL = 5.0e-6
 DEFAULT_COLD_EXTRA_S = 3.0  # a cold first frame's extra cost with its kernels in the cache
 DEFAULT_COMPILE_EXTRA_S = 4.5  # ... and with an empty kernel cache (every kernel compiled)
 DEFAULT_STARTUP_S = 4.0
+DEFAULT_INLINE_STARTUP_S = 0.1  # an inline job spawns nothing: the executor's own set-up
 BIG_FRAME = 100_000  # samples above which a frame's cost says something about the machine's rate
 
 
@@ -127,8 +128,9 @@ def record(scene_name: str, settings_hash: str, samples: int, report: dict[str, 
     compiled = compiled_all and any(int(r.get("kernels_compiled", 0) or 0) > 0 for r in rows if r.get("cold"))
     data = _read() or {"version": 2, "scenes": {}}
     runs = [r for r in data["scenes"].pop(scene_name, []) if isinstance(r, dict) and r.get("settings_hash") != settings_hash]
+    inline = (report.get("executor") or {}).get("kind") == "inline" if isinstance(report.get("executor"), dict) else False
     runs.append({"settings_hash": settings_hash, "samples": samples, "warm_s": warm_s, "cold_extra_s": cold_extra, "startup_s": startup,
-                 "compiled": compiled})
+                 "compiled": compiled, "inline": inline})
     data["scenes"][scene_name] = runs[-MAX_RUNS:]
     while len(data["scenes"]) > MAX_SCENES:
         data["scenes"].pop(next(iter(data["scenes"])))
@@ -188,7 +190,8 @@ def cold_extra_of(runs: list[dict[str, Any]], everything: list[dict[str, Any]], 
     kernel cache (`compiles`): from this machine's runs that compiled every kernel, else
     the built-in figure. With kernels in the cache (most are shared between scenes: a new
     scene compiles a few seconds' worth): this scene's last run unless it compiled them
-    all, else this machine's runs that did not."""
+    all, else this machine's runs that did not, else at most what a run that compiled
+    them all paid."""
     def fig(r: dict[str, Any]) -> float:
         return float(r.get("cold_extra_s", 0.0) or 0.0)
 
@@ -200,28 +203,46 @@ def cold_extra_of(runs: list[dict[str, Any]], everything: list[dict[str, Any]], 
     if runs and not runs[-1].get("compiled"):
         return fig(runs[-1]), "kernels from the cache"
     cached = [fig(r) for r in everything if not r.get("compiled")]
-    return (statistics.median(cached) if cached else DEFAULT_COLD_EXTRA_S), "kernels from the cache"
+    if cached:
+        return statistics.median(cached), "kernels from the cache"
+    # only runs that compiled everything: a cold frame from the cache costs at most what theirs did
+    compiled = [fig(r) for r in (runs or everything) if r.get("compiled")]
+    return min([DEFAULT_COLD_EXTRA_S, *compiled]), "kernels from the cache"
 
 
-def estimate(scene_name: str, settings_hash: str, samples: int, frames: int, workers: int, bake_s: float = 0.0, denoise_pixels: int = 0) -> dict[str, Any]:
-    """The job's expected wall time: bake, the farm's start-up, each worker's cold first
-    frame (every kernel compiled when the kernel cache is empty: `cold_extra_of`), then warm frames
-    shared among the workers. Returns the figures and their basis."""
+def startup_of(runs: list[dict[str, Any]], everything: list[dict[str, Any]], inline: bool) -> float:
+    """The start-up of a job run by spawned workers, or inline in this process (`inline`):
+    this scene's last such run, else the median of this machine's, else the built-in figure
+    (an inline job starts no process: its scene build is in its cold frame)."""
+    same = lambda r: bool(r.get("inline", False)) == inline  # noqa: E731
+    mine = [r for r in runs if same(r)]
+    if mine:
+        return float(mine[-1]["startup_s"])
+    known = [float(r["startup_s"]) for r in everything if same(r) and "startup_s" in r]
+    if known:
+        return statistics.median(known)
+    return DEFAULT_INLINE_STARTUP_S if inline else DEFAULT_STARTUP_S
+
+
+def estimate(scene_name: str, settings_hash: str, samples: int, frames: int, workers: int, bake_s: float = 0.0, denoise_pixels: int = 0,
+             inline: bool = False) -> dict[str, Any]:
+    """The job's expected wall time: bake, the start-up of its executor (spawned workers, or
+    none `inline`), each worker's cold first frame (every kernel compiled when the kernel
+    cache is empty: `cold_extra_of`), then warm frames shared among the workers. Returns the
+    figures and their basis."""
     scenes = _read().get("scenes", {})
     runs = [r for r in scenes.get(scene_name, []) if isinstance(r, dict) and r.get("samples")]
     everything = [r for rs in scenes.values() for r in rs if isinstance(r, dict)]
     rate = machine_rate(scenes)
     compiles = kernel_bytes() < EMPTY_KERNEL_CACHE_BYTES  # a new machine, a fresh CI runner, a cleared cache
+    startup = startup_of(runs, everything, inline)
     if runs:
         warm, basis = warm_frame(runs, settings_hash, samples, rate)
-        startup = float(runs[-1]["startup_s"])
     else:
         warm = DEFAULT_FRAME_OVERHEAD_S + rate * samples + DEFAULT_DENOISE_S_PER_PIXEL * denoise_pixels
         if everything:
-            startup = statistics.median(float(r["startup_s"]) for r in everything)
             basis = f"this machine's cost per sample ({len(everything)} runs recorded)"
         else:
-            startup = DEFAULT_STARTUP_S
             basis = "built-in figures (no run recorded on this machine yet)"
     cold_extra, cold_basis = cold_extra_of(runs, everything, compiles)
     workers = max(1, min(workers, frames)) if frames else 1

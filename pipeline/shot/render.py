@@ -526,6 +526,8 @@ def cut_chunks(req: RenderRequest, s: Settled, at: FramesAtHand) -> tuple[Settle
         job = replace(job, threads=threads)
         chunk_size = max(1, len(todo))
         s = replace(s, job=job, workers=workers, threads=threads)
+        # run here: no workers to start (the plan's ETA and the progress bar say so)
+        cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), 1, at.bake_s, denoised_pixels(loaded.scene), inline=True)
     return s, Chunking(chunk_size, make_chunks(todo, chunk_size), cost, inline)
 
 
