@@ -233,18 +233,22 @@ def read_json_record(path: str | Path, what: str, expect: type | tuple[type, ...
 
 # What one render worker's address space holds, measured on a worker rendering one pass
 # (VmPeak, scalar_rgb, 1 spp): 1.00 GB at 2048x2048 (4.2M lanes), 1.41 GB at 2900x2900
-# (8.4M lanes): about 100 bytes a lane over a base of 600 MB. A pass covers every pixel, so a
-# frame of more pixels than $MOTION_MAX_LANES runs passes of one sample per pixel that are
-# larger than the lane budget (4096x4096: 2.2 GB).
+# (8.4M lanes): about 100 bytes a lane over a base of 600 MB. A frame of more pixels than
+# $MOTION_MAX_LANES renders in bands of rows (render/film.py `bands`), each within the budget.
 PASS_BYTES_PER_LANE = 100
 WORKER_BASE_BYTES = 600 * 1024**2
+# the whole frame besides the band's pass: the film's interleaved RGBA, its readback and the
+# frame written (three float32 RGBA copies)
+FRAME_BYTES_PER_PIXEL = 48
 
 
 def pass_lanes(width: int, height: int, spp: int) -> int:
     """Sample lanes in one render pass of a `width` x `height` frame at `spp` (render/film.py:
-    as many samples per pixel as $MOTION_MAX_LANES allows, at least one)."""
-    pixels = max(1, width * height)
-    return pixels * max(1, min(spp, env_size("MOTION_MAX_LANES") // pixels))
+    a band of rows at most $MOTION_MAX_LANES pixels, or one row, and as many samples per
+    pixel as the budget allows, at least one)."""
+    budget = env_size("MOTION_MAX_LANES")
+    pixels = max(1, min(width * height, max(width, budget)))
+    return pixels * max(1, min(spp, budget // pixels))
 
 
 def address_space_limit() -> int | None:

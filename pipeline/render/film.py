@@ -6,7 +6,9 @@ varies with the threads; sums of floats then differ in the last bit. Here a pixe
 samples are consecutive lanes, so for each reconstruction-filter offset a row gather
 (`row_sums`) adds one pixel's weighted samples in a fixed order, and the image gathers
 those sums offset by offset, also in a fixed order: no atomics anywhere. Large sample
-counts run as passes (at most $MOTION_MAX_LANES lanes each), summed in pass order.
+counts run as passes (at most $MOTION_MAX_LANES lanes each), summed in pass order; a
+frame of more pixels than that runs in bands of rows (`bands`), each rendering the
+filter's reach of rows beyond the rows it delivers, with a seed of its own.
 
 Field rendering (`motion render --fields`) passes a field's `rows` (offset, step 2): the
 film then traces and returns only that field's rows.
@@ -37,7 +39,9 @@ def render(sample: SampleFn, scene: mi.Scene, sensor: Any, seed: Any, spp: int, 
     """Render `sensor`'s image of `scene`, every sample's value from `sample` (the
     integrator's path). Returns a mi.TensorXf [H, W, 4 + AOV channels] (RGBA, alpha = the
     pixel's coverage); `rows` (offset, step): only rows offset, offset + step, ... (a
-    field: step 2), H counting only those."""
+    field: step 2), H counting only those. A frame of more pixels than the lane budget
+    ($MOTION_MAX_LANES) renders in bands of rows (`bands`), each a window with the filter's
+    reach of rows above and below, so no pass holds more lanes than the budget."""
     film = sensor.film()
     sampler = sensor.sampler()
     spp = int(spp) if spp else int(sampler.sample_count())
@@ -48,27 +52,61 @@ def render(sample: SampleFn, scene: mi.Scene, sensor: Any, seed: Any, spp: int, 
     offset, step = rows
     out_h = (height - offset + step - 1) // step
     n_px = width * out_h
+    apron = _reach(film.rfilter()) // step  # rows of the rendered set a pixel's filter reaches
+    flat: Any = None
+    for index, (first, last, lo, hi) in enumerate(bands(out_h, width, apron, env_size("MOTION_MAX_LANES"))):
+        # band 0 keeps the frame's seed (a frame in one band is as it always was); later bands derive theirs
+        band_seed = seed if index == 0 else mi.sample_tea_32(int(seed), BAND_SEED_BASE + index)[0]
+        planes = _render_window(sample, scene, sensor, sampler, band_seed, spp, (width, height), (offset + step * lo, step, hi - lo))
+        n_ch = len(planes)
+        if flat is None:
+            flat = dr.zeros(mi.Float, n_px * n_ch)
+        # interleave the band's own rows into [H, W, C]: each element written exactly once (no conflicts)
+        inner = dr.arange(mi.UInt32, (last - first) * width)
+        source = inner + (first - lo) * width
+        target = inner + first * width
+        for c, plane in enumerate(planes):
+            dr.scatter(flat, dr.gather(mi.Float, plane, source), target * n_ch + c)
+        dr.eval(flat)
+    return mi.TensorXf(flat, shape=(out_h, width, n_ch))
+
+
+BAND_SEED_BASE = 1 << 20  # bands' seeds apart from the passes' (sample_tea_32(seed, pass))
+
+
+def bands(rows: int, width: int, apron: int, budget: int) -> list[tuple[int, int, int, int]]:
+    """The row bands of an image of `rows` x `width` pixels under a budget of `budget`
+    pixels a window: (first, last) rows each band delivers and (lo, hi) rows it renders,
+    `apron` more on each side where the image has them (the filter of a delivered pixel
+    reaches rows its band renders, never another band's). One band, (0, rows, 0, rows), when
+    the image fits."""
+    if rows * width <= budget:
+        return [(0, rows, 0, rows)]
+    inner = max(1, budget // max(width, 1) - 2 * apron)
+    return [(a, min(rows, a + inner), max(0, a - apron), min(rows, a + inner + apron)) for a in range(0, rows, inner)]
+
+
+def _reach(rfilter: Any) -> int:
+    """Pixels a reconstruction filter reaches beyond its own pixel."""
+    return max(0, int(np.ceil(rfilter.radius() - 0.5)))
+
+
+def _render_window(sample: SampleFn, scene: mi.Scene, sensor: Any, sampler: Any, seed: Any, spp: int, size: tuple[int, int], window: tuple[int, int, int]) -> list[Any]:
+    """The normalised channel planes of `window` (offset, step, count) of a frame of `size`
+    (width, height): rows offset, offset + step, ... count of them, in passes of at most the lane budget's samples per pixel (pass
+    0 keeps `seed`, later ones derive theirs from it), summed in pass order."""
+    width, height = size
+    n_px = width * window[2]
     per_pass = max(1, min(spp, env_size("MOTION_MAX_LANES") // max(n_px, 1)))
     total: list[Any] = []
-    done, index = 0, 0
-    for count in stratified_passes(spp, per_pass):
-        # pass 0 keeps the frame's seed; later passes derive theirs from it and the pass
+    for index, count in enumerate(stratified_passes(spp, per_pass)):
         pass_seed = seed if index == 0 else mi.sample_tea_32(int(seed), index)[0]
-        acc, used = render_pass(sample, scene, sensor, sampler, pass_seed, count, width, height, (offset, step))
+        acc, _ = render_pass(sample, scene, sensor, sampler, pass_seed, count, width, height, window)
         total = acc if index == 0 else [t + a for t, a in zip(total, acc)]
         dr.eval(total)
-        done += used
-        index += 1
     weight = total[-1]
     inv = dr.select(weight > 0, dr.rcp(weight), 0.0)
-    planes = [a * inv for a in total[:-1]]
-    # interleave to [H, W, C]: each element written exactly once (no conflicts)
-    n_ch = len(planes)
-    target = dr.arange(mi.UInt32, n_px)
-    flat = dr.zeros(mi.Float, n_px * n_ch)
-    for c, plane in enumerate(planes):
-        dr.scatter(flat, plane, target * n_ch + c)
-    return mi.TensorXf(flat, shape=(out_h, width, n_ch))
+    return [a * inv for a in total[:-1]]
 
 
 def exact_count(n: int) -> bool:
@@ -100,12 +138,14 @@ def stratified_passes(spp: int, per_pass: int) -> list[int]:
     return counts
 
 
-def render_pass(sample: SampleFn, scene: mi.Scene, sensor: Any, sampler: Any, seed: Any, spp: int, width: int, height: int, rows: tuple[int, int] = (0, 1)) -> tuple[list[Any], int]:
+def render_pass(sample: SampleFn, scene: mi.Scene, sensor: Any, sampler: Any, seed: Any, spp: int, width: int, height: int,
+                rows: tuple[int, ...] = (0, 1)) -> tuple[list[Any], int]:
     """One pass of `spp` samples per pixel: per-pixel filter-weighted sums of every
     channel and of the weights (unnormalised), and the sample count actually used.
-    `rows` (offset, step): only image rows offset, offset + step, ... (a field)."""
-    offset, step = rows
-    out_h = (height - offset + step - 1) // step
+    `rows` (offset, step): only image rows offset, offset + step, ... below `height` (a
+    field); (offset, step, count): count such rows (a band, `render`)."""
+    offset, step = rows[0], rows[1]
+    out_h = rows[2] if len(rows) > 2 else (height - offset + step - 1) // step
     n_px = width * out_h
     sampler.set_sample_count(spp)
     spp = int(sampler.sample_count())  # exact for the counts of `stratified_passes`
@@ -129,7 +169,7 @@ def render_pass(sample: SampleFn, scene: mi.Scene, sensor: Any, sampler: Any, se
     # the pixels (ox, oy) away (`row_sums`: one kernel); then every target pixel
     # gathers those sums from its neighbours, offset by offset in a fixed order
     rfilter = sensor.film().rfilter()
-    reach = max(0, int(np.ceil(rfilter.radius() - 0.5)))
+    reach = _reach(rfilter)
     target = dr.arange(mi.UInt32, n_px)
     tx, ty = mi.Int32(target % width), mi.Int32(target // width)
     acc = [mi.Float(dr.zeros(mi.Float, n_px)) for _ in range(len(channels) + 1)]

@@ -201,7 +201,7 @@ def worker_memory_problem(loaded: LoadedScene) -> Any:
     """A frame whose render pass cannot fit the address space a worker may use (RLIMIT_AS,
     which workers inherit), located at render.resolution: found here, not as a
     std::bad_alloc on every attempt after the bake (4096x4096 under 2 GiB: exit 3 after 54 s)."""
-    from ..limits import PASS_BYTES_PER_LANE, WORKER_BASE_BYTES, address_space_limit, pass_lanes
+    from ..limits import FRAME_BYTES_PER_PIXEL, PASS_BYTES_PER_LANE, WORKER_BASE_BYTES, address_space_limit, pass_lanes
 
     limit = address_space_limit()
     if limit is None:
@@ -209,12 +209,12 @@ def worker_memory_problem(loaded: LoadedScene) -> Any:
     render = loaded.scene.render
     width, height = render.resolution
     lanes = pass_lanes(width, height, render.spp)
-    need = WORKER_BASE_BYTES + PASS_BYTES_PER_LANE * lanes
+    need = WORKER_BASE_BYTES + PASS_BYTES_PER_LANE * lanes + FRAME_BYTES_PER_PIXEL * width * height
     if need <= limit:
         return None
-    return loaded.source.problem(("render", "resolution"), f"{width}x{height} renders {lanes} sample lanes a pass (a pass covers every pixel), "
-                                 f"about {need / 1e9:.1f} GB for a worker; this process may use {limit / 1e9:.1f} GB of address space (ulimit -v): "
-                                 "lower the resolution or raise the limit")
+    return loaded.source.problem(("render", "resolution"), f"{width}x{height} needs about {need / 1e9:.1f} GB for a worker ({lanes} sample lanes a "
+                                 f"pass, at most $MOTION_MAX_LANES, and the frame's {width * height} pixels); this process may use "
+                                 f"{limit / 1e9:.1f} GB of address space (ulimit -v): lower the resolution or $MOTION_MAX_LANES, or raise the limit")
 
 
 def warn_variant(req: RenderRequest, loaded: LoadedScene) -> None:
