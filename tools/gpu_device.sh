@@ -5,6 +5,9 @@
 #                .venv/bin/python bench/gpu_check.py --out /tmp/gc --make-reference .gpu/refs \
 #                    --render-args "--no-denoise --deliver none --ocio none --spp 32 --resolution 128x72"   (RENDER_ARGS below)
 # Then one device call with carry [".gpu"]:   bash .gpu/run.sh bash tools/gpu_device.sh
+# Any other command on the device: bash .gpu/run.sh bash tools/gpu_device.sh -- python3 -m pytest ...
+# (the kit's run.sh links pyproject's package-dir, which this project does not have: setup.py
+# maps the folders, and this script links them as it does, then runs the command instead).
 #
 # Steps, each under its own time limit so that a slow one leaves the others their figures,
 # everything written under $OUT: the machine; every example at ci-smoke on cuda_ad_rgb against
@@ -30,6 +33,7 @@ for pkg, folder in roots.items():
     os.symlink(os.path.abspath(folder), dst)
 print("linked:", ", ".join(f"{k} -> {v}" for k, v in roots.items()))
 PY
+if [ "${1:-}" = "--" ]; then shift; exec "$@"; fi
 
 { nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv,noheader; lscpu | grep 'Model name'; nproc
   ldconfig -p | grep -i 'libLLVM' || echo "no libLLVM"; python3 --version; } > "$out/machine.txt" 2>&1
