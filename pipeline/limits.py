@@ -106,6 +106,9 @@ ENV_SIZES: dict[str, tuple[int, int | None]] = {
     "MOTION_MAX_LANES": (1 << 23, 1 << 28),
     # bytes of converted assets kept on disk (render/assets.py)
     "MOTION_ASSET_CACHE_CAP": (2 * 1024**3, None),
+    # MB of viewed frames a run's deliverables share (telecine/movie.py ViewedFrames): 72
+    # frames of 480x270 take 56 MB
+    "MOTION_VIEWED_MB": (512, 1 << 20),
 }
 
 

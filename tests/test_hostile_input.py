@@ -524,7 +524,7 @@ def test_fuzz_structural_yaml_mutations(tmp_path: Path, text: str) -> None:
         assert err.problems
 
 
-@pytest.mark.parametrize("name", ["MOTION_MAX_LANES", "MOTION_ASSET_CACHE_CAP"])
+@pytest.mark.parametrize("name", ["MOTION_MAX_LANES", "MOTION_ASSET_CACHE_CAP", "MOTION_VIEWED_MB"])
 @pytest.mark.parametrize("value", ["abc", "0", "-5", "1e9"])
 def test_bad_sizing_environment_variable_is_one_line_before_any_work(tmp_path: Path, name: str, value: str) -> None:
     from _support import run_motion

@@ -18,7 +18,6 @@ when no codec is given. Files are encoded to a hidden temporary name and renamed
 from __future__ import annotations
 
 import math
-import os
 
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -200,7 +199,6 @@ class ViewTransform:
         return np.round(self.encode(rgba) * 65535.0).astype(np.uint16)
 
 
-DEFAULT_VIEWED_BUDGET_MB = 512  # viewed frames a run's deliverables share ($MOTION_VIEWED_MB): 72 frames of 480x270 take 56 MB
 
 
 class ViewedFrames:
@@ -213,8 +211,9 @@ class ViewedFrames:
 
     def __init__(self, seq: Sequence, view: ViewTransform, budget_bytes: int | None = None) -> None:
         if budget_bytes is None:
-            env = os.environ.get("MOTION_VIEWED_MB", "").strip()
-            budget_bytes = (int(env) if env.isdigit() else DEFAULT_VIEWED_BUDGET_MB) << 20
+            from ..limits import env_size
+
+            budget_bytes = env_size("MOTION_VIEWED_MB") << 20
         self.paths, self.view, self.budget = seq.paths, view, budget_bytes
         self.kept: dict[int, np.ndarray] = {}
         self.used = 0
