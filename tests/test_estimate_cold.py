@@ -52,11 +52,11 @@ def test_an_inline_job_is_estimated_without_a_workers_start(tmp_path: Path, monk
 
     monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setattr(est, "kernel_bytes", lambda: 10 * est.EMPTY_KERNEL_CACHE_BYTES)
-    assert est.estimate("s", "h", 100, 3, 1, inline=True)["startup_s"] == est.DEFAULT_INLINE_STARTUP_S
+    assert est.run_inline(est.estimate("s", "h", 100, 3, 1))["startup_s"] == est.DEFAULT_INLINE_STARTUP_S
     assert est.estimate("s", "h", 100, 3, 2)["startup_s"] == est.DEFAULT_STARTUP_S
     frames = [{"frame": f, "status": "rendered", "cold": f == 0, "setup_s": 0.0, "render_s": 0.9 if f == 0 else 0.02, "kernels_compiled": int(f == 0)} for f in range(3)]
     report = {"frames": frames, "workers": [{}], "totals": {"farm_s": 0.96}, "executor": {"kind": "inline"}}
     est.record("s", "h", 100, report, compiled_all=True)
-    got = est.estimate("s", "h", 100, 3, 1, inline=True)
+    got = est.run_inline(est.estimate("s", "h", 100, 3, 2))
     assert got["startup_s"] < 0.1 and got["cold_extra_s"] < 1.0 and got["seconds"] < 1.5, got
     assert est.estimate("s", "h", 100, 3, 2)["startup_s"] == est.DEFAULT_STARTUP_S  # workers: no inline figure borrowed

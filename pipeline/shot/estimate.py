@@ -224,18 +224,16 @@ def startup_of(runs: list[dict[str, Any]], everything: list[dict[str, Any]], inl
     return DEFAULT_INLINE_STARTUP_S if inline else DEFAULT_STARTUP_S
 
 
-def estimate(scene_name: str, settings_hash: str, samples: int, frames: int, workers: int, bake_s: float = 0.0, denoise_pixels: int = 0,
-             inline: bool = False) -> dict[str, Any]:
-    """The job's expected wall time: bake, the start-up of its executor (spawned workers, or
-    none `inline`), each worker's cold first frame (every kernel compiled when the kernel
-    cache is empty: `cold_extra_of`), then warm frames shared among the workers. Returns the
-    figures and their basis."""
+def estimate(scene_name: str, settings_hash: str, samples: int, frames: int, workers: int, bake_s: float = 0.0, denoise_pixels: int = 0) -> dict[str, Any]:
+    """The job's expected wall time on spawned workers: bake, their start-up, each worker's
+    cold first frame (every kernel compiled when the kernel cache is empty: `cold_extra_of`),
+    then warm frames shared among the workers. Returns the figures and their basis, and
+    the start-up an inline run would have instead (`run_inline`)."""
     scenes = _read().get("scenes", {})
     runs = [r for r in scenes.get(scene_name, []) if isinstance(r, dict) and r.get("samples")]
     everything = [r for rs in scenes.values() for r in rs if isinstance(r, dict)]
     rate = machine_rate(scenes)
     compiles = kernel_bytes() < EMPTY_KERNEL_CACHE_BYTES  # a new machine, a fresh CI runner, a cleared cache
-    startup = startup_of(runs, everything, inline)
     if runs:
         warm, basis = warm_frame(runs, settings_hash, samples, rate)
     else:
@@ -245,9 +243,21 @@ def estimate(scene_name: str, settings_hash: str, samples: int, frames: int, wor
         else:
             basis = "built-in figures (no run recorded on this machine yet)"
     cold_extra, cold_basis = cold_extra_of(runs, everything, compiles)
+    figures = {"frames": frames, "bake_s": bake_s, "warm_frame_s": warm, "cold_extra_s": cold_extra, "compiles_kernels": compiles,
+               "inline_startup_s": startup_of(runs, everything, inline=True), "basis": f"{basis}; {cold_basis}"}
+    return _on(figures, workers, startup_of(runs, everything, inline=False))
+
+
+def run_inline(cost: dict[str, Any]) -> dict[str, Any]:
+    """`estimate`'s figures for the job rendered inline, in this process: one worker, and no
+    worker to start."""
+    return _on(cost, 1, cost["inline_startup_s"])
+
+
+def _on(figures: dict[str, Any], workers: int, startup: float) -> dict[str, Any]:
+    """The figures with the job's time on `workers` that take `startup` to start."""
+    frames, warm = figures["frames"], figures["warm_frame_s"]
     workers = max(1, min(workers, frames)) if frames else 1
     per_worker = math.ceil(frames / workers) if frames else 0
-    render_s = (startup + cold_extra + per_worker * warm) if frames else 0.0
-    return {"seconds": bake_s + render_s, "bake_s": bake_s, "warm_frame_s": warm, "cold_extra_s": cold_extra, "startup_s": startup,
-            "per_frame_s": warm / workers, "compiles_kernels": compiles,
-            "basis": f"{basis}; {cold_basis}"}
+    render_s = (startup + figures["cold_extra_s"] + per_worker * warm) if frames else 0.0
+    return {**figures, "seconds": figures["bake_s"] + render_s, "startup_s": startup, "per_frame_s": warm / workers}

@@ -35,7 +35,7 @@ from ..render.job import MAX_PARTS, RENDERER_VERSION, RenderJob, frame_key, fram
 from ..scene.files import file_digests
 from ..scene.loader import LoadedScene, load_scene
 from .deliver import DeliverPlan, check_deliver, deliver_and_record, deliver_plan
-from .estimate import denoised_pixels, estimate, samples_of
+from .estimate import denoised_pixels, estimate, run_inline, samples_of
 from .identity import check_owner, record_owner
 from .estimate import record as record_cost
 from .dry_run import check_only, plan, resolved_settings
@@ -526,8 +526,7 @@ def cut_chunks(req: RenderRequest, s: Settled, at: FramesAtHand) -> tuple[Settle
         job = replace(job, threads=threads)
         chunk_size = max(1, len(todo))
         s = replace(s, job=job, workers=workers, threads=threads)
-        # run here: no workers to start (the plan's ETA and the progress bar say so)
-        cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), 1, at.bake_s, denoised_pixels(loaded.scene), inline=True)
+        cost = run_inline(cost)  # run here: no worker to start (the plan's ETA and the progress bar say so)
     return s, Chunking(chunk_size, make_chunks(todo, chunk_size), cost, inline)
 
 
