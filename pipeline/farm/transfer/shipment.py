@@ -106,7 +106,9 @@ class Shipment:
         # (retried with no cause: test_a_worker_killed_mid_chunk_is_retried, 1 run in 2)
         self._job_future = client.scatter(self.sent, hash=False, broadcast=True)
         self.stocked: set[str] = set()  # workers that hold every asset (cache or sent)
-        self.bytes_sent = 0  # asset bytes handed to workers (each once per worker)
+        self.bytes_sent = 0  # asset bytes handed to workers (each once per worker, every worker once one lacks it)
+        self.holders: dict[str, set[str]] = {}  # asset -> the workers it was sent to
+        self._sizes = {a.sha256: a.size for a in self.assets}
         self.bytes_scattered = 0  # asset bytes the client itself uploaded
 
     def job_future(self, client: Any) -> Any:
@@ -116,13 +118,19 @@ class Shipment:
         return self._job_future
 
     def _future(self, client: Any, sha256: str, worker: str) -> Any:
+        """The asset's future for `worker`: scattered now if no live worker holds it (to every
+        worker, as the job: scattered data cannot be recomputed, and an asset held by the one
+        worker that first lacked it died with that worker, cancelling every chunk elsewhere
+        that still needed it from there), else taken from a holder. Counts what crosses."""
         if sha256 not in self.futures or self.futures[sha256].status != "finished":  # new, or every holder died
             data = self.fetch(sha256)
-            # to every worker (broadcast), as the job: scattered data cannot be recomputed, and
-            # an asset held by the one worker that first lacked it died with that worker,
-            # cancelling every chunk elsewhere that still needed it from there
             self.futures[sha256] = client.scatter(data, hash=False, broadcast=True)
+            self.holders[sha256] = set(client.scheduler_info(n_workers=-1).get("workers", {})) | {worker}
             self.bytes_scattered += len(data)
+            self.bytes_sent += len(data) * len(self.holders[sha256])
+        elif worker not in self.holders.setdefault(sha256, set()):  # a worker that joined since: from a holder
+            self.holders[sha256].add(worker)
+            self.bytes_sent += self._sizes[sha256]
         return self.futures[sha256]
 
     def payload_for(self, client: Any, worker: str) -> dict[str, Any]:
@@ -135,8 +143,6 @@ class Shipment:
         except Exception:  # the worker left or cannot answer: send everything (the chunk is retried if it is gone)
             lacking = everything
         self.stocked.add(worker)
-        sizes = {a.sha256: a.size for a in self.assets}
-        self.bytes_sent += sum(sizes[h] for h in lacking)
         return {h: self._future(client, h, worker) for h in lacking}
 
     def stats(self) -> dict[str, int]:
