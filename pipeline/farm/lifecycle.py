@@ -36,11 +36,11 @@ from .task import ChunkResult
 
 FrameState = Literal["queued", "running", "held", "stopped", "rendered", "skipped", "done_elsewhere", "failed", "not_rendered"]
 FRAME_STATES: tuple[FrameState, ...] = get_args(FrameState)
-FINAL_FRAME_STATES: frozenset[FrameState] = frozenset({"rendered", "skipped", "done_elsewhere", "failed", "not_rendered"})
+FINAL_FRAME_STATES: tuple[FrameState, ...] = ("rendered", "skipped", "done_elsewhere", "failed", "not_rendered")  # the report totals each
 
 ChunkState = Literal["queued", "running", "done", "lost", "stopped", "failed"]
 CHUNK_STATES: tuple[ChunkState, ...] = get_args(ChunkState)
-FINAL_CHUNK_STATES: frozenset[ChunkState] = frozenset({"done", "lost", "stopped", "failed"})
+FINAL_CHUNK_STATES: tuple[ChunkState, ...] = ("done", "lost", "stopped", "failed")
 
 
 class IllegalMove(RuntimeError):
@@ -443,7 +443,6 @@ class Lifecycle:
             else:
                 self.move_frame(f, "not_rendered")
                 not_rendered.append(f)
-        self._out.clear()  # settling tells nobody: the run is over
         return written, not_rendered
 
 
