@@ -136,14 +136,14 @@ def try_claim(frame_file: str | Path, who: Claimant, stale_after_s: float) -> tu
                 write_atomic(path, body, "claiming frame")  # our own earlier attempt (its worker died): take over
                 return True, None
             if is_stale(path, info, stale_after_s):
-                _break(path)
+                _break_stale(path)
                 continue
             return False, info
         info = read_claim(path)
         return False, info or {}
 
 
-def _break(path: Path) -> None:
+def _break_stale(path: Path) -> None:
     """Remove a stale claim atomically: only one breaker's rename succeeds."""
     grave = path.with_name(f"{path.name}.stale.{os.getpid()}.{uuid.uuid4().hex[:6]}")
     try:
@@ -164,7 +164,7 @@ def clear_stale(frame_files: list[str], stale_after_s: float) -> int:
         info = read_claim(path)
         if info is not None and is_stale(path, info, stale_after_s):
             try:
-                _break(path)
+                _break_stale(path)
                 n += 1
             except OSError:
                 pass
@@ -248,7 +248,8 @@ def _lock_live(path: Path, info: dict) -> bool:
     return -MAX_CLOCK_SKEW_S <= age <= RUN_LOCK_STALE_S
 
 
-def _order(info: dict) -> tuple[float, str]:
+def _taken_order(info: dict) -> tuple[float, str]:
+    """A run lock's sort key: when it was taken (an unreadable time last), then its run id."""
     t = info.get("time")
     return (float(t) if isinstance(t, (int, float)) and not isinstance(t, bool) and math.isfinite(t) else math.inf, str(info.get("run_id")))
 
@@ -277,9 +278,9 @@ def take_run_lock(out_dir: str | Path, who: Claimant, scene: str, version: str) 
         if info is None:
             continue
         if not _lock_live(other, info):
-            _break(other)
+            _break_stale(other)
             continue
-        if info.get("version") == version or _order(info) > _order(mine):
+        if info.get("version") == version or _taken_order(info) > _taken_order(mine):
             continue  # the same version shares the folder; a later one gives way to us
         path.unlink(missing_ok=True)
         raise OutputInUseError(
