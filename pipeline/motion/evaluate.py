@@ -20,7 +20,7 @@ from ..scene.schema import Camera
 from ..scene.types import Transform
 from .graph import evaluation_order
 from .local import broadcast, local_pose, object_base, transform_base, vec3
-from .pose import Pose, compose
+from .pose import Pose, UnrepresentablePoseError, compose
 from .rotation import direction_quat, look_at_quat
 
 if TYPE_CHECKING:
@@ -151,6 +151,16 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
     return SceneMotion(t, world, camera, camera_scalars, lights, light_scalars, vertices, particles)
 
 
+def compose_at(loaded: "LoadedScene", loc: tuple[Any, ...], t: np.ndarray, world_from_parent: Pose, parent_from_thing: Pose) -> Pose:
+    """world_from_thing = world_from_parent * parent_from_thing (pose.compose); a product no
+    rotation times a stretch can hold is a SceneError at the thing's `parent`, with the time."""
+    try:
+        return compose(world_from_parent, parent_from_thing)
+    except UnrepresentablePoseError as exc:
+        when = float(t[int(exc.samples[0])])
+        raise SceneError([loaded.source.problem((*loc, "parent"), f"{exc} (at t = {when:.6g} s)")]) from None
+
+
 def _object_poses(loaded: "LoadedScene", t: np.ndarray, simulation: Any | None) -> dict[str, Pose]:
     """Every object's world pose at `t`, parents first: simulated bodies from
     `simulation`, planned paths (motion/plan.py), keyed or procedural motion under the
@@ -168,7 +178,7 @@ def _object_poses(loaded: "LoadedScene", t: np.ndarray, simulation: Any | None) 
             if name not in sampled:
                 raise MotionError(f"the simulation has no samples for dynamics body '{name}'")
             pose = sampled[name]
-            world[name] = Pose(*(np.asarray(a, dtype=np.float64) for a in pose))
+            world[name] = Pose(*(None if a is None else np.asarray(a, dtype=np.float64) for a in pose))
             continue
         if obj.motion.type == "plan":  # planned path (motion/plan.py); its follower is simulated
             from . import plan
@@ -181,7 +191,7 @@ def _object_poses(loaded: "LoadedScene", t: np.ndarray, simulation: Any | None) 
         local = local_pose(loaded, ("objects", i), obj.motion, object_base(obj), t, {})
         pose = Pose(local.translation, local.rotation, local.scale)
         local_poses[name] = pose
-        world[name] = compose(world[obj.parent], pose) if obj.parent is not None else pose
+        world[name] = compose_at(loaded, ("objects", i), t, world[obj.parent], pose) if obj.parent is not None else pose
     if scene.ik:  # after the chains' keyed poses, before their children's world poses are final
         from .ik import apply_ik
 
@@ -197,7 +207,7 @@ def _camera_motion(loaded: "LoadedScene", t: np.ndarray, world: dict[str, Pose])
     local = local_pose(loaded, ("camera",), cam.motion, _camera_base(cam), t, {"fov": 1, "ortho_width": 1})
     camera = Pose(local.translation, local.rotation, local.scale)
     if cam.parent is not None:
-        camera = compose(world[cam.parent], camera)
+        camera = compose_at(loaded, ("camera",), t, world[cam.parent], camera)
     camera_scalars = {"fov": np.full(count, float(cam.fov))}
     if cam.type == "orthographic":
         camera_scalars["ortho_width"] = np.full(count, float(cam.ortho_width))
@@ -217,7 +227,7 @@ def _light_motion(loaded: "LoadedScene", t: np.ndarray, world: dict[str, Pose]) 
         local = local_pose(loaded, ("lights", i), light.motion, light.frame(_LIGHT_FRAMES), t, dims)
         pose = Pose(local.translation, local.rotation, local.scale)
         name = light_key(light, i)
-        lights[name] = compose(world[light.parent], pose) if light.parent is not None else pose
+        lights[name] = compose_at(loaded, ("lights", i), t, world[light.parent], pose) if light.parent is not None else pose
         scalars = {k: (np.full(count, v[0]) if v.shape == (1,) else broadcast(v, count)) for k, v in bases.items()}
         scalars.update(local.scalars)
         light_scalars[name] = scalars
