@@ -22,7 +22,7 @@ from ..scene.loader import LoadedScene
 from ..variant import load_dict
 from .build import material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
-from .instant import add_lights, add_shapes, light_record, sensor_record
+from .instant import add_lights, add_shapes, light_record, rest_frame, sensor_record
 from .roles import Roles
 from .sbt import SbtOwner, dict_types
 from .shutter_poses import across_shutter
@@ -164,17 +164,19 @@ class SceneCache:
         return keys
 
     def _update_mover_scales(self, fi: StackedFrame) -> list[str]:
-        """A mover's scale is applied in its rest frame, per frame (not per sample): only
-        that mover's small BVH is rebuilt, and only when its scale changed."""
+        """A mover's stretch (its scale, or the full symmetric stretch under a non-uniform
+        parent scale) is applied in its rest frame, per frame (not per sample): only that
+        mover's small BVH is rebuilt, and only when its stretch changed."""
         keys: list[str] = []
         scene = self.loaded.scene
         for name in self.roles.mover_names:
-            s = np.asarray(fi.objects[name][2][0], dtype=float)
-            if np.allclose(s, self._mover_scale[name]):
+            s = rest_frame(fi, name)
+            before = self._mover_scale[name]
+            if np.allclose(s, np.diag([*before, 1.0]) if before.ndim == 1 else before):
                 continue
             obj = next(o for o in scene.objects if o.name == name)
             params = self._mover_params[name]
-            for k, shape in enumerate(object_shapes(obj, self.loaded, np.diag([*s, 1.0]), {})):
+            for k, shape in enumerate(object_shapes(obj, self.loaded, s, {})):
                 params[f"{mitsuba_id(name)}__{k}.to_world"] = shape["to_world"]
                 keys.append(f"mover:{mitsuba_id(name)}__{k}.to_world")
             params.update()
