@@ -91,7 +91,7 @@ objects:
   - name: inner
     shape: cube
     parent: root
-    transform: {scale: [0.33504, 0.5, 0.33504]}
+    transform: {scale: [0.67008, 1, 0.67008]}
     motion:
       type: keyframes
       time_unit: seconds
@@ -112,12 +112,12 @@ def test_the_box_animated_hierarchy_in_scene_yaml_matches_the_4x4_product(tmp_pa
     path = tmp_path / "box.yaml"
     path.write_text(HIERARCHY)
     motion = evaluate(load_scene(path), np.array([1.0, 45 / FPS, 2.2]))
-    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])  # the unit cube
     at45 = motion.objects["inner"].transform_points(corners)[1]
     np.testing.assert_allclose([at45[:, 1].min(), at45[:, 1].max()], [2.52 - 0.67008, 2.52 + 0.67008], atol=1e-9)
     np.testing.assert_allclose([at45[:, 2].min(), at45[:, 2].max()], [-0.5, 0.5], atol=1e-9)
     root, inner, grand = (motion.objects[n] for n in ("root", "inner", "grandchild"))
-    local_inner = np.diag([0.33504, 0.5, 0.33504, 1.0])
+    local_inner = np.diag([0.67008, 1.0, 0.67008, 1.0])
     turn = np.eye(4)
     turn[:3, :3] = Rotation.from_euler("x", 90.0, degrees=True).as_matrix()  # halfway from 0 to 180 degrees
     np.testing.assert_allclose(inner.matrices()[1], root.matrices()[1] @ turn @ local_inner, atol=1e-12)
@@ -173,3 +173,67 @@ def test_the_stretch_survives_a_bake_file_and_old_files_read_as_diagonal(tmp_pat
         out.write_text(json.dumps(doc))
         old = read_baked(out)
         assert all(p.stretch_offdiag is None for f in old.frames for p in f.at_frame.objects.values())
+
+
+TWIN = """
+name: %(name)s
+timeline: {fps: 24, first: 0, last: 0}
+camera: {position: [0.2, 0.5, 3.5], look_at: [0.2, 0.4, 0], fov: 40}
+lights:
+  - {type: constant, radiance: 0.4}
+  - {type: directional, direction: [-0.4, -1, -0.6], irradiance: 3}
+render: {resolution: [48, 36], spp: 4, motion_blur: off}
+objects:
+%(objects)s
+"""
+MOVING = """
+    motion:
+      type: keyframes
+      time_unit: seconds
+      channels:
+        translate: {keys: [{time: 0, value: [0, 0.3, 0]}, {time: 1, value: [0.5, 0.3, 0]}]}"""
+
+
+def _cube_obj(path: Path, m: np.ndarray) -> None:
+    """The unit cube's 12 triangles (the scene's `cube`: [-0.5, 0.5]^3), its corners mapped
+    by m; no vertex shared between faces, so its normals are the faces' (flat, as the cube's)."""
+    corners = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
+    world = (m @ np.c_[corners, np.ones(8)].T).T[:, :3]
+    quads = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]  # outward, counter-clockwise
+    lines = []
+    for k, quad in enumerate(quads):
+        lines += [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in world[quad]]
+        lines += [f"f {4 * k + 1} {4 * k + 2} {4 * k + 3}", f"f {4 * k + 1} {4 * k + 3} {4 * k + 4}"]
+    path.write_text("\n".join(lines) + "\n")
+
+
+@pytest.mark.slow  # two renders each
+@pytest.mark.parametrize("moving", [False, True], ids=["static", "mover"])
+def test_a_rotated_child_under_a_non_uniform_scale_renders_as_its_sheared_twin(tmp_path: Path, moving: bool):
+    """A cube turned about X and Z under a parent scaled [1, 2, 1] renders like a mesh of
+    the cube's corners mapped by the closed-form 4x4 product (the renderer applies the full
+    stretch in the rest frame: the static set and a mover alike)."""
+    from _support import run_motion
+    from motion.pipeline.frame_output import read_frame
+
+    turn = Rotation.from_euler("xz", [40, 30], degrees=True)
+    stretch = np.diag([1.0, 2.0, 1.0, 1.0])
+    child = np.eye(4)
+    child[:3, :3] = turn.as_matrix() @ np.diag([0.5, 0.4, 0.3])
+    lift = np.eye(4)
+    lift[:3, 3] = (0, 0.3, 0)  # the parent's translate: in the mesh, or keyed on the moving twin
+    _cube_obj(tmp_path / "twin.obj", stretch @ child if moving else lift @ stretch @ child)
+    w, x, y, z = (float(v) for v in turn.as_quat(scalar_first=True))
+    hierarchy = (f"  - name: stretch\n    shape: empty\n    transform: {{translate: [0, 0.3, 0], scale: [1, 2, 1]}}{MOVING if moving else ''}\n"
+                 f"  - name: box\n    shape: cube\n    parent: stretch\n    transform: {{rotate: {{quaternion: [{w!r}, {x!r}, {y!r}, {z!r}]}}, scale: [0.5, 0.4, 0.3]}}\n")
+    twin = f"  - name: box\n    shape: mesh\n    file: twin.obj\n" + (f"    transform: {{translate: [0, 0.3, 0]}}{MOVING}\n" if moving else "")
+    images = []
+    for name, objects in (("tree", hierarchy), ("twin", twin)):
+        (tmp_path / f"{name}.yaml").write_text(TWIN % {"name": name, "objects": objects})
+        proc = run_motion("render", str(tmp_path / f"{name}.yaml"), "-o", str(tmp_path / name))
+        assert proc.returncode == 0, proc.stderr
+        images.append(read_frame(next((tmp_path / name).glob(f"{name}.*.exr"))).rgba[..., :3])
+    tree, ours = images
+    covered = (np.abs(ours - 0.4).max(axis=-1) > 0.02).mean()
+    assert covered > 0.05  # the box fills part of the frame
+    assert np.abs(tree - ours).mean() < 2e-3, np.abs(tree - ours).mean()

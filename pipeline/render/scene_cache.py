@@ -177,8 +177,17 @@ class SceneCache:
             obj = next(o for o in scene.objects if o.name == name)
             params = self._mover_params[name]
             for k, shape in enumerate(object_shapes(obj, self.loaded, s, {})):
-                params[f"{mitsuba_id(name)}__{k}.to_world"] = shape["to_world"]
-                keys.append(f"mover:{mitsuba_id(name)}__{k}.to_world")
+                prefix = f"{mitsuba_id(name)}__{k}"
+                if f"{prefix}.to_world" in params:
+                    params[f"{prefix}.to_world"] = shape["to_world"]
+                    keys.append(f"mover:{prefix}.to_world")
+                    continue
+                # a mesh (cube, mesh file) holds its transform in its vertices: the fresh shape's
+                fresh = self._mi.traverse(load_dict(shape))
+                for field in ("vertex_positions", "vertex_normals"):
+                    if field in fresh and f"{prefix}.{field}" in params:
+                        params[f"{prefix}.{field}"] = fresh[field]
+                        keys.append(f"mover:{prefix}.{field}")
             params.update()
             self._mover_scale[name] = s
         return keys
