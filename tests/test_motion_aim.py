@@ -116,3 +116,13 @@ def test_an_aimed_camera_with_a_keyed_rotation_is_refused(tmp_path: Path):
     path.write_text(text)
     with pytest.raises(SceneError, match=r"camera\.motion: look_at aims at 'crate', which sets the rotation; a keyed rotate channel"):
         load_scene(path)
+
+
+def test_a_light_aimed_at_a_moving_object_is_posed_per_frame_by_the_renderer(tmp_path: Path):
+    """The spot light has no motion of its own, but its aim moves: the renderer poses it
+    per path (a moving light), not once in the static set."""
+    from motion.pipeline.render.roles import sort_scene
+
+    roles = sort_scene(_load(tmp_path))
+    assert [light.name for _, light in roles.moving_lights] == ["key"]
+    assert not sort_scene(_load(tmp_path, aim="[0, 1, 0]")).moving_lights
