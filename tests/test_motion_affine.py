@@ -1,7 +1,7 @@
 """Affine hierarchies: parent frames compose as 4x4 matrices, so a non-uniform parent scale
 over a rotated child is exact (world_from_object = T R S, S the symmetric stretch of the
-polar decomposition); a product no rotation times a stretch can hold is a located error;
-the stretch survives a bake file and the renderer's rest frame."""
+polar decomposition), mirrors included; the stretch survives a bake file and the
+renderer's rest frame."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ import pytest
 import scipy.linalg
 from scipy.spatial.transform import Rotation
 
-from motion.pipeline.errors import SceneError
 from motion.pipeline.motion import Pose, evaluate
 from motion.pipeline.motion.pose import UnrepresentablePoseError, compose, matrix_to_quat, polar_stretch, quat_to_matrix
 from motion.pipeline.scene import load_scene
@@ -65,11 +64,22 @@ def test_polar_stretch_is_scipys_polar_decomposition():
     np.testing.assert_allclose(quat_to_matrix(matrix_to_quat(u)), u, atol=1e-14)
 
 
-def test_a_mirror_under_a_non_uniform_scale_is_refused():
-    p = Pose(np.zeros((2, 3)), np.tile([1.0, 0, 0, 0], (2, 1)), np.array([[1.0, 2.0, 1.0], [-1.0, 2.0, 1.0]]))
-    c = Pose(np.zeros((2, 3)), np.tile(Rotation.from_euler("z", 30, degrees=True).as_quat(scalar_first=True), (2, 1)), np.array([[1.0, 3.0, 1.0]] * 2))
-    with pytest.raises(UnrepresentablePoseError, match="mirrors") as exc:
-        compose(p, c)
+def test_mirrors_and_collapses_under_a_non_uniform_scale_are_held_exactly():
+    """Any 3x3 is a rotation times a symmetric matrix: a parent scale (-1, 2, 1) or
+    (0, 2, 1) over a turned child with a non-uniform scale of its own composes to the
+    exact product, the rotation a proper one, the mirror one negative eigenvalue of the
+    stretch (as a negative `scale` is); only a non-finite product is refused."""
+    p = Pose(np.zeros((3, 3)), np.tile([1.0, 0, 0, 0], (3, 1)), np.array([[1.0, 2.0, 1.0], [-1.0, 2.0, 1.0], [0.0, 2.0, 1.0]]))
+    turn = Rotation.from_euler("zx", [30, 50], degrees=True)
+    c = Pose(np.tile([0.1, 0.2, 0.3], (3, 1)), np.tile(turn.as_quat(scalar_first=True), (3, 1)), np.array([[1.0, 3.0, 0.5]] * 3))
+    out = compose(p, c)
+    np.testing.assert_allclose(out.matrices(), p.matrices() @ c.matrices(), atol=1e-14)
+    np.testing.assert_allclose(np.linalg.det(quat_to_matrix(out.rotation)), 1.0, atol=1e-14)
+    eig = np.linalg.eigvalsh(out.stretch())
+    assert (eig[0] > 0).all() and eig[1][0] < 0 < eig[1][1] and abs(eig[2][0]) < 1e-14
+    bad = p._replace(scale=np.array([[1.0, 2.0, 1.0], [np.inf, 2.0, 1.0], [1.0, 2.0, 1.0]]))
+    with pytest.raises(UnrepresentablePoseError, match="not finite") as exc, np.errstate(invalid="ignore"):
+        compose(bad, c)
     assert list(exc.value.samples) == [1]
 
 
@@ -127,18 +137,20 @@ def test_the_box_animated_hierarchy_in_scene_yaml_matches_the_4x4_product(tmp_pa
     np.testing.assert_allclose(grand.matrices(), inner.matrices() @ local_grand, atol=1e-12)
 
 
-def test_a_composed_mirror_is_a_located_scene_error(tmp_path: Path):
-    """A rotated child whose own scale turns negative (a procedural channel), under a
-    non-uniform parent stretch: the product mirrors, which no rotation times a stretch
-    holds; the error names the child's `parent` and the time."""
+def test_a_composed_mirror_in_scene_yaml_is_the_4x4_product(tmp_path: Path):
+    """A rotated child whose own scale turns negative (a procedural channel) under the
+    stretched, turning box: the grandchild's world matrix is still the product of the
+    three matrices (before, a mirror under a non-uniform scale had no exact form)."""
     text = HIERARCHY.replace("rotate: {axis: [0, 0, 1], angle: 30}, scale: [1, 0.5, 2]}", "rotate: {axis: [0, 0, 1], angle: 30}, scale: [1, 0.5, 2]}\n    motion:\n      type: procedural\n      channels: {scale: ['-1', '1', '1']}")
     path = tmp_path / "mirror.yaml"
     path.write_text(text)
-    loaded = load_scene(path)
-    with pytest.raises(SceneError) as exc:
-        evaluate(loaded, np.array([0.0, 1.0]))
-    assert "objects[2].parent" in str(exc.value), str(exc.value)
-    assert "mirrors" in str(exc.value) and "t = 0 s" in str(exc.value)
+    motion = evaluate(load_scene(path), np.array([0.0, 45 / FPS, 2.2]))
+    local_grand = np.eye(4)
+    local_grand[:3, :3] = Rotation.from_euler("z", 30, degrees=True).as_matrix() @ np.diag([-1, 0.5, 2])
+    local_grand[:3, 3] = (0, 1, 0)
+    grand = motion.objects["grandchild"]
+    np.testing.assert_allclose(grand.matrices(), motion.objects["inner"].matrices() @ local_grand, atol=1e-12)
+    assert (np.linalg.det(grand.stretch()) < 0).all()
 
 
 @pytest.mark.parametrize("suffix", [".json", ".npz"])

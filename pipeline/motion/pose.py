@@ -4,7 +4,9 @@ A `Pose` holds world_from_object = T(translation) * R(rotation) * S at T times, 
 symmetric stretch: its diagonal is `scale`, its off-diagonal terms `stretch_offdiag` (None
 while S is diagonal, which it is for every pose a `transform:` or a motion block makes).
 Composing under a non-uniform parent scale gives a general S (the polar decomposition of
-the 4x4 product, as pbrt-v4's AnimatedTransform::Decompose): exact, never dropped.
+the 4x4 product, as pbrt-v4's AnimatedTransform::Decompose): exact, never dropped. Any
+3x3 is a rotation times a symmetric matrix, so every finite product is held (a mirror as
+one negative eigenvalue of S, as a negative `scale` is).
 Quaternions are (w, x, y, z) arrays of shape [..., 4]; scipy's `Rotation` is scalar-last,
 so conversions pass `scalar_first=True` at the boundary (rotation.py).
 """
@@ -21,13 +23,11 @@ from ..errors import MotionError
 OFFDIAG = ((0, 1), (0, 2), (1, 2))
 # |B - B^T| below this fraction of |B| is round-off: B is already the stretch
 SYMMETRY_TOLERANCE = 1e-12
-# det(B) below this fraction of |B|^3: no rotation times a stretch gives it
-SINGULAR_TOLERANCE = 1e-12
 
 
 class UnrepresentablePoseError(MotionError):
-    """A composed world_from_object mirrors (negative determinant) or is singular where a
-    rotation times a stretch cannot hold it; `samples` are the time indices affected."""
+    """A composed world_from_object that a rotation times a symmetric stretch cannot hold
+    (it is not finite); `samples` are the time indices affected."""
 
     def __init__(self, message: str, samples: np.ndarray) -> None:
         super().__init__(message)
@@ -130,10 +130,10 @@ def compose(world_from_parent: Pose, parent_from_child: Pose) -> Pose:
 
     T_p R_p S_p T_c R_c S_c = T(t_p + R_p S_p t_c) R_p R_c B with B = R_c^T S_p R_c S_c.
     Where the parent's stretch is uniform B = s_p S_c is the child's stretch (the old
-    per-axis product, bit for bit). Otherwise B's polar decomposition B = U P (P symmetric
-    positive definite, U a rotation) gives rotation R_p R_c U and stretch P; a symmetric B
-    (an unrotated child) is its own stretch. Raises UnrepresentablePoseError where B is
-    not symmetric and mirrors or is singular."""
+    per-axis product, bit for bit). Otherwise B = U P (`polar_stretch`: U a rotation, P
+    symmetric, positive definite unless B mirrors) gives rotation R_p R_c U and stretch P;
+    a symmetric B (an unrotated child) is its own stretch. Every finite product is held
+    exactly; a non-finite one raises UnrepresentablePoseError."""
     p, c = world_from_parent, parent_from_child
     if p.stretch_offdiag is None:
         stretched_t = p.scale * c.translation
@@ -174,26 +174,27 @@ def _needs_matrices(p: Pose, c: Pose) -> np.ndarray:
 
 
 def polar_stretch(b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """b [K, 3, 3] = U P with U a rotation and P symmetric (the right polar decomposition,
-    as scipy.linalg.polar, batched through numpy's SVD b = W diag(sigma) V^T: U = W V^T,
-    P = V diag(sigma) V^T). A b that is already symmetric is its own P (U = I), whatever the
-    signs of its eigenvalues. Raises UnrepresentablePoseError (samples: rows of b) where b
-    is not symmetric and det(b) <= 0: a mirror or a collapse no rotation can carry."""
+    """b [K, 3, 3] = U S with U a rotation and S symmetric, exactly, for any finite b.
+
+    The right polar decomposition (as scipy.linalg.polar), batched through numpy's SVD
+    b = W diag(sigma) V^T: U = W V^T, S = V diag(sigma) V^T, S positive definite where
+    det(b) > 0. Where det(b) < 0 (a mirror) W V^T would be a reflection: the last singular
+    pair changes sign, b = (W D) (D diag(sigma)) V^T with D = diag(1, 1, -1), so U stays a
+    rotation and S takes the mirror as one negative eigenvalue, as a negative `scale` does;
+    a singular b gets a rotation too. A b that is already symmetric is its own S (U = I).
+    Raises UnrepresentablePoseError (samples: rows of b) where b is not finite."""
+    finite = np.isfinite(b).all(axis=(-2, -1))
+    if not finite.all():
+        raise UnrepresentablePoseError("the composed transform is not finite", np.nonzero(~finite)[0])
     size = np.abs(b).max(axis=(-2, -1))
     asym = np.abs(b - np.swapaxes(b, -1, -2)).max(axis=(-2, -1)) > SYMMETRY_TOLERANCE * size
     u = np.broadcast_to(np.eye(3), b.shape).copy()
     stretch = 0.5 * (b + np.swapaxes(b, -1, -2))
     if asym.any():
-        g = b[asym]
-        det = np.linalg.det(g)
-        bad = det <= SINGULAR_TOLERANCE * size[asym] ** 3
-        if bad.any():
-            rows = np.nonzero(asym)[0][bad]
-            what = "mirrors (negative determinant)" if (det[bad] < 0).any() else "is singular (a zero scale)"
-            raise UnrepresentablePoseError(
-                f"under a non-uniform parent scale the composed transform {what}: a rotation times a "
-                "stretch cannot hold it", rows)
-        w, sigma, vt = np.linalg.svd(g)
+        w, sigma, vt = np.linalg.svd(b[asym])
+        sign = np.where(np.linalg.det(w @ vt) < 0, -1.0, 1.0)
+        w[:, :, 2] *= sign[:, None]
+        sigma[:, 2] *= sign
         u[asym] = w @ vt
         p = np.swapaxes(vt, -1, -2) @ (sigma[:, :, None] * vt)
         stretch[asym] = 0.5 * (p + np.swapaxes(p, -1, -2))
