@@ -157,8 +157,8 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
 
 
 def compose_at(loaded: "LoadedScene", loc: tuple[Any, ...], t: np.ndarray, world_from_parent: Pose, parent_from_thing: Pose) -> Pose:
-    """world_from_thing = world_from_parent * parent_from_thing (pose.compose); a product no
-    rotation times a stretch can hold is a SceneError at the thing's `parent`, with the time."""
+    """world_from_thing = world_from_parent * parent_from_thing (pose.compose); a product
+    that is not finite is a SceneError at the thing's `parent`, with the time."""
     try:
         return compose(world_from_parent, parent_from_thing)
     except UnrepresentablePoseError as exc:
