@@ -22,7 +22,7 @@ from ..scene.loader import LoadedScene
 from ..variant import load_dict
 from .build import material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
-from .instant import add_lights, add_shapes, light_record, sensor_record
+from .instant import add_lights, add_shapes, light_record, rest_frame, sensor_record
 from .roles import Roles
 from .sbt import SbtOwner, dict_types
 from .shutter_poses import across_shutter
@@ -164,19 +164,30 @@ class SceneCache:
         return keys
 
     def _update_mover_scales(self, fi: StackedFrame) -> list[str]:
-        """A mover's scale is applied in its rest frame, per frame (not per sample): only
-        that mover's small BVH is rebuilt, and only when its scale changed."""
+        """A mover's stretch (its scale, or the full symmetric stretch under a non-uniform
+        parent scale) is applied in its rest frame, per frame (not per sample): only that
+        mover's small BVH is rebuilt, and only when its stretch changed."""
         keys: list[str] = []
         scene = self.loaded.scene
         for name in self.roles.mover_names:
-            s = np.asarray(fi.objects[name][2][0], dtype=float)
-            if np.allclose(s, self._mover_scale[name]):
+            s = rest_frame(fi, name)
+            before = self._mover_scale[name]
+            if np.allclose(s, np.diag([*before, 1.0]) if before.ndim == 1 else before):
                 continue
             obj = next(o for o in scene.objects if o.name == name)
             params = self._mover_params[name]
-            for k, shape in enumerate(object_shapes(obj, self.loaded, np.diag([*s, 1.0]), {})):
-                params[f"{mitsuba_id(name)}__{k}.to_world"] = shape["to_world"]
-                keys.append(f"mover:{mitsuba_id(name)}__{k}.to_world")
+            for k, shape in enumerate(object_shapes(obj, self.loaded, s, {})):
+                prefix = f"{mitsuba_id(name)}__{k}"
+                if f"{prefix}.to_world" in params:
+                    params[f"{prefix}.to_world"] = shape["to_world"]
+                    keys.append(f"mover:{prefix}.to_world")
+                    continue
+                # a mesh (cube, mesh file) holds its transform in its vertices: the fresh shape's
+                fresh = self._mi.traverse(load_dict(shape))
+                for field in ("vertex_positions", "vertex_normals"):
+                    if field in fresh and f"{prefix}.{field}" in params:
+                        params[f"{prefix}.{field}"] = fresh[field]
+                        keys.append(f"mover:{prefix}.{field}")
             params.update()
             self._mover_scale[name] = s
         return keys
