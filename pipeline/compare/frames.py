@@ -143,8 +143,11 @@ def incomparable(new: Mapping[str, Any], ref: Mapping[str, Any]) -> list[str]:
     return []
 
 
-def part_name(part: str) -> str:
-    """A look part's name for a note: `m1` -> 'material 2 of the scene (m1)'."""
+def part_name(part: str, names: Mapping[str, str] | None = None) -> str:
+    """A look part's name for a note: `m1` -> 'material 2 of the scene (m1)', or with the
+    scene's `names` (render/look.py part_names) 'material iron (m1)'."""
+    if names and part in names:
+        return f"{names[part]} ({part})"
     if part in _PART_NAMES:
         return _PART_NAMES[part]
     kind, number = part[:1], part[1:]
@@ -153,12 +156,13 @@ def part_name(part: str) -> str:
     return f"look part {part}"
 
 
-def notes(new: Mapping[str, Any], ref: Mapping[str, Any]) -> list[str]:
+def notes(new: Mapping[str, Any], ref: Mapping[str, Any], names: Mapping[str, str] | None = None) -> list[str]:
     """How NEW and REF (FrameFacts.to_dict()) were made differently though they can be
     compared, as phrases: the renderer's version, each look part (material, object, light,
     camera) and render setting that differs (noise-only and storage ones excepted), the
     frame's motion. The scene file's bytes count only when a frame has no look key (a
-    comment or a name changes no picture). Empty when they are the same picture."""
+    comment or a name changes no picture). Empty when they are the same picture. `names`:
+    what each look part is called in the new frames' scene, when known."""
     out = []
     a, b = new.get("renderer"), ref.get("renderer")
     if a is not None and b is not None and a != b:
@@ -168,7 +172,7 @@ def notes(new: Mapping[str, Any], ref: Mapping[str, Any]) -> list[str]:
         for part in sorted(set(pa) | set(pb), key=_part_order):
             if part not in _PARTS_SAID_APART and pa.get(part) != pb.get(part):
                 said = "differs" if part in pa and part in pb else ("is new" if part in pa else "is gone")
-                out.append(f"{part_name(part)} {said}")
+                out.append(f"{part_name(part, names)} {said}")
     else:
         da, db = new.get("scene_digest"), ref.get("scene_digest")
         if da is not None and db is not None and da != db:

@@ -20,7 +20,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, Mapping
 
 import numpy as np
 
@@ -214,7 +214,7 @@ def flip_score(new: np.ndarray, ref: np.ndarray) -> tuple[float, np.ndarray]:
     return float(mean), np.asarray(fmap, dtype=np.float32).reshape(a.shape[:2])
 
 
-def frame_notes(new_paths: dict[int, Path], ref_paths: dict[int, Path], common: list[int]) -> dict[int, list[str]]:
+def frame_notes(new_paths: dict[int, Path], ref_paths: dict[int, Path], common: list[int], names: Mapping[str, str] | None = None) -> dict[int, list[str]]:
     """Each common frame's notes (frames.notes) from the two headers; ReferenceMismatchError
     (exit 2) for a pair that cannot be compared (frames.incomparable), before any pixel."""
     out: dict[int, list[str]] = {}
@@ -224,7 +224,7 @@ def frame_notes(new_paths: dict[int, Path], ref_paths: dict[int, Path], common: 
         cannot = incomparable(new_facts, ref_facts)
         if cannot:
             raise ReferenceMismatchError(f"{new_paths[number]}: {cannot[0]} of reference {ref_paths[number]}: frames of different sizes cannot be compared")
-        out[number] = notes(new_facts, ref_facts)
+        out[number] = notes(new_facts, ref_facts, names)
     return out
 
 
@@ -273,9 +273,11 @@ def compare_sequences(
     alpha: float = ALPHA,
     workers: int | None = None,
     keep_maps: bool = False,
+    part_names: Mapping[str, str] | None = None,
 ) -> Comparison:
     """Compare the sequence in `new_dir` with the references in `ref_dir` frame by frame.
-    `frames`: only these frame numbers (default: every reference frame). Raises
+    `frames`: only these frame numbers (default: every reference frame); `part_names`: what
+    the look's parts are called in the new frames' scene (for the notes). Raises
     ReferenceMismatchError (exit 2) for frames of other sizes, FrameIOError for unreadable
     folders, frames or manifests; frames made differently are compared and noted."""
     t0 = time.perf_counter()
@@ -289,7 +291,7 @@ def compare_sequences(
     common = [n for n in wanted if n in new_paths]
     missing = [n for n in wanted if n not in new_paths]
     unreferenced = sorted(n for n in new_paths if n not in ref_paths) if frames is None else []
-    per_frame = frame_notes(new_paths, ref_paths, common)
+    per_frame = frame_notes(new_paths, ref_paths, common, part_names)
     jobs = [(n, str(new_paths[n]), str(ref_paths[n])) for n in common]
     workers = workers if workers is not None else min(2, os.cpu_count() or 1)
     outcomes: list[FrameOutcome]

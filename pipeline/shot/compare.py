@@ -38,13 +38,28 @@ def check_compare(ref_dir: str | Path, out_dir: str | Path, resolution: tuple[in
     check_report_targets(html_dir=folder, junit=folder / "junit.xml", json_path=folder / "compare.json", what="--compare report")
 
 
+def scene_part_names(scene: str | Path | None) -> dict[str, str] | None:
+    """What each look part is called in the rendered scene (`material wall` for m0), for
+    the notes; None when the scene cannot be read now (the notes then count parts)."""
+    if not scene:
+        return None
+    from ..errors import MotionError
+    from ..render.look import part_names
+    from ..scene.loader import load_scene
+
+    try:
+        return part_names(load_scene(scene, assets=False))
+    except (MotionError, OSError):
+        return None
+
+
 def compare_render(report: dict[str, Any], ref_dir: str | Path) -> tuple[Comparison, dict[str, str]]:
     """Compare the frames this render's `report` covers with `ref_dir`; returns the
     comparison (its `notes` say how the frames were made differently) and the reports
     written (HTML, JUnit, JSON in OUTPUT/compare/)."""
     out_dir = Path(report["output_dir"])
     frames = sorted({int(row["frame"]) for row in report.get("frames", []) if "frame" in row})
-    result = compare_sequences(out_dir, ref_dir, frames=frames or None, keep_maps=True)
+    result = compare_sequences(out_dir, ref_dir, frames=frames or None, keep_maps=True, part_names=scene_part_names(report.get("scene")))
     folder = report_folder(out_dir)
     written = write_reports(result, html_dir=folder, junit=folder / "junit.xml", json_path=folder / "compare.json")
     return result, written
