@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from farm_util import motion
+from farm_util import ROOT, motion
 
 SCENE = """name: edit
 timeline: {fps: 24, first: 0, last: 2}
@@ -84,6 +84,9 @@ def test_a_changed_material_is_compared_and_named(golden: Path, tmp_path: Path) 
     code, out = _render(scene, out_dir, "--compare", golden, "--allow-different-settings")
     assert code == 1, out
     assert NOTE in out and "FAIL: 3 frames" in out and "3 different" in out, out
+    import xmlschema
+
+    xmlschema.XMLSchema(str(ROOT / "tests" / "data" / "junit-10.xsd")).validate(str(out_dir / "compare" / "junit.xml"))  # notes and all
     junit = ET.parse(out_dir / "compare" / "junit.xml").getroot()
     cases = junit.findall(".//testcase")
     assert [c.attrib["name"] for c in cases] == ["frame 0000", "frame 0001", "frame 0002"]

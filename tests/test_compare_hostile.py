@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from farm_util import MOTION, motion
+from farm_util import MOTION, ROOT, motion
 from motion.pipeline.frame_output import write_frame
 
 W, H = 32, 18
@@ -65,6 +65,9 @@ def test_a_non_finite_pixel_is_a_difference_and_reports_stay_valid(tmp_path: Pat
     data = _no_nan_tokens((tmp_path / "report" / "compare.json").read_text())
     assert [f["outcome"] for f in data["frames"]] == ["identical"] * 3 + ["different"] + ["identical"] * 4
     assert data["frames"][3]["regions"][0]["nonfinite"] == 1 and data["frames"][3]["regions"][0]["z"] is None
+    import xmlschema
+
+    xmlschema.XMLSchema(str(ROOT / "tests" / "data" / "junit-10.xsd")).validate(str(tmp_path / "report" / "junit.xml"))
     suite = ET.parse(tmp_path / "report" / "junit.xml").getroot()
     assert suite.attrib["failures"] == "1"
     assert "<!doctype html>" in (tmp_path / "report" / "index.html").read_text()
