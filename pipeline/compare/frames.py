@@ -201,11 +201,6 @@ def _part_order(part: str) -> tuple[str, int, str]:
     return (kind, int(number), part) if kind in _PART_KINDS and number.isdigit() and len(number) < 10 else (part, 0, part)
 
 
-def differences(new: Mapping[str, Any], ref: Mapping[str, Any]) -> list[str]:
-    """Every difference in how NEW and REF were made: `incomparable`, then `notes`."""
-    return incomparable(new, ref) + notes(new, ref)
-
-
 def read_pixels(path: str | Path, layer: str) -> tuple[dict[str, Any], np.ndarray, np.ndarray | None]:
     """(header, RGBA float32 [H, W, 4], the layer `layer` as float32 [H, W, C] or None) of a
     frame: only what a comparison reads is converted (frame_output.read_frame converts every

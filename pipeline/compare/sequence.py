@@ -102,11 +102,6 @@ class Comparison:
     seconds: float = 0.0
 
     @property
-    def allowed(self) -> list[str]:
-        """The notes (their name in reports before every difference was compared)."""
-        return self.notes
-
-    @property
     def failed(self) -> list[FrameOutcome]:
         """The frames that fail."""
         return [f for f in self.frames if f.failed]
@@ -196,7 +191,8 @@ def flip_score(new: np.ndarray, ref: np.ndarray) -> tuple[float, np.ndarray]:
     the mean and the per-pixel map [H, W] in [0, 1]. Non-finite values count as 0 here
     (the test names them). FLIP sets its exposure range from the reference's largest and
     median luminance and ends the process when the two meet (a black or uniform reference):
-    the range is then one stop up to the exposure that maps the brighter frame's largest luminance to the top."""
+    the range is then one stop up to the exposure that maps the brighter frame's largest
+    luminance to the top."""
     import flip_evaluator
 
     def linear(x: np.ndarray) -> np.ndarray:
