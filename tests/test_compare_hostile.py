@@ -221,3 +221,16 @@ def test_a_stop_ends_a_pool_of_workers_at_once(tmp_path: Path, how: int, code: i
     while (leftover := subprocess.run(["pgrep", "-a", "-s", str(proc.pid)], capture_output=True, text=True).stdout.strip()) and time.perf_counter() < deadline:
         time.sleep(0.2)
     assert not leftover, f"processes left: {leftover}"
+
+
+def test_settings_with_nan_or_huge_numbers_in_a_header_keep_the_manifest_json(tmp_path: Path) -> None:
+    new = tmp_path / "new"
+    pic = _picture(0)
+    write_frame(new / "t.0000.exr", pic, {"render_settings": '{"spp": NaN, "x": 1e400, "deep": ' + "[" * 5000 + "]" * 5000 + "}"})
+    res = motion("compare", new, tmp_path / "golden", "--bless")
+    assert res.returncode == 0 and "Traceback" not in res.stderr, res.stderr
+    manifest = _no_nan_tokens((tmp_path / "golden" / "manifest.json").read_text())
+    assert manifest["settings"].get("spp") is None and manifest["settings"].get("x") is None
+    res = motion("compare", new, tmp_path / "golden", "--json", tmp_path / "c.json")
+    assert res.returncode == 0 and "1 identical" in res.stdout, res.stdout + res.stderr
+    _no_nan_tokens((tmp_path / "c.json").read_text())

@@ -15,6 +15,7 @@ cannot be compared (`incomparable`).
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -67,10 +68,10 @@ def facts_from_header(path: Path, header: Mapping[str, Any]) -> FrameFacts:
     raw = meta.get("render_settings")
     if isinstance(raw, (str, bytes)):
         try:
-            loaded = json.loads(raw)
+            loaded = json.loads(raw, parse_constant=lambda _: None, parse_float=_finite_float)  # a manifest holds no NaN
             if isinstance(loaded, dict):
                 settings = {k: v for k, v in loaded.items() if k not in NOISE_ONLY}
-        except ValueError:
+        except (ValueError, RecursionError):
             settings = {}
 
     def _int(value: Any) -> int | None:
@@ -86,6 +87,12 @@ def facts_from_header(path: Path, header: Mapping[str, Any]) -> FrameFacts:
                       scene=_str(meta.get("scene")), scene_digest=_str(meta.get("scene_hash")), renderer=_str(meta.get("renderer")),
                       variant=_str(meta.get("variant")), seed=_int(meta.get("seed")), spp=_int(meta.get("spp")), settings=settings,
                       look_parts=_parts(meta.get("look_parts")), motion_hash=_str(meta.get("motion_hash")))
+
+
+def _finite_float(text: str) -> float | None:
+    """A JSON number as a float, or None when it is out of range (1e400)."""
+    value = float(text)
+    return value if math.isfinite(value) else None
 
 
 def _parts(raw: Any) -> dict[str, str] | None:
