@@ -78,7 +78,8 @@ def _timecode_attr(tc: str, fps: Fraction | None = None) -> Any:
     group = timecode_group(fps) if fps is not None else 1
     field, place = timecode_fields(ff, fps) if fps is not None else (ff, 0)
     if field >= MAX_TIMECODE_FRAMES:
-        raise FrameIOError(f"timecode {tc}: frame {ff} is out of range at {fps or 'an unstated rate'} frames/s")
+        rate = f"at {fps} frames/s" if fps is not None else "without a frame rate (30 frames a second at most)"
+        raise FrameIOError(f"timecode {tc}: frame {ff} is out of range {rate}")
     code = OpenEXR.TimeCode()
     code.hours, code.minutes, code.seconds, code.frame = hh, mm, ss, field
     code.dropFrame = drop

@@ -75,3 +75,11 @@ def test_a_shot_above_30_fps_renders_past_its_30th_frame(tmp_path: Path, written
     sep = ";" if written == "59.94" else ":"
     labels = [header_timecode(read_header(p)) for p in frames_in(tmp_path / "out")]
     assert labels == [f"00:00:00{sep}{f:02d}" for f in range(first, first + 4)]
+
+
+def test_a_label_past_30_without_a_rate_is_one_located_error(tmp_path: Path) -> None:
+    from motion.pipeline.errors import FrameIOError
+
+    with pytest.raises(FrameIOError, match="00:00:00:45: frame 45 is out of range without a frame rate"):
+        write_frame(tmp_path / "t.exr", PIXELS, timecode="00:00:00:45")  # before: RuntimeError from the binding
+    assert not (tmp_path / "t.exr").exists()

@@ -41,9 +41,9 @@ def recorded_scene(out_dir: Path, warn: bool = True) -> Path | None:
             data = json.loads(read_bounded(path, RECORD_BYTES, WHAT))
         except (InputFileError, ValueError, RecursionError):
             data = None
-    scene = data.get("scene") if isinstance(data, dict) else None
     if data is None:
         return None
+    scene = data.get("scene") if isinstance(data, dict) else None
     why = _unusable(scene)
     if why:
         if warn:
