@@ -44,24 +44,24 @@ def read_import(path: Path, shown: str, spec: Any, index: int, base_dir: Path) -
     # the entry without its overrides, as text: its repr names every field's value (a dump
     # would build the entry's serializer, 0.01 s, for a key)
     settings = repr(spec.model_copy(update={"overrides": {}}))
-    raw: bytes | None = None
-    if kind == "gltf":
-        # read once: the bytes hashed for the key are the bytes parsed (a file swapped
-        # between a hash and a read would leave one file's records under another's digest)
-        try:
-            raw = read_bounded(path, MOST_BYTES[kind], "glTF file")
-        except InputFileError:
-            return _read_file(kind, path, shown, spec, index, base_dir)  # it says why, located
-        digest = bytes_digest(raw)
-    else:
-        digest = file_digest(path)  # usd-core opens the stage by path: checked again after the read
-    # what decides the records: the reader (kind and the suffix it goes by), the bytes, the entry
-    key = STORE.key(json.dumps([FORMAT, kind, path.suffix.lower(), digest, settings, shown, index, str(base_dir.resolve()), _code(kind)]))
-    memo = STORE.path(key, "records", ".json")
+    where = (kind, path.suffix.lower(), settings, shown, index, str(base_dir.resolve()))
+    digest = file_digest(path)
+    memo = _entry(where, digest)
     kept = _recall(memo, MOST_BYTES[kind], base_dir)
     if kept is not None:
         STATS["records"] += 1
         return kept
+    raw: bytes | None = None
+    if kind == "gltf":
+        # read once: the records are parsed from the bytes their key is hashed from (a file
+        # swapped between a hash and a read left one file's records under another's digest)
+        try:
+            raw = read_bounded(path, MOST_BYTES[kind], "glTF file")
+        except InputFileError:
+            return _read_file(kind, path, shown, spec, index, base_dir)  # it says why, located
+        read_digest = bytes_digest(raw)
+        if read_digest != digest:  # changed since it was hashed: kept under the bytes read
+            digest, memo = read_digest, _entry(where, read_digest)
     with digests_recorded() as read:
         ex = _read_file(kind, path, shown, spec, index, base_dir, raw)
     read.pop(str(path.resolve()), None)  # the key has it
@@ -69,6 +69,15 @@ def read_import(path: Path, shown: str, spec: Any, index: int, base_dir: Path) -
     if _unchanged({**parsed, **read}):  # else a file changed while it was read: its records are not kept
         STORE.put(memo, json.dumps({"read": read, "records": _to_json(ex)}).encode(), best_effort=True, doing="keeping an import's records")
     return ex
+
+
+def _entry(where: tuple[Any, ...], digest: str) -> Path:
+    """The kept records' file for an import `where` (the reader's kind and the suffix it
+    goes by, the entry without its overrides, where it is shown, the scene's folder) of
+    the bytes of `digest`, by the reader's code: everything that decides the records."""
+    kind, suffix, settings, shown, index, base = where
+    key = STORE.key(json.dumps([FORMAT, kind, suffix, digest, settings, shown, index, base, _code(kind)]))
+    return STORE.path(key, "records", ".json")
 
 
 def _unchanged(read: dict[str, str]) -> bool:
