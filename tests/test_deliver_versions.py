@@ -40,11 +40,19 @@ def _manifest(out: Path) -> dict:
     return json.loads((out / "deliver" / "manifest.json").read_text())
 
 
+def _recolour_floor(scene: Path, value: float) -> None:
+    doc = yaml.safe_load(scene.read_text())
+    next(m for m in doc["materials"] if m["name"] == "floor")["color"] = value
+    scene.write_text(yaml.safe_dump(doc))
+
+
 def test_a_partial_rerun_rebuilds_the_whole_shot_as_a_new_version(tmp_path: Path) -> None:
-    """The shot, then `--overwrite --frames 4-7`: the 24p movie and the contact sheet of the
-    new version hold all 12 frames (they held the 4 re-rendered ones before, and the manifest
-    said 4-7 for every format), the first version is untouched, and the manifest says what
-    each version was made from; the same command again makes no new version."""
+    """The shot, then `--overwrite --frames 4-7` with nothing changed: the same pixels, so
+    no new version (before: v002, byte-identical to v001, "frames 4-7 changed since v001":
+    the manifest hashed whole EXR files, whose headers change on every render). The floor
+    recoloured and 4-7 rendered again: v002 of every format, holding all 12 frames, naming
+    exactly the frames whose pixels changed; v001 untouched; the same command again makes
+    no v003."""
     scene, out = _scene(tmp_path), tmp_path / "out"
     args = ["render", scene, "-o", out, *TINY, "--deliver", "24p,60i,contact"]
     first = motion(*args)
@@ -53,21 +61,26 @@ def test_a_partial_rerun_rebuilds_the_whole_shot_as_a_new_version(tmp_path: Path
     v1 = deliver / "farm-tiny_24p_v001.mov"
     v1_bytes = v1.read_bytes()
     assert _frames(v1) == 12
+    same = motion(*args, "--overwrite", "--frames", "4-7")
+    assert same.returncode == 0, same.stderr
+    assert "4 rendered" in same.stderr
+    assert same.stderr.count("up to date (v001, frames 0-11 unchanged") == 3 and "changed" not in same.stderr.replace("unchanged", ""), same.stderr
+    assert not list(deliver.glob("*v002*"))
+    _recolour_floor(scene, 0.2)
     fix = motion(*args, "--overwrite", "--frames", "4-7")
     assert fix.returncode == 0, fix.stderr
-    assert "4 rendered" in fix.stderr
     v2 = deliver / "farm-tiny_24p_v002.mov"
     assert _frames(v2) == 12 and v1.read_bytes() == v1_bytes
     assert len(list((deliver / "60i_v002").glob("*.exr"))) == 15 and len(list((deliver / "60i_v001").glob("*.exr"))) == 15
     assert (deliver / "farm-tiny_contact_v001.png").is_file() and (deliver / "farm-tiny_contact_v002.png").is_file()
-    assert "frames 4-7 changed since v001" in fix.stderr
+    assert fix.stderr.count("(frames 4-7 changed since v001)") == 3, fix.stderr  # the 24p and 60i movies, the sheet
     made = _manifest(out)["deliverables"]
     assert set(made) == {"24p", "60i", "contact"} and all(e["latest"] == "v002" for e in made.values())
     versions = made["24p"]["versions"]
     assert [v["frames"] for v in versions.values()] == ["0-11", "0-11"]
     files = versions["v002"]["frame_files"]
     assert sorted(map(int, files)) == list(range(12)) and files["5"]["name"] == "farm-tiny.0005.exr"
-    changed = sorted(int(n) for n in files if files[n]["sha256"] != versions["v001"]["frame_files"][n]["sha256"])
+    changed = sorted(int(n) for n in files if files[n]["pixels"] != versions["v001"]["frame_files"][n]["pixels"])
     assert changed == [4, 5, 6, 7]
     again = motion(*args, "--frames", "4-7")
     assert again.returncode == 0, again.stderr

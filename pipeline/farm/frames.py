@@ -7,7 +7,8 @@ Grammar (Blender-like, comma-separated parts, each one of):
     A-BxS      every S-th frame from A       0-119x2  (0, 2, ... 118)
 
 Parts may mix (`1,5,10-20x5`); the result is sorted and each frame appears once.
-Negative frames are allowed (`-5--1`).
+Negative frames are allowed (`-5--1`, or `-5..-1`: ranges that start below 0 are printed
+`A..B`, timeline.format_range, and read back as written).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from typing import Sequence
 from ..errors import UsageError
 from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES, format_frames  # noqa: F401  (format_frames: re-exported for farm)
 
-_PART = re.compile(r"^(-?\d+)(?:-(-?\d+)(?:x(\d+))?)?$")
+_PART = re.compile(r"^(-?\d+)(?:(?:-|\.\.)(-?\d+)(?:x(\d+))?)?$")  # A-B, or A..B (as ranges from below 0 are printed)
 
 
 def parse_frames(spec: str, first: int | None = None, last: int | None = None) -> list[int]:
