@@ -127,8 +127,11 @@ def deliver_plan(req: RenderRequest, loaded: Any, frames: list[int]) -> DeliverP
         shot = chosen
     if req.shard and not explicit:
         return DeliverPlan((), {f: "a shard makes no deliverables: assemble after every shard with --check --deliver" for f in formats}, frames=tuple(shot))
-    if getattr(req, "check", False) and not explicit:  # a check writes nothing but its report
-        return DeliverPlan((), {f: "--check makes no deliverables unless asked: --check --deliver" for f in formats}, frames=tuple(shot))
+    if req.check and not explicit:  # a check writes nothing but its report
+        why = "--check makes no deliverables unless asked: --check --deliver"
+        for f in formats:
+            logging.getLogger("motion").info(f"  {f}: not made: {why} (the scene's output.deliver)")
+        return DeliverPlan((), {f: why for f in formats}, frames=tuple(shot))
     return DeliverPlan(formats, {}, explicit, tuple(shot), part)
 
 
