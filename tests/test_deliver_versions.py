@@ -225,3 +225,32 @@ def test_quiet_after_the_command_and_the_plan_says_where_output_goes(tmp_path: P
     plan = motion("render", scene, *TINY, "--dry-run", cwd=tmp_path)
     assert plan.returncode == 0, plan.stderr
     assert f"output:    {tmp_path / 'out' / 'farm-tiny'} (out/<name> under the current folder {tmp_path}" in plan.stdout
+
+
+def test_a_frames_pixel_digest_is_its_pixels_not_its_header(tmp_path: Path) -> None:
+    """The digest write_exr records (`motion:pixels_sha256`) is the picture's: two writes of
+    the same pixels with other header attributes have it equal (their files differ), one
+    pixel of one layer changes it, and a frame written without it (by OpenEXR alone, as
+    before) is decoded to the same digest."""
+    import OpenEXR
+
+    from motion.pipeline.frame_output import META_PREFIX, PIXELS_KEY, frame_pixels_digest, pixel_digest, read_header, write_frame
+
+    rgba = np.random.default_rng(1).random((6, 8, 4)).astype(np.float32)
+    normal = np.random.default_rng(2).random((6, 8, 3)).astype(np.float32)
+    a = write_frame(tmp_path / "a.0001.exr", rgba, {"render_seconds": 1.5}, aovs={"normal": normal})
+    b = write_frame(tmp_path / "b.0001.exr", rgba, {"render_seconds": 2.5, "worker": "w7"}, aovs={"normal": normal})
+    assert a.read_bytes() != b.read_bytes()
+    assert frame_pixels_digest(a) == frame_pixels_digest(b) == read_header(a)[META_PREFIX + PIXELS_KEY]
+    with OpenEXR.File(str(a), separate_channels=True) as f:
+        decoded = {name: np.asarray(ch.pixels) for name, ch in f.channels().items()}
+    assert pixel_digest(decoded) == frame_pixels_digest(a)
+    changed = normal.copy()
+    changed[3, 4, 2] += 0.25
+    c = write_frame(tmp_path / "c.0001.exr", rgba, {"render_seconds": 1.5}, aovs={"normal": changed})
+    assert frame_pixels_digest(c) != frame_pixels_digest(a)
+    bare = tmp_path / "bare.0001.exr"
+    header = {k: v for k, v in read_header(a).items() if k != META_PREFIX + PIXELS_KEY and k not in ("channels", "dataWindow", "displayWindow")}
+    OpenEXR.File(header, decoded).write(str(bare))
+    assert META_PREFIX + PIXELS_KEY not in read_header(bare)
+    assert frame_pixels_digest(bare) == frame_pixels_digest(a)
