@@ -173,3 +173,15 @@ def test_no_command_allocates_by_the_span_of_frame_numbers(tmp_path: Path) -> No
     assert said[0].split() == ["True"] * 5
     assert "(2 frames, 2147483647 missing)" in said[1] and (tmp_path / "sheet.png").is_file()
     assert sorted(p.name for p in (tmp_path / "png").iterdir()) == ["t.0000.png", "t.2147483648.png"]
+
+
+def test_a_range_from_below_0_is_printed_one_way_and_read_back() -> None:
+    """A timeline from -10 printed 'frames -10-37' (is that -10 to 37, or -10 and -37?):
+    every range that starts below 0 is printed A..B, which --frames reads back as written."""
+    from motion.pipeline.farm.frames import parse_frames
+    from motion.pipeline.timeline import format_frames, format_range
+
+    assert format_range(-10, 37) == "-10..37" and format_range(-5, -1) == "-5..-1" and format_range(0, 119) == "0-119"
+    for frames in (list(range(-10, 38)), list(range(-5, 0)), list(range(-10, 31, 2)), [-3, -1, 4, 5, 6]):
+        assert parse_frames(format_frames(frames)) == frames
+    assert format_frames(list(range(-10, 38))) == "-10..37" and format_frames(list(range(-10, 31, 2))) == "-10..30x2"

@@ -18,7 +18,7 @@ import re
 from typing import Sequence
 
 from ..errors import UsageError
-from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES, format_frames  # noqa: F401  (format_frames: re-exported for farm)
+from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES, format_frames, format_range  # noqa: F401  (format_frames: re-exported for farm)
 
 _PART = re.compile(r"^(-?\d+)(?:(?:-|\.\.)(-?\d+)(?:x(\d+))?)?$")  # A-B, or A..B (as ranges from below 0 are printed)
 
@@ -57,8 +57,8 @@ def parse_frames(spec: str, first: int | None = None, last: int | None = None) -
         if first is not None and last is not None and (lo < first or r[-1] > last):
             # name the frames outside without listing a huge range one by one
             outside = [x for x in (range(lo, min(hi, first - 1) + 1, s), range(max(lo, last + 1), hi + 1, s)) if len(x)]
-            text = ",".join(format_frames(x) if len(x) <= 1000 else f"{x[0]}-{x[-1]}" for x in outside)
-            raise UsageError(f"--frames: {text} outside the scene's timeline {first}-{last}")
+            text = ",".join(format_frames(x) if len(x) <= 1000 else format_range(x[0], x[-1], x.step) for x in outside)
+            raise UsageError(f"--frames: {text} outside the scene's timeline {format_range(first, last)}")
         total += len(r)  # an upper bound on the selection (parts may overlap)
         if total > MAX_FRAMES:
             raise UsageError(f"--frames: {shown!r} selects more than {MAX_FRAMES} frames (the limit for one job)")

@@ -312,7 +312,9 @@ class Scheduler:
         now = self.clock()
         for w, (chunk, t0) in list(self.running.items()):
             if now - t0 > self.cfg.task_timeout_s:
-                reason = f"chunk {chunk.frames[0]}-{chunk.frames[-1]} timed out after {self.cfg.task_timeout_s:g}s on {w}"
+                from ..timeline import format_range
+
+                reason = f"chunk {format_range(chunk.frames[0], chunk.frames[-1])} timed out after {self.cfg.task_timeout_s:g}s on {w}"
                 del self.running[w]
                 self.ex.stop_worker(w, "timeout")
                 self._worker(w).lost.append(reason)
