@@ -254,3 +254,32 @@ def test_a_frames_pixel_digest_is_its_pixels_not_its_header(tmp_path: Path) -> N
     OpenEXR.File(header, decoded).write(str(bare))
     assert META_PREFIX + PIXELS_KEY not in read_header(bare)
     assert frame_pixels_digest(bare) == frame_pixels_digest(a)
+
+
+def test_a_manifest_an_earlier_motion_wrote_makes_no_version_of_an_unchanged_shot(tmp_path: Path) -> None:
+    """A manifest that recorded whole files (each frame's file SHA-256, no pixel digest, as
+    motion wrote before): a plain rerun is up to date (its files are the recorded ones), and
+    frames rendered again make the next version, which says why without claiming that
+    pixels changed; after that, versions follow pixels."""
+    import hashlib
+
+    scene, out = _scene(tmp_path, last=3), tmp_path / "out"
+    args = ["render", scene, "-o", out, *TINY, "--deliver", "contact"]
+    assert motion(*args).returncode == 0
+    path = out / "deliver" / "manifest.json"
+    doc = json.loads(path.read_text())
+    v1 = doc["deliverables"]["contact"]["versions"]["v001"]
+    for rec in v1["frame_files"].values():
+        del rec["pixels"]
+        rec["sha256"] = hashlib.sha256((out / rec["name"]).read_bytes()).hexdigest()
+    del v1["timing"]
+    v1["made_from"] = hashlib.sha256(json.dumps([[int(n), r["sha256"]] for n, r in v1["frame_files"].items()]).encode()).hexdigest()
+    path.write_text(json.dumps(doc))
+    same = motion(*args)
+    assert same.returncode == 0 and "up to date (v001" in same.stderr, same.stderr
+    again = motion(*args, "--overwrite", "--frames", "1")
+    assert again.returncode == 0, again.stderr
+    assert "(frame files rewritten or changed since v001; an earlier motion recorded whole files, not pixels)" in again.stderr, again.stderr
+    assert "frames 1 changed" not in again.stderr
+    last = motion(*args, "--overwrite", "--frames", "2")
+    assert last.returncode == 0 and "up to date (v002" in last.stderr, last.stderr

@@ -50,6 +50,7 @@ from ..farm.report import write_report
 from ..files import confined, disk_faults, publish, publish_path, staging
 from ..frame_output import disk_fault, frame_pixels_digest, inside
 from ..limits import read_bounded
+from ..scene.files import file_digest
 from .request import RenderRequest
 
 MANIFEST = "manifest.json"
@@ -355,7 +356,7 @@ def _changed(before: Mapping[str, Any] | None, files: Mapping[str, Any], timing:
         return ""
     old = before.get("frame_files", {})
     if old and not any(_digest(r.get("pixels")) for r in old.values() if isinstance(r, dict)):
-        return "its frames were recorded by file by an earlier motion, now by their pixels"
+        return "frame files rewritten or changed; an earlier motion recorded whole files, not pixels"
     diff = [int(n) for n, r in files.items() if (old.get(n) or {}).get("pixels") != r["pixels"]]
     gone = [int(n) for n in old if n not in files and n.lstrip("-").isdigit()]
     parts = ([f"frames {format_frames(sorted(diff))} changed"] if diff else []) + ([f"frames {format_frames(sorted(gone))} gone"] if gone else [])
@@ -364,6 +365,12 @@ def _changed(before: Mapping[str, Any] | None, files: Mapping[str, Any], timing:
     if not same_recipe:
         parts.append("the recipe changed")
     return "; ".join(parts) or "its outputs are gone"
+
+
+def _since(why: str, last_name: str | None) -> str:
+    """'frames 4-7 changed since v001'; a reason with a clause after ';' keeps it last."""
+    head, sep, tail = why.partition("; an earlier")
+    return f"{head} since {last_name}" + (f"{sep}{tail}" if sep else "")
 
 
 def _outputs_of(done: list[Path], staged: Path) -> list[str]:
@@ -494,8 +501,27 @@ def _new_version(fmt: str, plan: DeliverPlan, made: _Made, folder: Path, prefix:
         if p.is_dir():
             say(f"  {fmt}: {name}: {len(list(p.glob('*.exr')))} frames in {p}")
         else:
-            say(f"  {fmt}: {name}: {p}" + (f" ({o['rate']})" if o["rate"] else "") + made.lacks + (f" ({why} since {last_name})" if why else ""))
+            say(f"  {fmt}: {name}: {p}" + (f" ({o['rate']})" if o["rate"] else "") + made.lacks + (f" ({_since(why, last_name)})" if why else ""))
     return name, names
+
+
+def _same_frames(last: Mapping[str, Any], made: _Made) -> bool:
+    """Whether version `last` was made from these frames: its pixel-keyed digest; for a
+    version an earlier motion recorded by whole files (SHA-256 of each file), those files
+    unchanged (the old digest, from the file's size and time when they match its record),
+    so upgrading motion makes no version of an unchanged shot."""
+    if last["made_from"] == made.made_from:
+        return True
+    old = last.get("frame_files") or {}
+    if not old or any(_digest(r.get("pixels")) for r in old.values()) or set(old) != set(made.frame_files):
+        return False
+    by_name = {r["name"]: r for r in old.values()}
+    digests = []
+    for p in made.seq.paths:
+        st, rec = p.stat(), by_name.get(p.name)
+        known = isinstance(rec, dict) and rec.get("size") == st.st_size and rec.get("mtime_ns") == st.st_mtime_ns
+        digests.append(rec["sha256"] if known else file_digest(p, memo=False))  # type: ignore[index]
+    return last["made_from"] == hashlib.sha256(json.dumps([[n, d] for n, d in zip(made.seq.numbers, digests)]).encode()).hexdigest()
 
 
 def _one_format(fmt: str, plan: DeliverPlan, made: _Made, folder: Path, prefix: str, manifest: dict[str, Any],
@@ -505,7 +531,7 @@ def _one_format(fmt: str, plan: DeliverPlan, made: _Made, folder: Path, prefix: 
     entry = manifest["deliverables"].get(plan.key(fmt)) or {"versions": {}}
     last_name = max(entry["versions"], key=lambda v: int(v[1:]), default=None)
     last = entry["versions"].get(last_name) if last_name else None
-    if last is not None and last["made_from"] == made.made_from and last["recipe"] == recipe(fmt, made.view) and _outputs_present(last, folder):
+    if last is not None and _same_frames(last, made) and last["recipe"] == recipe(fmt, made.view) and _outputs_present(last, folder):
         names = [o["name"] for o in last["outputs"]]
         say(f"  {fmt}: up to date ({last_name}, frames {format_frames(list(made.seq.numbers))} unchanged{made.lacks}): "
             + ", ".join(str(folder / n) for n in names))
