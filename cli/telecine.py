@@ -98,15 +98,16 @@ def _timeline_sequence(in_dir: Path, prefix: str | None, allow_gaps: bool = Fals
         return None
     loaded, found = shot
     from motion.pipeline.farm.frames import format_frames
+    from motion.pipeline.timeline import format_range
     from motion.pipeline.telecine.sequence import sequence_of
 
     timeline = loaded.scene.timeline
-    click.echo(f"motion: {in_dir}: warning: frames {format_frames(sorted(found.foreign))} lie outside the timeline {timeline.first}-{timeline.last} "
+    click.echo(f"motion: {in_dir}: warning: frames {format_frames(sorted(found.foreign))} lie outside the timeline {format_range(timeline.first, timeline.last)} "
                f"of {loaded.path}: foreign, left out", err=True)
     name = next(iter(found.timeline.values())).name.rsplit(".", 2)[0]
     seq = sequence_of(found.timeline, name, directory=in_dir, require_even_height=even)
     if seq.missing and not allow_gaps:
-        raise FrameIOError(f"{in_dir}: frames {format_frames(list(seq.missing))} of sequence {name} ({seq.numbers[0]}-{seq.numbers[-1]}) are missing")
+        raise FrameIOError(f"{in_dir}: frames {seq.missing.text()} of sequence {name} ({format_range(seq.numbers[0], seq.numbers[-1])}) are missing")
     return seq
 
 

@@ -20,6 +20,7 @@ def validate(scenes: tuple[Path, ...], preset: str | None, as_json: bool) -> Non
     from motion.pipeline.errors import Problem, SceneError
     from motion.pipeline.presets import load_preset, overrides_from
     from motion.pipeline.scene import load_scene
+    from motion.pipeline.timeline import format_range
 
     nothing_to_finish()  # it only reads: its process may end without teardown (cli/main.py)
     overrides = overrides_from(load_preset(preset)[0], {}) if preset else None
@@ -44,7 +45,7 @@ def validate(scenes: tuple[Path, ...], preset: str | None, as_json: bool) -> Non
                         "objects": len(s.objects), "lights": len(s.lights), "materials": len(s.materials), "warnings": warnings})
         if not as_json:
             click.echo(
-                f"{path}: ok ({loaded.name}: frames {s.timeline.first}-{s.timeline.last} at {s.timeline.fps} fps, "
+                f"{path}: ok ({loaded.name}: frames {format_range(s.timeline.first, s.timeline.last)} at {s.timeline.fps} fps, "
                 f"{len(s.objects)} objects, {len(s.lights)} lights, {len(s.materials)} materials)"
             )
     if as_json:

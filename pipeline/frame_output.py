@@ -200,10 +200,63 @@ def write_frame(
 def write_exr(path: str | Path, header: Mapping[str, Any], channels: Mapping[str, np.ndarray], doing: str = "writing frame") -> Path:
     """The one EXR writer (frames, the temporal pass): `header` and `channels` as OpenEXR's
     binding takes them, written through the write policy (files.writing: a temporary file
-    and an atomic rename) and read back whole before it is published."""
+    and an atomic rename) and read back whole before it is published. The header gets the
+    digest of the pixels written (`motion:pixels_sha256`, pixel_digest), replacing any
+    copied from another frame."""
+    header = {**header, META_PREFIX + PIXELS_KEY: pixel_digest(channels)}
     with writing(path, doing, verify=_reads_back) as tmp:
         OpenEXR.File(dict(header), dict(channels)).write(str(tmp))
     return Path(path)
+
+
+# The header attribute (under META_PREFIX) holding the digest of a frame's pixels.
+PIXELS_KEY = "pixels_sha256"
+
+
+def _single_channels(channels: Mapping[str, np.ndarray]) -> list[tuple[str, np.ndarray]]:
+    """Channels as OpenEXR stores them, one plane each, by name: an [H, W, C] entry is
+    split as the binding writes it ('RGBA' -> R, G, B, A; 'noisy.RGBA' -> noisy.R ...)."""
+    out: list[tuple[str, np.ndarray]] = []
+    for name, px in channels.items():
+        px = np.asarray(px)
+        if px.ndim != 3:
+            out.append((name, px))
+            continue
+        head, _, tail = name.rpartition(".")
+        names = [f"{head}.{c}" if head else c for c in tail] if len(tail) == px.shape[2] else [f"{name}.{i}" for i in range(px.shape[2])]
+        out += [(n, px[..., i]) for i, n in enumerate(names)]
+    return sorted(out, key=lambda item: item[0])
+
+
+def pixel_digest(channels: Mapping[str, np.ndarray]) -> str:
+    """SHA-256 of a frame's pixels, whatever its header says: every channel (all layers),
+    in name order, each as its name, type, shape and samples. The same for the arrays
+    given to the writer and for the channels read back from the file (frame_pixels_digest),
+    so it identifies the picture: a rerun that writes the same pixels writes the same digest."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for name, plane in _single_channels(channels):
+        h.update(f"{name}\0{plane.dtype.str}\0{plane.shape}\0".encode())
+        h.update(np.ascontiguousarray(plane).data)
+    return h.hexdigest()
+
+
+def frame_pixels_digest(path: str | Path) -> str:
+    """The pixel digest of the EXR at `path`: the one its header records (written with the
+    frame, no pixel decoded), or, for a frame written without one, computed from its decoded
+    channels. FrameIOError for a file that does not read."""
+    path = Path(path)
+    header = read_header(path)
+    recorded = header.get(META_PREFIX + PIXELS_KEY)
+    if isinstance(recorded, str) and len(recorded) == 64 and all(c in "0123456789abcdef" for c in recorded):
+        return recorded
+    check_data_window(path, header)  # before a pixel is allocated
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            return pixel_digest({name: np.asarray(ch.pixels) for name, ch in f.channels().items()})
+    except Exception as exc:  # the bindings raise RuntimeError for any bad file
+        raise FrameIOError(f"{path}: not a readable OpenEXR file ({exc})") from None
 
 
 def _reads_back(tmp: Path) -> bool:

@@ -226,8 +226,22 @@ def timecode_fields(label_frame: int, fps: Fraction | int) -> tuple[int, int]:
     return divmod(label_frame, timecode_group(fps))
 
 
+def format_range(first: int, last: int, step: int = 1) -> str:
+    """One run of frames in the `--frames` grammar: '0-119', '0-118x2'; a run that starts
+    below 0 as 'A..B' ('-10..37', '-5..-1'), which '-10-37' would leave to be puzzled out.
+    One frame is its number.
+
+    >>> format_range(-10, 37)
+    '-10..37'
+    """
+    if first == last:
+        return str(first)
+    return f"{first}{'..' if first < 0 else '-'}{last}" + (f"x{step}" if step != 1 else "")
+
+
 def format_frames(frames: Sequence[int]) -> str:
-    """Compact text in the `--frames` grammar: [1,2,3,7] -> '1-3,7'; [0,2,4,6] -> '0-6x2'.
+    """Compact text in the `--frames` grammar: [1,2,3,7] -> '1-3,7'; [0,2,4,6] -> '0-6x2';
+    runs that start below 0 as 'A..B' (format_range).
 
     >>> format_frames([0, 2, 4, 6, 9, 10])
     '0-6x2,9,10'
@@ -242,7 +256,7 @@ def format_frames(frames: Sequence[int]) -> str:
             while j + 1 < len(fs) and fs[j + 1] - fs[j] == step:
                 j += 1
         if j - i >= 2:
-            parts.append(f"{fs[i]}-{fs[j]}" + (f"x{step}" if step != 1 else ""))
+            parts.append(format_range(fs[i], fs[j], step))
             i = j + 1
         else:
             parts.append(str(fs[i]))

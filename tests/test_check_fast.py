@@ -96,3 +96,23 @@ def test_reads_whole_decodes_no_more_than_the_last_chunk(tmp_path: Path) -> None
         cut.write_bytes(whole[:keep])
         assert not reads_whole(cut), keep
     assert not reads_whole(tmp_path / "absent.exr")
+
+
+def test_check_without_deliver_writes_nothing(tmp_path: Path) -> None:
+    """A scene that declares `output.deliver`: `render --check` built those deliverables
+    (a contact sheet v001 and the manifest written into the folder it checked). A check
+    writes nothing without `--deliver`: the folder is byte for byte as it was, and the
+    line says what was not made and how to ask; `--check --deliver contact` makes it."""
+    out = tmp_path / "out"
+    doc = json.loads(json.dumps(SHOT))
+    doc.setdefault("output", {})["deliver"] = ["contact"]
+    scene = _write(tmp_path / "keys.yaml", doc)
+    assert motion("render", scene, "-o", out, *TINY, "--deliver", "none").returncode == 0
+    before = {str(p.relative_to(out)): (p.stat().st_mtime_ns, p.read_bytes() if p.is_file() else None) for p in out.rglob("*")}
+    res = motion("render", scene, "-o", out, *TINY, "--check")
+    assert res.returncode == 0, res.stderr
+    assert {str(p.relative_to(out)): (p.stat().st_mtime_ns, p.read_bytes() if p.is_file() else None) for p in out.rglob("*")} == before
+    assert "contact: not made: --check makes no deliverables unless asked: --check --deliver" in res.stderr, res.stderr
+    res = motion("render", scene, "-o", out, *TINY, "--check", "--deliver", "contact")
+    assert res.returncode == 0, res.stderr
+    assert (out / "deliver" / "keys_contact_v001.png").is_file()

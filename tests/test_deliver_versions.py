@@ -40,11 +40,19 @@ def _manifest(out: Path) -> dict:
     return json.loads((out / "deliver" / "manifest.json").read_text())
 
 
+def _recolour_floor(scene: Path, value: float) -> None:
+    doc = yaml.safe_load(scene.read_text())
+    next(m for m in doc["materials"] if m["name"] == "floor")["color"] = value
+    scene.write_text(yaml.safe_dump(doc))
+
+
 def test_a_partial_rerun_rebuilds_the_whole_shot_as_a_new_version(tmp_path: Path) -> None:
-    """The shot, then `--overwrite --frames 4-7`: the 24p movie and the contact sheet of the
-    new version hold all 12 frames (they held the 4 re-rendered ones before, and the manifest
-    said 4-7 for every format), the first version is untouched, and the manifest says what
-    each version was made from; the same command again makes no new version."""
+    """The shot, then `--overwrite --frames 4-7` with nothing changed: the same pixels, so
+    no new version (before: v002, byte-identical to v001, "frames 4-7 changed since v001":
+    the manifest hashed whole EXR files, whose headers change on every render). The floor
+    recoloured and 4-7 rendered again: v002 of every format, holding all 12 frames, naming
+    exactly the frames whose pixels changed; v001 untouched; the same command again makes
+    no v003."""
     scene, out = _scene(tmp_path), tmp_path / "out"
     args = ["render", scene, "-o", out, *TINY, "--deliver", "24p,60i,contact"]
     first = motion(*args)
@@ -53,21 +61,26 @@ def test_a_partial_rerun_rebuilds_the_whole_shot_as_a_new_version(tmp_path: Path
     v1 = deliver / "farm-tiny_24p_v001.mov"
     v1_bytes = v1.read_bytes()
     assert _frames(v1) == 12
+    same = motion(*args, "--overwrite", "--frames", "4-7")
+    assert same.returncode == 0, same.stderr
+    assert "4 rendered" in same.stderr
+    assert same.stderr.count("up to date (v001, frames 0-11 unchanged") == 3 and "changed" not in same.stderr.replace("unchanged", ""), same.stderr
+    assert not list(deliver.glob("*v002*"))
+    _recolour_floor(scene, 0.2)
     fix = motion(*args, "--overwrite", "--frames", "4-7")
     assert fix.returncode == 0, fix.stderr
-    assert "4 rendered" in fix.stderr
     v2 = deliver / "farm-tiny_24p_v002.mov"
     assert _frames(v2) == 12 and v1.read_bytes() == v1_bytes
     assert len(list((deliver / "60i_v002").glob("*.exr"))) == 15 and len(list((deliver / "60i_v001").glob("*.exr"))) == 15
     assert (deliver / "farm-tiny_contact_v001.png").is_file() and (deliver / "farm-tiny_contact_v002.png").is_file()
-    assert "frames 4-7 changed since v001" in fix.stderr
+    assert fix.stderr.count("(frames 4-7 changed since v001)") == 3, fix.stderr  # the 24p and 60i movies, the sheet
     made = _manifest(out)["deliverables"]
     assert set(made) == {"24p", "60i", "contact"} and all(e["latest"] == "v002" for e in made.values())
     versions = made["24p"]["versions"]
     assert [v["frames"] for v in versions.values()] == ["0-11", "0-11"]
     files = versions["v002"]["frame_files"]
     assert sorted(map(int, files)) == list(range(12)) and files["5"]["name"] == "farm-tiny.0005.exr"
-    changed = sorted(int(n) for n in files if files[n]["sha256"] != versions["v001"]["frame_files"][n]["sha256"])
+    changed = sorted(int(n) for n in files if files[n]["pixels"] != versions["v001"]["frame_files"][n]["pixels"])
     assert changed == [4, 5, 6, 7]
     again = motion(*args, "--frames", "4-7")
     assert again.returncode == 0, again.stderr
@@ -212,3 +225,61 @@ def test_quiet_after_the_command_and_the_plan_says_where_output_goes(tmp_path: P
     plan = motion("render", scene, *TINY, "--dry-run", cwd=tmp_path)
     assert plan.returncode == 0, plan.stderr
     assert f"output:    {tmp_path / 'out' / 'farm-tiny'} (out/<name> under the current folder {tmp_path}" in plan.stdout
+
+
+def test_a_frames_pixel_digest_is_its_pixels_not_its_header(tmp_path: Path) -> None:
+    """The digest write_exr records (`motion:pixels_sha256`) is the picture's: two writes of
+    the same pixels with other header attributes have it equal (their files differ), one
+    pixel of one layer changes it, and a frame written without it (by OpenEXR alone, as
+    before) is decoded to the same digest."""
+    import OpenEXR
+
+    from motion.pipeline.frame_output import META_PREFIX, PIXELS_KEY, frame_pixels_digest, pixel_digest, read_header, write_frame
+
+    rgba = np.random.default_rng(1).random((6, 8, 4)).astype(np.float32)
+    normal = np.random.default_rng(2).random((6, 8, 3)).astype(np.float32)
+    a = write_frame(tmp_path / "a.0001.exr", rgba, {"render_seconds": 1.5}, aovs={"normal": normal})
+    b = write_frame(tmp_path / "b.0001.exr", rgba, {"render_seconds": 2.5, "worker": "w7"}, aovs={"normal": normal})
+    assert a.read_bytes() != b.read_bytes()
+    assert frame_pixels_digest(a) == frame_pixels_digest(b) == read_header(a)[META_PREFIX + PIXELS_KEY]
+    with OpenEXR.File(str(a), separate_channels=True) as f:
+        decoded = {name: np.asarray(ch.pixels) for name, ch in f.channels().items()}
+    assert pixel_digest(decoded) == frame_pixels_digest(a)
+    changed = normal.copy()
+    changed[3, 4, 2] += 0.25
+    c = write_frame(tmp_path / "c.0001.exr", rgba, {"render_seconds": 1.5}, aovs={"normal": changed})
+    assert frame_pixels_digest(c) != frame_pixels_digest(a)
+    bare = tmp_path / "bare.0001.exr"
+    header = {k: v for k, v in read_header(a).items() if k != META_PREFIX + PIXELS_KEY and k not in ("channels", "dataWindow", "displayWindow")}
+    OpenEXR.File(header, decoded).write(str(bare))
+    assert META_PREFIX + PIXELS_KEY not in read_header(bare)
+    assert frame_pixels_digest(bare) == frame_pixels_digest(a)
+
+
+def test_a_manifest_an_earlier_motion_wrote_makes_no_version_of_an_unchanged_shot(tmp_path: Path) -> None:
+    """A manifest that recorded whole files (each frame's file SHA-256, no pixel digest, as
+    motion wrote before): a plain rerun is up to date (its files are the recorded ones), and
+    frames rendered again make the next version, which says why without claiming that
+    pixels changed; after that, versions follow pixels."""
+    import hashlib
+
+    scene, out = _scene(tmp_path, last=3), tmp_path / "out"
+    args = ["render", scene, "-o", out, *TINY, "--deliver", "contact"]
+    assert motion(*args).returncode == 0
+    path = out / "deliver" / "manifest.json"
+    doc = json.loads(path.read_text())
+    v1 = doc["deliverables"]["contact"]["versions"]["v001"]
+    for rec in v1["frame_files"].values():
+        del rec["pixels"]
+        rec["sha256"] = hashlib.sha256((out / rec["name"]).read_bytes()).hexdigest()
+    del v1["timing"]
+    v1["made_from"] = hashlib.sha256(json.dumps([[int(n), r["sha256"]] for n, r in v1["frame_files"].items()]).encode()).hexdigest()
+    path.write_text(json.dumps(doc))
+    same = motion(*args)
+    assert same.returncode == 0 and "up to date (v001" in same.stderr, same.stderr
+    again = motion(*args, "--overwrite", "--frames", "1")
+    assert again.returncode == 0, again.stderr
+    assert "(frame files rewritten or changed since v001; an earlier motion recorded whole files, not pixels)" in again.stderr, again.stderr
+    assert "frames 1 changed" not in again.stderr
+    last = motion(*args, "--overwrite", "--frames", "2")
+    assert last.returncode == 0 and "up to date (v002" in last.stderr, last.stderr

@@ -104,3 +104,84 @@ def test_flipbook_page(rendered: Path) -> None:
     assert 'data-frame="3"' in body and 'data-loaded="5"' in body and "data-broken" not in body, body
     assert 'id="info-file">farm-tiny.0003.exr<' in dom and 'id="counter">4 / 5<' in dom
     assert shown.ids["stage"]["src"] == data["frames"][3]["src"]
+
+
+def test_frames_below_0_are_read_by_every_tool(tmp_path: Path) -> None:
+    """A timeline from -3: the renderer writes `farm-tiny.-0003.exr`; `export` refused the
+    folder ("frames -3..-1 are numbered below 0"), `--deliver` refused before the first
+    frame, and the sequence reader of the sheet, telecine and compare did not see those
+    files at all. Every tool reads them now, names its outputs as the renderer names
+    frames, and prints the range as -3..1 (not -3-1)."""
+    import yaml
+
+    from motion.pipeline.telecine.sequence import discover
+
+    doc = yaml.safe_load(SCENE.read_text())
+    doc["timeline"].update(first=-3, last=1)
+    scene = tmp_path / "neg.yaml"
+    scene.write_text(yaml.safe_dump(doc))
+    out = tmp_path / "out"
+    res = motion("render", scene, "-o", out, *TINY, "--deliver", "contact,24p")
+    assert res.returncode == 0, res.stderr
+    assert (out / "farm-tiny.-0003.exr").is_file() and (out / "deliver" / "farm-tiny_24p_v001.mov").is_file()
+    seq = discover(out)
+    assert seq.numbers == (-3, -2, -1, 0, 1) and not seq.missing and seq.padding == 4
+    res = motion("export", out, "-o", tmp_path / "png")
+    assert res.returncode == 0, res.stderr
+    assert sorted(p.name for p in (tmp_path / "png").iterdir()) == sorted(f"farm-tiny.{n}.png" for n in ("-0003", "-0002", "-0001", "0000", "0001"))
+    res = motion("contact-sheet", out, "-o", tmp_path / "sheet.png")
+    assert res.returncode == 0 and "(5 frames)" in res.stdout, res.stderr
+    res = motion("telecine", out, "-o", tmp_path / "60i")
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "60i" / "farm-tiny.-0003.exr").is_file() and len(list((tmp_path / "60i").glob("*.exr"))) == 6
+    res = motion("view", out, "-o", tmp_path / "flip" / "index.html")
+    assert res.returncode == 0, res.stderr
+    res = motion("render", scene, "-o", out, *TINY, "--check")
+    assert res.returncode == 0 and "all 5 frames (-3..1) complete" in res.stderr, res.stderr
+    plan = motion("render", scene, "-o", out, *TINY, "--dry-run")
+    assert "frames:    -3..1 (5)" in plan.stdout, plan.stdout
+
+
+def test_no_command_allocates_by_the_span_of_frame_numbers(tmp_path: Path) -> None:
+    """A folder holding t.0000.exr and t.2147483648.exr: `contact-sheet` and `export`
+    grew to 21 GB (the set of the 2**31 numbers absent between them) until the OOM killer
+    ended them. Under a 1.5 GiB address-space cap each finishes in seconds; the sheet
+    counts the missing numbers, the reader keeps them as one run."""
+    import resource
+    import sys
+    from fractions import Fraction
+
+    from farm_util import MOTION
+    from motion.pipeline.frame_output import write_frame
+
+    frames = tmp_path / "frames"
+    for n in (0, 2**31):
+        write_frame(frames / f"t.{n:04d}.exr", np.full((12, 16, 4), 0.3, np.float32), {"frame": n}, fps=Fraction(24))
+
+    def capped() -> None:  # (every run that reads the folder is capped: the code before took the machine's memory)
+        resource.setrlimit(resource.RLIMIT_AS, (3 << 29, 3 << 29))
+
+    read = ("from motion.pipeline.telecine.sequence import discover\n"
+            f"m = discover({str(frames)!r}, allow_gaps=True).missing\n"
+            "print(m.runs == ((1, 2**31 - 1),), len(m) == 2**31 - 1, 2**30 in m, m[-1] == 2**31 - 1, m[:2] == (1, 2))")
+    said = []
+    for argv in ([sys.executable, "-c", read], [MOTION, "contact-sheet", str(frames), "-o", str(tmp_path / "sheet.png")],
+                 [MOTION, "export", str(frames), "-o", str(tmp_path / "png")]):
+        res = subprocess.run(argv, capture_output=True, text=True, timeout=60, preexec_fn=capped)
+        assert res.returncode == 0, res.stderr
+        said.append(res.stdout)
+    assert said[0].split() == ["True"] * 5
+    assert "(2 frames, 2147483647 missing)" in said[1] and (tmp_path / "sheet.png").is_file()
+    assert sorted(p.name for p in (tmp_path / "png").iterdir()) == ["t.0000.png", "t.2147483648.png"]
+
+
+def test_a_range_from_below_0_is_printed_one_way_and_read_back() -> None:
+    """A timeline from -10 printed 'frames -10-37' (is that -10 to 37, or -10 and -37?):
+    every range that starts below 0 is printed A..B, which --frames reads back as written."""
+    from motion.pipeline.farm.frames import parse_frames
+    from motion.pipeline.timeline import format_frames, format_range
+
+    assert format_range(-10, 37) == "-10..37" and format_range(-5, -1) == "-5..-1" and format_range(0, 119) == "0-119"
+    for frames in (list(range(-10, 38)), list(range(-5, 0)), list(range(-10, 31, 2)), [-3, -1, 4, 5, 6]):
+        assert parse_frames(format_frames(frames)) == frames
+    assert format_frames(list(range(-10, 38))) == "-10..37" and format_frames(list(range(-10, 31, 2))) == "-10..30x2"

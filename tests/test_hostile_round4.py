@@ -158,12 +158,15 @@ def test_names_that_are_not_utf8_are_refused_before_any_frame(tmp_path: Path) ->
     assert sorted(os.listdir(tmp_path)) == sorted(["s.yaml", odd])
 
 
-def test_deliver_over_negative_frames_is_refused_before_rendering(tmp_path: Path) -> None:
+def test_deliver_over_negative_frames_is_made(tmp_path: Path) -> None:
+    """Frames below 0 are read by every tool (docs/telecine.md): the deliverable of a
+    timeline from -2 is made of its four frames (it was refused before the first frame)."""
     scene = tmp_path / "s.yaml"
     scene.write_text(BASE.replace("first: 0, last: 1", "first: -2, last: 1"))
     res = motion("render", scene, "-o", tmp_path / "out", "--deliver", "contact")
-    assert res.returncode == 2 and "frames -2,-1 are negative" in res.stderr, res.stderr
-    assert not (tmp_path / "out").exists()  # before: all four frames rendered, then the deliverable failed (exit 0)
+    assert res.returncode == 0, res.stderr
+    made = json.loads((tmp_path / "out" / "deliver" / "manifest.json").read_text())["deliverables"]["contact"]["versions"]["v001"]
+    assert made["frames"] == "-2..1" and sorted(map(int, made["frame_files"])) == [-2, -1, 0, 1]
 
 
 def test_an_ocio_config_that_is_not_a_regular_file_is_refused_not_waited_on(tmp_path: Path) -> None:
@@ -243,14 +246,17 @@ def test_frames_at_29_97_and_59_94_carry_drop_frame_timecode(tmp_path: Path, fps
     assert header_timecode(read_header(path)) == code  # before: non-drop at 2997/100
 
 
-def test_export_of_frames_below_zero_is_refused_not_half_done(tmp_path: Path) -> None:
+def test_export_of_frames_below_zero_is_whole(tmp_path: Path) -> None:
+    """Frames below 0 are read by every tool: export and view write all four images (before
+    the reader ignored them: 2 of 4 images, exit 0; then they were refused)."""
     scene = tmp_path / "s.yaml"
     scene.write_text(BASE.replace("first: 0, last: 1", "first: -2, last: 1"))
     assert motion("render", scene, "-o", tmp_path / "out").returncode == 0
     for command in ("export", "view"):
         res = motion(command, tmp_path / "out", "-o", tmp_path / command / "index.html" if command == "view" else tmp_path / command)
-        assert res.returncode == 2 and "frames -2,-1 are numbered below 0" in res.stderr, res.stderr  # before: 2 of 4 images, exit 0
-        assert not (tmp_path / command).exists()
+        assert res.returncode == 0, res.stderr
+    assert sorted(p.name for p in (tmp_path / "export").glob("*.png"))[:2] == ["s.-0001.png", "s.-0002.png"]
+    assert len(list((tmp_path / "export").glob("*.png"))) == 4 and len(list((tmp_path / "view" / "frames").glob("*.jpg"))) == 4
 
 
 # --- 9. import and size budgets ---------------------------------------------------------------

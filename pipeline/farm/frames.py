@@ -7,7 +7,8 @@ Grammar (Blender-like, comma-separated parts, each one of):
     A-BxS      every S-th frame from A       0-119x2  (0, 2, ... 118)
 
 Parts may mix (`1,5,10-20x5`); the result is sorted and each frame appears once.
-Negative frames are allowed (`-5--1`).
+Negative frames are allowed (`-5--1`, or `-5..-1`: ranges that start below 0 are printed
+`A..B`, timeline.format_range, and read back as written).
 """
 
 from __future__ import annotations
@@ -17,9 +18,9 @@ import re
 from typing import Sequence
 
 from ..errors import UsageError
-from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES, format_frames  # noqa: F401  (format_frames: re-exported for farm)
+from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES, format_frames, format_range  # noqa: F401  (format_frames: re-exported for farm)
 
-_PART = re.compile(r"^(-?\d+)(?:-(-?\d+)(?:x(\d+))?)?$")
+_PART = re.compile(r"^(-?\d+)(?:(?:-|\.\.)(-?\d+)(?:x(\d+))?)?$")  # A-B, or A..B (as ranges from below 0 are printed)
 
 
 def parse_frames(spec: str, first: int | None = None, last: int | None = None) -> list[int]:
@@ -56,8 +57,8 @@ def parse_frames(spec: str, first: int | None = None, last: int | None = None) -
         if first is not None and last is not None and (lo < first or r[-1] > last):
             # name the frames outside without listing a huge range one by one
             outside = [x for x in (range(lo, min(hi, first - 1) + 1, s), range(max(lo, last + 1), hi + 1, s)) if len(x)]
-            text = ",".join(format_frames(x) if len(x) <= 1000 else f"{x[0]}-{x[-1]}" for x in outside)
-            raise UsageError(f"--frames: {text} outside the scene's timeline {first}-{last}")
+            text = ",".join(format_frames(x) if len(x) <= 1000 else format_range(x[0], x[-1], x.step) for x in outside)
+            raise UsageError(f"--frames: {text} outside the scene's timeline {format_range(first, last)}")
         total += len(r)  # an upper bound on the selection (parts may overlap)
         if total > MAX_FRAMES:
             raise UsageError(f"--frames: {shown!r} selects more than {MAX_FRAMES} frames (the limit for one job)")

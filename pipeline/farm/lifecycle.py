@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Literal, Union, get_args
 
 from ..render.job import FrameResult
+from ..timeline import format_range
 from .config import FarmConfig
 from .task import ChunkResult
 
@@ -380,7 +381,7 @@ class Lifecycle:
         worker stopped) and count as lost."""
         for w, chunk in list(self.running.items()):
             if now - chunk.started > self.cfg.task_timeout_s:
-                reason = f"chunk {chunk.frames[0]}-{chunk.frames[-1]} timed out after {self.cfg.task_timeout_s:g}s on {w}"
+                reason = f"chunk {format_range(chunk.frames[0], chunk.frames[-1])} timed out after {self.cfg.task_timeout_s:g}s on {w}"
                 self._out.append(StopWorker(w, "timeout"))
                 self._worker(w).lost.append(reason)
                 chunk.reason = reason

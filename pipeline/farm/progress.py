@@ -137,7 +137,9 @@ class Progress:
         elif kind == "retry":
             self.retries += 1
             f = data["frames"]
-            self.log(f"  retrying frames {f[0]}-{f[-1]} (attempt {data['attempt'] + 1}): {data['error']}", logging.WARNING)
+            from ..timeline import format_range
+
+            self.log(f"  retrying frames {format_range(f[0], f[-1])} (attempt {data['attempt'] + 1}): {data['error']}", logging.WARNING)
         elif kind == "excluded":
             self.log(f"  worker {data['worker']} excluded for this job: {data['reason']}", logging.WARNING)
         elif kind == "held":

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterator
 from ..errors import AssetError, Problem
 from ..expr import ExpressionError, parse_expression
 from ..limits import MAX_IMAGE_BYTES, MAX_MESH_BYTES
-from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
+from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES, format_range
 from . import checked
 from .files import named_files
 from .problems import closest
@@ -711,5 +711,5 @@ def key_warnings(scene: Scene) -> list[str]:
             listed = ", ".join(vals[:6]) + (f" and {len(vals) - 6} more" if len(vals) > 6 else "")
             unit = ("frame" if in_frames else "second") + ("s" if len(vals) > 1 else "")
             hint = " (a key's time counts from frame 0, not from timeline.first)" if in_frames and tl.first > 0 and before else ""
-            out.append(f"{yaml_path(loc)}.{track}: keys at {unit} {listed} lie outside the timeline (frames {tl.first}-{tl.last}): {why}{hint}")
+            out.append(f"{yaml_path(loc)}.{track}: keys at {unit} {listed} lie outside the timeline (frames {format_range(tl.first, tl.last)}): {why}{hint}")
     return out

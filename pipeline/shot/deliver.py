@@ -12,14 +12,21 @@ explicit choice, `--deliver-frames A-B`, named apart (`<name>_24p_20-23_v001.mov
 
 Deliverables are versioned: `<name>_24p_v001.mov`, `<name>_24p_v002.mov`, the field frames
 of a pulldown in `60i_v001/`. `deliver/manifest.json` says what each version was made
-from (every frame's number, file and SHA-256, and the recipe: format record, view
-transform, motion's version), so a rerun whose frames and recipe are unchanged makes no
-new version, and one that changed makes the next; a previous version is never
-overwritten. Each version is built in a staging folder inside `deliver/` and published
-whole, so a failed rerun leaves every version as it was, with the manifest describing
-them. A damaged manifest (not JSON, wrong types, deep nesting, not a regular file) is
-discarded with one warning and rebuilt; version numbers then continue from the files on
-disk, and an entry naming an output outside the deliver folder is never trusted.
+from (every frame's number, file and pixel digest, the frames' rate and first timecode,
+and the recipe: format record, view transform, motion's version), so a rerun whose
+pictures and recipe are unchanged makes no new version (a re-rendered frame of the same
+pixels is the same frame, though its header differs), and one that changed makes the
+next, naming what changed; a previous version is never overwritten. A frame's pixel
+digest is in its EXR header (frame_output.write_exr writes it); a frame written without
+one is decoded once to compute it. Each version is built in a staging folder inside
+`deliver/` with the manifest's new content beside it; its outputs are then renamed into
+place and the manifest last (the outputs taken back if that fails), so a failed rerun
+(a full disk) leaves every version and the manifest as they were. A damaged manifest
+(not JSON, wrong types, deep nesting, not a regular file) is discarded with one warning
+and rebuilt; version numbers then continue from the files on disk, and an entry naming
+an output outside the deliver folder is never trusted. A manifest that is a folder is
+refused before the first frame. Versions are numbered v001 to v999999999; past the last,
+the run says so and what to move (never a version a later run cannot read).
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ import json
 import logging
 import os
 import re
+import shutil
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -37,9 +45,10 @@ from typing import Any, Callable, Mapping
 from ..deliverables import FORMATS
 from ..errors import FrameIOError, InputFileError, UsageError
 from ..farm.frames import format_frames, parse_frames
+from ..timeline import format_range
 from ..farm.report import write_report
-from ..files import confined, publish_path, staging
-from ..frame_output import disk_fault, inside, write_atomic
+from ..files import confined, disk_faults, publish, publish_path, staging
+from ..frame_output import disk_fault, frame_pixels_digest, inside
 from ..limits import read_bounded
 from ..scene.files import file_digest
 from .request import RenderRequest
@@ -50,6 +59,7 @@ MAX_MANIFEST_BYTES = 64 << 20  # a manifest of thousands of versions of 10,000-f
 # Bumped when what a deliverable holds changes for the same frames and options (the
 # movies' encoding, the view transform's defaults): old deliverables are then rebuilt.
 RECIPE_VERSION = 2
+MAX_VERSION = 999_999_999  # v001 .. v999999999: what a version's name holds (_VERSION)
 
 
 @dataclass
@@ -111,13 +121,18 @@ def deliver_plan(req: RenderRequest, loaded: Any, frames: list[int]) -> DeliverP
     if req.deliver_frames:
         try:
             chosen = parse_frames(req.deliver_frames, shot[0], shot[-1])
-        except ValueError as exc:
-            raise UsageError(f"--deliver-frames {req.deliver_frames}: {exc}") from None
+        except UsageError as exc:  # (the grammar's errors name --frames: this is --deliver-frames)
+            raise UsageError("--deliver-frames: " + str(exc).removeprefix("--frames: ")) from None
         if chosen != shot:  # the whole shot named as a range is the shot
             part = format_frames(chosen)
         shot = chosen
     if req.shard and not explicit:
-        return DeliverPlan((), {f: "a shard makes no deliverables: assemble after every shard with --check" for f in formats}, frames=tuple(shot))
+        return DeliverPlan((), {f: "a shard makes no deliverables: assemble after every shard with --check --deliver" for f in formats}, frames=tuple(shot))
+    if req.check and not explicit:  # a check writes nothing but its report
+        why = "--check makes no deliverables unless asked: --check --deliver"
+        for f in formats:
+            logging.getLogger("motion").info(f"  {f}: not made: {why} (the scene's output.deliver)")
+        return DeliverPlan((), {f: why for f in formats}, frames=tuple(shot))
     return DeliverPlan(formats, {}, explicit, tuple(shot), part)
 
 
@@ -138,12 +153,6 @@ def check_deliver(req: RenderRequest, loaded: Any, plan: DeliverPlan, frames: li
     interlaced = [r.name for r in records if r.interlaced]
     if interlaced and height % 2:
         raise UsageError(f"--deliver {','.join(interlaced)}: the render is {height} rows high; interlaced fields need an even height (--resolution)")
-    negative = [f for f in plan.frames if f < 0]
-    if negative:  # the sequence reader of every deliverable numbers frames from 0 (it rendered them all, then refused)
-        raise UsageError(
-            f"--deliver {','.join(plan.formats)}: frames {format_frames(negative)} are negative; deliverables are made from frames numbered from 0 "
-            f"(render them without --deliver, or start the timeline at 0)"
-        )
     movies = [r for r in records if r.codec is not None]
     try:
         import av
@@ -162,6 +171,7 @@ def check_deliver(req: RenderRequest, loaded: Any, plan: DeliverPlan, frames: li
     folder = out_dir / "deliver"
     if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
         raise UsageError(f"--deliver: {folder} is {'a link' if folder.is_symlink() else 'a file'}; deliverables are written only into a real folder inside the output folder")
+    check_manifest_path(folder)
     gaps = [b for a, b in zip(plan.frames, plan.frames[1:]) if b != a + 1]
     if gaps and plan.part is not None and any(r.gapless for r in records):
         raise UsageError(f"--deliver-frames {plan.part}: a movie needs a gapless run of frames (A-B)")
@@ -173,7 +183,7 @@ def check_deliver(req: RenderRequest, loaded: Any, plan: DeliverPlan, frames: li
     why = f"{what} lacks frames {format_frames(lacking)} (neither on disk nor in this run)"
     blocked = [r.name for r in records if r.gapless]
     if blocked and plan.explicit:
-        run = f"{frames[0]}-{frames[-1]}" if frames and frames == list(range(frames[0], frames[-1] + 1)) else "A-B"
+        run = format_range(frames[0], frames[-1]) if frames and frames == list(range(frames[0], frames[-1] + 1)) else "A-B"
         hint = "" if plan.part else f"; render them too, or make a deliverable of part of the shot with --deliver-frames {run}"
         raise UsageError(f"--deliver {','.join(blocked)}: a movie is made from a gapless run of frames, the whole shot: {why}{hint}")
     return replace(plan, formats=tuple(f for f in plan.formats if f not in blocked),
@@ -184,18 +194,31 @@ def check_deliver(req: RenderRequest, loaded: Any, plan: DeliverPlan, frames: li
 
 
 def frame_digests(paths: list[Path], known: Mapping[str, Any]) -> list[str]:
-    """SHA-256 of each frame file. A file whose name, size and modification time match the
-    manifest's record keeps its recorded digest (as git's index does), so an unchanged
-    folder of 1080p frames is not read again on every rerun."""
+    """The pixel digest of each frame (frame_output.frame_pixels_digest: from its header,
+    or decoded for a frame written without one). A file whose name, size and modification
+    time match the manifest's record keeps its recorded digest (as git's index does), so
+    an unchanged folder is not read again on every rerun."""
     out = []
     for p in paths:
         st = p.stat()
         rec = known.get(p.name)
-        if isinstance(rec, dict) and rec.get("size") == st.st_size and rec.get("mtime_ns") == st.st_mtime_ns and isinstance(rec.get("sha256"), str):
-            out.append(rec["sha256"])
+        if isinstance(rec, dict) and rec.get("size") == st.st_size and rec.get("mtime_ns") == st.st_mtime_ns and _digest(rec.get("pixels")):
+            out.append(rec["pixels"])
             continue
-        out.append(file_digest(p, memo=False))
+        try:
+            out.append(frame_pixels_digest(p))
+        except FrameIOError as exc:
+            raise UsageError(f"--deliver: {exc}") from None
     return out
+
+
+def check_manifest_path(folder: Path) -> None:
+    """A manifest that is a folder cannot be replaced by the new one: refused (before the
+    first frame, and again before anything is published), never a version left
+    unrecorded. A link, a FIFO or a damaged file is replaced (read_manifest warns)."""
+    path = folder / MANIFEST
+    if path.is_dir() and not path.is_symlink():
+        raise UsageError(f"--deliver: {path} is a folder; the deliverables' manifest is a file there: move the folder away")
 
 
 _VERSION = re.compile(r"^v(\d{3,9})$")
@@ -213,6 +236,10 @@ def _int(v: Any) -> bool:
     return isinstance(v, int) and not isinstance(v, bool)
 
 
+def _digest(v: Any) -> bool:
+    return isinstance(v, str) and _SHA.match(v) is not None
+
+
 def _version_ok(v: Any) -> bool:
     """One version's record has the shape we write (anything else: the manifest is damaged)."""
     if not isinstance(v, dict) or not isinstance(v.get("made_from"), str) or not isinstance(v.get("recipe"), dict):
@@ -222,7 +249,7 @@ def _version_ok(v: Any) -> bool:
         return False
     return isinstance(files, dict) and all(
         isinstance(k, str) and isinstance(r, dict) and _plain_name(r.get("name")) and _int(r.get("size")) and _int(r.get("mtime_ns"))
-        and isinstance(r.get("sha256"), str) and _SHA.match(r["sha256"]) is not None for k, r in files.items())
+        and (_digest(r.get("pixels")) or _digest(r.get("sha256"))) for k, r in files.items())  # (sha256: a whole file, before pixel digests)
 
 
 def _manifest_problem(data: Any) -> str | None:
@@ -291,11 +318,16 @@ def next_version(folder: Path, prefix: str, tag: str, entry: Mapping[str, Any]) 
     """The next version number of a deliverable: past every version the manifest records
     and every file or folder of that name on disk (so a discarded manifest never leads to
     an overwrite)."""
-    seen = [int(m.group(1)) for v in entry.get("versions", {}) if (m := _VERSION.match(v))]
+    recorded = max((int(m.group(1)) for v in entry.get("versions", {}) if (m := _VERSION.match(v))), default=0)
     names = re.compile(rf"^(?:{re.escape(prefix)}_)?{re.escape(tag)}_v(\d{{3,9}})(?:\.[A-Za-z0-9]+)?$")
-    if folder.is_dir():
-        seen += [int(m.group(1)) for p in folder.iterdir() if (m := names.match(p.name))]
-    return max(seen, default=0) + 1
+    on_disk = [(int(m.group(1)), p.name) for p in folder.iterdir() if (m := names.match(p.name))] if folder.is_dir() else []
+    last = max([recorded, *(n for n, _ in on_disk)])
+    if last >= MAX_VERSION:  # a name holds 9 digits: v1000000000 would be a version no later run reads
+        where = (f"{folder / MANIFEST} records v{recorded:03d}" if recorded >= MAX_VERSION
+                 else f"{folder / max(on_disk)[1]} is there")
+        raise UsageError(f"--deliver {tag}: {where}, the last version a name holds (v001 to v{MAX_VERSION}); "
+                         f"move the {tag} versions out of {folder} (and their entry out of {MANIFEST}) to number them from v001 again")
+    return last + 1
 
 
 def movie_rate(path: Path, interlaced: bool = False) -> str | None:
@@ -316,36 +348,65 @@ def movie_rate(path: Path, interlaced: bool = False) -> str | None:
     return (rate_label(rate) + (" interlaced, 2 fields a frame" if interlaced else "")) if rate else None
 
 
-def _changed(before: Mapping[str, Any] | None, files: Mapping[str, Any]) -> str:
-    """'frames 20-23 changed since v001' from the last version's frame records and these."""
+def _changed(before: Mapping[str, Any] | None, files: Mapping[str, Any], timing: Mapping[str, Any], same_recipe: bool) -> str:
+    """Why a new version is made, from the last version's record and these frames:
+    'frames 20-23 changed', 'frames 30-31 gone', 'the frames' rate or timecode changed',
+    'the recipe changed', or that its outputs are gone. Only a change that is there."""
     if not before:
         return ""
     old = before.get("frame_files", {})
-    diff = [int(n) for n, r in files.items() if (old.get(n) or {}).get("sha256") != r["sha256"]]
+    if old and not any(_digest(r.get("pixels")) for r in old.values() if isinstance(r, dict)):
+        return "frame files rewritten or changed; an earlier motion recorded whole files, not pixels"
+    diff = [int(n) for n, r in files.items() if (old.get(n) or {}).get("pixels") != r["pixels"]]
     gone = [int(n) for n in old if n not in files and n.lstrip("-").isdigit()]
     parts = ([f"frames {format_frames(sorted(diff))} changed"] if diff else []) + ([f"frames {format_frames(sorted(gone))} gone"] if gone else [])
-    return "; ".join(parts) or "the recipe changed"
+    if "timing" in before and before["timing"] != dict(timing):
+        parts.append("the frames' rate or timecode changed")
+    if not same_recipe:
+        parts.append("the recipe changed")
+    return "; ".join(parts) or "its outputs are gone"
 
 
-def _make(fmt: str, plan: DeliverPlan, seq: Any, folder: Path, prefix: str, view: Any, number: int, shared: Any = None) -> list[str]:
-    """Build version `number` of `fmt` in a staging folder and publish its outputs; their
-    names. `shared`: the viewed frames the run's deliverables share (telecine.movie.ViewedFrames)."""
-    from ..telecine.deliver import deliver
+def _since(why: str, last_name: str | None) -> str:
+    """'frames 4-7 changed since v001'; a reason with a clause after ';' keeps it last."""
+    head, sep, tail = why.partition("; an earlier")
+    return f"{head} since {last_name}" + (f"{sep}{tail}" if sep else "")
 
-    tag = f"{plan.tag(fmt)}_v{number:03d}"
-    with staging(folder, f"making the {fmt} deliverable in", prefix=f".staging-{fmt}-") as staged:
-        done = deliver(seq.directory, staged, (fmt,), view=view, sequence=seq, tags={fmt: tag}, shared=shared)[fmt]
-        names: list[str] = []
-        for p in done:
-            top = Path(p).relative_to(staged).parts[0]
-            if top not in names:
-                names.append(top)
-        clash = [n for n in names if os.path.lexists(folder / n)]
-        if clash:  # (another run made this version meanwhile): never overwrite one
-            raise UsageError(f"--deliver: {folder / clash[0]} appeared while it was being made; run again for the next version")
-        for name in names:
-            publish_path(staged / name, folder / name)
+
+def _outputs_of(done: list[Path], staged: Path) -> list[str]:
+    """The top-level names (files, or a pulldown's folder) of what a maker wrote in `staged`."""
+    names: list[str] = []
+    for p in done:
+        top = Path(p).relative_to(staged).parts[0]
+        if top not in names:
+            names.append(top)
     return names
+
+
+def _publish(staged: Path, names: list[str], manifest_tmp: Path, folder: Path) -> None:
+    """Move a version's staged outputs into `folder`, then the manifest that records them
+    (its new content already written whole in `manifest_tmp`): renames only, the manifest
+    last. If any step fails, the outputs already moved are taken back (they are new names:
+    nothing of an earlier version is touched), so the folder and its manifest stay as they
+    were."""
+    clash = [n for n in names if os.path.lexists(folder / n)]
+    if clash:  # (another run made this version meanwhile): never overwrite one
+        raise UsageError(f"--deliver: {folder / clash[0]} appeared while it was being made; run again for the next version")
+    check_manifest_path(folder)
+    moved: list[Path] = []
+    try:
+        with disk_faults("publishing a deliverable in", folder):
+            for name in names:
+                publish_path(staged / name, folder / name)
+                moved.append(folder / name)
+            publish(manifest_tmp, folder / MANIFEST)
+    except BaseException:
+        for path in moved:
+            if path.is_dir() and not path.is_symlink():
+                shutil.rmtree(path, ignore_errors=True)
+            else:
+                path.unlink(missing_ok=True)
+        raise
 
 
 def _deliver_folder(out_dir: Path) -> Path:
@@ -384,11 +445,12 @@ def _shot_sequence(out_dir: Path, plan: DeliverPlan, frame_paths: Mapping[int, P
 @dataclass(frozen=True)
 class _Made:
     """What the deliverables of one run are made from: the sequence, its frames' records
-    (number -> name, size, time, SHA-256), their digest, the frames lacking, the view and
-    the frames as viewed."""
+    (number -> name, size, time, pixel digest), the frames' rate and first timecode, their
+    digest, the frames lacking, the view and the frames as viewed."""
 
     seq: Any
     frame_files: dict[str, dict[str, Any]]
+    timing: dict[str, Any]
     made_from: str
     lacking: list[int]
     view: Any
@@ -400,40 +462,76 @@ class _Made:
         return f" (lacks frames {format_frames(self.lacking)})" if self.lacking else ""
 
 
+def _version_record(fmt: str, made: _Made, staged: Path, names: list[str]) -> dict[str, Any]:
+    """The manifest's record of a version whose outputs `names` are staged in `staged`."""
+    interlaced = FORMATS[fmt].interlaced
+    outputs = [{"name": n, "size": (staged / n).stat().st_size if (staged / n).is_file() else None,
+                "rate": movie_rate(staged / n, interlaced)} for n in names]
+    return {"frames": format_frames(list(made.seq.numbers)), "lacks": format_frames(made.lacking) or None, "made_from": made.made_from,
+            "timing": made.timing, "recipe": recipe(fmt, made.view), "outputs": outputs, "frame_files": made.frame_files,
+            "made_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+
+
 def _new_version(fmt: str, plan: DeliverPlan, made: _Made, folder: Path, prefix: str, manifest: dict[str, Any],
                  entry: dict[str, Any], last_name: str | None, say: Callable[[str], None]) -> tuple[str, list[str]]:
-    """Make the next version of `fmt`, record it in the manifest (written at once) and say
-    where it is; its name and output names."""
-    numbers, last = list(made.seq.numbers), entry["versions"].get(last_name) if last_name else None
-    interlaced = FORMATS[fmt].interlaced
+    """Make the next version of `fmt` in a staging folder, with the manifest that records
+    it written there too; then publish both (_publish: outputs, then the manifest) and say
+    where it is. Its name and output names."""
+    from ..telecine.deliver import deliver
+
+    last = entry["versions"].get(last_name) if last_name else None
     name = f"v{next_version(folder, prefix, plan.tag(fmt), entry):03d}"
-    names = _make(fmt, plan, made.seq, folder, prefix, made.view, int(name[1:]), made.shared)
-    outputs = [{"name": n, "size": (folder / n).stat().st_size if (folder / n).is_file() else None,
-                "rate": movie_rate(folder / n, interlaced)} for n in names]
-    entry["versions"][name] = {"frames": format_frames(numbers), "lacks": format_frames(made.lacking) or None, "made_from": made.made_from,
-                               "recipe": recipe(fmt, made.view), "outputs": outputs, "frame_files": made.frame_files,
-                               "made_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    entry.update(format=fmt, part=plan.part, latest=name)
-    manifest["deliverables"][plan.key(fmt)] = entry
-    write_atomic(folder / MANIFEST, (json.dumps(manifest, indent=2) + "\n").encode(), "writing the deliverables' manifest")
-    why = _changed(last, made.frame_files) if last is not None else ""
-    for o in outputs:
+    with staging(folder, f"making the {fmt} deliverable in", prefix=f".staging-{fmt}-") as staged:
+        done = deliver(made.seq.directory, staged, (fmt,), view=made.view, sequence=made.seq, tags={fmt: f"{plan.tag(fmt)}_{name}"}, shared=made.shared)[fmt]
+        names = _outputs_of(done, staged)
+        version = _version_record(fmt, made, staged, names)
+        updated = {**manifest, "deliverables": {**manifest["deliverables"], plan.key(fmt): {
+            **entry, "versions": {**entry["versions"], name: version}, "format": fmt, "part": plan.part, "latest": name}}}
+        manifest_tmp = staged / f".{MANIFEST}.new"
+        with disk_faults("writing the deliverables' manifest", folder / MANIFEST):
+            with open(manifest_tmp, "wb") as fh:
+                fh.write((json.dumps(updated, indent=2) + "\n").encode())
+                fh.flush()
+                os.fsync(fh.fileno())
+        _publish(staged, names, manifest_tmp, folder)
+    manifest["deliverables"] = updated["deliverables"]  # (what is on disk now)
+    why = _changed(last, made.frame_files, made.timing, last is not None and last.get("recipe") == recipe(fmt, made.view)) if last is not None else ""
+    for o in version["outputs"]:
         p = folder / o["name"]
         if p.is_dir():
             say(f"  {fmt}: {name}: {len(list(p.glob('*.exr')))} frames in {p}")
         else:
-            say(f"  {fmt}: {name}: {p}" + (f" ({o['rate']})" if o["rate"] else "") + made.lacks + (f" ({why} since {last_name})" if why else ""))
+            say(f"  {fmt}: {name}: {p}" + (f" ({o['rate']})" if o["rate"] else "") + made.lacks + (f" ({_since(why, last_name)})" if why else ""))
     return name, names
+
+
+def _same_frames(last: Mapping[str, Any], made: _Made) -> bool:
+    """Whether version `last` was made from these frames: its pixel-keyed digest; for a
+    version an earlier motion recorded by whole files (SHA-256 of each file), those files
+    unchanged (the old digest, from the file's size and time when they match its record),
+    so upgrading motion makes no version of an unchanged shot."""
+    if last["made_from"] == made.made_from:
+        return True
+    old = last.get("frame_files") or {}
+    if not old or any(_digest(r.get("pixels")) for r in old.values()) or set(old) != set(made.frame_files):
+        return False
+    by_name = {r["name"]: r for r in old.values()}
+    digests = []
+    for p in made.seq.paths:
+        st, rec = p.stat(), by_name.get(p.name)
+        known = isinstance(rec, dict) and rec.get("size") == st.st_size and rec.get("mtime_ns") == st.st_mtime_ns
+        digests.append(rec["sha256"] if known else file_digest(p, memo=False))  # type: ignore[index]
+    return last["made_from"] == hashlib.sha256(json.dumps([[n, d] for n, d in zip(made.seq.numbers, digests)]).encode()).hexdigest()
 
 
 def _one_format(fmt: str, plan: DeliverPlan, made: _Made, folder: Path, prefix: str, manifest: dict[str, Any],
                 say: Callable[[str], None]) -> tuple[str, str, list[str]]:
-    """The deliverable `fmt`: its last version when made from these frames with this
+    """The deliverable `fmt`: its last version when made from these pictures with this
     recipe and still there, else a new version; (status, version, output names)."""
     entry = manifest["deliverables"].get(plan.key(fmt)) or {"versions": {}}
     last_name = max(entry["versions"], key=lambda v: int(v[1:]), default=None)
     last = entry["versions"].get(last_name) if last_name else None
-    if last is not None and last["made_from"] == made.made_from and last["recipe"] == recipe(fmt, made.view) and _outputs_present(last, folder):
+    if last is not None and _same_frames(last, made) and last["recipe"] == recipe(fmt, made.view) and _outputs_present(last, folder):
         names = [o["name"] for o in last["outputs"]]
         say(f"  {fmt}: up to date ({last_name}, frames {format_frames(list(made.seq.numbers))} unchanged{made.lacks}): "
             + ", ".join(str(folder / n) for n in names))
@@ -450,18 +548,21 @@ def deliver_and_record(req: RenderRequest, out_dir: Path, plan: DeliverPlan, fra
     each one is and record them in the report (rewritten in place) and in
     deliver/manifest.json."""
     folder = _deliver_folder(out_dir)
+    check_manifest_path(folder)
     view = deliver_view(req)
     seq, lacking = _shot_sequence(out_dir, plan, frame_paths, prefix)
     manifest = read_manifest(folder)
     known = {r["name"]: r for e in manifest["deliverables"].values() for v in e["versions"].values() for r in v["frame_files"].values()}
     numbers = list(seq.numbers)
     digests = frame_digests(list(seq.paths), known)
-    frame_files = {str(n): {"name": p.name, "size": p.stat().st_size, "mtime_ns": p.stat().st_mtime_ns, "sha256": d}
+    frame_files = {str(n): {"name": p.name, "size": p.stat().st_size, "mtime_ns": p.stat().st_mtime_ns, "pixels": d}
                    for n, p, d in zip(numbers, seq.paths, digests)}
-    made_from = hashlib.sha256(json.dumps([[n, d] for n, d in zip(numbers, digests)]).encode()).hexdigest()
-    from ..telecine.movie import ViewedFrames
+    from ..telecine.movie import ViewedFrames, first_timecode
 
-    made = _Made(seq, frame_files, made_from, lacking, view, ViewedFrames(seq, view))
+    # what a deliverable takes from the frames besides their pixels: the rate and the first timecode
+    timing = {"fps": str(seq.fps) if seq.fps is not None else None, "timecode": first_timecode(seq)}
+    made_from = hashlib.sha256(json.dumps({"pixels": [[n, d] for n, d in zip(numbers, digests)], "timing": timing}).encode()).hexdigest()
+    made = _Made(seq, frame_files, timing, made_from, lacking, view, ViewedFrames(seq, view))
     record: dict[str, Any] = {}
     status: dict[str, str] = {}
     versions: dict[str, str] = {}

@@ -144,7 +144,7 @@ def plan_text(p: dict[str, Any]) -> str:
         f"  report:    {p['outputs']['report']}",
     ]
     for fmt, path in p["outputs"]["deliverables"].items():
-        lines.append(f"  {fmt}: {path} (the next version: made when its frames or recipe changed)")
+        lines.append(f"  {fmt}: {path} (the next version: made when its frames' pixels or its recipe changed)")
     for fmt, why in p["outputs"].get("deliverables_left_out", {}).items():
         lines.append(f"  {fmt}: not made: {why}")
     return "\n".join(lines)

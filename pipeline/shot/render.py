@@ -24,6 +24,7 @@ from ..farm.claims import Claimant, RunLock, clear_stale, new_run_id, release_ru
 from ..farm.config import FarmConfig, load_farm_config
 from ..farm.frames import chunks as make_chunks
 from ..farm.frames import default_chunk_size, format_frames, parse_frames, parse_shard, shard
+from ..timeline import format_range
 from ..farm.progress import Progress
 from ..farm.report import build_report, check_writable, merge_previous, write_report, write_report_somewhere
 from ..farm.run import MAX_RETRIES, MAX_THREADS, MAX_WORKERS, default_workers, run_chunks
@@ -96,7 +97,7 @@ def select_frames(req: RenderRequest, loaded: LoadedScene, preset: Preset | None
         selected = sorted(set(req.frames))
         outside = [f for f in selected if not scene.timeline.first <= f <= scene.timeline.last]
         if outside:
-            raise UsageError(f"frames {format_frames(outside)} are outside the timeline {scene.timeline.first}-{scene.timeline.last}")
+            raise UsageError(f"frames {format_frames(outside)} are outside the timeline {format_range(scene.timeline.first, scene.timeline.last)}")
     elif req.frames_spec:
         selected = parse_frames(req.frames_spec, scene.timeline.first, scene.timeline.last)
     else:
@@ -498,7 +499,7 @@ def bake_and_sort(req: RenderRequest, s: Settled) -> FramesAtHand:
     foreign = sorted(folder_frames(out_dir, loaded).foreign)
     if foreign:
         logging.getLogger("motion").warning(
-            f"motion: {out_dir}: frames {format_frames(foreign)} lie outside the timeline {loaded.scene.timeline.first}-{loaded.scene.timeline.last}: "
+            f"motion: {out_dir}: frames {format_frames(foreign)} lie outside the timeline {format_range(loaded.scene.timeline.first, loaded.scene.timeline.last)}: "
             "foreign, left as they are and in no deliverable")
     return FramesAtHand(bake_s, by_frame, paths, states, skipped, todo, foreign)
 

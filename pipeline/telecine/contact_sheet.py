@@ -19,9 +19,9 @@ import numpy as np
 
 from ..errors import UsageError
 from ..files import writing
-from ..timeline import rate_label
+from ..timeline import format_range, rate_label
 from .movie import ViewTransform
-from .sequence import Sequence, discover, read_mapped
+from .sequence import Sequence, discover, frame_digits, read_mapped
 
 LABEL_ROWS = 18
 GAP = 4
@@ -59,7 +59,7 @@ def sheet_layout(seq: Sequence, max_frames: int = 60) -> SheetLayout:
     picked = tuple(range(0, len(seq), step))
     span = seq.numbers[-1] - seq.first + 1
     count = f"{len(seq)} frames" if not seq.missing else f"{len(seq)} of {span} frames, {len(seq.missing)} missing"
-    header = (f"{seq.prefix}  frames {seq.first}-{seq.numbers[-1]} ({count})  {seq.width}x{seq.height}"
+    header = (f"{seq.prefix}  frames {format_range(seq.first, seq.numbers[-1])} ({count})  {seq.width}x{seq.height}"
               f"{f'  {rate_label(seq.fps)}' if seq.fps else ''}")  # '29.97 fps (30000/1001)', as the movies
     return SheetLayout(picked, tuple(seq.numbers[i] for i in picked), step, len(seq.missing), header)
 
@@ -137,7 +137,7 @@ def contact_sheet(
     fig.figimage(sheet[::-1], 0, 0, origin="lower", resize=False)
     fig.text(GAP / width, 1 - 4 / height, title, color="white", fontsize=8, va="top", ha="left", family="monospace")
     for x, y, number in places:
-        fig.text(x / width, 1 - (y + 2) / height, f"{number:04d}", color="white", fontsize=9,
+        fig.text(x / width, 1 - (y + 2) / height, frame_digits(number), color="white", fontsize=9,
                  va="top", ha="left", family="monospace")
     with writing(out_path, "writing the contact sheet", suffix=".png") as tmp:
         FigureCanvasAgg(fig).print_png(tmp)

@@ -27,7 +27,7 @@ from ..timeline import timecode
 from .cadence import Cadence, Tail, film_rate, output_rate, parse_cadence, plan
 from ..field_model import FieldOrder, check_field_order, weave_frames
 from .inverse import Detection, detect_pulldown, recovery_map
-from .sequence import Sequence, assembly_threads, discover, find_sequences, read_checked, read_mapped
+from .sequence import Sequence, assembly_threads, discover, find_sequences, frame_digits, read_checked, read_mapped
 
 if TYPE_CHECKING:
     from .movie import ViewedFrames
@@ -276,7 +276,7 @@ def telecine_sequence(
                     videoFrame=i,
                     tail=tail,
                 )
-                fname = f"{name}.{seq.first + i:0{seq.padding}d}.exr"
+                fname = f"{name}.{frame_digits(seq.first + i, seq.padding)}.exr"
                 writes.submit(
                     write_frame, staging.dir / fname, rgba, meta, fps=rate, timecode=_timecode(start + i, rate, drop_frame),
                     aovs=aovs or None, pixel_type=ptype, compression=out.compression,
@@ -392,7 +392,7 @@ def inverse_sequence(
             if detection is not None:
                 meta["cadencePhase"] = detection.phase
             number = r.source if numbered_by_source else seq.first + r.source
-            fname = f"{name}.{number:0{seq.padding}d}.exr"
+            fname = f"{name}.{frame_digits(number, seq.padding)}.exr"
             write_frame(
                 staging.dir / fname, rgba, meta, fps=film, timecode=timecode(i, film),
                 aovs=aovs or None, pixel_type=ptype, compression=out.compression,  # type: ignore[arg-type]

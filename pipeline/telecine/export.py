@@ -30,7 +30,7 @@ from ..errors import UsageError
 from ..files import writing
 from ..timeline import frame_timecode, rate_label
 from .movie import ViewTransform
-from .sequence import Sequence, discover, read_checked
+from .sequence import Sequence, discover, frame_digits, read_checked
 
 FORMATS = {"png": ".png", "jpg": ".jpg"}
 Progress = Callable[[int, int], None]
@@ -73,7 +73,6 @@ def export_images(
     if not 1 <= int(quality) <= 95:
         raise UsageError(f"--quality must be 1-95, got {quality}")
     view = view or ViewTransform()
-    _refuse_negative_frames(Path(in_dir), prefix)
     seq = discover(in_dir, prefix, require_even_height=False, allow_gaps=True)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -82,7 +81,7 @@ def export_images(
     paths = []
     for i, number in enumerate(seq.numbers):
         rgb = to_8bit(view(read_checked(seq, i).rgba))
-        path = out / f"{seq.prefix}.{number:0{seq.padding}d}{FORMATS[fmt]}"
+        path = out / f"{seq.prefix}.{frame_digits(number, seq.padding)}{FORMATS[fmt]}"
         with writing(path, f"writing the {fmt.upper()} image", suffix=FORMATS[fmt]) as tmp:
             image = Image.fromarray(rgb, "RGB")
             if fmt == "png":
@@ -96,25 +95,6 @@ def export_images(
         if progress is not None:
             progress(i + 1, len(seq))
     return Exported(out, tuple(paths), seq.numbers, seq, view.description)
-
-
-def _refuse_negative_frames(in_dir: Path, prefix: str | None) -> None:
-    """Frames numbered below 0 (`shot.-0002.exr`, a timeline that starts before 0) are not
-    part of a sequence the readers find: refuse them by name rather than export only the
-    rest and exit 0 (frames -2..1 wrote two of four images)."""
-    import re
-
-    from ..timeline import format_frames
-
-    name = re.compile(r"^(?P<prefix>.+)\.-(?P<number>\d+)\.exr$", re.IGNORECASE)
-    try:
-        found = [(m["prefix"], -int(m["number"])) for m in map(name.match, os.listdir(in_dir)) if m and not m.string.startswith(".")]
-    except OSError:
-        return  # not a folder: discover says so
-    negative = sorted(n for p, n in found if prefix is None or p == prefix)
-    if negative:
-        raise UsageError(f"{in_dir}: frames {format_frames(negative)} are numbered below 0; export reads frames numbered from 0 "
-                         f"(render the shot from frame 0, or export a folder without them)")
 
 
 def _frame_info(seq: Sequence, index: int, number: int, fps: Fraction | None) -> dict[str, Any]:
@@ -154,7 +134,7 @@ def write_flipbook(exported: Exported, path: str | Path, title: str | None = Non
         "width": seq.width,
         "height": seq.height,
         "view": exported.view,
-        "missing": list(seq.missing),
+        "missing": len(seq.missing),  # a count: frames 0 and 2**31 are two frames, not a list of 2**31
         "frames": frames,
     }
     page = _PAGE.replace("__TITLE__", html.escape(data["title"])).replace(
@@ -214,7 +194,7 @@ if (data.width < 320) stage.style.imageRendering = "pixelated";
 document.getElementById("title").textContent = data.title;
 document.getElementById("about").textContent =
   `${data.frames.length} frames, ${data.width}x${data.height}, ${data.fps_text}; ${data.view}` +
-  (data.missing.length ? `; ${data.missing.length} frame numbers missing` : "");
+  (data.missing ? `; ${data.missing} frame numbers missing` : "");
 function show(i) {
   index = Math.max(0, Math.min(data.frames.length - 1, i));
   const f = data.frames[index];

@@ -67,7 +67,7 @@ def weave_fields(
     from ..timeline import timecode
     from ..field_model import weave
     from .movie import write_movie
-    from .sequence import find_sequences
+    from .sequence import find_sequences, frame_digits
 
     fo: FieldOrder = check_field_order(order)
     field_dir, out_dir = Path(field_dir), Path(out_dir)
@@ -105,7 +105,7 @@ def weave_fields(
             secondFieldShutter=f"{second.meta['shutter_open']},{second.meta['shutter_close']}",
             time=float(first.meta["time"]),
         )
-        path = out_dir / f"{name}.{k:04d}.exr"
+        path = out_dir / f"{name}.{frame_digits(k)}.exr"
         write_frame(path, rgba, meta, fps=frame_rate, timecode=timecode(k, frame_rate, drop_frame=drop),
                     pixel_type=pixel_type, compression=compression, aovs=aovs or None)  # type: ignore[arg-type]
         written.append(path)

@@ -5,25 +5,108 @@ between the first and the last is present (only the contact sheet, a glance tool
 gaps: `allow_gaps=True`, the absent numbers in `Sequence.missing`), every header reads, every frame has the same
 size, and the height is even (a field pair needs as many bottom rows as top rows).
 Each problem is a `FrameIOError` naming the offending frame.
+
+This is the one reader of frame file names (`frame_number`, `frame_digits`): what the
+renderer writes (`shot.-0002.exr` for a frame below 0, as scene/schema.py `frame_name`
+does) every tool reads. Nothing here is sized by the span of the frame numbers (frames 0
+and 2**31 are two frames): the absent numbers are kept as runs (`Gaps`), never listed.
 """
 
 from __future__ import annotations
 
 import os
 import re
+from collections import abc
 from dataclasses import dataclass, field, replace
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Literal, Mapping, TypeVar
+from typing import Any, Callable, Iterable, Iterator, Literal, Mapping, TypeVar, overload
 
 import numpy as np
 
 from ..errors import FrameIOError
 from ..frame_output import Frame, check_data_window, motion_meta, read_frame, read_header
+from ..timeline import format_frames, format_range
 
 PixelType = Literal["half", "float"]
 
-_NAME = re.compile(r"^(?P<prefix>.+)\.(?P<number>\d+)\.exr$", re.IGNORECASE)
+_NAME = re.compile(r"^(?P<prefix>.+)\.(?P<number>-?\d+)\.exr$", re.IGNORECASE)
+
+
+def frame_number(name: str) -> tuple[str, int, int] | None:
+    """`shot.0012.exr` -> ('shot', 12, 4), `shot.-0002.exr` -> ('shot', -2, 4): prefix,
+    number and digits (the padding, without the sign); None for another name."""
+    m = _NAME.match(name)
+    if m is None:
+        return None
+    return m["prefix"], int(m["number"]), len(m["number"].lstrip("-"))
+
+
+def frame_digits(number: int, padding: int = 4) -> str:
+    """A frame number as it is written in a file name: 12 -> '0012', -2 -> '-0002' (the sign
+    before `padding` digits, as the renderer names frames)."""
+    return f"{number:0{padding}d}" if number >= 0 else f"-{-number:0{padding}d}"
+
+
+@dataclass(frozen=True, eq=False)
+class Gaps(abc.Sequence):  # type: ignore[type-arg]
+    """The absent frame numbers between a sequence's first and last frame, held as runs
+    (first, last) between the frames present: as long as the frames, however far apart
+    their numbers are. It reads as the sequence of the numbers themselves (len, index,
+    slice, `in`, iteration, truth, == a tuple), each computed when asked."""
+
+    runs: tuple[tuple[int, int], ...] = ()
+
+    @classmethod
+    def between(cls, numbers: Iterable[int]) -> "Gaps":
+        """The runs absent between sorted, distinct `numbers`."""
+        ns = list(numbers)
+        return cls(tuple((a + 1, b - 1) for a, b in zip(ns, ns[1:]) if b > a + 1))
+
+    def __len__(self) -> int:
+        return sum(b - a + 1 for a, b in self.runs)
+
+    def __bool__(self) -> bool:
+        return bool(self.runs)
+
+    def __iter__(self) -> Iterator[int]:
+        for a, b in self.runs:
+            yield from range(a, b + 1)
+
+    def __contains__(self, number: object) -> bool:
+        return isinstance(number, int) and any(a <= number <= b for a, b in self.runs)
+
+    @overload
+    def __getitem__(self, index: int) -> int: ...
+    @overload
+    def __getitem__(self, index: slice) -> tuple[int, ...]: ...
+    def __getitem__(self, index: int | slice) -> int | tuple[int, ...]:
+        if isinstance(index, slice):
+            return tuple(self[i] for i in range(*index.indices(len(self))))
+        i = index + len(self) if index < 0 else index
+        for a, b in self.runs:
+            if 0 <= i <= b - a:
+                return a + i
+            i -= b - a + 1
+        raise IndexError("Gaps index out of range")
+
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, Gaps):
+            return self.runs == other.runs
+        return isinstance(other, (tuple, list)) and len(self) == len(other) and all(x == y for x, y in zip(self, other))
+
+    def __hash__(self) -> int:
+        return hash(self.runs)
+
+    def __repr__(self) -> str:
+        return f"Gaps({self.text()})"
+
+    def text(self, limit: int = 8) -> str:
+        """The absent numbers as runs in the `--frames` grammar ('3-5,9'), at most `limit`
+        runs and then how many more."""
+        runs = self.runs
+        shown = ",".join(format_range(a, b) if b > a + 1 else format_frames([a, b]) for a, b in runs[:limit])
+        return shown + (f" and {len(runs) - limit} more runs" if len(runs) > limit else "")
 
 
 @dataclass(frozen=True)
@@ -39,7 +122,7 @@ class Sequence:
     pixel_type: PixelType
     fps: Fraction | None = None
     first_meta: dict[str, Any] = field(default_factory=dict)
-    missing: tuple[int, ...] = ()  # absent frame numbers between first and last (allow_gaps only)
+    missing: Gaps = Gaps()  # absent frame numbers between first and last, as runs (allow_gaps only)
     padding: int = 4  # digits of the frame number in names made from it (at least 4)
 
     def __len__(self) -> int:
@@ -87,9 +170,9 @@ def find_sequences(directory: str | Path) -> dict[str, list[tuple[int, Path]]]:
         raise FrameIOError(f"{directory}: no such folder")
     groups: dict[str, list[tuple[int, Path]]] = {}
     for path in directory.iterdir():
-        m = _NAME.match(path.name)
-        if m and not path.name.startswith("."):
-            groups.setdefault(m["prefix"], []).append((int(m["number"]), path))
+        found = frame_number(path.name)
+        if found and not path.name.startswith("."):
+            groups.setdefault(found[0], []).append((found[1], path))
     for items in groups.values():
         items.sort()
     return groups
@@ -124,16 +207,16 @@ def discover(
         prefix, items = next(iter(groups.items()))
 
     numbers = [n for n, _ in items]
-    if len(set(numbers)) != len(numbers):
-        dup = next(n for n in numbers if numbers.count(n) > 1)
+    dup = next((a for a, b in zip(numbers, numbers[1:]) if a == b), None)  # (sorted: a repeat is adjacent)
+    if dup is not None:
         names = [p.name for n, p in items if n == dup]
         raise FrameIOError(f"{directory}: frame {dup} appears twice ({', '.join(names)})")
-    pad = len(_NAME.match(items[0][1].name)["number"])  # type: ignore[index]
-    missing = sorted(set(range(numbers[0], numbers[-1] + 1)) - set(numbers))
+    pad = frame_number(items[0][1].name)[2]  # type: ignore[index]
+    missing = Gaps.between(numbers)
     if missing and not allow_gaps:
-        shown = ", ".join(str(directory / f"{prefix}.{n:0{pad}d}.exr") for n in missing[:3])
+        shown = ", ".join(str(directory / f"{prefix}.{frame_digits(n, pad)}.exr") for n in missing[:3])
         more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
-        raise FrameIOError(f"missing frame {shown}{more} in sequence {prefix} ({numbers[0]}-{numbers[-1]})")
+        raise FrameIOError(f"missing frame {shown}{more} in sequence {prefix} ({format_range(numbers[0], numbers[-1])})")
     if len(items) < min_frames:
         raise FrameIOError(f"{directory}: sequence {prefix} has {len(items)} frames, need at least {min_frames}")
     return sequence_of(dict(items), prefix, directory=directory, require_even_height=require_even_height, padding=max(4, pad))
@@ -195,7 +278,7 @@ def sequence_of(
         pixel_type=_pixel_type(items[0][1]),
         fps=fps,
         first_meta=first_meta,
-        missing=tuple(sorted(set(range(numbers[0], numbers[-1] + 1)) - set(numbers))),
+        missing=Gaps.between(numbers),
         padding=padding,
     )
 
@@ -207,7 +290,7 @@ def select(seq: Sequence, numbers: list[int] | tuple[int, ...]) -> Sequence:
     absent = [n for n in numbers if n not in where]
     if absent:
         raise FrameIOError(f"{seq.directory}: frame {absent[0]} of sequence {seq.prefix} is not there" + (f" ({len(absent)} absent)" if len(absent) > 1 else ""))
-    return replace(seq, numbers=tuple(numbers), paths=tuple(where[n] for n in numbers), missing=())
+    return replace(seq, numbers=tuple(numbers), paths=tuple(where[n] for n in numbers), missing=Gaps())
 
 
 T = TypeVar("T")
