@@ -112,10 +112,8 @@ def test_a_changed_dynamics_input_simulates_again(tmp_path: Path, root: Path, ca
 def test_a_damaged_or_forged_entry_is_discarded_with_one_warning(tmp_path: Path, root: Path, caplog: pytest.LogCaptureFixture, damage: str) -> None:
     """A truncated entry, a flipped byte, a file that is no .npz, an entry whose outline
     names a class outside the simulation's records, or one whose arrays have the wrong
-    shape (digests made right by the forger): one warning, simulated again (no traceback,
+    shape (a well-formed file, CRCs right): one warning, simulated again (no traceback,
     nothing executed), and the new simulation is kept in its place."""
-    from motion.pipeline.bake import keep
-
     scene = _write(tmp_path / "s.yaml", SHOT)
     fresh, _ = _simulate(scene, caplog)
     entry = next((root / "simulations").glob("sim-*.npz"))
@@ -139,7 +137,7 @@ def test_a_damaged_or_forged_entry_is_discarded_with_one_warning(tmp_path: Path,
             arrays[first] = arrays[first].ravel()[:3].copy()
         raw = outline.encode()
         buf = io.BytesIO()
-        np.savez(buf, **arrays, __outline__=np.frombuffer(raw, np.uint8), __digest__=np.frombuffer(keep._digest(raw, arrays).encode(), np.uint8))
+        np.savez(buf, **arrays, __outline__=np.frombuffer(raw, np.uint8))
         data = buf.getvalue()
     entry.write_bytes(data)
     again, kept = _simulate(scene, caplog)

@@ -11,10 +11,10 @@ again (docs/bake-format.md, "The kept simulation").
   and output settings change nothing.
 - An entry is plain data: one uncompressed `.npz` of numpy arrays (read with
   `allow_pickle=False`) and a JSON outline of the records they fill, whose classes come from
-  a fixed table (`_CLASSES`); nothing in it is executed. The entry carries the SHA-256 of its
-  outline and arrays; a damaged or forged entry (unreadable, another digest, a record or
-  array of the wrong kind, sampling that fails) is one warning, discarded and simulated
-  again.
+  a fixed table (`_HOMES`); nothing in it is executed. Each member carries the zip format's
+  CRC-32, checked as it is read; a damaged or forged entry (unreadable, a CRC that does not
+  match, a record or array of the wrong kind, sampling that fails) is one warning, discarded
+  and simulated again.
 """
 
 from __future__ import annotations
@@ -24,13 +24,14 @@ import hashlib
 import io
 import json
 import logging
+import os
 import zipfile
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any, BinaryIO, Callable
 
 import numpy as np
 
-from ..cache import STORES, Store
+from ..cache import STORES, Store, trusted
 
 if TYPE_CHECKING:
     from ..scene.loader import LoadedScene
@@ -40,7 +41,6 @@ log = logging.getLogger("motion")
 STORE: Store = STORES["simulations"]
 FORMAT = "motion-simulation/1"
 _OUTLINE = "__outline__"  # the JSON outline, as uint8
-_DIGEST = "__digest__"  # SHA-256 of the outline and every array, as uint8 hex
 # what the simulation's code is: the stages it runs and the modules they read below them
 _CODE_FOLDERS = ("dynamics", "motion")
 _CODE_FILES = ("bake/keep.py", "bake/timing.py", "geometry.py", "meshes.py", "expr.py", "timeline.py", "scene/dynamics_schema.py",
@@ -192,46 +192,40 @@ def _rebuild(node: Any, arrays: Any, depth: int = 0) -> Any:
     return cls(**{k: _rebuild(v, arrays, depth + 1) for k, v in fields.items()})
 
 
-def _digest(outline: bytes, arrays: dict[str, np.ndarray]) -> str:
-    """SHA-256 over the outline and every array's name, dtype, shape and bytes."""
-    h = hashlib.sha256(outline)
-    for name in sorted(arrays):
-        a = arrays[name]
-        h.update(f"|{name}|{a.dtype.str}|{a.shape}|".encode())
-        h.update(np.ascontiguousarray(a).tobytes())
-    return h.hexdigest()
-
-
 def encode(simulation: Any) -> bytes:
-    """The simulation as one uncompressed .npz: its arrays, its outline, their digest."""
+    """The simulation as one uncompressed .npz: its arrays and its outline (each member
+    carries the zip format's CRC-32 of its bytes, checked as it is read back)."""
     arrays: dict[str, np.ndarray] = {}
     outline = json.dumps({"format": FORMAT, "value": _outline(simulation, arrays)}, separators=(",", ":")).encode()
-    digest = _digest(outline, arrays)
     buf = io.BytesIO()
-    np.savez(buf, **arrays, **{_OUTLINE: np.frombuffer(outline, dtype=np.uint8), _DIGEST: np.frombuffer(digest.encode(), dtype=np.uint8)})
+    np.savez(buf, **arrays, **{_OUTLINE: np.frombuffer(outline, dtype=np.uint8)})
     return buf.getvalue()
 
 
-def decode(data: bytes, limit: int) -> Any:
-    """The simulation an entry holds; DamagedEntry when it is not one (bounded: at most
-    `limit` bytes once unpacked, stored members only, no pickles)."""
+def decode(data: bytes | BinaryIO, limit: int) -> Any:
+    """The simulation an entry (its bytes, or the open file) holds; DamagedEntry when it is
+    not one (bounded: at most `limit` bytes once unpacked, stored members only, no pickles; a
+    damaged byte fails its member's CRC-32 as it is read)."""
+    source = io.BytesIO(data) if isinstance(data, bytes) else data
     try:
-        with zipfile.ZipFile(io.BytesIO(data)) as z:
+        with zipfile.ZipFile(source) as z:
             infos = z.infolist()
             if any(i.compress_type != zipfile.ZIP_STORED for i in infos) or sum(i.file_size for i in infos) > limit:
                 raise DamagedEntry("compressed or larger than its bound")
-        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
-            arrays = {name: npz[name] for name in npz.files}
+            arrays = {}
+            for info in infos:  # each member as numpy's own .npz reader reads it (np.load), from the file itself
+                if not info.filename.endswith(".npy"):
+                    raise DamagedEntry(f"a member {info.filename[:40]!r} that is no array")
+                with z.open(info) as member:
+                    arrays[info.filename[:-4]] = np.lib.format.read_array(member, allow_pickle=False)
     except DamagedEntry:
         raise
     except Exception as exc:  # a damaged zip or .npy header: any of zipfile's, numpy's or the OS's errors
         raise DamagedEntry(f"unreadable ({type(exc).__name__})") from None
-    outline_arr, digest_arr = arrays.pop(_OUTLINE, None), arrays.pop(_DIGEST, None)
-    if outline_arr is None or digest_arr is None or outline_arr.dtype != np.uint8 or digest_arr.dtype != np.uint8:
-        raise DamagedEntry("no outline or digest")
+    outline_arr = arrays.pop(_OUTLINE, None)
+    if outline_arr is None or outline_arr.dtype != np.uint8:
+        raise DamagedEntry("no outline")
     outline = outline_arr.tobytes()
-    if _digest(outline, arrays) != digest_arr.tobytes().decode("ascii", "replace"):
-        raise DamagedEntry("its digest does not match its contents")
     if any(a.dtype.kind not in "biuf" for a in arrays.values()):
         raise DamagedEntry("an array of no numeric type")
     try:
@@ -282,10 +276,13 @@ def kept(loaded: "LoadedScene", t_start: float, t_end: float, simulate: Callable
     run's simulation). Logs which."""
     key = simulation_key(loaded, t_start, t_end)
     entry = STORE.path(key, stem="sim", suffix=".npz")
-    data = STORE.read(entry, MAX_KEPT_BYTES)
-    if data is not None:
+    st = trusted(entry)  # ours, a regular file (never a FIFO), in folders only we may write
+    if st is None and os.path.lexists(entry):
+        STORE.stats["refused"] += 1
+    if st is not None and st.st_size <= MAX_KEPT_BYTES:
         try:
-            simulation = decode(data, MAX_KEPT_BYTES)
+            with open(entry, "rb") as f:  # read in place: a 100 MB entry is not copied into memory first
+                simulation = decode(f, MAX_KEPT_BYTES)
             with np.errstate(all="ignore"):
                 _samples(simulation)
         except DamagedEntry as exc:
