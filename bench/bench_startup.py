@@ -40,7 +40,8 @@ ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 MOTION = str(BIN / "motion")
 EXAMPLES = sorted(p.stem for p in (ROOT / "scenes").glob("*.yaml"))
-RERUN = ("bouncing-balls", "cannonball-splash")  # simulated shots whose rerun reads the kept simulation
+# simulated shots whose rerun reads the kept simulation: two examples and the kind of shot issue 46 wrote
+RERUN = {**{n: ROOT / "scenes" / f"{n}.yaml" for n in ("bouncing-balls", "cannonball-splash")}, "wrecking": ROOT / "bench" / "shots" / "wrecking.yaml"}
 
 
 def timed(cmd: list[str], env: dict[str, str] | None = None) -> tuple[float, float]:
@@ -73,9 +74,9 @@ def main() -> None:
                                                 "-o", str(tmp / "one"), "--overwrite"]
     for name in EXAMPLES:
         jobs[f"validate {name}"] = [MOTION, "validate", str(ROOT / "scenes" / f"{name}.yaml")]
-    for name in RERUN:  # the untimed pass renders the frames; every timed run renders nothing (the kept simulation, bake/keep.py)
-        jobs[f"rerun ci-smoke {name}, renders nothing"] = [MOTION, "-q", "render", str(ROOT / "scenes" / f"{name}.yaml"), "--preset", "ci-smoke",
-                                                           "-o", str(tmp / f"rerun-{name}"), "--resume"]
+    for name, path in RERUN.items():  # the untimed pass renders the frames; every timed run renders nothing (the kept simulation, bake/keep.py)
+        jobs[f"rerun ci-smoke {name}, renders nothing"] = [MOTION, "-q", "render", str(path), "--preset", "ci-smoke", "-o", str(tmp / f"rerun-{name}"), "--resume"]
+        jobs.setdefault(f"validate {name}", [MOTION, "validate", str(path)])
     jobs["--dry-run bouncing-balls"] = [MOTION, "-q", "render", str(ROOT / "scenes" / "bouncing-balls.yaml"), "--dry-run", "-o", str(tmp / "dry")]
     jobs["--help"] = [MOTION, "--help"]
     if args.only:
