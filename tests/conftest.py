@@ -23,7 +23,6 @@ from _support import run_motion
 SCRATCH = Path(__file__).resolve().parents[1] / ".pytest-tmp"
 SESSION = pytest.StashKey[Path]()
 PASSED = pytest.StashKey[bool]()
-USER_ENV = {k: os.environ.get(k) for k in ("MOTION_CACHE_DIR", "DRJIT_CACHE_DIR", "XDG_CACHE_HOME")}  # as the session found them
 
 
 def _sweep(scratch: Path) -> None:
