@@ -202,6 +202,28 @@ def encode(simulation: Any) -> bytes:
     return buf.getvalue()
 
 
+def _read_npy(member: BinaryIO, size: int) -> np.ndarray:
+    """One .npy member, its header believed only as far as its own bytes go: a numeric dtype,
+    and a shape whose bytes fit in the member's `size` (a forged shape allocates nothing)."""
+    fmt = np.lib.format
+    version = fmt.read_magic(member)
+    shape, fortran, dtype = (fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0)(member)
+    if dtype.hasobject or dtype.kind not in "biuf":
+        raise DamagedEntry("an array of no numeric type")
+    count = 1
+    for n in shape:
+        count *= int(n)
+    nbytes = count * dtype.itemsize
+    if nbytes > size:
+        raise DamagedEntry(f"an array of {nbytes} bytes in a member of {size}")
+    data = bytearray(nbytes)
+    if member.readinto(data) != nbytes:
+        raise DamagedEntry("an array cut short")
+    if member.read(1):  # the member ends with its array; reading to its end checks its CRC-32
+        raise DamagedEntry("bytes after an array")
+    return np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C")
+
+
 def decode(data: bytes | BinaryIO, limit: int) -> Any:
     """The simulation an entry (its bytes, or the open file) holds; DamagedEntry when it is
     not one (bounded: at most `limit` bytes once unpacked, stored members only, no pickles; a
@@ -213,11 +235,11 @@ def decode(data: bytes | BinaryIO, limit: int) -> Any:
             if any(i.compress_type != zipfile.ZIP_STORED for i in infos) or sum(i.file_size for i in infos) > limit:
                 raise DamagedEntry("compressed or larger than its bound")
             arrays = {}
-            for info in infos:  # each member as numpy's own .npz reader reads it (np.load), from the file itself
+            for info in infos:
                 if not info.filename.endswith(".npy"):
                     raise DamagedEntry(f"a member {info.filename[:40]!r} that is no array")
                 with z.open(info) as member:
-                    arrays[info.filename[:-4]] = np.lib.format.read_array(member, allow_pickle=False)
+                    arrays[info.filename[:-4]] = _read_npy(member, info.file_size)
     except DamagedEntry:
         raise
     except Exception as exc:  # a damaged zip or .npy header: any of zipfile's, numpy's or the OS's errors
