@@ -16,6 +16,7 @@ import yaml
 
 from _dynamics_scenes import ball, floor
 from _support import run_motion
+from farm_util import report
 
 KEPT = "kept from an earlier run"
 
@@ -154,17 +155,17 @@ def test_ci_smoke_reads_the_kept_simulation_and_renders_the_same_pixels(tmp_path
     """Two frames rendered in one folder keep the simulation (first run: simulated); the
     ci-smoke job of the same scene in a fresh folder reads it (its three frames are a
     subset of the timeline the simulation covers) and its frames 1001 and 1012 are bit for
-    bit those of the first run."""
+    bit those of the first run. Each run's report says which (`simulation`)."""
     from motion.pipeline.frame_output import read_frame
 
     env = {"MOTION_CACHE_DIR": str(tmp_path / "cache")}
     scene = _write(tmp_path / "keep.yaml", SHOT)
     first = run_motion("render", str(scene), "--preset", "ci-smoke", "--frames", "1001,1012", "-o", str(tmp_path / "a"), "--no-progress", env=env)
     assert first.returncode == 0, first.stderr
-    assert KEPT not in first.stderr
+    assert KEPT not in first.stderr and report(tmp_path / "a")["simulation"] == "simulated"
     smoke = run_motion("render", str(scene), "--preset", "ci-smoke", "-o", str(tmp_path / "b"), "--no-progress", env=env)
     assert smoke.returncode == 0, smoke.stderr
-    assert KEPT in smoke.stderr
+    assert KEPT in smoke.stderr and report(tmp_path / "b")["simulation"] == "kept"
     for frame in (1001, 1012):
         a = read_frame(tmp_path / "a" / f"keep.{frame}.exr").rgba
         b = read_frame(tmp_path / "b" / f"keep.{frame}.exr").rgba
