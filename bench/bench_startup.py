@@ -3,6 +3,7 @@
     python bench/bench_startup.py               # 5 alternating rounds, warm kernel cache, then an empty one
     python bench/bench_startup.py --rounds 3 --no-cold
     python bench/bench_startup.py --only validate   # validate of every example, warm and with an empty cache root
+    python bench/bench_startup.py --only rerun --rounds 3   # reruns that render nothing, beside validate
 
 Jobs (each a fresh process, alternating, medians, with the CPU named):
 - the ci-smoke job of every example (`motion -q render SCENE --preset ci-smoke`), and the
@@ -10,6 +11,8 @@ Jobs (each a fresh process, alternating, medians, with the CPU named):
   (bench/plain/bouncing_balls_smoke.py: import mitsuba, load_dict, render x3, write EXR);
 - a one-frame preview render of bouncing-balls;
 - `motion validate` of every example, `--dry-run` of bouncing-balls, `motion --help`;
+- a rerun of the ci-smoke job of the simulated examples that renders nothing (`--resume`
+  over its own frames: the kept simulation is read, bake/keep.py), beside their validate;
 - with a Python that has `bpy` (`--cycles-python PY` or $BENCH_CYCLES_PYTHON; skipped
   otherwise): one frame of the bench shot of bench_equal_error.py (100k-triangle terrain,
   4 moving balls, sky + sun, 320x180, 16 spp, 180-degree shutter) in a fresh process, ours
@@ -37,6 +40,8 @@ ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 MOTION = str(BIN / "motion")
 EXAMPLES = sorted(p.stem for p in (ROOT / "scenes").glob("*.yaml"))
+# simulated shots whose rerun reads the kept simulation: two examples and the kind of shot issue 46 wrote
+RERUN = {**{n: ROOT / "scenes" / f"{n}.yaml" for n in ("bouncing-balls", "cannonball-splash")}, "wrecking": ROOT / "bench" / "shots" / "wrecking.yaml"}
 
 
 def timed(cmd: list[str], env: dict[str, str] | None = None) -> tuple[float, float]:
@@ -69,10 +74,14 @@ def main() -> None:
                                                 "-o", str(tmp / "one"), "--overwrite"]
     for name in EXAMPLES:
         jobs[f"validate {name}"] = [MOTION, "validate", str(ROOT / "scenes" / f"{name}.yaml")]
+    for name, path in RERUN.items():  # the untimed pass renders the frames; every timed run renders nothing (the kept simulation, bake/keep.py)
+        jobs[f"rerun ci-smoke {name}, renders nothing"] = [MOTION, "-q", "render", str(path), "--preset", "ci-smoke", "-o", str(tmp / f"rerun-{name}"), "--resume"]
+        jobs.setdefault(f"validate {name}", [MOTION, "validate", str(path)])
     jobs["--dry-run bouncing-balls"] = [MOTION, "-q", "render", str(ROOT / "scenes" / "bouncing-balls.yaml"), "--dry-run", "-o", str(tmp / "dry")]
     jobs["--help"] = [MOTION, "--help"]
     if args.only:
-        jobs = {k: v for k, v in jobs.items() if args.only in k or k.startswith("plain")}
+        beside = {f"validate {n}" for n in RERUN} if "rerun" in args.only else set()  # a rerun is read beside its validate
+        jobs = {k: v for k, v in jobs.items() if args.only in k or k.startswith("plain") or k in beside}
     if args.cycles_python:
         import json
 
@@ -100,6 +109,9 @@ def main() -> None:
         ratio = f"  {med / anchor:5.2f}x plain" if name.startswith("ci-smoke bouncing-balls") or name.startswith("plain") else ""
         if name == "one bench-shot frame, ours (16 spp)":
             ratio = f"  {med / statistics.median(times['one bench-shot frame, Cycles (16 spp)']):5.2f}x Cycles"
+        scene = name.split()[2].rstrip(",") if name.startswith("rerun ci-smoke ") else ""
+        if scene and f"validate {scene}" in times:
+            ratio = f"  {med / statistics.median(times['validate ' + scene]):5.2f}x validate"
         print(f"{name:42} {med:7.3f} s  {statistics.median(rss[name]):6.0f} MB{ratio}")
     if not args.only or "validate" in args.only:
         # what validation keeps (the scene's compiled validator, the assets whose bytes

@@ -13,7 +13,8 @@ def _folders() -> dict[str, Path]:
     from motion.pipeline.cache import STORES, kernels_dir, validation_dir
     from motion.pipeline.render.assets import assets_dir
 
-    return {"assets": assets_dir(), "kernels": kernels_dir(), "validation": validation_dir(), "shipped": STORES["shipped"].dir()}
+    return {"assets": assets_dir(), "kernels": kernels_dir(), "validation": validation_dir(), "shipped": STORES["shipped"].dir(),
+            "simulations": STORES["simulations"].dir()}
 
 
 @click.group("cache")
@@ -43,11 +44,11 @@ def cache_info() -> None:
 
 
 @cache.command("clear")
-@click.option("--what", type=click.Choice(["all", "assets", "kernels", "validation", "shipped"]), default="all", show_default=True)
+@click.option("--what", type=click.Choice(["all", "assets", "kernels", "validation", "shipped", "simulations"]), default="all", show_default=True)
 def cache_clear(what: str) -> None:
     """Delete cached files (they are rebuilt on demand): assets holds the converted assets,
     imports and import records; validation the kept validators and asset passes; shipped
-    what shipped jobs carried to this worker."""
+    what shipped jobs carried to this worker; simulations the kept dynamics simulations."""
     from motion.pipeline.cache import clear_kernels
     from motion.pipeline.render.assets import clear
 

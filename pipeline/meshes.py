@@ -183,11 +183,40 @@ def _load_obj(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     return verts, _fan(faces)  # type: ignore[arg-type]
 
 
+# every statement of the OBJ format (Wavefront's spec): a file whose first statement is none
+# of these is not an OBJ file, whatever its name
+_OBJ_STATEMENTS = frozenset("v vt vn vp f l p o g s mg usemtl mtllib cstype deg bmat step curv curv2 surf parm trim hole scrv sp end "
+                            "con lod maplib usemap c_interp d_interp trace_obj shadow_obj bevel call csh ctech stech".split())
+_SIGNATURES = ((b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"v/1\x01", "an OpenEXR image"), (b"GIF8", "a GIF image"),
+               (b"ply", "a PLY mesh"), (b"glTF", "a binary glTF"), (b"PK\x03\x04", "a zip archive"), (b"#?RADIANCE", "a Radiance HDR image"))
+
+
+def _not_obj(data: bytes) -> str | None:
+    """Why `data` is not an OBJ file (what it starts with), or None when it may be one: a
+    binary file (a NUL byte, a known signature), or text whose first statement is not an
+    OBJ statement."""
+    head = data[:4096]
+    kind = next((what for sig, what in _SIGNATURES if head.startswith(sig)), None)
+    if kind is not None or b"\0" in head:
+        return f"not an OBJ mesh (it starts with {head[:8]!r}{': ' + kind if kind else ', binary data'})"
+    for line in head.decode("utf-8", errors="replace").splitlines():
+        word = line.split(maxsplit=1)[0] if line.split() else ""
+        if not word or word.startswith("#"):
+            continue
+        if word not in _OBJ_STATEMENTS:
+            return f"not an OBJ mesh (it starts with {line.strip()[:40]!r}, not an OBJ statement such as v or f)"
+        return None
+    return None
+
+
 def _parse_obj(data: bytes, attributes: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[list[Any]]]:
     """Positions [v, 3], texture coordinates [vt, 2], normals [vn, 3] and each polygon's
     corners as 0-based (v, vt, vn) triples (-1: none given). Without `attributes` (the
     positions-only readers, twice as fast on a large file): no vt / vn values, and corners
     as their vertex index alone; the indices are checked either way."""
+    why = _not_obj(data)
+    if why is not None:
+        raise MeshFormatError(why)
     verts: list[list[float]] = []
     faces: list[list[Any]] = []
     counts = {"vt": 0, "vn": 0}

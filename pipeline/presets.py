@@ -46,13 +46,21 @@ def preset_names() -> list[str]:
 def load_preset(name: str) -> tuple[Preset, str]:
     """A preset by name (configs/NAME.yaml) or path; returns it and its file name."""
     path = Path(name)
-    if path.suffix in (".yaml", ".yml") and os.path.lexists(path):
+    if path.suffix.lower() in (".yaml", ".yml") or os.sep in name or (os.altsep and os.altsep in name):
+        if not os.path.lexists(path):
+            from .scene.checks import near_file
+
+            raise UsageError(f"--preset {name}: file not found{near_file(name, Path.cwd())}")
         # bounded like a scene: a regular file within the size limit (docs/scene-format.md)
         text, file = read_yaml_file(path, "preset file"), str(path)
     else:
         entry = configs_dir() / f"{name}.yaml"
         if name == "farm" or not entry.is_file():
-            raise UsageError(f"unknown preset '{name}'; available: {', '.join(preset_names())} (or a path to a .yaml file)")
+            from .scene.problems import closest
+
+            close = closest(name, preset_names())
+            hint = f"; did you mean '{close}'?" if close else ""
+            raise UsageError(f"unknown preset '{name}'{hint} (available: {', '.join(preset_names())}, or a path to a .yaml file)")
         text, file = entry.read_text(), f"configs/{name}.yaml"
     data, source = parse_yaml(text, file)
     data = {} if data is None else data

@@ -33,3 +33,37 @@ def test_the_readmes_commands_can_be_pasted() -> None:
             command = line.split("#")[0]
             for left, right in zip(command.split("|"), command.split("|")[1:]):
                 assert not (left.strip().startswith("motion") and right.strip().startswith("motion")), line
+
+
+def _reference_rows() -> dict[tuple[str, str], list[str]]:
+    """(record, field) -> the cells of its row in the generated field reference."""
+    sys.path.insert(0, str(REPO / "tools"))
+    try:
+        import scene_docs
+    finally:
+        sys.path.pop(0)
+    rows: dict[tuple[str, str], list[str]] = {}
+    record = ""
+    for line in scene_docs.generate().splitlines():
+        if line.startswith("### "):
+            record = line[4:].strip()
+        elif line.startswith("| `"):
+            cells = [c.strip() for c in line.strip("|").split(" | ")]
+            rows[(record, cells[0].strip("`"))] = cells
+    return rows
+
+
+def test_units_come_from_the_schema_not_from_a_fields_name() -> None:
+    """A unit is the field's own: a choice or a name has none (Shutter.position was "m",
+    Spring.a "m/s^2"), a planned path's start is a position (was "s"), the emitter's and the
+    turntable's `rate` differ (they shared one text), a string's length is in characters
+    (MorphTarget.name said "at least 1 items"); the dynamics blocks' start/stop say their clock."""
+    rows = _reference_rows()
+    unit = {key: cells[4] for key, cells in rows.items()}
+    assert unit[("Shutter", "position")] == "" and unit[("Shutter", "angle")] == "degrees"
+    assert unit[("Spring", "a")] == unit[("Spring", "b")] == "" and unit[("Spring", "stiffness")] == "N/m"
+    assert unit[("PlanMotion", "start")] == "m"
+    assert unit[("Turntable", "rate")] == "degrees/s" and unit[("ParticleEmitter", "rate")] == "particles/s"
+    assert rows[("MorphTarget", "name")][3] == "1 to 128 characters"
+    for record in ("ParticleEmitter", "DynamicsMotion", "Flock"):
+        assert unit[(record, "start")] == "s" and "after the first frame" in rows[(record, "start")][5]

@@ -198,3 +198,42 @@ def test_a_worker_killed_mid_chunk_is_retried(hidden_cluster) -> None:
     assert sum(r["attempts"] > 1 for r in rep["frames"]) == 3, [(r["frame"], r["attempts"], r.get("worker"), r.get("errors") or r.get("error")) for r in rep["frames"]]  # the killed chunk, once more
     assert [f.name for f in frames_in(out)] == [f"scene.{f:04d}.exr" for f in range(6)]
     assert not leftovers(out)  # the client's claims and temporary files are gone
+
+
+@pytest.fixture(scope="module")
+def one_worker(tmp_path_factory):
+    """A scheduler and one worker that sees the client's folders, with a cache root of its own."""
+    tmp_path = tmp_path_factory.mktemp("warm")
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    procs = [subprocess.Popen([DASK, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path)]
+    env = {**os.environ, "MOTION_CACHE_DIR": str(tmp_path / "worker-cache")}
+    procs.append(subprocess.Popen([DASK, "worker", address, "--nthreads", "1", "--no-nanny", "--no-dashboard", "--host", "127.0.0.1", "--name", "w"],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path, env=env))
+    try:
+        wait_for(lambda: _try(lambda: _workers_connected(address) == 1), 60, "a dask worker")
+        yield {"address": address, "folder": tmp_path, "cache": tmp_path / "worker-cache"}
+    finally:
+        stop_processes(procs)
+
+
+def test_a_worker_that_holds_the_scene_is_sent_no_asset_again(one_worker) -> None:
+    """A worker warm with the scene (a shared-disk job of it rendered there: its renderer
+    holds the scene's meshes and textures in memory) is sent no asset by the ship jobs that
+    follow: each reports asset_bytes_to_workers 0, and their frames equal the shared job's.
+    Before, the warm worker never checked the assets out (so never kept them), and every ship
+    job sent them again (29960 bytes twice in a row)."""
+    folder = one_worker["folder"]
+    checker = (np.indices((8, 8)).sum(axis=0) % 2 * 200 + 30).astype(np.uint8)
+    path = _textured(folder / "shot", np.stack([checker] * 3, axis=-1))
+    common = ["--frames", "0-1", "--threads", "1", "--scheduler", one_worker["address"], *TINY]
+    shared = motion("render", path, "-o", folder / "shared", "--transfer", "shared", *common)
+    assert shared.returncode == 0, shared.stderr
+    for run in range(2):
+        shipped = motion("render", path, "-o", folder / "ship", "--transfer", "ship", "--overwrite", *common)
+        assert shipped.returncode == 0, shipped.stderr
+        sent = report(folder / "ship")["executor"]["transfer"]
+        assert sent["mode"] == "ship" and sent["assets"] == 2, sent
+        assert sent["asset_bytes_to_workers"] == sent["asset_bytes_from_client"] == 0, (run, sent)
+        for a, b in zip(frames_in(folder / "ship"), frames_in(folder / "shared")):
+            assert np.array_equal(read_frame(a).rgba, read_frame(b).rgba)

@@ -28,8 +28,10 @@ def test_bake_progress_reports_simulated_seconds_per_second_and_eta(caplog) -> N
     assert lines[-1].startswith("motion: bake: simulated 2.00 s of dynamics in") and lines[-1].endswith("96 frames baked in " + lines[-1].rsplit(" in ", 1)[1])
 
 
-def test_render_prints_the_bake_rate(tmp_path) -> None:
+def test_render_prints_the_bake_rate(tmp_path, monkeypatch) -> None:
     from test_range_independence import _scene
+
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))  # a root of its own: no simulation kept by another test
 
     res = motion("render", _scene(tmp_path), "-o", tmp_path / "out", "--frames", "0-1", *LINES, "--workers", "1")
     assert res.returncode == 0, res.stderr

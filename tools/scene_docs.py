@@ -4,7 +4,8 @@
     python tools/scene_docs.py --check  # exit 1 if the doc is out of date (a test runs this)
 
 Everything between the BEGIN/END markers is generated: one table per record with each
-field's type, default, allowed range and unit. The prose around it is hand-written.
+field's type, default, allowed range, unit and meaning (the unit and meaning from the field's
+pydantic metadata where the schema declares them). The prose around it is hand-written.
 """
 
 from __future__ import annotations
@@ -22,19 +23,44 @@ DOC = Path(__file__).resolve().parents[1] / "docs" / "scene-format.md"
 BEGIN = "<!-- BEGIN GENERATED FIELD REFERENCE (tools/scene_docs.py) -->"
 END = "<!-- END GENERATED FIELD REFERENCE -->"
 
-# Units by field name (SI; angles in degrees). Fields not listed are unitless.
+# A field's unit is declared at the schema (`Field(json_schema_extra={"unit": ...})`, with its
+# `description` beside it) where its name alone does not say it (`start` is a time in one record
+# and a position in another; `rate` is particles or degrees per second). Otherwise it comes
+# from this table by the field's name (SI; angles in degrees), and only for a field that holds
+# numbers: a name, a choice, a flag or a record has no unit.
 UNITS = {
     "fps": "frames/s", "fov": "degrees", "angle": "degrees", "cutoff_angle": "degrees", "beam_width": "degrees",
     "ortho_width": "m", "near": "m", "far": "m", "position": "m", "look_at": "m", "translate": "m",
     "radius": "m", "size": "m", "width": "m", "height": "m", "mass": "kg", "velocity": "m/s",
     "angular_velocity": "degrees/s", "step": "s", "gravity": "m/s^2", "air_density": "kg/m^3",
     "density": "kg/m^3", "level": "m", "stiffness": "N/m", "damping": "N s/m", "rest_length": "m",
-    "rate": "1/s (emitter) or degrees/s (turntable)", "lifetime": "s", "speed": "m/s", "speed_spread": "m/s",
-    "spread": "degrees", "start": "s", "stop": "s", "x0": "m", "v0": "m/s", "a": "m/s^2", "t0": "s",
+    "lifetime": "s", "speed": "m/s", "speed_spread": "m/s",
+    "spread": "degrees", "x0": "m", "v0": "m/s", "a": "m/s^2", "t0": "s",
     "period": "s", "phase": "degrees", "frequency": "Hz", "radiance": "W sr^-1 m^-2", "intensity": "W sr^-1",
     "irradiance": "W m^-2", "area": "m^2", "linear": "N s/m", "softening": "m", "G": "N m^2 kg^-2",
     "euler": "degrees", "time": "frames or s (time_unit)", "translate_amplitude": "m", "rotate_amplitude": "degrees",
 }
+
+
+def _leaves(tp: Any) -> list[Any]:
+    """The plain types a field's type is made of (through Annotated, unions, tuples, lists)."""
+    origin = typing.get_origin(tp)
+    if origin is typing.Annotated:
+        return _leaves(typing.get_args(tp)[0])
+    if origin is typing.Literal:
+        return [typing.Literal]
+    if origin is not None:
+        return [leaf for a in typing.get_args(tp) if a is not Ellipsis for leaf in _leaves(a)]
+    return [tp]
+
+
+def _unit(name: str, field: Any) -> str:
+    """The field's unit: declared at the schema, else by its name for a field of numbers."""
+    extra = field.json_schema_extra if isinstance(field.json_schema_extra, dict) else {}
+    if "unit" in extra:
+        return str(extra["unit"])
+    numeric = any(isinstance(t, type) and issubclass(t, (int, float)) and t is not bool for t in _leaves(field.annotation))
+    return UNITS.get(name, "") if numeric else ""
 
 
 def _type_name(tp: Any) -> str:
@@ -63,6 +89,7 @@ def _type_name(tp: Any) -> str:
 
 def _range(field: Any) -> str:
     bits = []
+    lengths: list[int | None] = [None, None]  # MinLen, MaxLen
     metas = list(field.metadata)
     tp = field.annotation
     while typing.get_origin(tp) is typing.Annotated:
@@ -74,9 +101,16 @@ def _range(field: Any) -> str:
             if v is not None:
                 bits.append(f"{sym} {v}")
         if isinstance(m, MinLen):
-            bits.append(f"at least {m.min_length} items")
+            lengths[0] = m.min_length
         if isinstance(m, MaxLen):
-            bits.append(f"at most {m.max_length}")
+            lengths[1] = m.max_length
+    things = "characters" if tp is str else "items"
+    if lengths[0] is not None and lengths[1] is not None:
+        bits.append(f"{lengths[0]} to {lengths[1]} {things}")
+    elif lengths[0] is not None:
+        bits.append(f"at least {lengths[0]} {things[:-1] if lengths[0] == 1 else things}")
+    elif lengths[1] is not None:
+        bits.append(f"at most {lengths[1]} {things}")
     return ", ".join(dict.fromkeys(bits))
 
 
@@ -121,9 +155,10 @@ def generate() -> str:
         if doc and not doc.startswith(("Usage docs", "!!! abstract")):
             out.append("")
             out.append(" ".join(doc.split()))
-        out += ["", "| field | type | default | range | unit |", "|---|---|---|---|---|"]
+        out += ["", "| field | type | default | range | unit | meaning |", "|---|---|---|---|---|---|"]
         for name, field in model.model_fields.items():
-            out.append(f"| `{name}` | {_type_name(field.annotation)} | {_default(field)} | {_range(field)} | {UNITS.get(name, '')} |")
+            meaning = " ".join((field.description or "").split())
+            out.append(f"| `{name}` | {_type_name(field.annotation)} | {_default(field)} | {_range(field)} | {_unit(name, field)} | {meaning} |")
         out.append("")
     out.append(END)
     return "\n".join(out)

@@ -55,16 +55,18 @@ def simulation_range(loaded: "LoadedScene", frames: Sequence[int] = ()) -> tuple
 
 
 def simulate_for(loaded: "LoadedScene", frames: Sequence[int] = (), on_progress: Any = None) -> Any | None:
-    """The scene's dynamics simulated over `simulation_range` (None without dynamics).
-    What `bake` runs when it is given no simulation, and what the farm runs once before
-    sharding. `on_progress(t, t_start, t_end)` is called as the simulation advances."""
+    """The scene's dynamics simulated over `simulation_range` (None without dynamics), or
+    the simulation an earlier run kept for the same dynamics inputs (keep.py). What `bake`
+    runs when it is given no simulation, and what the farm runs once before sharding. `on_progress(t, t_start, t_end)` is called as the simulation advances."""
     from ..motion import has_dynamics
 
     if not has_dynamics(loaded):
         return None
     from ..dynamics import simulate
 
+    from .keep import kept
+
     t_start, t_end = simulation_range(loaded, frames)
     if on_progress is None:
-        return simulate(loaded, t_end=t_end, t_start=t_start)
-    return simulate(loaded, t_end=t_end, t_start=t_start, on_progress=on_progress)
+        return kept(loaded, t_start, t_end, lambda: simulate(loaded, t_end=t_end, t_start=t_start))
+    return kept(loaded, t_start, t_end, lambda: simulate(loaded, t_end=t_end, t_start=t_start, on_progress=on_progress))

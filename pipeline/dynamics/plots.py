@@ -6,6 +6,10 @@ bodies, else one line per body's total; particle systems and shared terms (sprin
 gravity between bodies) are drawn as their group's totals. The potential's zero is the
 plane through the world origin perpendicular to gravity ("height 0"), written on the plot.
 
+Time runs on the dynamics clock (`CLOCK`: seconds from the first frame, 0 there whatever
+its number), the clock of every `start`/`stop` of a dynamics block, so a body's `start: 0.5`
+is at 0.5 on the plot.
+
 Trajectory: height over time; the side view (height against horizontal distance) only
 when some body or particle really moves sideways (a body dropped straight down moves
 ~1e-14 m sideways in floating point, which would draw noise in an empty-looking panel).
@@ -21,8 +25,12 @@ import numpy as np
 
 from ..errors import UsageError
 from ..files import writing
+from .world import shot_start
 
 FORMATS = (".png", ".pdf", ".svg")
+# the plots' time axis is the dynamics clock (world.shot_start): 0 at the first frame, the clock
+# every `start`/`stop` of a dynamics block reads, not the scene's clock (41.7 s at frame 1001)
+CLOCK = "time from the first frame (s; the clock of dynamics start/stop)"
 PANELS_MAX = 6  # bodies drawn in panels of their own; more share one panel of totals
 
 
@@ -70,25 +78,27 @@ def energy_figure(plt: Any, loaded: Any, sim: Any) -> Any:
     rows = math.ceil(n / cols)
     fig, axes = plt.subplots(rows, cols, figsize=(4.5 * cols, 3.4 * rows + 0.6), dpi=100, squeeze=False)
     flat = list(axes.ravel())
+    epoch = shot_start(loaded)
     for ax, (name, t, k, p) in zip(flat, panels):
+        t = t - epoch
         line = ax.plot(t, k + p, label="total")[0]
         ax.plot(t, k, "--", color=line.get_color(), alpha=0.7, label="kinetic")
         ax.plot(t, p, ":", color=line.get_color(), alpha=0.7, label="potential")
         ax.set_title(name, fontsize=10)
-        ax.set_xlabel("time (s)")
+        ax.set_xlabel(CLOCK)
         ax.set_ylabel("energy (J)")
     if n > len(panels):
         ax = flat[len(panels)]
         if len(bodies) > PANELS_MAX:
             for name, t, k, p in bodies:
-                ax.plot(t, k + p, label=f"{name}: total")
+                ax.plot(t - epoch, k + p, label=f"{name}: total")
         for label, t, k, p in groups:
-            line = ax.plot(t, k + p, label=f"{label}: total")[0]
-            ax.plot(t, k, "--", color=line.get_color(), alpha=0.6, label=f"{label}: kinetic")
+            line = ax.plot(t - epoch, k + p, label=f"{label}: total")[0]
+            ax.plot(t - epoch, k, "--", color=line.get_color(), alpha=0.6, label=f"{label}: kinetic")
         if shared is not None:
-            ax.plot(*shared, label="shared potential (springs, gravity between bodies), from its start")
+            ax.plot(shared[0] - epoch, shared[1], label="shared potential (springs, gravity between bodies), from its start")
         ax.set_title("totals", fontsize=10)
-        ax.set_xlabel("time (s)")
+        ax.set_xlabel(CLOCK)
         ax.set_ylabel("energy (J)")
     for ax in flat[n:]:
         ax.set_visible(False)
@@ -123,8 +133,8 @@ def trajectory_figure(plt: Any, loaded: Any, sim: Any) -> Any:
         ax_s = None
     colors = {}
     for name, h in heights:
-        colors[name] = ax_t.plot(times, h, label=name)[0].get_color()
-    ax_t.set_xlabel("time (s)")
+        colors[name] = ax_t.plot(times - shot_start(loaded), h, label=name)[0].get_color()
+    ax_t.set_xlabel(CLOCK)
     ax_t.set_ylabel("height (m)")
     ax_t.set_title(f"{loaded.name}: height over time" + ("" if side else " (no body moves sideways)"))
     if ax_s is not None:

@@ -30,6 +30,9 @@ def parse_address(text: str, what: str = "--scheduler") -> tuple[str, str, int]:
     is wrong (scheme, host, port) otherwise."""
     spec = text.strip()
     if "://" not in spec:
+        malformed = _malformed_scheme(spec)
+        if malformed is not None:
+            raise UsageError(f"{what} {text!r}: the scheme is malformed (a scheme ends in '://'); did you mean {malformed!r}?")
         spec = f"tcp://{spec}"
     try:
         parts = urlsplit(spec)
@@ -37,7 +40,11 @@ def parse_address(text: str, what: str = "--scheduler") -> tuple[str, str, int]:
     except ValueError as exc:
         raise UsageError(f"{what} {text!r}: {exc}; expected tcp://HOST:PORT") from None
     if parts.scheme not in SCHEMES:
-        raise UsageError(f"{what} {text!r}: unknown scheme '{parts.scheme}'; expected {' or '.join(s + '://' for s in SCHEMES)}HOST:PORT")
+        from ..scene.problems import closest
+
+        close = closest(parts.scheme, list(SCHEMES))
+        hint = f"; did you mean {close + spec[len(parts.scheme):]!r}?" if close else f"; expected {' or '.join(s + '://' for s in SCHEMES)}HOST:PORT"
+        raise UsageError(f"{what} {text!r}: unknown scheme '{parts.scheme}'{hint}")
     if not parts.hostname:
         raise UsageError(f"{what} {text!r}: no host; expected tcp://HOST:PORT")
     if port is None or not 1 <= port <= 65535:
@@ -45,6 +52,23 @@ def parse_address(text: str, what: str = "--scheduler") -> tuple[str, str, int]:
     if parts.path not in ("", "/") or parts.query or parts.fragment:
         raise UsageError(f"{what} {text!r}: unexpected '{parts.path or ''}{'?' + parts.query if parts.query else ''}' after the port; expected tcp://HOST:PORT")
     return parts.scheme, parts.hostname, port
+
+
+def _malformed_scheme(spec: str) -> str | None:
+    """The address `spec` meant when it starts with a scheme whose '://' is written wrong
+    ('tcp//h:p', 'tcp:/h:p', 'tcp:h:p', 'tpc//h:p'), else None. Only a known scheme (or a
+    near misspelling of one) counts: 'host:8786' has no scheme and is fine."""
+    import re
+
+    from ..scene.problems import closest
+
+    m = re.match(r"([A-Za-z][A-Za-z0-9+.-]*)(:/*|/+)(.+)$", spec)
+    if m is None:
+        return None
+    scheme = closest(m.group(1), list(SCHEMES), cutoff=0.6)
+    if scheme is None or (m.group(2) == ":" and m.group(1).lower() not in SCHEMES) or (m.group(2) == ":" and m.group(3).isdigit()):
+        return None
+    return f"{scheme}://{m.group(3).lstrip('/')}"
 
 
 def read_scheduler_file(path: Path) -> str:

@@ -165,6 +165,12 @@ def frame_key(job: RenderJob, baked: BakedFrame) -> tuple[dict[str, Any], dict[s
 _WORKER: dict[str, Any] = {}
 
 
+def warm_key() -> str | None:
+    """The key (`RenderJob.key`) of the job whose scene this worker process holds built, in
+    memory (its renderer is reused by the job's next chunk); None when it holds none."""
+    return _WORKER.get("key")
+
+
 def worker_id() -> str:
     """This worker process as host:pid."""
     return f"{socket.gethostname()}:{os.getpid()}"

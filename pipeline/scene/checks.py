@@ -46,6 +46,25 @@ SCALAR_CHANNELS = {
 NUMBER_CHANNELS = ("fov", "ortho_width")
 
 
+def near_file(rel: str, base_dir: Path) -> str:
+    """"; did you mean 'REL'?" naming a file in the folder of `rel` (relative to
+    `base_dir`) whose name is close to the missing one's (`tex/crates.png` for
+    `tex/crate.png`), written as `rel` was; else "". The folder's first 10,000 entries
+    are compared."""
+    import os
+
+    name = Path(rel).name
+    try:
+        with os.scandir(base_dir / rel[: len(rel) - len(name)] if rel.endswith(name) else (base_dir / rel).parent) as entries:
+            names = [e.name for _, e in zip(range(10_000), entries) if e.name != name and e.is_file()]
+    except OSError:
+        return ""
+    close = closest(name, names)
+    if close is None:
+        return ""
+    return f"; did you mean '{rel[: len(rel) - len(name)] + close if rel.endswith(name) else close}'?"
+
+
 def _suggest(name: str, options: list[str]) -> str:
     close = closest(name, options)
     if close:
@@ -232,7 +251,7 @@ def check_asset_files(c: _Check) -> None:
             if (base_dir / rel).exists():
                 c.add(loc, f"not a regular file: {rel} (relative to {base_dir})")
             else:
-                c.add(loc, f"file not found: {rel} (relative to {base_dir})")
+                c.add(loc, f"file not found: {rel} (relative to {base_dir}){near_file(rel, base_dir)}")
             return
         if not c.assets or kind in ("skin", "morph"):  # checked where they are read (motion/deform.py)
             return

@@ -113,7 +113,7 @@ class DynamicsMotion(Model):
     static_friction: NonNegative | None = None
     drag: Drag | None = None
     pinned: bool = False  # infinite mass: forces and impulses do not move it
-    start: FiniteFloat = 0.0  # seconds after the first frame: held at its transform before then
+    start: Annotated[FiniteFloat, Field(json_schema_extra={"unit": "s"}, description="when the body starts to move, in seconds after the first frame (the dynamics clock: 0 at the timeline's first frame, whatever its number); held at its transform before then")] = 0.0
     contact: Contact | None = None  # impulse | penalty; default: the simulation's `dynamics.contact`
     penalty: Penalty | None = None  # this body's penalty contact; default: `dynamics.penalty`
 
@@ -173,7 +173,7 @@ class ParticleEmitter(Model):
     with speed `speed` +- `speed_spread` inside a cone of `spread` degrees about
     `direction`; each lives `lifetime` seconds. Seeded: the same seed, the same particles."""
 
-    rate: Positive = 100.0
+    rate: Annotated[Positive, Field(json_schema_extra={"unit": "particles/s"})] = 100.0
     lifetime: Positive = 2.0
     position: Vec3 = (0.0, 0.0, 0.0)
     size: Vec3 = (0.0, 0.0, 0.0)
@@ -187,8 +187,8 @@ class ParticleEmitter(Model):
     drag: Drag | None = None
     seed: int = 0
     max_count: Annotated[int, Field(ge=1, le=10_000_000)] = 100_000
-    start: FiniteFloat = 0.0  # seconds after the first frame (the dynamics clock)
-    stop: FiniteFloat | None = None  # seconds after the first frame
+    start: Annotated[FiniteFloat, Field(json_schema_extra={"unit": "s"}, description="when emission starts, in seconds after the first frame (the dynamics clock: 0 at the timeline's first frame, whatever its number)")] = 0.0
+    stop: Annotated[FiniteFloat | None, Field(json_schema_extra={"unit": "s"}, description="when emission stops, in seconds after the first frame; null: the end of the shot")] = None
 
     @model_validator(mode="after")
     def _window(self) -> "ParticleEmitter":

@@ -166,7 +166,7 @@ class Turntable(Model):
 
     type: Literal["turntable"]
     axis: Vec3 = (0.0, 1.0, 0.0)
-    rate: FiniteFloat = 360.0  # degrees per second
+    rate: Annotated[FiniteFloat, Field(json_schema_extra={"unit": "degrees/s"})] = 360.0
     phase: FiniteFloat = 0.0  # degrees
 
 
@@ -262,7 +262,7 @@ class PlanMotion(Model):
 
     type: Literal["plan"]
     grid: OccupancyGrid
-    start: Vec3
+    start: Annotated[Vec3, Field(json_schema_extra={"unit": "m"}, description="where the path starts")]
     goal: Vec3
     waypoints: list[Vec3] = []
     radius: Positive = 0.3  # m, the agent's own radius
@@ -501,7 +501,7 @@ class Flock(Model):
     planar: bool = False  # crowds: velocities stay in the plane normal to `up`
     up: Vec3 = (0.0, 1.0, 0.0)
     step: Annotated[float, Field(gt=0, le=0.1)] = 1.0 / 120.0  # s, the flock's own fixed step
-    start: FiniteFloat = 0.0  # s: the flock starts moving here
+    start: Annotated[FiniteFloat, Field(json_schema_extra={"unit": "s"}, description="when the flock starts moving, in seconds after the first frame (the dynamics clock: 0 at the timeline's first frame, whatever its number)")] = 0.0
 
     @model_validator(mode="after")
     def _consistent(self) -> "Flock":

@@ -427,6 +427,7 @@ class FramesAtHand:
     skipped: list[int]
     todo: list[int]
     foreign: list[int]
+    simulation: str | None = None  # "simulated", "kept" (from an earlier run: bake/keep.py), None: no dynamics simulated here
 
 
 @dataclass(frozen=True)
@@ -487,7 +488,12 @@ def bake_and_sort(req: RenderRequest, s: Settled) -> FramesAtHand:
     paths = {f: str(frame_path(job, loaded, f)) for f in frames}
     # --check bakes nothing when every frame's header says it was made from this version (shot/stale.py)
     recorded = recorded_keys(paths, frames, job.settings_hash, job.look, RENDERER_VERSION) if req.check and not req.motion_file else None
+    from ..bake.keep import STORE as KEPT
+    from ..motion import has_dynamics
+
+    kept_before = KEPT.stats["hits"]
     inputs = motion_inputs(req, loaded, s.sel) if recorded is None else []
+    simulation = None if recorded is not None or req.motion_file or not s.sel.selected or not has_dynamics(loaded) else ("kept" if KEPT.stats["hits"] > kept_before else "simulated")
     bake_s = time.perf_counter() - t0
     by_frame = by_number(inputs)  # each frame made from the bake's arrays when a task needs it
 
@@ -501,7 +507,7 @@ def bake_and_sort(req: RenderRequest, s: Settled) -> FramesAtHand:
         logging.getLogger("motion").warning(
             f"motion: {out_dir}: frames {format_frames(foreign)} lie outside the timeline {format_range(loaded.scene.timeline.first, loaded.scene.timeline.last)}: "
             "foreign, left as they are and in no deliverable")
-    return FramesAtHand(bake_s, by_frame, paths, states, skipped, todo, foreign)
+    return FramesAtHand(bake_s, by_frame, paths, states, skipped, todo, foreign, simulation)
 
 
 def check_run(req: RenderRequest, s: Settled, at: FramesAtHand) -> dict[str, Any]:
@@ -609,6 +615,8 @@ def make_report(req: RenderRequest, s: Settled, at: FramesAtHand, c: Chunking, s
         motion_file=str(req.motion_file) if req.motion_file else None,
     )
     report["report"] = str(report_name(req, s))
+    if at.simulation is not None:
+        report["simulation"] = at.simulation  # kept: read from an earlier run's (bake/keep.py)
     if at.states.stale:
         report["replaced"] = [{"frame": f, "reason": why} for f, why in sorted(at.states.stale.items())]
     timeline = loaded.scene.timeline

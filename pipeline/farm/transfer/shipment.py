@@ -82,8 +82,8 @@ class FilesByHash:
 class Shipment:
     """The client's side of one shipped job on a Dask cluster: the job as sent (the parsed
     scene and manifest, without bytes) scattered once, and which workers already hold every
-    asset. A worker's first chunk asks its cache what it lacks (`missing_assets`, one
-    `client.run`) and takes exactly those assets as futures among its arguments: an asset
+    asset. A worker's first chunk asks it what it lacks (`missing_assets`, one `client.run`:
+    nothing when its renderer holds this job's scene built, else what its cache lacks) and takes exactly those assets as futures among its arguments: an asset
     is scattered when a worker first lacks it, to every worker at once (`broadcast`: a
     scattered asset cannot be recomputed, so one held by a single worker would die with it
     and cancel the chunks elsewhere that needed it), so each asset crosses to each worker
@@ -139,7 +139,8 @@ class Shipment:
             return {}
         everything = sorted({a.sha256 for a in self.assets})
         try:
-            lacking = client.run(missing_assets, self.assets, workers=[worker]).get(worker, everything)
+            warm = self.given.key if self.given.cache else None
+            lacking = client.run(missing_assets, self.assets, warm, workers=[worker]).get(worker, everything)
         except Exception:  # the worker left or cannot answer: send everything (the chunk is retried if it is gone)
             lacking = everything
         self.stocked.add(worker)

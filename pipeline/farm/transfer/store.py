@@ -68,7 +68,14 @@ def check_out(assets: Iterable[ShippedAsset], fetch: Callable[[str], bytes], fol
     return out
 
 
-def missing_assets(assets: Sequence[ShippedAsset]) -> list[str]:
-    """The hashes of `assets` this worker's cache does not hold whole (run on a worker by
-    `client.run` before its first chunk of a job: only those bytes are sent to it)."""
+def missing_assets(assets: Sequence[ShippedAsset], warm: str | None = None) -> list[str]:
+    """The hashes of `assets` this worker holds neither in memory nor whole in its cache
+    (run on a worker by `client.run` before its first chunk of a job: only those bytes are
+    sent to it). `warm`: the job's key (`RenderJob.key`, when its workers may reuse their
+    renderer); a worker whose renderer holds that job's scene built needs none of its files
+    (it never reads them again), wherever it got them (a shared-disk job of the scene)."""
+    from ...render.job import warm_key
+
+    if warm is not None and warm_key() == warm:
+        return []
     return sorted({a.sha256 for a in assets if cached(a) is None})
