@@ -64,7 +64,7 @@ def lay_out(boxes: np.ndarray, spheres: np.ndarray) -> Layout:
 def translate_shape(mi: Any, shape: Any, offset: np.ndarray) -> None:
     """Move a built Mitsuba shape by `offset` (a mesh's vertices, another shape's to_world)."""
     params = mi.traverse(shape)
-    if shape.is_mesh():
+    if "vertex_positions" in params:  # a triangle mesh (a rectangle reads as a mesh to is_mesh, with a to_world)
         v = np.array(params["vertex_positions"], dtype=np.float64).reshape(-1, 3) + offset
         params["vertex_positions"] = mi.Float(np.asarray(v, np.float32).ravel())
     else:
@@ -79,7 +79,7 @@ def shape_sphere(shape: Any, centre: np.ndarray) -> float:
 
     box = shape.bbox()
     lo, hi = np.array(box.min, dtype=float).ravel(), np.array(box.max, dtype=float).ravel()
-    if shape.is_mesh():
+    if shape.is_mesh() and "vertex_positions" in mi.traverse(shape):
         vertices = np.array(shape.vertex_positions_buffer(), dtype=float).reshape(-1, 3)
         if len(vertices):
             return float(np.sqrt(((vertices - centre) ** 2).sum(axis=1).max()))

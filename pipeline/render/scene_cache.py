@@ -109,11 +109,7 @@ class SceneCache:
         integrator = self.integrator
         integrator.set_sbt_owner(self.owner)
         integrator.set_samples(fi.samples)
-        self._emitters = {
-            k: self.owner.scene({"type": "scene", **{f"{mitsuba_id(name)}__{j}": sd for j, sd in enumerate(md)}})
-            for k, (name, md) in enumerate(zip(self.roles.mover_names, mover_dicts))
-            if any("emitter" in sd for sd in md)
-        }
+        self._emitters = self._emitter_scenes(mover_dicts)
         self.atlas = Atlas(mi, self.owner.scene)
         self.broadphase = Broadphase(mi, self.owner.scene)
         self._capacity = [_room(_particle_count(fi, name)) for name in self.roles.particle_names]
@@ -135,6 +131,17 @@ class SceneCache:
         obj = next(o for o in self.loaded.scene.objects if o.name == name)
         return object_shapes(obj, self.loaded, np.diag([*scale, 1.0]), self._materials)
 
+    def _emitter_scenes(self, mover_dicts: list[list[dict[str, Any]]]) -> dict[int, Any]:
+        """The emissive movers' own rest-frame scenes (emitter sampling in the kernel)."""
+        owner = self.owner
+        if owner is None:
+            return {}
+        return {
+            k: owner.scene({"type": "scene", **{f"{mitsuba_id(name)}__{j}": sd for j, sd in enumerate(md)}})
+            for k, (name, md) in enumerate(zip(self.roles.mover_names, mover_dicts))
+            if any("emitter" in sd for sd in md)
+        }
+
     def _holder_dicts(self, name: str) -> list[dict[str, Any]]:
         """A particle system's holder: one sphere of the particles' radius at the origin,
         wearing their material (and emitter); every particle is this sphere, moved."""
@@ -154,6 +161,8 @@ class SceneCache:
         templates += [[load_dict(sd) for sd in self._holder_dicts(name)] for name in self.roles.particle_names]
         keys = [f"m{k}_{mitsuba_id(n)}" for k, n in enumerate(self.roles.mover_names)] + [f"p{k}_{mitsuba_id(n)}" for k, n in enumerate(self.roles.particle_names)]
         if templates:
+            if atlas.scene is not None and self.owner is not None:
+                self.owner.forget([atlas.scene])  # the old atlas is no longer traced
             atlas.build(templates, keys)
 
     # --- per frame (warm) ---------------------------------------------------------------
@@ -210,9 +219,13 @@ class SceneCache:
             return []
         for name in self.roles.mover_names:
             self._mover_scale[name] = np.array(fi.objects[name][2][0], dtype=float)
-        self._build_atlas([self._mover_dicts(name, self._mover_scale[name]) for name in self.roles.mover_names])
+        mover_dicts = [self._mover_dicts(name, self._mover_scale[name]) for name in self.roles.mover_names]
+        self._build_atlas(mover_dicts)
+        if self._emitters and self.owner is not None:
+            self.owner.forget(self._emitters.values())
+            self._emitters = self._emitter_scenes(mover_dicts)
         self._moving_changed = True
-        return [f"atlas:{mitsuba_id(name)}" for name in changed]
+        return [f"mover:{mitsuba_id(name)} (atlas)" for name in changed]
 
     def set_frame(self, fi: StackedFrame, mode: str, u_fixed: float | None = None) -> None:
         """The integrator's per-frame poses (movers, particles, camera, moving lights), the
@@ -265,6 +278,8 @@ class SceneCache:
         proxies = separate(proxies, self._walk_scale(fi, proxies))
         scene_before = broad.scene
         broad.update(proxies)
+        if scene_before is not None and broad.scene is not scene_before and self.owner is not None:
+            self.owner.forget([scene_before])
         if broad.scene is not scene_before or getattr(self, "_moving_changed", True) or self.integrator.world.particles != total:
             self.integrator.set_moving(broad.scene, atlas.scene, m, total, self._emitters)
             self._moving_changed = False
