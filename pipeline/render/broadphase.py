@@ -143,6 +143,8 @@ class Broadphase:
             self.scene = self._make_scene({"type": "scene", "broadphase": shape})
             self._params = mi.traverse(self.scene)
             self.count = len(data)
-            return
+        # written through the parameter update on every frame, the first too: a frame then
+        # traces the same variables, in the same order, as the next, and the cold frame's
+        # kernels are the warm frames' (a fresh shape's own arrays would compile them again)
         self._params["broadphase.data"] = mi.Float(data.ravel())
         self._params.update()

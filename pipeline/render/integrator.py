@@ -71,11 +71,12 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         """The number of baked samples across the shutter (fixed for a job)."""
         self.frame_data.n_samples = max(2, int(n_samples))
 
-    def set_moving(self, broadphase: Any, atlas: Any, rigid: int, particles: int, emitters: dict[int, Any]) -> None:
+    def set_moving(self, broadphase: Any, atlas: Any, rigid: int, particles: int, emitters: dict[int, Any], particle_emitters: Sequence[tuple[int, int, Any]] = ()) -> None:
         """Everything that moves rigidly or as particles (render/world.py): the broadphase
-        and atlas scenes, how many rigid movers and particles they hold, and the emissive
-        movers' rest-frame scenes (for emitter sampling)."""
-        self.world.set_moving(broadphase, atlas, rigid, particles, emitters)
+        and atlas scenes, how many rigid movers and particles they hold, the emissive
+        movers' rest-frame scenes and the emissive particle systems' ranges and holder
+        scenes (for emitter sampling)."""
+        self.world.set_moving(broadphase, atlas, rigid, particles, emitters, particle_emitters)
 
     def set_sbt_owner(self, owner: Any) -> None:
         """The SBT owner every traced scene of the job was built against (render/sbt.py)."""
@@ -193,7 +194,14 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             value, bsdf_pdf = bsdf.eval_pdf(ctx, si, si.to_local(d), ok)
             mis = dr.select(ds.delta, 1.0, _mis(ds.pdf, bsdf_pdf))
             L += dr.select(ok, mis * value * weight, 0.0)
-        # area emitters on deforming meshes and particles: the slice at the path's time
+        # emissive particle systems: one particle of each, sampled at the path's time
+        for g in range(len(self.world.particle_emitters)):
+            ds, weight = self.world.sample_particle_emitter(g, movers, si, sampler.next_1d(), sampler.next_2d(), active)
+            ok = active & (ds.pdf != 0.0)
+            ok &= ~self.world.occluded(scene, si.spawn_ray_to(ds.p), movers, ok, k_slice)
+            value, bsdf_pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), ok)
+            L += dr.select(ok, _mis(ds.pdf, bsdf_pdf) * value * weight, 0.0)
+        # area emitters on deforming meshes: the slice at the path's time
         for g in self.world.emissive_slices:
             ds, weight = self.world.sample_slice_emitter(g, si, sampler.next_2d(), k_slice, active)
             ok = active & (ds.pdf != 0.0)
@@ -308,6 +316,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
         em_pdf = dr.select(~prev_bsdf_delta & ~on_mover, choice.pdf(prev_si, ds, ~prev_bsdf_delta & ~on_mover), 0.0)
         em_pdf = self._mover_emitter_pdf(ds, prev_si, hit_mover, movers, em_pdf, ~prev_bsdf_delta & on_mover)
+        em_pdf = self.world.particle_emitter_pdf(ds, prev_si, hit_mover, movers, em_pdf, ~prev_bsdf_delta & on_mover)
         em_pdf = self.world.slice_emitter_pdf(ds, prev_si, hit_mover, k_slice, em_pdf, ~prev_bsdf_delta & on_mover)
         return ds, dr.select(depth == 0, 1.0, _mis(prev_bsdf_pdf, em_pdf))
 

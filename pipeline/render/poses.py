@@ -21,7 +21,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import FrameDataError
-from ..motion.pose import quat_rotate
+from ..motion.pose import SLERP_LINEAR_BELOW, quat_rotate
 
 # The blocks of the per-frame data array, in order (see `FrameData.set`):
 #   mover_t [M, N, 3], mover_q [M, N, 4]   movers' world_from_object across the shutter
@@ -57,13 +57,14 @@ def qconj(q: Any) -> Any:
 
 
 def slerp(q0: Any, q1: Any, f: Any) -> Any:
-    """Shortest-arc spherical interpolation of unit quaternions (w, x, y, z)."""
+    """Shortest-arc spherical interpolation of unit quaternions (w, x, y, z): motion.pose's
+    `slerp` in drjit, with the float32 threshold of `SLERP_LINEAR_BELOW`."""
     d = dr.dot(q0, q1)
     q1 = dr.select(d < 0, -q1, q1)
     d = dr.abs(d)
     theta = dr.acos(dr.minimum(d, 1.0))
     s = dr.sin(theta)
-    small = s < 1e-4
+    small = s < SLERP_LINEAR_BELOW["float32"]
     w0 = dr.select(small, 1 - f, dr.sin((1 - f) * theta) / s)
     w1 = dr.select(small, f, dr.sin(f * theta) / s)
     return dr.normalize(w0 * q0 + w1 * q1)
@@ -151,6 +152,10 @@ class FrameData:
         # element offsets of each block; the gathers below index in units of 3 or 4 floats
         offsets = np.cumsum([0, *(len(a) for a in flat[:-1])])
         self.at = {name: int(o) for name, o in zip(FRAME_BLOCKS, offsets)}
+        # the old array goes first: its variable index is the one the new array takes, so
+        # with the broadphase's buffer (render/broadphase.py) also new each frame, the
+        # kernel's inputs keep one order and one kernel serves every frame
+        self.array = None
         self.array = mi.Float(np.concatenate(flat))
         # opaque: new values each frame must not become new literals in the kernel
         dr.make_opaque(self.array)

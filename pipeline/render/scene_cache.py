@@ -55,6 +55,7 @@ class SceneCache:
         self._emitters: dict[int, Any] = {}  # emissive mover -> its rest-frame scene
         self._capacity: list[int] = []  # particles' room per system (grows by 1.5x: one recompile)
         self._moving_changed = True  # the atlas or broadphase scene changed: tell the integrator
+        self._holders: dict[str, Any] = {}  # emissive particle system -> its holder sphere's own scene
         self.sliced: SlicedGeometry | None = None
         self.owner: SbtOwner | None = None  # the SBT owner of every scene the kernel traces
 
@@ -141,6 +142,19 @@ class SceneCache:
             for k, (name, md) in enumerate(zip(self.roles.mover_names, mover_dicts))
             if any("emitter" in sd for sd in md)
         }
+
+    def _particle_emitters(self) -> list[tuple[int, int, Any]]:
+        """Each emissive particle system's (first particle, room, holder scene), its holder
+        sphere built once per job at the origin (emitter sampling in the kernel)."""
+        out, first = [], 0
+        for k, (name, room) in enumerate(zip(self.roles.particle_names, self._capacity)):
+            holder = self._holders.get(name)
+            if holder is None and self.owner is not None and any("emitter" in d for d in self._holder_dicts(name)):
+                holder = self._holders[name] = self.owner.scene({"type": "scene", "holder": self._holder_dicts(name)[0]})
+            if holder is not None:
+                out.append((first, room, holder))
+            first += room
+        return out
 
     def _holder_dicts(self, name: str) -> list[dict[str, Any]]:
         """A particle system's holder: one sphere of the particles' radius at the origin,
@@ -281,7 +295,7 @@ class SceneCache:
         if scene_before is not None and broad.scene is not scene_before and self.owner is not None:
             self.owner.forget([scene_before])
         if broad.scene is not scene_before or getattr(self, "_moving_changed", True) or self.integrator.world.particles != total:
-            self.integrator.set_moving(broad.scene, atlas.scene, m, total, self._emitters)
+            self.integrator.set_moving(broad.scene, atlas.scene, m, total, self._emitters, self._particle_emitters())
             self._moving_changed = False
         return {
             "template_offset": atlas.layout.offset,

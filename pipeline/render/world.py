@@ -57,6 +57,7 @@ class World:
         self.rigid = 0  # rigid movers (proxies 0 .. rigid - 1)
         self.particles = 0  # particle capacity (proxies rigid .. rigid + particles - 1)
         self.emitters: dict[int, mi.Scene] = {}  # emissive mover -> its rest-frame scene (emitter sampling)
+        self.particle_emitters: list[tuple[int, int, mi.Scene]] = []  # emissive particle systems: (first particle, room, holder scene)
         self.slices: list[list[mi.Scene]] = []  # per deforming object: one scene per shutter sample
         self.emissive_slices: list[int] = []  # indices of slice groups that carry area emitters
         self.owner: SbtOwner | None = None  # the SBT owner of every scene traced (render/sbt.py)
@@ -76,7 +77,8 @@ class World:
         """Every scene one kernel traces: the static `scene`, the broadphase and atlas, the
         emissive movers' scenes, every slice."""
         moving = [self.broadphase, self.atlas] if self.moving else []
-        return [scene, *moving, *(self.emitters[k] for k in self.emissive), *(s for group in self.slices for s in group)]  # type: ignore[list-item]
+        holders = [h for _, _, h in self.particle_emitters]
+        return [scene, *moving, *(self.emitters[k] for k in self.emissive), *holders, *(s for group in self.slices for s in group)]  # type: ignore[list-item]
 
     def set_owner(self, owner: SbtOwner | None) -> None:
         """The SBT owner every traced scene was built against (render/sbt.py)."""
@@ -93,13 +95,44 @@ class World:
             check_shared(traced, self.owner)
             self._checked = key
 
-    def set_moving(self, broadphase: mi.Scene | None, atlas: mi.Scene | None, rigid: int, particles: int, emitters: dict[int, mi.Scene]) -> None:
+    def set_moving(self, broadphase: mi.Scene | None, atlas: mi.Scene | None, rigid: int, particles: int, emitters: dict[int, mi.Scene],
+                   particle_emitters: Sequence[tuple[int, int, mi.Scene]] = ()) -> None:
         """The broadphase and atlas scenes, the counts of rigid movers and particles they
-        hold, and the emissive movers' rest-frame scenes."""
+        hold, the emissive movers' rest-frame scenes, and for each emissive particle system
+        its particles' range (first, room) and its holder sphere's own scene."""
         self.broadphase, self.atlas = broadphase, atlas
         self.rigid, self.particles = rigid, particles
         self.emitters = dict(emitters)
+        self.particle_emitters = list(particle_emitters)
         self._checked = None
+
+    def sample_particle_emitter(self, system: int, movers: Movers, si: Any, sample1: Any, sample2: Any, active: Any) -> tuple[Any, Any]:
+        """An emitter sample of emissive particle system `system` at the path's time: one of
+        its particle slots chosen uniformly (a slot dead at that time gives nothing), a
+        point of that sphere sampled by solid angle from si (its holder's own sampling, the
+        sphere moved to the particle's centre). (DirectionSample3f in world space with the
+        slot's choice in its pdf, weight)."""
+        first, room, holder = self.particle_emitters[system]
+        slot = dr.minimum(mi.UInt32(sample1 * room), room - 1)
+        centre, alive = movers.particle(slot + first, active)
+        ok = active & alive
+        ref = mi.Interaction3f(si.t, si.time, si.wavelengths, si.p - centre, si.n)
+        ds, weight = holder.sample_emitter_direction(ref, sample2, False, ok)
+        ds.p = ds.p + centre
+        ds.pdf = ds.pdf / room
+        return ds, dr.select(ok, weight * room, 0.0)
+
+    def particle_emitter_pdf(self, ds: Any, ref: Any, hit: Any, movers: Movers, pdf: Any, active: Any) -> Any:
+        """The solid-angle pdf with which `sample_particle_emitter` would have chosen the
+        point a BSDF-sampled ray hit on an emissive particle (`pdf` elsewhere)."""
+        for first, room, holder in self.particle_emitters:
+            base = self.rigid + first
+            mine = active & (hit >= base) & (hit < base + room)
+            centre, _ = movers.particle(dr.select(mine, hit - self.rigid, 0), mine)
+            local_ref = mi.Interaction3f(ref.t, ref.time, ref.wavelengths, ref.p - centre, ref.n)
+            local = mi.DirectionSample3f(ds.p - centre, ds.n, ds.uv, ds.time, ds.pdf, ds.delta, ds.d, ds.dist, ds.emitter)
+            pdf = dr.select(mine, holder.pdf_emitter_direction(local_ref, local, mine) / room, pdf)
+        return pdf
 
     def set_slices(self, groups: Sequence[Sequence[mi.Scene]]) -> None:
         """For each deforming object, one world-space scene per slice."""
