@@ -26,14 +26,20 @@ def cache_info() -> None:
     """Entries, bytes, hits and misses of each cache (one line per store of pipeline/cache.py),
     then drjit's kernel cache."""
     from motion.pipeline.cache import STORES, kernels_dir, trusted_folder
-    from motion.pipeline.render.assets import info
+    from motion.pipeline.cache import kernel_files as drjit_files
 
     for store in STORES.values():
         files, size = store.info()
         ours = "" if not store.dir().is_dir() or trusted_folder(store.dir()) else "  (writable by others: its entries are not used)"
         click.echo(f"{store.name:<15} {files:>6} files {size / 1e6:>10.1f} MB  {store.dir()}{ours}")
-    k = info(kernels_dir())
-    click.echo(f"{'kernels':<15} {k.files:>6} files {k.bytes / 1e6:>10.1f} MB  {kernels_dir()}")
+    kernels = drjit_files()
+    size = 0
+    for path in kernels:
+        try:
+            size += path.stat().st_size
+        except OSError:
+            continue  # swept or replaced while we looked
+    click.echo(f"{'kernels':<15} {len(kernels):>6} files {size / 1e6:>10.1f} MB  {kernels_dir()}")
 
 
 @cache.command("clear")
@@ -42,11 +48,14 @@ def cache_clear(what: str) -> None:
     """Delete cached files (they are rebuilt on demand): assets holds the converted assets,
     imports and import records; validation the kept validators and asset passes; shipped
     what shipped jobs carried to this worker."""
+    from motion.pipeline.cache import clear_kernels
     from motion.pipeline.render.assets import clear
 
     for name, folder in _folders().items():
         if what in ("all", name):
-            click.echo(f"{name}: removed {clear(folder)} files from {folder}")
+            # the kernel folder may be $DRJIT_CACHE_DIR, shared with others: only drjit's files go
+            removed = clear_kernels(folder) if name == "kernels" else clear(folder)
+            click.echo(f"{name}: removed {removed} files from {folder}")
 
 
 @cache.command("key")
@@ -96,9 +105,11 @@ def cache_warm(scene: Path, preset: str | None, frames_spec: str | None) -> None
 
 
 def kernel_files(folder: Path) -> set[str]:
-    """The names of drjit's kernel files in `folder` (`*.bin`: not its `sweep.stamp` nor a
-    writer's `*.tmp`, which come and go beside them)."""
-    return {p.name for p in folder.glob("*.bin")} if folder.is_dir() else set()
+    """The names of drjit's kernel files in `folder` (`*.bin` as drjit names them: not its
+    `sweep.stamp` nor a writer's `*.tmp`, which come and go beside them, nor anyone else's)."""
+    from motion.pipeline.cache import kernel_files as drjit_files
+
+    return {p.name for p in drjit_files(folder) if p.name.endswith(".bin")}
 
 
 commands = [cache]

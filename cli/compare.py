@@ -22,9 +22,9 @@ def report_paths(report_dir: Path | None, html_dir: Path | None, junit: Path | N
 @click.command("compare")
 @click.argument("new_dir", type=click.Path(file_okay=False, path_type=Path))
 @click.argument("ref_dir", type=click.Path(file_okay=False, path_type=Path))
-@click.option("--bless", is_flag=True, help="Make NEW's frames the references in REF (half floats + manifest.json) instead of comparing.")
-@click.option("--allow-different-settings", is_flag=True, help="Compare even when the scene digest or render settings differ from the references' (each difference is reported).")
-@click.option("--frames", "frames_spec", help="Only these frames: 0-23, 1,5,9 ... (default: every reference frame).")
+@click.option("--bless", is_flag=True, help="Make NEW's frames the references in REF (half floats + manifest.json) instead of comparing (with --frames: only those).")
+@click.option("--allow-different-settings", is_flag=True, help="Kept for scripts: frames made differently (a material, a setting) are always compared, each difference named as a note.")
+@click.option("--frames", "frames_spec", help="Only these frames: 0-23, 1,5,9 ... (default: every reference frame; with --bless every frame of NEW).")
 @click.option("--prefix", help="The sequence's name in NEW when it holds several.")
 @click.option("--report", "report_dir", type=click.Path(file_okay=False, path_type=Path), help="Write every report into this folder: index.html, junit.xml, compare.json.")
 @click.option("--html", "html_dir", type=click.Path(file_okay=False, path_type=Path), help="Folder for the HTML report (index.html + images).")
@@ -38,25 +38,27 @@ def compare(new_dir: Path, ref_dir: Path, bless: bool, allow_different_settings:
     """Compare the EXR sequence in NEW_DIR with the references in REF_DIR, frame by frame:
     identical, equal within noise, or different (where, how large, which channel).
     Exit 0 when every frame is identical or equal, 1 when one differs or is missing,
-    2 for bad input or frames made from another scene or settings (docs/compare.md)."""
-    if bless:
-        from motion.pipeline.compare import bless as bless_frames
-
-        manifest = bless_frames(new_dir, ref_dir, prefix)
-        click.echo(f"blessed {len(manifest.frames)} frames of {new_dir} as the references in {ref_dir} ({ref_dir / 'manifest.json'})")
-        return
-    from motion.pipeline.compare import compare_sequences, write_reports
-
+    2 for bad input or frames that cannot be compared (sizes); frames made differently (a
+    material, a setting) are compared, each difference a `note:` (docs/compare.md)."""
     frames = None
     if frames_spec:
         from motion.pipeline.farm.frames import parse_frames
 
         frames = parse_frames(frames_spec)
-    result = compare_sequences(new_dir, ref_dir, prefix=prefix, frames=frames, allow_different_settings=allow_different_settings,
-                               flip=flip, workers=workers, keep_maps=bool(report_dir or html_dir))  # type: ignore[arg-type]
-    written = write_reports(result, **report_paths(report_dir, html_dir, junit, json_path))
-    for line in result.allowed:
-        click.echo(f"note: allowed: {line}", err=True)
+    if bless:
+        from motion.pipeline.compare import bless as bless_frames
+
+        manifest = bless_frames(new_dir, ref_dir, prefix, frames)
+        click.echo(f"blessed {len(manifest.frames)} frames of {new_dir} as the references in {ref_dir} ({ref_dir / 'manifest.json'})")
+        return
+    from motion.pipeline.compare import check_report_targets, compare_sequences, write_reports
+
+    targets = report_paths(report_dir, html_dir, junit, json_path)
+    check_report_targets(**targets)
+    result = compare_sequences(new_dir, ref_dir, prefix=prefix, frames=frames, flip=flip, workers=workers, keep_maps=bool(report_dir or html_dir))  # type: ignore[arg-type]
+    written = write_reports(result, **targets)
+    for line in result.notes:
+        click.echo(f"note: {line}", err=True)
     for f in result.frames:
         if verbose or f.failed:
             click.echo(f.message())

@@ -35,6 +35,7 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--shard", help="I/N: render only the I-th (1-based) of N balanced parts of the frames (CI matrix, farm nodes).")
 @click.option("--preset", help="Render preset: ci-smoke, preview, final, or a path to a preset .yaml.")
 @click.option("--spp", type=click.IntRange(min=1), help="Samples per pixel (overrides preset and scene).")
+@click.option("--seed", type=click.IntRange(min=0, max=2**31 - 1), help="Render seed (overrides preset and scene render.seed; changes the noise, not the picture).")
 @click.option("--resolution", help="WIDTHxHEIGHT (overrides preset and scene).")
 @click.option("--motion-blur", type=click.Choice(["stochastic", "subframes", "off"]), help="Motion-blur mode.")
 @click.option("--denoise/--no-denoise", "denoise", default=None, help="Denoise each frame with Intel Open Image Denoise, albedo + normal guides (default: the preset's / scene's render.denoise).")
@@ -66,7 +67,7 @@ def _resolution(value: str | None) -> tuple[int, int] | None:
 @click.option("--fields", "fields", type=click.Choice(["60i", "50i"]), help="Render the video's fields directly (each at its own instant and shutter, only its rows) into OUT/fields/ and weave them into interlaced frames and a movie in OUT; --frames then counts interlaced frames.")
 @click.option("--field-order", type=click.Choice(["tff", "bff"]), default="tff", show_default=True, help="With --fields: which field of each frame is first in time.")
 @click.option("--compare", "compare_ref", type=click.Path(file_okay=False, path_type=Path), help="After the frames, compare them with the references in this folder (motion compare; reports in OUTPUT/compare/; exit 1 if one differs).")
-@click.option("--allow-different-settings", is_flag=True, help="With --compare: compare even when the scene or settings differ from the references'.")
+@click.option("--allow-different-settings", is_flag=True, help="Kept for scripts: with --compare, frames made differently are always compared, each difference a note.")
 def render(
     scene: Path,
     output_dir: Path | None,
@@ -74,6 +75,7 @@ def render(
     shard: str | None,
     preset: str | None,
     spp: int | None,
+    seed: int | None,
     resolution: str | None,
     motion_blur: str | None,
     denoise: bool | None,
@@ -112,12 +114,13 @@ def render(
 
     request = RenderRequest(
         scene=scene, output_dir=output_dir, frames_spec=frames_spec, shard=shard, preset=preset, motion_file=motion_file, report=report_path,
-        render_overrides=_render_overrides(spp, resolution, motion_blur, variant, denoise, temporal),
+        render_overrides={**_render_overrides(spp, resolution, motion_blur, variant, denoise, temporal), "seed": seed},
         output_overrides={"aovs": list(dict.fromkeys(aovs)) or None},
         cache=not no_cache, resume=resume, overwrite=overwrite, progress=progress, check=check, dry_run=dry_run,
         deliver=deliver_spec, deliver_frames=deliver_frames,
         deliver_view={"exposure": exposure, "ocio_config": ocio_config, "ocio_display": ocio_display, "ocio_view": ocio_view},
         workers=workers, scheduler=scheduler, transfer=transfer, threads=threads, chunk_size=chunk_size, retries=retries, task_timeout_s=task_timeout_s,
+        compare=None if dry_run else compare_ref,
     )
     if fields:
         from motion.pipeline.shot import run_field_render
@@ -134,7 +137,7 @@ def render(
     elif as_json:
         click.echo(json.dumps(summary(result) if "totals" in result else result, indent=2))
     if compare_ref is not None and not dry_run:
-        _compare(result, compare_ref, allow_different_settings)
+        _compare(result, compare_ref)
 
 
 def _render_overrides(spp: int | None, resolution: str | None, motion_blur: str | None, variant: str | None, denoise: bool | None, temporal: str | None) -> dict[str, Any]:
@@ -163,12 +166,15 @@ def _run(request: "RenderRequest", as_json: bool) -> dict[str, Any]:
         raise
 
 
-def _compare(report: dict, ref_dir: Path, allow: bool) -> None:
-    """`--compare REF`: the frames just rendered against the references (exit 1 if one differs)."""
+def _compare(report: dict, ref_dir: Path) -> None:
+    """`--compare REF`: the frames just rendered against the references (exit 1 if one
+    differs); how they were made differently, as `note:` lines like `motion compare`'s."""
     from motion.pipeline.errors import FramesDifferError
     from motion.pipeline.shot.compare import compare_render
 
-    result, written = compare_render(report, ref_dir, allow_different_settings=allow)
+    result, written = compare_render(report, ref_dir)
+    for line in result.notes:
+        click.echo(f"note: {line}", err=True)
     for f in result.failed:
         click.echo(f.message(), err=True)
     click.echo(result.summary(), err=True)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import stat
 import threading
 from dataclasses import dataclass, field
@@ -64,6 +65,45 @@ def validation_dir() -> Path:
 def kernels_dir() -> Path:
     """drjit's kernel cache: $DRJIT_CACHE_DIR, else kernels/ under the cache root."""
     return Path(os.environ.get("DRJIT_CACHE_DIR", str(cache_root() / "kernels")))
+
+
+# What drjit writes in its kernel cache folder (drjit-core's io.cpp): one file a kernel,
+# `<32 hex digits>.<backend>.v<format>.bin` (`0ab0...e8.llvm.v6.bin`; `<hex>.<backend>.bin`
+# before drjit 1.1), its writer's temporary `<that name>.<number>.tmp` (`<that name>.tmp`
+# before), and the `sweep.stamp` of its size sweep. Nothing else there is drjit's or ours:
+# $DRJIT_CACHE_DIR may name a folder others keep files in.
+_KERNEL_FILE = re.compile(r"[0-9a-f]{32}\.[a-z0-9_]+(\.v[0-9]+)?\.bin(\.[0-9]+)?(\.tmp)?|sweep\.stamp")
+
+
+def is_kernel_file(name: str) -> bool:
+    """Whether a file name in the kernel cache folder is one drjit writes there
+    (`_KERNEL_FILE`): a kernel, a kernel being written, the sweep stamp."""
+    return _KERNEL_FILE.fullmatch(name) is not None
+
+
+def kernel_files(folder: Path | None = None) -> list[Path]:
+    """drjit's files in the kernel cache folder (`folder`, default `kernels_dir()`): regular
+    files named as drjit names them, at its top level only (a subfolder, a link, or any
+    other file is someone else's). Empty when the folder is missing or unreadable."""
+    folder = kernels_dir() if folder is None else folder
+    try:
+        with os.scandir(folder) as entries:
+            return [Path(e.path) for e in entries if is_kernel_file(e.name) and e.is_file(follow_symlinks=False)]
+    except OSError:
+        return []
+
+
+def clear_kernels(folder: Path | None = None) -> int:
+    """Remove drjit's files from the kernel cache folder (`kernel_files`), never another
+    file there; returns how many went."""
+    n = 0
+    for path in kernel_files(folder):
+        try:
+            path.unlink()
+            n += 1
+        except FileNotFoundError:
+            pass  # another process's sweep or writer took it
+    return n
 
 
 def kernel_cache_key() -> str:

@@ -18,6 +18,7 @@ import OpenEXR
 
 from .errors import DiskFaultError, FrameIOError
 from .files import DISK_FAULT_ERRNOS, _UMASK, _unlink_quietly, confined, disk_fault, disk_fault_errno, lost_write, publish, write_atomic, writing  # noqa: F401  (the write policy, re-exported)
+from .timeline import MAX_TIMECODE_FRAMES, timecode_fields, timecode_group
 
 PixelType = Literal["half", "float"]
 Compression = Literal["zip", "zips", "piz", "zstd", "none"]
@@ -65,20 +66,52 @@ def read_meta(path: str | Path) -> dict[str, Any]:
     return motion_meta(read_header(path))
 
 
-def _timecode_attr(tc: str) -> Any:
-    """'HH:MM:SS:FF' (or ';FF' for drop-frame) -> OpenEXR.TimeCode."""
+def _timecode_attr(tc: str, fps: Fraction | None = None) -> Any:
+    """'HH:MM:SS:FF' (or ';FF' for drop-frame), FF counted at the nominal rate of `fps`
+    -> OpenEXR.TimeCode, as SMPTE ST 12-1 counts rates above 30 frames/s: the frame field
+    holds FF // group (`timeline.timecode_group`: 2 at 48, 50, 59.94 and 60 fps), the
+    field-phase (pair) flag is set on the odd frames, and where a group is larger than a
+    pair (120 fps: 4) the frame's place in it (0 .. group-1) is in the user bits, which
+    ST 12-1 cannot say otherwise (docs/telecine.md, "Timecode")."""
     drop = ";" in tc
     hh, mm, ss, ff = (int(x) for x in tc.replace(";", ":").split(":"))
+    group = timecode_group(fps) if fps is not None else 1
+    field, place = timecode_fields(ff, fps) if fps is not None else (ff, 0)
+    if field >= MAX_TIMECODE_FRAMES:
+        rate = f"at {fps} frames/s" if fps is not None else "without a frame rate (30 frames a second at most)"
+        raise FrameIOError(f"timecode {tc}: frame {ff} is out of range {rate}")
     code = OpenEXR.TimeCode()
-    code.hours, code.minutes, code.seconds, code.frame = hh, mm, ss, ff
+    code.hours, code.minutes, code.seconds, code.frame = hh, mm, ss, field
     code.dropFrame = drop
+    if group > 1:
+        code.fieldPhase = bool(place % 2)
+    if group > 2:
+        code.userData = place
     return code
 
 
-def timecode_str(code: Any) -> str:
-    """OpenEXR.TimeCode (as read back) -> 'HH:MM:SS:FF' ('HH:MM:SS;FF' for drop-frame)."""
+def timecode_str(code: Any, fps: Fraction | None = None) -> str:
+    """OpenEXR.TimeCode (as read back) -> 'HH:MM:SS:FF' ('HH:MM:SS;FF' for drop-frame), FF
+    counted at the nominal rate of `fps` (the frame's framesPerSecond: a 60 fps frame's
+    frame field 22 with the pair flag is FF 45); without `fps`, the frame field as it is."""
     sep = ";" if code.dropFrame else ":"
-    return f"{code.hours:02d}:{code.minutes:02d}:{code.seconds:02d}{sep}{code.frame:02d}"
+    group = timecode_group(fps) if fps else 1
+    ff = code.frame * group + (int(code.fieldPhase) if group == 2 else code.userData % group if group > 2 else 0)
+    return f"{code.hours:02d}:{code.minutes:02d}:{code.seconds:02d}{sep}{ff:02d}"
+
+
+def header_timecode(header: Mapping[str, Any]) -> str | None:
+    """A frame header's timecode as 'HH:MM:SS:FF' at its own rate (`timeCode` read with
+    `framesPerSecond`), None without a timeCode attribute."""
+    code = header.get("timeCode")
+    if code is None:
+        return None
+    fps = header.get("framesPerSecond")
+    try:
+        rate = Fraction(fps) if fps is not None else None
+    except (TypeError, ValueError, ZeroDivisionError):
+        rate = None
+    return timecode_str(code, rate if rate is not None and rate > 0 else None)
 
 
 def _header_value(value: Any) -> Any:
@@ -155,7 +188,7 @@ def write_frame(
     if fps is not None:
         header["framesPerSecond"] = Fraction(fps)
     if timecode is not None:
-        header["timeCode"] = _timecode_attr(timecode)
+        header["timeCode"] = _timecode_attr(timecode, Fraction(fps) if fps is not None else None)
     for key, value in (standard or {}).items():
         header[key] = _header_value(value)
     for key, value in (meta or {}).items():

@@ -200,6 +200,32 @@ def timecode(frame: int, fps: Fraction, drop_frame: bool = False) -> str:
     return f"{hh:02d}:{mm:02d}:{ss:02d}{sep}{ff:02d}"
 
 
+# SMPTE ST 12-1 counts at most 30 frames a second in its frame field; a faster rate is
+# counted in groups of `timecode_group(fps)` frames (pairs at 48, 50, 59.94 and 60 fps).
+MAX_TIMECODE_FRAMES = 30
+
+
+def timecode_group(fps: Fraction | int) -> int:
+    """How many frames share one value of the timecode's frame field: 1 up to 30 frames/s,
+    2 (the frame pair of SMPTE ST 12-1) up to 60, 4 at 120 (ceil(nominal / 30) in general).
+
+    >>> [timecode_group(Fraction(n)) for n in (24, 30, 48, 50, 60)], timecode_group(Fraction(120000, 1001))
+    ([1, 1, 2, 2, 2], 4)
+    """
+    return max(1, -(-round(fps) // MAX_TIMECODE_FRAMES))
+
+
+def timecode_fields(label_frame: int, fps: Fraction | int) -> tuple[int, int]:
+    """A timecode label's frame number FF (0 .. nominal-1, as `timecode` writes it) as the
+    frame field of a SMPTE ST 12 time address and the frame's place in its group: at 60
+    fps label 45 is field 22, second of its pair (the pair flag set); at 24 fps it is itself.
+
+    >>> timecode_fields(45, Fraction(60)), timecode_fields(45, Fraction(120)), timecode_fields(17, Fraction(24))
+    ((22, 1), (11, 1), (17, 0))
+    """
+    return divmod(label_frame, timecode_group(fps))
+
+
 def format_frames(frames: Sequence[int]) -> str:
     """Compact text in the `--frames` grammar: [1,2,3,7] -> '1-3,7'; [0,2,4,6] -> '0-6x2'.
 

@@ -33,8 +33,7 @@ def test_frames_shutters_and_samples() -> None:
     assert f.sample_times[0] == f.shutter[0] and f.sample_times[-1] == f.shutter[1]
     direct = evaluate(loaded, f.sample_times)
     for name, pose in direct.objects.items():
-        for a, b in zip(f.across_shutter.objects[name], pose):
-            np.testing.assert_allclose(a, b, atol=1e-12)
+        np.testing.assert_allclose(f.across_shutter.objects[name].matrices(), pose.matrices(), atol=1e-12)
     np.testing.assert_allclose(f.at_frame.objects["hips"].translation, [[0.6, 0.95, 0.0]], atol=1e-12)
     with pytest.raises(FrameNotBakedError, match="frame 5 is not in this bake"):
         baked.frame(5)

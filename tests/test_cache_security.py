@@ -260,8 +260,9 @@ def test_a_damaged_or_foreign_import_record_is_read_again(tmp_path: Path, monkey
 
 def test_an_import_swapped_while_it_is_read_is_not_kept(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The glTF file is hashed, then another file takes its place before the reader reads
-    it: its records are not kept under the first file's hash (a later load of the first file
-    would otherwise get the other file's objects)."""
+    it: the reader parses the bytes that were hashed (memo.read_import reads the file once),
+    so the records kept under the first file's hash are the first file's, and the other
+    file, loaded in its turn, gets its own."""
     from motion.pipeline.scene.imports import cache as import_cache
     from motion.pipeline.scene.imports import memo
 
@@ -280,12 +281,14 @@ def test_an_import_swapped_while_it_is_read_is_not_kept(tmp_path: Path, monkeypa
         return real(*args)
 
     monkeypatch.setattr(memo, "_read_file", swap_then_read)
-    assert any("QQQ" in o.name for o in load_scene(path).scene.objects)  # the reader read the other file
+    assert not any("QQQ" in o.name for o in load_scene(path).scene.objects)  # the bytes hashed, not the file swapped in
     monkeypatch.setattr(memo, "_read_file", real)
     glb.write_bytes(original)
     before = import_cache.STATS["records"]
     objects = [o.name for o in load_scene(path).scene.objects]
-    assert import_cache.STATS["records"] == before and not any("QQQ" in n for n in objects)
+    assert import_cache.STATS["records"] == before + 1 and not any("QQQ" in n for n in objects)  # kept, and the first file's
+    glb.write_bytes(swapped)
+    assert any("QQQ" in o.name for o in load_scene(path).scene.objects)  # the other file: its own records
 
 
 # --- the cost history ----------------------------------------------------------------------------

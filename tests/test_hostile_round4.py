@@ -233,14 +233,14 @@ def test_ntsc_rates_written_as_decimals_are_the_exact_ratio(tmp_path: Path, writ
 
 @pytest.mark.parametrize("fps, frame, code", [("29.97", 1800, "00:01:00;02"), ("59.94", 3600, "00:01:00;04"), ("29.97", 17982, "00:10:00;00")])
 def test_frames_at_29_97_and_59_94_carry_drop_frame_timecode(tmp_path: Path, fps: str, frame: int, code: str) -> None:
-    from motion.pipeline.frame_output import read_header, timecode_str
+    from motion.pipeline.frame_output import header_timecode, read_header
 
     scene = tmp_path / "s.yaml"
     scene.write_text(BASE.replace("fps: 24, first: 0, last: 1", f"fps: {fps}, first: {frame}, last: {frame}"))
     res = motion("render", scene, "-o", tmp_path / "out")
     assert res.returncode == 0, res.stderr
     (path,) = frames_in(tmp_path / "out")
-    assert timecode_str(read_header(path)["timeCode"]) == code  # before: non-drop at 2997/100
+    assert header_timecode(read_header(path)) == code  # before: non-drop at 2997/100
 
 
 def test_export_of_frames_below_zero_is_refused_not_half_done(tmp_path: Path) -> None:

@@ -267,3 +267,34 @@ def test_a_kept_usd_import_is_not_used_when_a_layer_became_a_link_outside(tmp_pa
     (shot / "set.usda").symlink_to(tmp_path / "elsewhere" / "set.usda")
     with pytest.raises(SceneError, match="outside the scene's folder"):
         load_scene(shot / "shot.yaml")
+
+
+def test_a_non_uniform_scale_above_a_turning_child_is_usds_own_matrix(tmp_path):
+    """/Stretch scales (1, 2, 1) and slides; under it /Stretch/Spin turns about X on keys
+    and about Y, with a non-uniform scale of its own, and /Stretch/Spin/Tip sits off its
+    origin: at every sub-frame our world matrices are USD's ComputeLocalToWorldTransform
+    (a per-axis product of scales missed by 0.34 m at the first time checked)."""
+    stage = Usd.Stage.CreateNew(str(tmp_path / "stretch.usda"))
+    stage.SetTimeCodesPerSecond(24.0)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    top = UsdGeom.Xform.Define(stage, "/Stretch")
+    move = top.AddTranslateOp()
+    move.Set(Gf.Vec3d(0, 0, 0), 0)
+    move.Set(Gf.Vec3d(0, 2.52, 0), 30)
+    top.AddScaleOp().Set(Gf.Vec3f(1, 2, 1))
+    spin = UsdGeom.Xform.Define(stage, "/Stretch/Spin")
+    turn = spin.AddRotateXOp()
+    turn.Set(0.0, 0)
+    turn.Set(180.0, 48)
+    spin.AddRotateYOp().Set(25.0)
+    spin.AddScaleOp().Set(Gf.Vec3f(0.3, 0.5, 0.8))
+    UsdGeom.Xform.Define(stage, "/Stretch/Spin/Tip").AddTranslateOp().Set(Gf.Vec3d(0, 1, 0.5))
+    stage.GetRootLayer().Save()
+    (tmp_path / "shot.yaml").write_text("timeline: {fps: 24, first: 0, last: 48}\ncamera: {position: [0, 1, 9], look_at: [0, 0, 0]}\nimports:\n  - {file: stretch.usda}\n")
+    codes = np.array([0, 7.5, 12, 24, 30.25, 45, 48])
+    motion = evaluate(load_scene(tmp_path / "shot.yaml"), codes / 24.0)
+    for name, path in (("Spin", "/Stretch/Spin"), ("Tip", "/Stretch/Spin/Tip")):
+        xf = UsdGeom.Xformable(stage.GetPrimAtPath(path))
+        for i, code in enumerate(codes):
+            theirs = np.array(xf.ComputeLocalToWorldTransform(Usd.TimeCode(float(code)))).T
+            np.testing.assert_allclose(motion.objects[name].matrices()[i], theirs, atol=1e-5, err_msg=f"{path} at time code {code}")

@@ -19,12 +19,16 @@ if TYPE_CHECKING:
 UNIT_TOLERANCE = 1e-6  # | |q| - 1 | allowed for a rotation quaternion
 
 
-def pose_problem(translation: Any, rotation: Any, scale: Any, times: Any) -> str | None:
-    """What is wrong with one pose track ([T, 3], [T, 4], [T, 3] at `times` [T]), or None:
-    a wrong shape, a non-finite translation, rotation or scale, a rotation that is not a
-    unit quaternion. The message names the channel and the first time at fault."""
+def pose_problem(translation: Any, rotation: Any, scale: Any, times: Any, stretch_offdiag: Any = None) -> str | None:
+    """What is wrong with one pose track ([T, 3], [T, 4], [T, 3] at `times` [T], and the
+    stretch's off-diagonal terms [T, 3] where present), or None: a wrong shape, a
+    non-finite translation, rotation, scale or stretch, a rotation that is not a unit
+    quaternion. The message names the channel and the first time at fault."""
     times = np.asarray(times, dtype=np.float64).reshape(-1)
-    for channel, arr, width in (("translation", translation, 3), ("rotation", rotation, 4), ("scale", scale, 3)):
+    channels = [("translation", translation, 3), ("rotation", rotation, 4), ("scale", scale, 3)]
+    if stretch_offdiag is not None:
+        channels.append(("stretch", stretch_offdiag, 3))
+    for channel, arr, width in channels:
         a = np.asarray(arr)
         if a.dtype.kind not in "fiu" or a.ndim != 2 or a.shape != (times.size, width):
             return f"{channel} has shape {a.shape} ({a.dtype}), expected [{times.size}, {width}] numbers"
@@ -63,7 +67,7 @@ def motion_problems(motion: "SceneMotion", half: bool = False) -> list[tuple[str
     poses += [("objects", n, f"object '{n}'", p) for n, p in motion.objects.items()]
     poses += [("lights", n, f"light '{n}'", p) for n, p in motion.lights.items()]
     for owner, name, who, pose in poses:
-        why = pose_problem(*pose, times)
+        why = pose_problem(*pose[:3], times, stretch_offdiag=pose[3] if len(pose) > 3 else None)
         if why is not None:
             problems.append((owner, name, f"{who}: {why}"))
     scalars = [("camera", "", "camera", c, arr) for c, arr in motion.camera_scalars.items()]

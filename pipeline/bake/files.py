@@ -29,6 +29,8 @@ VERSION = 1
 # --- files --------------------------------------------------------------------------------
 
 _POSE_FIELDS = ("translation", "rotation", "scale")
+# the stretch's off-diagonal terms (S_xy, S_xz, S_yz), written only where a pose has them
+_STRETCH_FIELD = "stretch"
 
 
 def _motion_arrays(motion: "SceneMotion", prefix: str, with_heavy: bool) -> dict[str, np.ndarray]:
@@ -36,10 +38,8 @@ def _motion_arrays(motion: "SceneMotion", prefix: str, with_heavy: bool) -> dict
     out: dict[str, np.ndarray] = {}
     for group in ("objects", "lights"):
         for name, pose in getattr(motion, group).items():
-            for fld, arr in zip(_POSE_FIELDS, pose):
-                out[f"{prefix}/{group}/{name}/{fld}"] = arr
-    for fld, arr in zip(_POSE_FIELDS, motion.camera):
-        out[f"{prefix}/camera/{fld}"] = arr
+            out.update(_pose_arrays(pose, f"{prefix}/{group}/{name}"))
+    out.update(_pose_arrays(motion.camera, f"{prefix}/camera"))
     for name, arr in motion.camera_scalars.items():
         out[f"{prefix}/camera_scalars/{name}"] = arr
     for light, scalars in motion.light_scalars.items():
@@ -52,6 +52,27 @@ def _motion_arrays(motion: "SceneMotion", prefix: str, with_heavy: bool) -> dict
             out[f"{prefix}/particles/{name}/positions"] = np.asarray(ps.positions)
             out[f"{prefix}/particles/{name}/alive"] = np.asarray(ps.alive)
             out[f"{prefix}/particles/{name}/ids"] = np.asarray(ps.ids)
+    return out
+
+
+def _pose_arrays(pose: Any, prefix: str) -> dict[str, np.ndarray]:
+    """One pose's arrays under `prefix/`: translation, rotation, scale, and `stretch` where
+    the pose has off-diagonal stretch terms."""
+    out = {f"{prefix}/{fld}": arr for fld, arr in zip(_POSE_FIELDS, pose)}
+    off = pose[3] if len(pose) > 3 else None
+    if off is not None:
+        out[f"{prefix}/{_STRETCH_FIELD}"] = off
+    return out
+
+
+def _stack_rows(rows: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    """Per-frame arrays stacked over frames; a frame without a pose's `stretch` (diagonal
+    there) gets zeros of its `scale`'s shape."""
+    keys = list(dict.fromkeys(k for r in rows for k in r))
+    out = {}
+    for key in keys:
+        fill = key[: -len(_STRETCH_FIELD)] + "scale" if key.endswith("/" + _STRETCH_FIELD) else None
+        out[key] = np.stack([r[key] if key in r else np.zeros_like(r[fill]) for r in rows])  # type: ignore[index]
     return out
 
 
@@ -103,8 +124,7 @@ def write_baked(baked: BakedMotion, path: str | Path) -> Path:
             per_frame = [_motion_arrays(f.across_shutter, "samples", True) for f in baked.frames]
             at_frame = [_motion_arrays(f.at_frame, "at_frame", True) for f in baked.frames]
             for rows in (per_frame, at_frame):
-                for key in rows[0]:
-                    stacked = np.stack([r[key] for r in rows])
+                for key, stacked in _stack_rows(rows).items():
                     # at_frame values drop their time axis of 1 (particle ids have none)
                     arrays[key] = stacked[:, 0] if key.startswith("at_frame/") and not key.endswith("/ids") else stacked
             with open(tmp, "wb") as fh:
@@ -311,13 +331,15 @@ def _scene_motion(node: dict[str, Any], times: np.ndarray, single: bool) -> "Sce
     `at_frame` record), one is added."""
     from ..dynamics.particles import ParticleSamples
     from ..motion import Pose, SceneMotion
+    from ..motion.pose import offdiag_or_none
 
     def arr(value: Any, dtype: Any = np.float64) -> np.ndarray:
         a = _numbers(value, "a value", dtype)
         return a[None] if single else a
 
     def pose(d: dict[str, Any]) -> Pose:
-        return Pose(arr(d["translation"]), arr(d["rotation"]), arr(d["scale"]))
+        off = d.get(_STRETCH_FIELD)  # absent in files written before stretches, and where diagonal
+        return Pose(arr(d["translation"]), arr(d["rotation"]), arr(d["scale"]), offdiag_or_none(None if off is None else arr(off)))
 
     return SceneMotion(
         times=times,

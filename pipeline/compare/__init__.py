@@ -6,8 +6,8 @@ reference set, `write_reports` writes the HTML, JUnit and JSON reports.
 """
 
 from .golden import Manifest, bless, read_manifest
-from .report import write_html, write_json, write_junit, write_reports
+from .report import check_report_targets, write_html, write_json, write_junit, write_reports
 from .sequence import Comparison, FrameOutcome, compare_sequences
 from .stats import FrameTest, Region, compare_frame
 
-__all__ = ["Comparison", "FrameOutcome", "FrameTest", "Manifest", "Region", "bless", "compare_sequences", "read_manifest", "compare_frame", "write_html", "write_json", "write_junit", "write_reports"]
+__all__ = ["check_report_targets", "Comparison", "FrameOutcome", "FrameTest", "Manifest", "Region", "bless", "compare_sequences", "read_manifest", "compare_frame", "write_html", "write_json", "write_junit", "write_reports"]

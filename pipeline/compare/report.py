@@ -15,6 +15,8 @@ import datetime as _dt
 import html
 import io
 import json
+import math
+import re
 import socket
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -22,33 +24,46 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import UsageError
 from ..files import write_atomic
-from .sequence import Comparison, FrameOutcome
+from .sequence import Comparison, FrameOutcome, ranges
+
+# characters XML 1.0 cannot hold (a control character in a file name): shown as U+FFFD
+_NOT_XML = re.compile("[^\\t\\n\\r\\x20-\\ud7ff\\ue000-\\ufffd\\U00010000-\\U0010ffff]")
+
+
+def _xml(text: object) -> str:
+    """`text` as XML 1.0 can hold it."""
+    return _NOT_XML.sub("\ufffd", str(text))
 
 
 def write_junit(comparison: Comparison, path: str | Path) -> Path:
     """JUnit XML (Jenkins' junit-10.xsd, which GitHub Actions, GitLab and Jenkins read): one
     test suite, one test case per frame; a frame that differs or is missing is a failure
-    whose message is its one line and whose text lists its regions."""
+    whose message is its one line and whose text lists its regions; each note (how the
+    frames were made differently) is a property of the suite and a line of its frames."""
     counts = comparison.counts()
     failures = counts["different"] + counts["missing"]
     name = f"motion compare {comparison.new_dir} vs {comparison.ref_dir}"
+    e = _xml
     suites = ET.Element("testsuites", name="motion compare", tests=str(len(comparison.frames)), failures=str(failures), errors="0", time=f"{comparison.seconds:.3f}")
-    suite = ET.SubElement(suites, "testsuite", name=name, tests=str(len(comparison.frames)), failures=str(failures), errors="0", skipped="0",
+    suite = ET.SubElement(suites, "testsuite", name=e(name), tests=str(len(comparison.frames)), failures=str(failures), errors="0", skipped="0",
                           time=f"{comparison.seconds:.3f}", timestamp=_dt.datetime.now().replace(microsecond=0).isoformat(), hostname=socket.gethostname())
     props = ET.SubElement(suite, "properties")
     for key, value in (("new", comparison.new_dir), ("reference", comparison.ref_dir), ("variants", json.dumps(comparison.variants())),
-                       ("allowed_differences", "; ".join(comparison.allowed) or "none")):
-        ET.SubElement(props, "property", name=key, value=str(value))
+                       ("allowed_differences", "; ".join(comparison.notes) or "none")):
+        ET.SubElement(props, "property", name=key, value=e(value))
+    for note in comparison.notes:
+        ET.SubElement(props, "property", name="note", value=e(note))
     prefix = Path(comparison.frames[0].ref).name.split(".")[0] if comparison.frames else "frames"
     for f in comparison.frames:
-        case = ET.SubElement(suite, "testcase", classname=f"motion.compare.{prefix}", name=f"frame {f.frame:04d}", time=f"{f.seconds:.3f}")
+        case = ET.SubElement(suite, "testcase", classname=e(f"motion.compare.{prefix}"), name=f"frame {f.frame:04d}", time=f"{f.seconds:.3f}")
         if f.failed:
-            failure = ET.SubElement(case, "failure", type=f.outcome, message=f.message())
-            failure.text = _details(f)
+            failure = ET.SubElement(case, "failure", type=f.outcome, message=e(f.message()))
+            failure.text = e(_details(f))
         else:
             out = ET.SubElement(case, "system-out")
-            out.text = _details(f)
+            out.text = e(_details(f))
     ET.indent(suites)
     data = ET.tostring(suites, encoding="utf-8", xml_declaration=True)
     return write_atomic(path, data + b"\n", "writing JUnit report")
@@ -63,12 +78,25 @@ def _details(f: FrameOutcome) -> str:
             rv=f.ref_facts.get("variant"), rs=f.ref_facts.get("seed"), rp=f.ref_facts.get("spp")))
     for r in f.regions:
         lines.append(f"  region {r.describe()}")
+    lines.extend(f"note: {note}" for note in f.notes)
     return "\n".join(lines)
 
 
+def _finite(value: Any) -> Any:
+    """`value` with every NaN or infinite number as null (JSON has no token for them)."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    return value
+
+
 def write_json(comparison: Comparison, path: str | Path) -> Path:
-    """The whole comparison as JSON (Comparison.to_dict)."""
-    return write_atomic(path, (json.dumps(comparison.to_dict(), indent=1) + "\n").encode(), "writing compare report")
+    """The whole comparison as JSON (Comparison.to_dict; a NaN or infinite figure, such as
+    the z of a non-finite pixel, is null)."""
+    return write_atomic(path, (json.dumps(_finite(comparison.to_dict()), indent=1, allow_nan=False) + "\n").encode(), "writing compare report")
 
 
 def _png(rgb8: np.ndarray) -> bytes:
@@ -97,9 +125,9 @@ def _frame_images(f: FrameOutcome) -> dict[str, bytes]:
     """PNG bytes of the reference, the new frame, |difference|, FLIP and z maps."""
     from ..frame_output import read_frame
 
-    new, ref = read_frame(f.new).rgba, read_frame(f.ref).rgba  # type: ignore[arg-type]
+    new, ref = (np.nan_to_num(read_frame(p).rgba, nan=0.0, posinf=0.0, neginf=0.0) for p in (f.new, f.ref))  # type: ignore[arg-type]
     diff = np.abs(new[..., :3].astype(np.float64) - ref[..., :3]).max(axis=2)
-    scale = float(np.quantile(diff, 0.999)) or 1.0
+    scale = float(np.quantile(diff, 0.999)) or 1.0  # (finite: non-finite values are 0 here)
     out = {"ref": _png(_view(ref)), "new": _png(_view(new)), "diff": _png(_magma(diff / scale))}
     if f.flip_map is not None:
         out["flip"] = _png(_magma(f.flip_map))
@@ -184,8 +212,9 @@ def write_html(comparison: Comparison, folder: str | Path) -> Path:
     for f in comparison.frames:
         worst = e(f.regions[0].describe()) if f.regions else ""
         flip = f"{f.flip:.3f}" if f.flip is not None else ""
+        noted = f' title="{e("; ".join(f.notes))}"' if f.notes else ""
         link = f'<a href="#frame={f.frame}">{f.frame}</a>' if f.outcome == "different" else str(f.frame)
-        rows.append(f'<tr id="row-{f.frame}"><td>{link}</td><td class="{f.outcome}">{f.outcome}</td>'
+        rows.append(f'<tr id="row-{f.frame}"{noted}><td>{link}</td><td class="{f.outcome}">{f.outcome}</td>'
                     f'<td>{e(str(f.new_facts.get("variant", "")))}</td><td>{e(str(f.ref_facts.get("variant", "")))}</td>'
                     f'<td>{e(str(f.new_facts.get("seed", "")))} / {e(str(f.ref_facts.get("seed", "")))}</td>'
                     f'<td>{f.layer}</td><td>{f.max_z:.1f} / {f.threshold:.1f}</td><td>{flip}</td><td>{worst}</td></tr>')
@@ -208,8 +237,8 @@ def write_html(comparison: Comparison, folder: str | Path) -> Path:
         sections.append(f'<section id="frame-{f.frame}" class="frame"><h2>Frame {f.frame}: <span class="different">different</span></h2>'
                         f'<p>new {e(str(f.new))} (variant {e(str(f.new_facts.get("variant")))}), reference {e(str(f.ref))} '
                         f'(variant {e(str(f.ref_facts.get("variant")))}); tested layer {f.layer}</p><ol>{regions}</ol><div class="maps">{"".join(figs)}</div></section>')
-    variants = "".join(f"<li>{e(v)}: {len(fr)} frame(s) ({e(_ranges(fr))})</li>" for v, fr in comparison.variants().items())
-    allowed = "".join(f"<li>{e(a)}</li>" for a in comparison.allowed)
+    variants = "".join(f"<li>{e(v)}: {len(fr)} frame(s) ({e(ranges(fr))})</li>" for v, fr in comparison.variants().items())
+    allowed = "".join(f"<li>{e(a)}</li>" for a in comparison.notes)
     page = f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>motion compare: {e(str(comparison.new_dir))}</title><style>{_STYLE}</style></head>
 <body data-failed="{len(comparison.failed)}">
@@ -217,7 +246,7 @@ def write_html(comparison: Comparison, folder: str | Path) -> Path:
 <p>new frames <code>{e(str(comparison.new_dir))}</code>, references <code>{e(str(comparison.ref_dir))}</code>.
 {counts['identical']} identical, {counts['equal']} equal within noise, {counts['different']} different, {counts['missing']} missing.</p>
 <h2>Variants of the new frames</h2><ul id="variants">{variants}</ul>
-{f'<h2>Differences allowed</h2><ul id="allowed">{allowed}</ul>' if allowed else ''}
+{f'<h2>Made differently from the references (compared all the same)</h2><ul id="allowed">{allowed}</ul>' if allowed else ''}
 <table id="frames"><tr><th>frame</th><th>outcome</th><th>variant (new)</th><th>variant (ref)</th><th>seed new / ref</th><th>layer</th><th>|z| / threshold</th><th>FLIP</th><th>worst region</th></tr>
 {''.join(rows)}</table>
 {''.join(sections)}
@@ -227,20 +256,34 @@ def write_html(comparison: Comparison, folder: str | Path) -> Path:
     return write_atomic(folder / "index.html", page.encode(), "writing compare report")
 
 
-def _ranges(numbers: list[int]) -> str:
-    """[1, 2, 3, 7] -> '1-3, 7'."""
-    out, start, prev = [], None, None
-    for n in sorted(numbers):
-        if start is None:
-            start = prev = n
-        elif n == prev + 1:  # type: ignore[operator]
-            prev = n
-        else:
-            out.append(f"{start}-{prev}" if prev != start else str(start))
-            start = prev = n
-    if start is not None:
-        out.append(f"{start}-{prev}" if prev != start else str(start))
-    return ", ".join(out)
+def _blocking_ancestor(path: Path) -> Path | None:
+    """The nearest existing folder above `path` when it is not a folder (a file stands where
+    a folder must be made), else None."""
+    for parent in path.absolute().parents:
+        if parent.exists() or parent.is_symlink():
+            return None if parent.is_dir() else parent
+    return None
+
+
+def check_report_targets(*, html_dir: str | Path | None = None, junit: str | Path | None = None, json_path: str | Path | None = None, what: str | None = None) -> None:
+    """Before any work: every report can be written where asked (a file where a file goes,
+    folders where folders go), creating nothing. UsageError naming the path (and `what`
+    asked for it, else the flag) otherwise."""
+    wanted: list[tuple[Path, bool, str]] = []  # (path, is a folder, which report)
+    if html_dir is not None:
+        wanted += [(Path(html_dir), True, "--html/--report"), (Path(html_dir) / "index.html", False, "--html/--report"),
+                   (Path(html_dir) / "img", True, "--html/--report")]
+    if junit is not None:
+        wanted.append((Path(junit), False, "--junit/--report"))
+    if json_path is not None:
+        wanted.append((Path(json_path), False, "--json/--report"))
+    for path, folder, flag in wanted:
+        flag = what or flag
+        if path.exists() and path.is_dir() != folder:
+            raise UsageError(f"{flag} {path}: cannot write the report there: it is {'a file, not a folder' if folder else 'a folder, not a file'}")
+        blocking = _blocking_ancestor(path)
+        if blocking is not None:
+            raise UsageError(f"{flag} {path}: cannot write the report there: {blocking} is a file, not a folder")
 
 
 def write_reports(comparison: Comparison, *, html_dir: str | Path | None = None, junit: str | Path | None = None, json_path: str | Path | None = None) -> dict[str, Any]:

@@ -1,13 +1,16 @@
 """`motion compare NEW REF`: two EXR sequences, frame by frame (docs/compare.md).
 
-Frames pair by number. Each pair is read (frames.read_pixels), checked for being made
-alike (frames.differences against the golden manifest, or the reference frame's own header
-when REF is a plain folder), then tested (stats.compare_frame) on the noisy beauty when both
+Frames pair by number; a golden set's references are only the files its manifest lists.
+Each pair's headers are read first: frames of other sizes cannot be compared (exit 2
+before any pixel is read); how else they were made differently (a material, a setting, the
+motion: frames.notes) is compared all the same and named as a note. Each pair is then read
+(frames.read_pixels) and tested (stats.compare_frame) on the noisy beauty when both
 frames keep one (a denoiser's output has no per-pixel noise left to measure), else on the
 beauty. A frame that differs gets a perceptual score: NVIDIA's FLIP (`flip-evaluator`,
 HDR-FLIP on the linear beauty), its mean and the FLIP map for the report.
 
-Frames are tested in a pool of processes (two on two cores) when there are many.
+Frames are tested in a pool of processes (two on two cores) when there are many; Ctrl-C or
+SIGTERM stops the pool's processes at once.
 """
 
 from __future__ import annotations
@@ -17,14 +20,13 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, Mapping
 
 import numpy as np
 
 from ..errors import FrameIOError, ReferenceMismatchError
-from ..telecine.sequence import Sequence, discover
-from .frames import FrameFacts, differences, facts_from_header, read_pixels
-from .golden import NOISY_LAYER, Manifest, read_manifest
+from .frames import FrameFacts, facts_from_header, find_frames, frame_facts, incomparable, notes, read_pixels
+from .golden import NOISY_LAYER, read_manifest
 from .stats import ALPHA, FILTER_KAPPA, Region, compare_frame
 
 Outcome = Literal["identical", "equal", "different", "missing"]
@@ -57,6 +59,7 @@ class FrameOutcome:
     block: int = 8
     z_blocks: np.ndarray | None = None
     flip_map: np.ndarray | None = None
+    notes: list[str] = field(default_factory=list)  # how this frame and its reference were made differently
 
     @property
     def failed(self) -> bool:
@@ -81,19 +84,21 @@ class FrameOutcome:
         return {"frame": self.frame, "new": self.new, "ref": self.ref, "outcome": self.outcome, "layer": self.layer,
                 "max_z": self.max_z, "threshold": self.threshold, "kappa": self.kappa, "rms": self.rms, "max_abs": self.max_abs,
                 "regions": [r.__dict__ for r in self.regions], "flip": self.flip, "new_facts": self.new_facts, "ref_facts": self.ref_facts,
-                "seconds": self.seconds, "message": self.message()}
+                "seconds": self.seconds, "message": self.message(), "notes": self.notes}
 
 
 @dataclass
 class Comparison:
     """A whole comparison: the folders, each frame's outcome, the new frames no reference
-    covers, the differences in how they were made that the user allowed, and the seconds."""
+    covers, the notes (how the frames were made differently from their references, each
+    with the frames it concerns: `frames 11-13: material 2 of the scene (m1) differs`), and
+    the seconds."""
 
     new_dir: Path
     ref_dir: Path
     frames: list[FrameOutcome]
     unreferenced: list[int] = field(default_factory=list)
-    allowed: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
     seconds: float = 0.0
 
     @property
@@ -137,7 +142,7 @@ class Comparison:
     def to_dict(self) -> dict[str, Any]:
         """Plain data for the JSON report."""
         return {"new": str(self.new_dir), "ref": str(self.ref_dir), "exit_code": self.exit_code, "summary": self.summary(), "counts": self.counts(),
-                "unreferenced": self.unreferenced, "allowed_differences": self.allowed, "variants": self.variants(), "seconds": self.seconds,
+                "unreferenced": self.unreferenced, "notes": self.notes, "allowed_differences": self.notes, "variants": self.variants(), "seconds": self.seconds,
                 "frames": [f.to_dict() for f in self.frames]}
 
 
@@ -175,37 +180,83 @@ def filter_kappa(new_facts: dict[str, Any], ref_facts: dict[str, Any]) -> float 
     return FILTER_KAPPA.get(str(names.pop()))
 
 
+# the input that ACES maps to its largest output, FLIP's own `x_max` (its start exposure is
+# log2(x_max / the reference's largest luminance))
+_FLIP_X_MAX = 2.1188731966890900
+_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # linear sRGB -> Y
+
+
 def flip_score(new: np.ndarray, ref: np.ndarray) -> tuple[float, np.ndarray]:
     """HDR-FLIP (NVIDIA, `flip-evaluator`) of NEW against REF on the linear RGB beauty:
-    the mean and the per-pixel map [H, W] in [0, 1]."""
+    the mean and the per-pixel map [H, W] in [0, 1]. Non-finite values count as 0 here
+    (the test names them). FLIP sets its exposure range from the reference's largest and
+    median luminance and ends the process when the two meet (a black or uniform reference):
+    the range is then one stop up to the exposure that maps the brighter frame's largest
+    luminance to the top."""
     import flip_evaluator
 
-    a = np.ascontiguousarray(np.clip(ref[..., :3], 0.0, None), dtype=np.float32)
-    b = np.ascontiguousarray(np.clip(new[..., :3], 0.0, None), dtype=np.float32)
-    fmap, mean, _params = flip_evaluator.evaluate(a, b, "HDR", applyMagma=False)
+    def linear(x: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(np.clip(np.nan_to_num(x[..., :3], nan=0.0, posinf=0.0, neginf=0.0), 0.0, None), dtype=np.float32)
+
+    a, b = linear(ref), linear(new)
+    y = a.astype(np.float64) @ _LUMINANCE
+    y_max, y_median = float(y.max(initial=0.0)), float(np.median(y)) if y.size else 0.0
+    params: dict[str, Any] = {}
+    if not y_max > y_median * (1.0 + 1e-4):
+        bright = y_max if y_max > 0 else float((b.astype(np.float64) @ _LUMINANCE).max(initial=0.0))
+        exposure = float(np.log2(_FLIP_X_MAX / bright)) if bright > 0 else 0.0
+        params = {"startExposure": exposure - 1.0, "stopExposure": exposure, "numExposures": 2}
+    fmap, mean, _params = flip_evaluator.evaluate(a, b, "HDR", applyMagma=False, parameters=params)
     return float(mean), np.asarray(fmap, dtype=np.float32).reshape(a.shape[:2])
 
 
-def _check_made_alike(new_seq: Sequence, ref_seq: Sequence, manifest: Manifest | None, common: list[int], allow: bool) -> list[str]:
-    """The differences in how the frames were made (refused unless `allow`)."""
-    from .frames import frame_facts
-
-    new_paths = dict(zip(new_seq.numbers, new_seq.paths))
-    ref_paths = dict(zip(ref_seq.numbers, ref_seq.paths))
-    found: list[str] = []
+def frame_notes(new_paths: dict[int, Path], ref_paths: dict[int, Path], common: list[int], names: Mapping[str, str] | None = None) -> dict[int, list[str]]:
+    """Each common frame's notes (frames.notes) from the two headers; ReferenceMismatchError
+    (exit 2) for a pair that cannot be compared (frames.incomparable), before any pixel."""
+    out: dict[int, list[str]] = {}
     for number in common:
         new_facts = frame_facts(new_paths[number]).to_dict()
-        ref_facts = manifest.facts() if manifest is not None else frame_facts(ref_paths[number]).to_dict()
-        for diff in differences(new_facts, ref_facts):
-            if diff.startswith("resolution"):
-                raise ReferenceMismatchError(f"{new_paths[number]}: {diff}: frames of different sizes cannot be compared")
-            line = f"frame {number}: {diff}"
-            if not allow:
-                where = f"{ref_seq.directory / 'manifest.json'}" if manifest is not None else str(ref_paths[number])
-                raise ReferenceMismatchError(f"{new_paths[number]} is not comparable with {where}: {diff} (--allow-different-settings compares anyway; --bless makes these frames the references)")
-            if diff not in {d.split(': ', 1)[1] for d in found}:
-                found.append(line)
-    return found
+        ref_facts = frame_facts(ref_paths[number]).to_dict()
+        cannot = incomparable(new_facts, ref_facts)
+        if cannot:
+            raise ReferenceMismatchError(f"{new_paths[number]}: {cannot[0]} of reference {ref_paths[number]}: frames of different sizes cannot be compared")
+        out[number] = notes(new_facts, ref_facts, names)
+    return out
+
+
+def gather_notes(per_frame: dict[int, list[str]]) -> list[str]:
+    """One line per note with the frames it concerns, in first-seen order."""
+    frames: dict[str, list[int]] = {}
+    for number in sorted(per_frame):
+        for note in per_frame[number]:
+            frames.setdefault(note, []).append(number)
+    return [f"frame{'s' if len(f) > 1 else ''} {ranges(f)}: {note}" for note, f in frames.items()]
+
+
+def ranges(numbers: list[int]) -> str:
+    """[1, 2, 3, 7] -> '1-3, 7'."""
+    out, start, prev = [], None, None
+    for n in sorted(numbers):
+        if start is None:
+            start = prev = n
+        elif n == prev + 1:  # type: ignore[operator]
+            prev = n
+        else:
+            out.append(f"{start}-{prev}" if prev != start else str(start))
+            start = prev = n
+    if start is not None:
+        out.append(f"{start}-{prev}" if prev != start else str(start))
+    return ", ".join(out)
+
+
+def reference_frames(ref_dir: str | Path, prefix: str | None) -> tuple[str | None, dict[int, Path]]:
+    """(name, {frame: file}) of the references: a golden set's manifest lists them (every
+    file checked against its digest; a file it does not list is no reference), else the
+    folder's sequence."""
+    manifest = read_manifest(ref_dir)
+    if manifest is not None:
+        return manifest.data.get("prefix"), manifest.paths()
+    return find_frames(ref_dir, prefix)
 
 
 def compare_sequences(
@@ -214,47 +265,70 @@ def compare_sequences(
     *,
     prefix: str | None = None,
     frames: list[int] | None = None,
-    allow_different_settings: bool = False,
     flip: FlipMode = "different",
     alpha: float = ALPHA,
     workers: int | None = None,
     keep_maps: bool = False,
+    part_names: Mapping[str, str] | None = None,
 ) -> Comparison:
     """Compare the sequence in `new_dir` with the references in `ref_dir` frame by frame.
-    `frames`: only these frame numbers (default: every reference frame). Raises
-    ReferenceMismatchError (exit 2) for frames not made alike unless allowed, FrameIOError
-    for unreadable folders or frames."""
+    `frames`: only these frame numbers (default: every reference frame); `part_names`: what
+    the look's parts are called in the new frames' scene (for the notes). Raises
+    ReferenceMismatchError (exit 2) for frames of other sizes, FrameIOError for unreadable
+    folders, frames or manifests; frames made differently are compared and noted."""
     t0 = time.perf_counter()
-    manifest = read_manifest(ref_dir)
-    ref_prefix = manifest.data.get("prefix") if manifest is not None else prefix
-    ref_seq = discover(ref_dir, ref_prefix, require_even_height=False, allow_gaps=True)
-    named = prefix or ref_seq.prefix
-    new_seq = discover(new_dir, named if _has_prefix(new_dir, named) else prefix, require_even_height=False, allow_gaps=True)
-    wanted = sorted(set(frames)) if frames is not None else list(ref_seq.numbers)
-    absent_ref = [n for n in wanted if n not in ref_seq.numbers]
+    ref_name, ref_paths = reference_frames(ref_dir, prefix)
+    named = prefix or ref_name
+    _, new_paths = find_frames(new_dir, named if _has_prefix(new_dir, named) else prefix)
+    wanted = sorted(set(frames)) if frames is not None else sorted(ref_paths)
+    absent_ref = [n for n in wanted if n not in ref_paths]
     if absent_ref:
         raise FrameIOError(f"{ref_dir}: no reference for frame {absent_ref[0]}" + (f" ({len(absent_ref)} frames have none)" if len(absent_ref) > 1 else ""))
-    common = [n for n in wanted if n in new_seq.numbers]
-    missing = [n for n in wanted if n not in new_seq.numbers]
-    unreferenced = [n for n in new_seq.numbers if n not in ref_seq.numbers] if frames is None else []
-    allowed = _check_made_alike(new_seq, ref_seq, manifest, common, allow_different_settings)
-
-    new_paths = dict(zip(new_seq.numbers, map(str, new_seq.paths)))
-    ref_paths = dict(zip(ref_seq.numbers, map(str, ref_seq.paths)))
-    jobs = [(n, new_paths[n], ref_paths[n]) for n in common]
+    common = [n for n in wanted if n in new_paths]
+    missing = [n for n in wanted if n not in new_paths]
+    unreferenced = sorted(n for n in new_paths if n not in ref_paths) if frames is None else []
+    per_frame = frame_notes(new_paths, ref_paths, common, part_names)
+    jobs = [(n, str(new_paths[n]), str(ref_paths[n])) for n in common]
     workers = workers if workers is not None else min(2, os.cpu_count() or 1)
     outcomes: list[FrameOutcome]
     if workers > 1 and len(jobs) >= _POOL_MIN_FRAMES:
-        import multiprocessing
-
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("forkserver")) as pool:
-            futures = [pool.submit(compare_pair, n, a, b, flip=flip, alpha=alpha, keep_maps=keep_maps) for n, a, b in jobs]
-            outcomes = [f.result() for f in futures]
+        outcomes = _in_pool(jobs, workers, flip=flip, alpha=alpha, keep_maps=keep_maps)
     else:
         outcomes = [compare_pair(n, a, b, flip=flip, alpha=alpha, keep_maps=keep_maps) for n, a, b in jobs]
-    outcomes += [FrameOutcome(frame=n, new=None, ref=ref_paths[n], outcome="missing") for n in missing]
+    for outcome in outcomes:
+        outcome.notes = per_frame.get(outcome.frame, [])
+    outcomes += [FrameOutcome(frame=n, new=None, ref=str(ref_paths[n]), outcome="missing") for n in missing]
     outcomes.sort(key=lambda o: o.frame)
-    return Comparison(Path(new_dir), Path(ref_dir), outcomes, unreferenced, allowed, time.perf_counter() - t0)
+    return Comparison(Path(new_dir), Path(ref_dir), outcomes, unreferenced, gather_notes(per_frame), time.perf_counter() - t0)
+
+
+def _quiet_worker() -> None:
+    """A pool process leaves Ctrl-C to the command, which stops it (no traceback per process)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _in_pool(jobs: list[tuple[int, str, str]], workers: int, **options: Any) -> list[FrameOutcome]:
+    """compare_pair of every job in `workers` processes. On Ctrl-C, SIGTERM (cli/main.py
+    raises KeyboardInterrupt for it) or an error, the processes are ended at once and
+    nothing waits for the frames in flight."""
+    import multiprocessing
+
+    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("forkserver"), initializer=_quiet_worker)
+    try:
+        futures = [pool.submit(compare_pair, n, a, b, **options) for n, a, b in jobs]
+        outcomes = [f.result() for f in futures]
+    except BaseException:
+        processes = list((getattr(pool, "_processes", None) or {}).values())  # the executor has no public way to end them
+        pool.shutdown(wait=False, cancel_futures=True)
+        for process in processes:
+            process.terminate()
+        for process in processes:
+            process.join(timeout=5)
+        raise
+    pool.shutdown(wait=True)
+    return outcomes
 
 
 def _has_prefix(folder: str | Path, prefix: str | None) -> bool:

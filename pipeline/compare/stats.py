@@ -68,9 +68,13 @@ class Region:
     z: float
     mean_diff: float
     relative: float
+    nonfinite: int = 0  # pixels whose value is NaN or infinite in one frame and not the same in the other
 
     def describe(self) -> str:
         """One phrase: where, how large, which channel, how much."""
+        if self.nonfinite:
+            return (f"x {self.x0}-{self.x1 - 1}, y {self.y0}-{self.y1 - 1} ({self.fraction * 100:.1f}% of the frame): "
+                    f"{self.nonfinite} pixel(s) NaN or infinite in {self.channel}")
         sign = "brighter" if self.mean_diff > 0 else "darker"
         rel = f"{abs(self.relative) * 100:.1f}% {sign}" if math.isfinite(self.relative) else f"{self.mean_diff:+.3g}"
         return (f"x {self.x0}-{self.x1 - 1}, y {self.y0}-{self.y1 - 1} ({self.fraction * 100:.1f}% of the frame): "
@@ -188,6 +192,8 @@ def compare_frame(new: np.ndarray, ref: np.ndarray, *, alpha: float = ALPHA, z_m
     correlation factor when known (FILTER_KAPPA by the frames' filter), else measured."""
     if new.shape != ref.shape:
         raise ValueError(f"shapes differ: {new.shape} and {ref.shape}")
+    if not (np.isfinite(new).all() and np.isfinite(ref).all()):
+        return _with_nonfinite(new, ref, alpha=alpha, z_min=z_min, block=block, kappa=kappa)
     h, w, c = new.shape
     names = CHANNELS[:c]
     if np.array_equal(new, ref):
@@ -199,6 +205,8 @@ def compare_frame(new: np.ndarray, ref: np.ndarray, *, alpha: float = ALPHA, z_m
     max_abs = {n: float(np.abs(d[..., i]).max()) for i, n in enumerate(names)}
     # only the channels that differ somewhere are tested (alpha is often 1 in both)
     active = [i for i in range(c) if rms[names[i]] > 0]
+    if not active:  # every value equal (+0.0 and -0.0)
+        return FrameTest("identical", rms=rms, max_abs=max_abs, block=b)
     names = tuple(names[i] for i in active)
     d = np.ascontiguousarray(d[..., active])
     sd = _block_sums(d, b)
@@ -224,6 +232,32 @@ def compare_frame(new: np.ndarray, ref: np.ndarray, *, alpha: float = ALPHA, z_m
     marked, peak, peak_ch = _mark(scales, z_crit, sd, sv, sn, kappa)
     regions = _regions(marked, peak, peak_ch, sd, sr, b, h, w, names)
     return FrameTest("different" if regions else "equal", max_z, z_crit, regions, kappa, rms, max_abs, b, np.abs(scales[0][1]).max(axis=2))
+
+
+def _with_nonfinite(new: np.ndarray, ref: np.ndarray, **test: object) -> FrameTest:
+    """The test of frames holding NaN or infinite values: a pixel whose non-finite value is
+    not the same in both frames is a difference (one region boxing them all), the rest is
+    tested as usual with those values set to 0."""
+    fin_new, fin_ref = np.isfinite(new), np.isfinite(ref)
+    same = (new == ref) | (np.isnan(new) & np.isnan(ref))
+    bad = ~(fin_new & fin_ref) & ~same  # [H, W, C]
+    result = compare_frame(np.where(fin_new, new, 0.0).astype(new.dtype), np.where(fin_ref, ref, 0.0).astype(ref.dtype), **test)  # type: ignore[arg-type]
+    pixels = bad.any(axis=2)
+    if not pixels.any():
+        return result
+    h, w, c = new.shape
+    ys, xs = np.nonzero(pixels)
+    count = int(pixels.sum())
+    channel = CHANNELS[int(np.nonzero(bad.any(axis=(0, 1)))[0][0])]
+    where = "new" if (~fin_new & ~same).any() else "reference"
+    region = Region(int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1, count, count / float(h * w),
+                    f"{channel} of the {where} frame", math.inf, math.nan, math.nan, nonfinite=count)
+    result.verdict = "different"
+    result.regions = [region] + result.regions
+    for i, n in enumerate(CHANNELS[:c]):
+        if bad[..., i].any():
+            result.max_abs[n] = math.inf
+    return result
 
 
 def _window_scales(sd: np.ndarray, sv: np.ndarray, sn: np.ndarray, kappa: float) -> list[tuple[int, np.ndarray]]:

@@ -12,7 +12,8 @@ frame has been renamed into place (or has failed).
 A claim found on disk is
 - ours (same run id): a retry of our own chunk after its worker died; taken over;
 - stale: empty or unreadable (older than WRITE_GRACE_S, which covers a writer without hard
-  links between its create and its write), its pid is gone on this host, or it is older
+  links between its create and its write), its pid is gone on this host or no process can
+  have it (under 1, over MAX_PID: on any host), or it is older
   than `stale_after_s` (default: the task timeout, which no live task outlives); broken by
   an atomic rename and re-claimed;
 - live: the frame is left alone; the farm checks back later and re-queues it only if the
@@ -36,7 +37,9 @@ import uuid
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from ..errors import InputFileError
 from ..files import create_exclusive, disk_faults, write_atomic
+from ..limits import read_bounded
 
 CLAIM_DIR = ".motion-claims"
 MAX_CLOCK_SKEW_S = 300.0  # seconds a claim may be dated ahead of this machine's clock
@@ -44,6 +47,8 @@ WRITE_GRACE_S = 5.0  # an empty claim younger than this may still be being writt
 # the longest a claim protects its frame whatever the limit asked (a NaN or infinite task
 # timeout made `age > limit` false forever: the job waited on a dead host's claim for good)
 MAX_STALE_AFTER_S = 7 * 24 * 3600.0
+CLAIM_BYTES = 64 * 1024  # a claim is a line of JSON; a bigger file is not one of ours
+MAX_PID = 1 << 22  # Linux's PID_MAX_LIMIT: no process on any host of a farm has a larger pid
 
 
 @dataclass(frozen=True)
@@ -72,27 +77,33 @@ def claim_path(frame_file: str | Path) -> Path:
 
 
 def read_claim(path: Path) -> dict | None:
-    """The claim's content; {} if empty or unreadable; None if it is gone."""
+    """The claim's content; {} if empty, unreadable or not a claim (a FIFO is never waited
+    on, a file over CLAIM_BYTES is not read); None if it is gone."""
     try:
-        text = path.read_bytes()
-    except FileNotFoundError:
-        return None
-    except OSError:
-        return {}
+        text = read_bounded(path, CLAIM_BYTES, "frame claim")
+    except InputFileError:
+        return None if not os.path.lexists(path) else {}
     try:
         data = json.loads(text)
         return data if isinstance(data, dict) else {}
-    except ValueError:  # not JSON, or not UTF-8 (UnicodeDecodeError is a ValueError)
+    except (ValueError, RecursionError):  # not JSON, not UTF-8 (a ValueError), or nested past the decoder's stack
         return {}
 
 
-def _pid_alive(pid: int) -> bool:
+def _pid_alive(pid: object) -> bool:
+    """Whether `pid` names a live process on this host. A pid no process can have (not an
+    integer, under 1, over the kernel's PID_MAX_LIMIT: 2**70) is not alive: its claim or
+    lock is stale. (0 and negative numbers would name process groups to os.kill.)"""
+    if not isinstance(pid, int) or isinstance(pid, bool) or not 1 <= pid <= MAX_PID:
+        return False
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
+    except (OSError, OverflowError):
+        return False
     return True
 
 
@@ -109,8 +120,10 @@ def is_stale(path: Path, info: dict, stale_after_s: float) -> bool:
         return True  # cannot even stat it: it protects nothing
     if age < -MAX_CLOCK_SKEW_S:
         return True
-    if not info.get("run_id") or not isinstance(info.get("pid"), int):
+    if not info.get("run_id") or not isinstance(info.get("pid"), int) or isinstance(info.get("pid"), bool):
         return age > WRITE_GRACE_S or age < -WRITE_GRACE_S
+    if not 1 <= info["pid"] <= MAX_PID:
+        return True  # no process has that pid, on any host
     if info.get("host") == socket.gethostname():
         if not _pid_alive(info["pid"]):
             return True
@@ -136,14 +149,14 @@ def try_claim(frame_file: str | Path, who: Claimant, stale_after_s: float) -> tu
                 write_atomic(path, body, "claiming frame")  # our own earlier attempt (its worker died): take over
                 return True, None
             if is_stale(path, info, stale_after_s):
-                _break(path)
+                _break_stale(path)
                 continue
             return False, info
         info = read_claim(path)
         return False, info or {}
 
 
-def _break(path: Path) -> None:
+def _break_stale(path: Path) -> None:
     """Remove a stale claim atomically: only one breaker's rename succeeds."""
     grave = path.with_name(f"{path.name}.stale.{os.getpid()}.{uuid.uuid4().hex[:6]}")
     try:
@@ -164,7 +177,7 @@ def clear_stale(frame_files: list[str], stale_after_s: float) -> int:
         info = read_claim(path)
         if info is not None and is_stale(path, info, stale_after_s):
             try:
-                _break(path)
+                _break_stale(path)
                 n += 1
             except OSError:
                 pass
@@ -243,12 +256,15 @@ def _lock_live(path: Path, info: dict) -> bool:
         return False
     if not info.get("run_id") or not isinstance(info.get("pid"), int) or isinstance(info.get("pid"), bool):
         return -WRITE_GRACE_S <= age <= WRITE_GRACE_S  # being written, or garbage
+    if not 1 <= info["pid"] <= MAX_PID:
+        return False  # no process has that pid, on any host
     if info.get("host") == socket.gethostname() and not _pid_alive(info["pid"]):
         return False
     return -MAX_CLOCK_SKEW_S <= age <= RUN_LOCK_STALE_S
 
 
-def _order(info: dict) -> tuple[float, str]:
+def _taken_order(info: dict) -> tuple[float, str]:
+    """A run lock's sort key: when it was taken (an unreadable time last), then its run id."""
     t = info.get("time")
     return (float(t) if isinstance(t, (int, float)) and not isinstance(t, bool) and math.isfinite(t) else math.inf, str(info.get("run_id")))
 
@@ -277,9 +293,9 @@ def take_run_lock(out_dir: str | Path, who: Claimant, scene: str, version: str) 
         if info is None:
             continue
         if not _lock_live(other, info):
-            _break(other)
+            _break_stale(other)
             continue
-        if info.get("version") == version or _order(info) > _order(mine):
+        if info.get("version") == version or _taken_order(info) > _taken_order(mine):
             continue  # the same version shares the folder; a later one gives way to us
         path.unlink(missing_ok=True)
         raise OutputInUseError(

@@ -1,8 +1,8 @@
 """The inline executor: a small job's chunks rendered in this process, one after another.
 
 A CI smoke render is three 64x36 frames: spawning a worker per core costs each worker the
-whole import of the stack and a cold scene build (about 0.6 s a worker on 2 cores), far
-more than the frames. When the plan's estimate says the frames cost less than a worker's
+whole import of the stack and a cold scene build, far more than the frames (docs/farm.md
+gives the figure). When the plan's estimate says the frames cost less than a worker's
 start would save (`shot/render.py: choose_executor`), the farm runs them here through
 the same scheduler: the same claims, resume checks, retries, per-frame progress and report,
 and the same pixels (tests/test_farm_ci.py renders the same frames inline, on 1 and on 2

@@ -96,7 +96,9 @@ def _visible_device(device: str | None) -> Iterator[None]:
 
 
 @dataclass
-class _Worker:
+class _WorkerProcess:
+    """One spawned worker: its process, its pipe, the chunk it runs and its GPU."""
+
     name: str
     process: Any
     conn: Connection
@@ -117,7 +119,7 @@ class LocalExecutor:
         self.n = workers
         self.devices = list(devices)
         self._ctx = mp.get_context("spawn")
-        self._workers: dict[str, _Worker] = {}
+        self._workers: dict[str, _WorkerProcess] = {}
         self._respawns_left = respawns if respawns is not None else 3 * workers
         self.started_at = time.perf_counter()
         for k in range(workers):
@@ -130,7 +132,7 @@ class LocalExecutor:
             proc.start()
         child.close()
         name = f"{socket.gethostname()}:{proc.pid}"
-        self._workers[name] = _Worker(name=name, process=proc, conn=parent, device=device)
+        self._workers[name] = _WorkerProcess(name=name, process=proc, conn=parent, device=device)
 
     @property
     def pids(self) -> list[int]:
@@ -160,7 +162,7 @@ class LocalExecutor:
 
     def poll(self, timeout: float) -> list[Event]:
         """Wait up to `timeout` s; the results, failures and worker deaths since."""
-        by_handle: dict[Any, _Worker] = {}
+        by_handle: dict[Any, _WorkerProcess] = {}
         for w in self._workers.values():
             by_handle[w.conn] = w
             by_handle[w.process.sentinel] = w
@@ -193,7 +195,7 @@ class LocalExecutor:
                     self._spawn(w.device)
         return events
 
-    def _drop(self, w: _Worker) -> None:
+    def _drop(self, w: _WorkerProcess) -> None:
         self._workers.pop(w.name, None)
         try:
             w.conn.close()

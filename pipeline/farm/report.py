@@ -17,6 +17,7 @@ from ..render.job import RenderJob
 from ..scene.loader import LoadedScene
 from .config import FarmConfig
 from .frames import format_frames
+from .lifecycle import FINAL_FRAME_STATES
 from .scheduler import Scheduler
 
 
@@ -74,7 +75,7 @@ def build_report(
         "config": {"retries": cfg.retries, "task_timeout_s": cfg.task_timeout_s, "max_worker_failures": cfg.max_worker_failures, "claim_stale_s": cfg.stale_after_s},
         "interrupted": interrupted,
         "disk_fault": sched.disk_fault if sched is not None else None,
-        "totals": _totals(rows, len(frames), len(failed), len(not_rendered), timings),
+        "totals": _totals(rows, len(frames), len(failed), timings),
         "failed": failed,
         "not_rendered": format_frames(not_rendered),
         "workers": _worker_rows(sched),
@@ -122,18 +123,16 @@ def _worker_rows(sched: Scheduler | None) -> list[dict[str, Any]]:
     return workers
 
 
-def _totals(rows: list[dict[str, Any]], frames: int, failed: int, not_rendered: int, timings: dict[str, float]) -> dict[str, Any]:
-    """The report's totals: frame counts by outcome, retries, summed times, throughput."""
-    count = lambda s: sum(1 for r in rows if r["status"] == s)  # noqa: E731
+def _totals(rows: list[dict[str, Any]], frames: int, failed: int, timings: dict[str, float]) -> dict[str, Any]:
+    """The report's totals: frames by final state (`failed` also counts the frames a disk
+    fault stopped before they ran), retries, summed times, throughput."""
+    by_state = {state: sum(1 for r in rows if r["status"] == state) for state in FINAL_FRAME_STATES}
     rendered = [r for r in rows if r["status"] == "rendered"]
     farm_s = timings.get("farm_s", 0.0)
     return {
         "frames": frames,
-        "rendered": len(rendered),
-        "skipped": count("skipped"),
-        "done_elsewhere": count("done_elsewhere"),
+        **by_state,
         "failed": failed,
-        "not_rendered": not_rendered,
         "retries": sum(r.get("retries", 0) for r in rows),
         "cold_frames": sum(1 for r in rendered if r.get("cold")),
         "render_s_sum": sum(r.get("render_s", 0.0) for r in rendered),

@@ -30,9 +30,8 @@ MAX_RETRIES = 100  # extra attempts per chunk
 
 def default_workers(frames: int, gpus: int = 0) -> int:
     """All local cores by default: one worker per core (each gets cores // workers drjit
-    threads), no more than there are frames, at most MAX_DEFAULT_WORKERS. On 2 cores,
-    2 workers x 1 thread render 1.6x faster than 1 worker x 2 threads (bench_farm).
-    On a CUDA variant (`gpus`: the devices `local.worker_devices` found) one worker per
+    threads), no more than there are frames, at most MAX_DEFAULT_WORKERS (docs/farm.md
+    gives the measurement behind one worker per core). On a CUDA variant (`gpus`: the devices `local.worker_devices` found) one worker per
     GPU instead: a worker's megakernel fills its GPU, and more workers per GPU only add
     CUDA contexts, scenes and compiled kernels to its memory."""
     from .local import threads_per_worker

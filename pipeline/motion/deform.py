@@ -19,7 +19,7 @@ from ..scene.motion_schema import BlendShapes, JointSkin, MorphTargets, Skinning
 from ..scene.schema import Mesh
 from .instances import agent_mesh
 from .keyframes import MODES, VectorTrack, _catmull_rom_tangents
-from .pose import Pose, compose
+from .pose import Pose, UnrepresentablePoseError, compose, flatten_pose, stack_poses
 
 if TYPE_CHECKING:
     from ..scene.loader import LoadedScene, Loc
@@ -122,10 +122,12 @@ def bone_poses(loaded: "LoadedScene", loc: "Loc", skin: Skinning, t: np.ndarray)
         local = _local(loaded, (*loc, "bones", i), bone.motion, base, t, {})
         p = Pose(local.translation, local.rotation, local.scale)
         b0 = Pose(*(x[None, :] for x in base))
-        posed[name] = compose(posed[bone.parent], p) if bone.parent else p
-        bind[name] = compose(bind[bone.parent], b0) if bone.parent else b0
-    stack = lambda d: Pose(*(np.stack([getattr(d[n], f) for n in names]) for f in Pose._fields))  # noqa: E731
-    return names, stack(posed), stack(bind)
+        try:
+            posed[name] = compose(posed[bone.parent], p) if bone.parent else p
+            bind[name] = compose(bind[bone.parent], b0) if bone.parent else b0
+        except UnrepresentablePoseError as exc:
+            raise SceneError([loaded.source.problem((*loc, "bones", i, "parent"), str(exc))]) from None
+    return names, stack_poses([posed[n] for n in names]), stack_poses([bind[n] for n in names])
 
 
 def skin_weights(loaded: "LoadedScene", loc: "Loc", skin: Skinning, vertices: np.ndarray, bind: Pose) -> tuple[np.ndarray, np.ndarray]:
@@ -134,9 +136,10 @@ def skin_weights(loaded: "LoadedScene", loc: "Loc", skin: Skinning, vertices: np
     if skin.weights is None:
         heads = bind.translation[:, 0]
         ys = np.stack([bone.length * np.array([0.0, 1.0, 0.0]) for bone in skin.bones])
-        from .pose import quat_rotate
+        from .pose import quat_rotate, stretch_matrices
 
-        tails = heads + quat_rotate(bind.rotation[:, 0], ys * bind.scale[:, 0])
+        off = None if bind.stretch_offdiag is None else bind.stretch_offdiag[:, 0]
+        tails = heads + quat_rotate(bind.rotation[:, 0], np.einsum("bij,bj->bi", stretch_matrices(bind.scale[:, 0], off), ys))
         return normalise_weights(auto_weights(vertices, heads, tails))
     if len(skin.weights) != len(vertices):
         raise SceneError([loaded.source.problem((*loc, "weights"), f"{len(skin.weights)} weight rows for a bind mesh of {len(vertices)} vertices")])
@@ -167,8 +170,7 @@ def linear_blend_skinning(vertices: np.ndarray, skin_matrices: np.ndarray, idx: 
 def _matrices(stacked: Pose) -> np.ndarray:
     """[B, T, ...] poses -> [B, T, 4, 4] matrices."""
     b, t = stacked.translation.shape[:2]
-    flat = Pose(*(a.reshape(b * t, -1) for a in stacked))
-    return flat.matrices().reshape(b, t, 4, 4)
+    return flatten_pose(stacked).matrices().reshape(b, t, 4, 4)
 
 
 def skinning(loaded: "LoadedScene", loc: "Loc", skin: Skinning, vertices: np.ndarray, t: np.ndarray) -> np.ndarray:

@@ -20,8 +20,8 @@ from ..scene.schema import Camera
 from ..scene.types import Transform
 from .graph import evaluation_order
 from .local import broadcast, local_pose, object_base, transform_base, vec3
-from .pose import Pose, compose
-from .rotation import direction_quat, look_at_quat
+from .pose import Pose, UnrepresentablePoseError, compose
+from .rotation import aim_quats, direction_quat, look_at_quat
 
 if TYPE_CHECKING:
     from ..scene.loader import LoadedScene
@@ -77,6 +77,8 @@ def has_dynamics(loaded: "LoadedScene") -> bool:
 def _camera_base(cam: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if cam.transform is not None:
         return object_base(cam)
+    if cam.position is not None and isinstance(cam.look_at, str):  # aimed at an object: turned per sample
+        return np.asarray(cam.position, dtype=np.float64), np.array([1.0, 0.0, 0.0, 0.0]), np.ones(3)
     if cam.position is not None and cam.look_at is not None:
         return np.asarray(cam.position, dtype=np.float64), look_at_quat(cam.position, cam.look_at, cam.up), np.ones(3)
     return np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), np.ones(3)
@@ -99,7 +101,10 @@ class _LightFrames:
         return np.asarray(position, dtype=np.float64), np.array([1.0, 0.0, 0.0, 0.0]), np.ones(3)
 
     def aimed(self, position: Any, look_at: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """At `position`, +Z towards `look_at` (up +Y, or +Z when the aim is vertical)."""
+        """At `position`, +Z towards `look_at` (up +Y, or +Z when the aim is vertical); an
+        aim at an object is unrotated here and turned per sample (`aim_at_object`)."""
+        if isinstance(look_at, str):
+            return np.asarray(position, dtype=np.float64), np.array([1.0, 0.0, 0.0, 0.0]), np.ones(3)
         up = (0.0, 1.0, 0.0)
         d = np.subtract(look_at, position)
         if np.linalg.norm(np.cross(d, up)) < 1e-9 * max(np.linalg.norm(d), 1e-300):
@@ -151,6 +156,37 @@ def evaluate(loaded: "LoadedScene", times: np.ndarray, simulation: Any | None = 
     return SceneMotion(t, world, camera, camera_scalars, lights, light_scalars, vertices, particles)
 
 
+def compose_at(loaded: "LoadedScene", loc: tuple[Any, ...], t: np.ndarray, world_from_parent: Pose, parent_from_thing: Pose) -> Pose:
+    """world_from_thing = world_from_parent * parent_from_thing (pose.compose); a product
+    that is not finite is a SceneError at the thing's `parent`, with the time."""
+    try:
+        return compose(world_from_parent, parent_from_thing)
+    except UnrepresentablePoseError as exc:
+        when = float(t[int(exc.samples[0])])
+        raise SceneError([loaded.source.problem((*loc, "parent"), f"{exc} (at t = {when:.6g} s)")]) from None
+
+
+def aim_at_object(loaded: "LoadedScene", loc: tuple[Any, ...], t: np.ndarray, pose: Pose, world: dict[str, Pose], target: str, up: np.ndarray | None) -> Pose:
+    """`pose` turned at every sample so local +Z points from its world position at the
+    world origin of object `target` at that time (its parents, keys and simulation
+    included), +Y towards `up` (None: +Y, or +Z where the aim is vertical, as a fixed aim).
+    A thing that reaches its target is a SceneError at its `look_at`."""
+    if target not in world:
+        raise SceneError([loaded.source.problem((*loc, "look_at"), f"unknown object '{target}' (look_at names an object)")])
+    goal = world[target].translation
+    d = goal - pose.translation
+    dist = np.linalg.norm(d, axis=-1)
+    if (dist <= 1e-12 * np.maximum(np.abs(goal).max(axis=-1), 1.0)).any():
+        k = int(np.argmax(dist <= 1e-12 * np.maximum(np.abs(goal).max(axis=-1), 1.0)))
+        raise SceneError([loaded.source.problem((*loc, "look_at"), f"the aim reaches '{target}' at t = {t[k]:.6g} s: nothing to look at")])
+    if up is None:
+        vertical = np.linalg.norm(np.cross(d, [0.0, 1.0, 0.0]), axis=-1) < 1e-9 * dist
+        ups = np.where(vertical[:, None], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0])
+    else:
+        ups = np.broadcast_to(up, d.shape)
+    return pose._replace(rotation=aim_quats(pose.translation, goal, ups))
+
+
 def _object_poses(loaded: "LoadedScene", t: np.ndarray, simulation: Any | None) -> dict[str, Pose]:
     """Every object's world pose at `t`, parents first: simulated bodies from
     `simulation`, planned paths (motion/plan.py), keyed or procedural motion under the
@@ -168,7 +204,7 @@ def _object_poses(loaded: "LoadedScene", t: np.ndarray, simulation: Any | None) 
             if name not in sampled:
                 raise MotionError(f"the simulation has no samples for dynamics body '{name}'")
             pose = sampled[name]
-            world[name] = Pose(*(np.asarray(a, dtype=np.float64) for a in pose))
+            world[name] = Pose(*(None if a is None else np.asarray(a, dtype=np.float64) for a in pose))
             continue
         if obj.motion.type == "plan":  # planned path (motion/plan.py); its follower is simulated
             from . import plan
@@ -181,7 +217,7 @@ def _object_poses(loaded: "LoadedScene", t: np.ndarray, simulation: Any | None) 
         local = local_pose(loaded, ("objects", i), obj.motion, object_base(obj), t, {})
         pose = Pose(local.translation, local.rotation, local.scale)
         local_poses[name] = pose
-        world[name] = compose(world[obj.parent], pose) if obj.parent is not None else pose
+        world[name] = compose_at(loaded, ("objects", i), t, world[obj.parent], pose) if obj.parent is not None else pose
     if scene.ik:  # after the chains' keyed poses, before their children's world poses are final
         from .ik import apply_ik
 
@@ -197,7 +233,9 @@ def _camera_motion(loaded: "LoadedScene", t: np.ndarray, world: dict[str, Pose])
     local = local_pose(loaded, ("camera",), cam.motion, _camera_base(cam), t, {"fov": 1, "ortho_width": 1})
     camera = Pose(local.translation, local.rotation, local.scale)
     if cam.parent is not None:
-        camera = compose(world[cam.parent], camera)
+        camera = compose_at(loaded, ("camera",), t, world[cam.parent], camera)
+    if isinstance(cam.look_at, str):
+        camera = aim_at_object(loaded, ("camera",), t, camera, world, cam.look_at, np.asarray(cam.up, dtype=np.float64))
     camera_scalars = {"fov": np.full(count, float(cam.fov))}
     if cam.type == "orthographic":
         camera_scalars["ortho_width"] = np.full(count, float(cam.ortho_width))
@@ -217,7 +255,10 @@ def _light_motion(loaded: "LoadedScene", t: np.ndarray, world: dict[str, Pose]) 
         local = local_pose(loaded, ("lights", i), light.motion, light.frame(_LIGHT_FRAMES), t, dims)
         pose = Pose(local.translation, local.rotation, local.scale)
         name = light_key(light, i)
-        lights[name] = compose(world[light.parent], pose) if light.parent is not None else pose
+        lights[name] = compose_at(loaded, ("lights", i), t, world[light.parent], pose) if light.parent is not None else pose
+        target = getattr(light, "look_at", None)
+        if isinstance(target, str):
+            lights[name] = aim_at_object(loaded, ("lights", i), t, lights[name], world, target, None)
         scalars = {k: (np.full(count, v[0]) if v.shape == (1,) else broadcast(v, count)) for k, v in bases.items()}
         scalars.update(local.scalars)
         light_scalars[name] = scalars

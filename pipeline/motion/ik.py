@@ -87,7 +87,7 @@ def chain_world(base: Pose, locals_: list[Pose]) -> list[Pose]:
 
 
 def _with_rotation(p: Pose, q: np.ndarray) -> Pose:
-    return Pose(p.translation, q, p.scale)
+    return p._replace(rotation=q)
 
 
 def _local_rotation(parent_world: np.ndarray, world: np.ndarray) -> np.ndarray:

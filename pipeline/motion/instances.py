@@ -84,6 +84,8 @@ def object_vertices(loaded: Any, obj: Any, track: Any, times: np.ndarray, world:
         raise FlockTooLargeError(f"{obj.deform.count} agents x {len(agent)} vertices is more than {MAX_INSTANCE_VERTICES} vertices; use fewer agents or a simpler agent mesh")
     up = np.asarray(obj.deform.up, dtype=np.float64)
     verts = instance_vertices(track, times, agent, up / np.linalg.norm(up))
-    t, q, s = (np.asarray(a, dtype=np.float64) for a in world)
+    t, q, s = (np.asarray(a, dtype=np.float64) for a in world[:3])
     local = quat_rotate(quat_conj(q)[:, None, :], verts - t[:, None, :])
+    if world.stretch_offdiag is not None:  # S^-1 of the full stretch under a non-uniform parent
+        return np.linalg.solve(world.stretch()[:, None, :, :], local[..., None])[..., 0]
     return local / s[:, None, :]

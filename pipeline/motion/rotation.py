@@ -15,7 +15,7 @@ import numpy as np
 from ..errors import RotationValueError
 from ..scene.motion_schema import Key
 from ..scene.types import AxisAngleRotation, EulerRotation, QuaternionRotation, Transform
-from .pose import quat_conj, quat_log, quat_mul, quat_normalize, quat_rotate, quat_to_matrix
+from .pose import matrix_to_quat, quat_conj, quat_log, quat_mul, quat_normalize, quat_rotate, quat_to_matrix
 
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 
@@ -178,3 +178,19 @@ def direction_quat(direction) -> np.ndarray:  # type: ignore[no-untyped-def]
     d = d / np.linalg.norm(d)
     up = np.array([0.0, 1.0, 0.0]) if abs(d[1]) < 0.99 else np.array([1.0, 0.0, 0.0])
     return look_at_quat(np.zeros(3), d, up)
+
+
+def aim_quats(origins: np.ndarray, targets: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """[T, 4] `look_at_quat` at every sample: local +Z from origins [T, 3] towards targets
+    [T, 3], +Y towards up ([3] or [T, 3]), +X left; an up parallel to the view picks a
+    perpendicular as look_at_quat does. Every origin must differ from its target."""
+    forward = targets - origins
+    forward = forward / np.linalg.norm(forward, axis=-1, keepdims=True)
+    left = np.cross(np.broadcast_to(up, forward.shape), forward)
+    parallel = np.linalg.norm(left, axis=-1) < 1e-9
+    if parallel.any():
+        other = np.where((np.abs(forward[parallel, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0])
+        left[parallel] = np.cross(other, forward[parallel])
+    left = left / np.linalg.norm(left, axis=-1, keepdims=True)
+    new_up = np.cross(forward, left)
+    return matrix_to_quat(np.stack((left, new_up, forward), axis=-1))

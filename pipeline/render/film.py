@@ -63,8 +63,8 @@ def render(sample: SampleFn, scene: mi.Scene, sensor: Any, seed: Any, spp: int, 
             flat = dr.zeros(mi.Float, n_px * n_ch)
         # interleave the band's own rows into [H, W, C]: each element written exactly once (no conflicts)
         inner = dr.arange(mi.UInt32, (last - first) * width)
-        source = inner + (first - lo) * width
-        target = inner + first * width
+        source = inner + _opaque((first - lo) * width)
+        target = inner + _opaque(first * width)
         for c, plane in enumerate(planes):
             dr.scatter(flat, dr.gather(mi.Float, plane, source), target * n_ch + c)
         dr.eval(flat)
@@ -84,6 +84,13 @@ def bands(rows: int, width: int, apron: int, budget: int) -> list[tuple[int, int
         return [(0, rows, 0, rows)]
     inner = max(1, budget // max(width, 1) - 2 * apron)
     return [(a, min(rows, a + inner), max(0, a - apron), min(rows, a + inner + apron)) for a in range(0, rows, inner)]
+
+
+def _opaque(value: int) -> Any:
+    """`value` as a UInt32 the kernel reads at run time: a band's first row, its row count or
+    its place in the frame differ from band to band, and as literals each band would trace
+    and compile kernels of its own (485 for a 4x48 frame in 48 bands, against 16)."""
+    return dr.opaque(mi.UInt32, value)
 
 
 def _reach(rfilter: Any) -> int:
@@ -154,7 +161,7 @@ def render_pass(sample: SampleFn, scene: mi.Scene, sensor: Any, sampler: Any, se
 
     # ray generation in Mitsuba's order of sampler dimensions
     pixel = dr.arange(mi.UInt32, n_px * spp) // spp
-    px = mi.Vector2f(mi.Float(pixel % width), mi.Float(offset + step * (pixel // width)))
+    px = mi.Vector2f(mi.Float(pixel % width), mi.Float(_opaque(offset) + step * (pixel // width)))
     film_pos = px + sampler.next_2d()
     time = sensor.shutter_open() + sampler.next_1d() * sensor.shutter_open_time()
     aperture = sampler.next_2d() if sensor.needs_aperture_sample() else mi.Point2f(0.5)
@@ -172,6 +179,7 @@ def render_pass(sample: SampleFn, scene: mi.Scene, sensor: Any, sampler: Any, se
     reach = _reach(rfilter)
     target = dr.arange(mi.UInt32, n_px)
     tx, ty = mi.Int32(target % width), mi.Int32(target // width)
+    rows_here = dr.opaque(mi.Int32, out_h)  # a band's row count: the last band's may differ
     acc = [mi.Float(dr.zeros(mi.Float, n_px)) for _ in range(len(channels) + 1)]
     for oy in range(-reach, reach + 1):
         if oy % step:
@@ -180,7 +188,7 @@ def render_pass(sample: SampleFn, scene: mi.Scene, sensor: Any, sampler: Any, se
         dr.eval(sums)
         for ox in range(-reach, reach + 1):
             sx, sy = tx - ox, ty - oy // step  # the source pixel whose samples land here
-            ok = (sx >= 0) & (sx < width) & (sy >= 0) & (sy < out_h)
+            ok = (sx >= 0) & (sx < width) & (sy >= 0) & (sy < rows_here)
             src = mi.UInt32(dr.select(ok, sy * width + sx, 0))
             acc = [a + dr.gather(mi.Float, v, src, ok) for a, v in zip(acc, sums[ox + reach])]
         dr.eval(acc)
@@ -193,7 +201,7 @@ def row_sums(rfilter: Any, channels: list[Any], film_pos: Any, spp: int, width: 
     where w = f(x) f(y) is the separable filter's weight of the sample for the pixel
     (ox, oy) away. Returns [2 reach + 1][channels + 1] arrays of n_px."""
     source = dr.arange(mi.UInt32, n_px)
-    sx, sy = mi.Float(source % width), mi.Float(rows[0] + rows[1] * (source // width))  # frame rows (a field: every other)
+    sx, sy = mi.Float(source % width), mi.Float(_opaque(rows[0]) + rows[1] * (source // width))  # frame rows (a field: every other)
     widths = 2 * reach + 1
     zero = [mi.Float(dr.zeros(mi.Float, n_px)) for _ in range(widths * (len(channels) + 1))]
 

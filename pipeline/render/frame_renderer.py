@@ -126,6 +126,12 @@ class FrameRenderer:
         dr.set_flag(dr.JitFlag.KernelHistory, True)
 
     @property
+    def last_kernels(self) -> list[dict[str, Any]]:
+        """The JIT kernels the last frame launched, in order (drjit's kernel history: `hash`,
+        `size`, `cache_hit`, `execution_time` ...); one hash per kernel traced."""
+        return self._last_history
+
+    @property
     def _scene(self) -> Any:
         """The cached motion_path scene (None before the cold frame)."""
         return self.cache.scene

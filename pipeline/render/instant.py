@@ -29,7 +29,10 @@ def add_shapes(d: dict[str, Any], loaded: LoadedScene, objects: Iterable[Any], f
             continue
         t, q, s = fi.objects[obj.name]
         ot, oq = pose_at(t, q, u)
-        for k, shape in enumerate(object_shapes(obj, loaded, trs_matrix(ot, oq, s[0]), materials)):
+        m = trs_matrix(ot, oq, s[0])
+        if obj.name in fi.stretches:  # T R S with S the full symmetric stretch at the frame time
+            m = trs_matrix(ot, oq) @ rest_frame(fi, obj.name)
+        for k, shape in enumerate(object_shapes(obj, loaded, m, materials)):
             d[f"{mitsuba_id(obj.name)}__{k}"] = shape
 
 
@@ -67,6 +70,17 @@ def sensor_record(loaded: LoadedScene, spp: int, fi: StackedFrame, u: float | No
 def ortho_width(fi: StackedFrame) -> float | None:
     """The orthographic width at the frame's time, if the camera is orthographic."""
     return None if fi.ortho_width is None else float(fi.ortho_width[0])
+
+
+def rest_frame(fi: StackedFrame, name: str) -> np.ndarray:
+    """[4, 4] an object's stretch at the frame time (diag(scale) or the full symmetric S),
+    which the renderer applies in the object's rest frame, per frame."""
+    m = np.eye(4)
+    if name in fi.stretches:
+        m[:3, :3] = fi.stretches[name][0]
+    else:
+        m[:3, :3] = np.diag(np.asarray(fi.objects[name][2][0], dtype=float))
+    return m
 
 
 def first_value(values: np.ndarray) -> Any:

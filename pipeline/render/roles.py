@@ -27,6 +27,12 @@ def is_static(loaded: LoadedScene, name: str) -> bool:
     return True
 
 
+def _aims_at_mover(loaded: LoadedScene, light: Any) -> bool:
+    """A spot light or projector whose `look_at` names an object that moves: it turns."""
+    target = getattr(light, "look_at", None)
+    return isinstance(target, str) and not is_static(loaded, target)
+
+
 @dataclass(frozen=True)
 class Roles:
     """The scene's objects and lights by how the renderer draws them (names in scene order;
@@ -56,11 +62,11 @@ def sort_scene(loaded: LoadedScene) -> Roles:
         for o in objects
         if o.name not in static_names and o.name not in slice_names and o.shape != "empty" and not o.is_particles and o.visible
     ]
-    # lights whose pose can change (their own motion or a moving parent)
+    # lights whose pose can change (their own motion, a moving parent, or an aim at a moving object)
     animated = [
         (i, light)
         for i, light in enumerate(loaded.scene.lights)
-        if light.motion.type != "static" or (light.parent is not None and not is_static(loaded, light.parent))
+        if light.motion.type != "static" or (light.parent is not None and not is_static(loaded, light.parent)) or _aims_at_mover(loaded, light)
     ]
     return Roles(
         static_names=static_names,

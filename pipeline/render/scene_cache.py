@@ -26,7 +26,7 @@ from .atlas import Atlas
 from .broadphase import Broadphase, particle_proxies, reach, separate, sphere_proxies
 from .build import DEFAULT_MATERIAL, emitter_dict, material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
-from .instant import add_lights, add_shapes, light_record, sensor_record
+from .instant import add_lights, add_shapes, light_record, rest_frame, sensor_record
 from .roles import Roles
 from .sbt import SbtOwner, dict_types
 from .poses import swept_spheres
@@ -48,7 +48,7 @@ class SceneCache:
         self.max_depth = max_depth
         self.scene: Any = None  # None until the cold frame is built
         self._params: Any = None
-        self._mover_scale: dict[str, np.ndarray] = {}
+        self._mover_stretch: dict[str, np.ndarray] = {}  # name -> [4, 4] the stretch baked into its atlas shapes
         self._materials: dict[str, Any] = {}
         self.atlas: Atlas | None = None
         self.broadphase: Broadphase | None = None
@@ -95,8 +95,8 @@ class SceneCache:
         # every scene the kernel traces is built against one SBT owner covering their
         # shape types (render/sbt.py: on CUDA the others' traces would be disabled)
         self._materials = materials
-        mover_dicts = [self._mover_dicts(name, np.asarray(fi.objects[name][2][0], dtype=float)) for name in self.roles.mover_names]
-        self._mover_scale = {name: np.array(fi.objects[name][2][0], dtype=float) for name in self.roles.mover_names}
+        self._mover_stretch = {name: rest_frame(fi, name) for name in self.roles.mover_names}
+        mover_dicts = [self._mover_dicts(name, self._mover_stretch[name]) for name in self.roles.mover_names]
         types = set().union(dict_types(d), *(dict_types({str(k): v for k, v in enumerate(md)}) for md in mover_dicts))
         if self.roles.deform_names:
             types.add("Mesh")
@@ -127,10 +127,10 @@ class SceneCache:
         # first warm frame replays the cold frame's kernels instead of compiling new ones
         self.update(fi)
 
-    def _mover_dicts(self, name: str, scale: np.ndarray) -> list[dict[str, Any]]:
-        """A mover's shape dictionaries in its rest frame, its scale baked in."""
+    def _mover_dicts(self, name: str, stretch: np.ndarray) -> list[dict[str, Any]]:
+        """A mover's shape dictionaries in its rest frame, its stretch [4, 4] baked in."""
         obj = next(o for o in self.loaded.scene.objects if o.name == name)
-        return object_shapes(obj, self.loaded, np.diag([*scale, 1.0]), self._materials)
+        return object_shapes(obj, self.loaded, stretch, self._materials)
 
     def _emitter_scenes(self, mover_dicts: list[list[dict[str, Any]]]) -> dict[int, Any]:
         """The emissive movers' own rest-frame scenes (emitter sampling in the kernel)."""
@@ -226,14 +226,15 @@ class SceneCache:
         return keys
 
     def _update_mover_scales(self, fi: StackedFrame) -> list[str]:
-        """A mover's scale is baked into its atlas shapes, per frame (not per sample): where
-        any mover's scale changed, the atlas is laid out and built again."""
-        changed = [name for name in self.roles.mover_names if not np.allclose(np.asarray(fi.objects[name][2][0], dtype=float), self._mover_scale[name])]
+        """A mover's stretch (its scale, or the full symmetric stretch under a non-uniform
+        parent scale: `instant.rest_frame`) is baked into its atlas shapes, per frame (not per
+        sample): where any mover's stretch changed, the atlas is laid out and built again."""
+        stretches = {name: rest_frame(fi, name) for name in self.roles.mover_names}
+        changed = [name for name in self.roles.mover_names if not np.allclose(stretches[name], self._mover_stretch[name])]
         if not changed:
             return []
-        for name in self.roles.mover_names:
-            self._mover_scale[name] = np.array(fi.objects[name][2][0], dtype=float)
-        mover_dicts = [self._mover_dicts(name, self._mover_scale[name]) for name in self.roles.mover_names]
+        self._mover_stretch = stretches
+        mover_dicts = [self._mover_dicts(name, stretches[name]) for name in self.roles.mover_names]
         self._build_atlas(mover_dicts)
         if self._emitters and self.owner is not None:
             self.owner.forget(self._emitters.values())

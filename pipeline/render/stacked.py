@@ -30,6 +30,7 @@ class StackedFrame:
     vertices: dict[str, np.ndarray] = field(default_factory=dict)  # deforming meshes [1+N, V, 3], object space
     ortho_width: np.ndarray | None = None  # [1+N], orthographic cameras
     particles: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)  # (positions [1+N, n, 3], alive [1+N, n])
+    stretches: dict[str, np.ndarray] = field(default_factory=dict)  # objects whose stretch is not diagonal: S [1+N, 3, 3]
 
 
 def stack_frame(frame: BakedFrame) -> StackedFrame:
@@ -37,7 +38,14 @@ def stack_frame(frame: BakedFrame) -> StackedFrame:
     at, across = frame.at_frame, frame.across_shutter
 
     def pose(p: Any, q: Any) -> tuple[np.ndarray, ...]:
-        return tuple(np.concatenate([x, y]) for x, y in zip(p, q))
+        return tuple(np.concatenate([x, y]) for x, y in zip(p[:3], q[:3]))
+
+    def stretch(p: Any, q: Any) -> np.ndarray | None:
+        if p.stretch_offdiag is None and q.stretch_offdiag is None:
+            return None
+        return np.concatenate([p.stretch(), q.stretch()])
+
+    stretches = {n: stretch(p, across.objects[n]) for n, p in at.objects.items()}
 
     fov = np.concatenate([at.camera_scalars["fov"], across.camera_scalars["fov"]])
     ortho = np.concatenate([at.camera_scalars["ortho_width"], across.camera_scalars["ortho_width"]]) if "ortho_width" in at.camera_scalars else None
@@ -57,4 +65,5 @@ def stack_frame(frame: BakedFrame) -> StackedFrame:
             n: (np.concatenate([p.positions, across.particles[n].positions]), np.concatenate([p.alive, across.particles[n].alive]))
             for n, p in at.particles.items()
         },
+        stretches={n: s for n, s in stretches.items() if s is not None},
     )

@@ -288,6 +288,39 @@ def check_expressions(c: _Check) -> None:
     c.problems.extend(expression_problems(c.scene, c.source, evaluate=c.assets))
 
 
+def _rotating_motion(motion: object) -> str | None:
+    """What in a motion block turns its owner (a keyed `rotate`, a rotating generator or
+    expression), or None."""
+    channels = getattr(motion, "channels", None)
+    if getattr(motion, "type", None) == "keyframes":
+        return "a keyed rotate channel" if channels and "rotate" in channels else None
+    if getattr(motion, "type", None) != "procedural":
+        return None
+    for g in getattr(motion, "generators", []):
+        if g.type == "turntable" or (g.type == "orbit" and g.face_center) or (g.type == "oscillate" and g.channel == "rotate") \
+                or (g.type == "noise" and any(g.rotate_amplitude)):
+            return f"a rotating {g.type} generator" + (" (set rotate_amplitude: [0, 0, 0])" if g.type == "noise" else "")
+    return "a rotate expression" if channels is not None and channels.rotate is not None else None
+
+
+def check_aims(c: _Check) -> None:
+    """A `look_at` that names something names an object (did you mean ...), and the
+    aimed camera or light has no rotating motion (the aim sets its rotation)."""
+    scene = c.scene
+    objects = [o.name for o in scene.objects]
+    owners = [(("camera",), scene.camera)] + [(("lights", i), light) for i, light in enumerate(scene.lights)]
+    for loc, owner in owners:
+        target = getattr(owner, "look_at", None)
+        if not isinstance(target, str):
+            continue
+        if target not in objects:
+            c.add((*loc, "look_at"), f"unknown object '{target}' (look_at names an object)" + _suggest(target, objects))
+            continue
+        why = _rotating_motion(owner.motion)
+        if why is not None:
+            c.add((*loc, "motion"), f"look_at aims at '{target}', which sets the rotation; {why} would fight it (key translate only, or aim at a point)")
+
+
 # The semantic checks, in the order their problems are reported (file order within each).
 SEMANTIC_CHECKS: tuple[Callable[[_Check], None], ...] = (
     check_names,
@@ -302,6 +335,7 @@ SEMANTIC_CHECKS: tuple[Callable[[_Check], None], ...] = (
     check_derived,
     check_motion_channels,
     check_expressions,
+    check_aims,
 )
 
 

@@ -60,7 +60,7 @@ def kept_validator(cls: type[BaseModel]) -> SchemaValidator:
     validator = _validators.get(cls)
     if validator is None:
         entry = entry_path(cls)
-        validator = _load(entry)
+        validator = _load(entry, cls)
         if validator is None:
             validator = _made(cls)
             _keep(entry, validator)
@@ -133,9 +133,12 @@ class _Unpickler(pickle.Unpickler):
         raise pickle.UnpicklingError(f"a kept validator may not name {module}.{name}")
 
 
-def _load(entry: Path) -> SchemaValidator | None:
-    """The kept validator if the entry is ours, reads whole and every source it names is
-    unchanged; None otherwise (a foreign or damaged entry says so in one warning line)."""
+def _load(entry: Path, cls: type[BaseModel] | None = None) -> SchemaValidator | None:
+    """The kept validator if the entry is ours, reads whole, every source it names is
+    unchanged and it validates `cls` (the root record of its core schema is that very
+    class: an entry holding another class's validator would hand every later load records
+    of the wrong kind); None otherwise (a foreign, damaged or mismatched entry says so in
+    one warning line)."""
     data = STORE.read(entry, MOST_BYTES)
     if data is None:
         if entry.exists() or entry.is_symlink():
@@ -150,7 +153,39 @@ def _load(entry: Path) -> SchemaValidator | None:
     except Exception as exc:  # truncated, naming a class the code no longer has, or a name it may not
         _discard(entry, f"{type(exc).__name__}")
         return None
-    return validator if isinstance(validator, SchemaValidator) else None
+    if not isinstance(validator, SchemaValidator):
+        _discard(entry, f"a {type(validator).__name__}, not a validator")
+        return None
+    if cls is not None and _root_class(validator) is not cls:
+        found = _root_class(validator)
+        _discard(entry, f"it validates {getattr(found, '__qualname__', 'another record')}, not {cls.__qualname__}")
+        return None
+    return validator
+
+
+def _root_class(validator: SchemaValidator) -> type | None:
+    """The record class a validator's core schema validates at its root (None when the root
+    is not a model record): pydantic-core pickles a validator as (schema, config), so the
+    schema is at hand without building one."""
+    try:
+        schema = validator.__reduce__()[1][0]
+        for _ in range(8):  # definitions around a model, or a reference into them
+            if not isinstance(schema, dict):
+                return None
+            kind = schema.get("type")
+            if kind == "model":
+                found = schema.get("cls")
+                return found if isinstance(found, type) else None
+            if kind == "definitions":
+                definitions = {d.get("ref"): d for d in schema.get("definitions", []) if isinstance(d, dict)}
+                schema = schema.get("schema")
+                if isinstance(schema, dict) and schema.get("type") == "definitions-ref":
+                    schema = definitions.get(schema.get("schema_ref"))
+            else:
+                return None
+    except (AttributeError, IndexError, TypeError):
+        return None
+    return None
 
 
 def _discard(entry: Path, why: str) -> None:

@@ -22,6 +22,15 @@ from .types import Color, Model, Name, NonNegative, Transform, Vec3
 
 LIGHT_TYPES: dict[str, type["_Light"]] = {}
 
+# Where a camera, spot light or projector points: a fixed world point, or an object's name,
+# tracked at every sample time (motion/evaluate.py aims at the object's world origin).
+Aim = Annotated[
+    Union[Vec3, Name],
+    Field(description="a point [x, y, z] in the parent's frame, or the name of an object whose world origin is "
+                      "tracked at every sample time (its parents, keys and simulation included), so the aim's "
+                      "motion blur is right; an aim at an object sets the rotation: no rotating motion on top"),
+]
+
 
 def light_key(light: Any, index: int) -> str:
     """A light's key in the scene's motion and render records: its name, else `light<index>`
@@ -42,7 +51,7 @@ class LightFrames(Protocol):
     def at(self, position: Vec3) -> Any:
         """At `position`, unrotated."""
 
-    def aimed(self, position: Vec3, look_at: Vec3) -> Any:
+    def aimed(self, position: Vec3, look_at: "Vec3 | str") -> Any:
         """At `position`, its +Z towards `look_at`."""
 
     def along(self, direction: Vec3) -> Any:
@@ -165,7 +174,7 @@ class SpotLight(_Light):
 
     type: Literal["spot"]
     position: Vec3
-    look_at: Vec3
+    look_at: Aim
     intensity: Color = 10.0
     cutoff_angle: Annotated[float, Field(gt=0, le=90)] = 20.0  # degrees
     beam_width: Annotated[float, Field(gt=0, le=90)] | None = None  # degrees, <= cutoff
@@ -218,7 +227,7 @@ class ProjectorLight(_Light):
 
     type: Literal["projector"]
     position: Vec3
-    look_at: Vec3
+    look_at: Aim
     file: str
     fov: Annotated[float, Field(gt=0, lt=180)] = 30.0  # degrees, horizontal
     scale: NonNegative = 1.0

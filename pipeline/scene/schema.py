@@ -19,6 +19,7 @@ from ..timeline import Timeline, parse_fps
 from .dynamics_schema import DynamicsSettings, ParticleEmitter
 from .imports.spec import ImportSpec
 from .lights import (  # the light records live in lights.py; these names stay importable from here
+    Aim,
     LIGHT_TYPES,
     ConstantLight,
     DirectionalLight,
@@ -90,7 +91,7 @@ class Camera(Model):
 
     type: Literal["perspective", "orthographic"] = "perspective"
     position: Vec3 | None = None
-    look_at: Vec3 | None = None
+    look_at: Aim | None = None
     up: Vec3 = (0.0, 1.0, 0.0)
     transform: Transform | None = None
     fov: Annotated[float, Field(gt=0, lt=180)] = 40.0

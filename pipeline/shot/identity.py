@@ -13,45 +13,78 @@ for it then.
 from __future__ import annotations
 
 import json
+import logging
 import os
+import stat
 from pathlib import Path
 
-from ..errors import ShotFolderTakenError
+from ..errors import InputFileError, ShotFolderTakenError, UsageError
 from ..files import write_atomic
+from ..limits import read_bounded, read_json_record
 from ..render.job import scene_reference
 
 RECORD = ".motion-shot.json"
+RECORD_BYTES = 64 * 1024  # the record is one short path; more is not ours
+WHAT = "the output folder's record of its scene file"
 
 
-def recorded_scene(out_dir: Path) -> Path | None:
+def recorded_scene(out_dir: Path, warn: bool = True) -> Path | None:
     """The scene file the folder's record names (absolute), or None when there is no
-    readable record."""
-    try:
-        data = json.loads((out_dir / RECORD).read_text())
-    except (OSError, ValueError):
+    usable record. A damaged one (not a regular file: a FIFO is never waited on; over its
+    size; not JSON; not a mapping; a scene path that is empty, holds a NUL, or is longer
+    than a path can be) is one warning line (`warn`), and the run writes it again."""
+    path = out_dir / RECORD
+    if warn:
+        data = read_json_record(path, WHAT, dict, limit=RECORD_BYTES)
+    else:
+        try:
+            data = json.loads(read_bounded(path, RECORD_BYTES, WHAT))
+        except (InputFileError, ValueError, RecursionError):
+            data = None
+    if data is None:
         return None
     scene = data.get("scene") if isinstance(data, dict) else None
-    if not isinstance(scene, str) or not scene:
+    why = _unusable(scene)
+    if why:
+        if warn:
+            logging.getLogger("motion").warning(f"motion: warning: {path}: {WHAT} discarded ({why}); it is made again")
         return None
     return Path(os.path.normpath(out_dir / scene))
+
+
+def _unusable(scene: object) -> str | None:
+    """Why a record's scene value cannot name a file (None when it can)."""
+    if not isinstance(scene, str) or not scene:
+        return "no scene path"
+    if "\0" in scene:
+        return "its scene path holds a NUL"
+    try:
+        encoded = os.fsencode(scene)
+    except UnicodeError:
+        return "its scene path is not text a path can hold"
+    if len(encoded) >= 4096 or any(len(part) > 255 for part in encoded.split(b"/")):
+        return f"its scene path is {len(encoded)} bytes, longer than a path can be"
+    return None
 
 
 def _same_file(a: Path, b: Path) -> bool:
     """The two paths name one file (links followed), or the same path when either is gone."""
     try:
         return os.path.samefile(a, b)
-    except OSError:
-        return a.resolve() == b.resolve()
+    except (OSError, ValueError):
+        return os.path.realpath(a) == os.path.realpath(b)
 
 
 def check_owner(out_dir: Path, scene: Path, overwrite: bool) -> Path | None:
     """Refuse a folder whose record names another scene file that still exists, unless
-    `overwrite`. Returns the other scene file when it is taken over (None otherwise)."""
+    `overwrite`. Returns the other scene file when it is taken over (None otherwise). A
+    folder where the record belongs is refused (UsageError): it is not ours to remove."""
+    _refuse_folder(out_dir)
     owner = recorded_scene(out_dir)
     if owner is None or _same_file(owner, scene):
         return None
-    if not owner.exists():
-        return owner
+    if not os.path.isfile(owner):
+        return owner  # gone (renamed, moved), or not a scene file at all
     if overwrite:
         return owner
     raise ShotFolderTakenError(
@@ -63,8 +96,21 @@ def check_owner(out_dir: Path, scene: Path, overwrite: bool) -> Path | None:
 def record_owner(out_dir: Path, scene: Path) -> None:
     """Write the folder's record naming `scene` (atomically, through files.py), unless it
     already does."""
-    owner = recorded_scene(out_dir)
+    _refuse_folder(out_dir)
+    owner = recorded_scene(out_dir, warn=False)
     if owner is not None and _same_file(owner, scene):
         return
     reference = scene_reference(scene, out_dir / "frame")
     write_atomic(out_dir / RECORD, (json.dumps({"scene": reference}, indent=2) + "\n").encode(), "writing the output folder's record")
+
+
+def _refuse_folder(out_dir: Path) -> None:
+    """UsageError when a folder stands where the record belongs (a FIFO, a link or another
+    non-folder is replaced by the record's atomic rename; a folder cannot be, and may hold
+    someone's files)."""
+    try:
+        mode = os.lstat(out_dir / RECORD).st_mode
+    except (OSError, ValueError):
+        return
+    if stat.S_ISDIR(mode):
+        raise UsageError(f"{out_dir / RECORD}: a folder stands where motion keeps {WHAT} (a small file): move it away or remove it, then run again")

@@ -190,6 +190,10 @@ def preflight(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: 
         problems = bake_budget_problems(loaded.scene, loaded.source, len(frames))
         if problems:
             raise SceneError(problems)
+    if req.compare is not None:
+        from .compare import check_compare
+
+        check_compare(req.compare, out_dir, tuple(loaded.scene.render.resolution))  # the references and OUTPUT/compare/, before the frames
     if req.check or req.dry_run:
         return  # --check and --dry-run write nothing
     check_writable(out_dir, "output folder")

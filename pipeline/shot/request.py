@@ -39,3 +39,4 @@ class RenderRequest:
     dry_run: bool = False  # only say what would be done (the plan); write nothing
     fields: str | None = None  # field order (tff/bff): the frames are fields, drawn row by parity (shot/fields.py)
     scene_overrides: dict[str, Any] = field(default_factory=dict)  # further sections merged over the scene (the field timeline)
+    compare: Path | None = None  # --compare REF: checked before any frame renders, compared after (shot/compare.py)

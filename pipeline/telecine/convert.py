@@ -13,7 +13,7 @@ Metadata on every telecined frame (besides the source frame's own `motion:` attr
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fractions import Fraction
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
@@ -40,6 +40,30 @@ TELECINE_KEYS = (
     "firstFieldSource", "secondFieldSource", "videoFrame", "blendSources", "tail",
     "inverseTelecine", "cadencePhase", "topFieldFrom", "bottomFieldFrom",
 )
+
+
+@dataclass(frozen=True)
+class SequenceOutput:
+    """How a conversion reads its input's name and writes its frames, the same for pulldown
+    and its inverse: the input sequence's `prefix` (None: the folder's only one), the
+    output's `out_prefix` (None: the input's), the EXR `pixel_type` (None: the input's) and
+    `compression`, whether an existing output sequence is replaced (`overwrite`), and
+    `progress(done, total)` after each frame."""
+
+    prefix: str | None = None
+    out_prefix: str | None = None
+    pixel_type: str | None = None
+    compression: str = "zip"
+    overwrite: bool = False
+    progress: Progress | None = None
+
+    def name(self, seq: Sequence) -> str:
+        """The output sequence's prefix."""
+        return self.out_prefix or seq.prefix
+
+    def pixel_type_for(self, seq: Sequence) -> str:
+        """The output frames' pixel type."""
+        return self.pixel_type or seq.pixel_type
 
 
 @dataclass(frozen=True)
@@ -196,17 +220,14 @@ def telecine_sequence(
     film_speed: str | Fraction | int = "23.976",
     tail: Tail = "pad",
     drop_frame: bool = False,
-    prefix: str | None = None,
-    out_prefix: str | None = None,
-    pixel_type: str | None = None,
-    compression: str = "zip",
-    overwrite: bool = False,
-    progress: Progress | None = None,
     sequence: Sequence | None = None,
     shared: ViewedFrames | None = None,
+    output: SequenceOutput = SequenceOutput(),
+    **output_fields: Any,
 ) -> Result:
     """Pull a progressive EXR sequence down to interlaced (or, for `blend`, blended) frames
-    (`shared`: the run's deliverables' viewed frames, filled as the film frames are read).
+    (`shared`: the run's deliverables' viewed frames, filled as the film frames are read;
+    `output`, or its fields as keywords: how the frames are named and written).
 
     Video frame i is numbered `first + i`, where `first` is the input's first frame
     number. Its timecode continues the film's: the film's first frame number, counted at
@@ -218,18 +239,19 @@ def telecine_sequence(
     order = check_field_order(field_order)
     film = film_rate(film_speed)
     rate = output_rate(film, cadence)
+    out = replace(output, **output_fields)
     in_dir, out_dir = Path(in_dir), Path(out_dir)
-    seq = sequence or discover(in_dir, prefix, require_even_height=not cadence.blend)
-    name = out_prefix or seq.prefix
+    seq = sequence or discover(in_dir, out.prefix, require_even_height=not cadence.blend)
+    name = out.name(seq)
     _check_dirs(seq.directory, out_dir, seq.prefix, name)
     frames = plan(len(seq), cadence, order, tail)
     if drop_frame:
         _timecode(0, rate, True)
     start = max(0, seq.first) * round(rate) // max(1, round(film))  # the film's start, in video frames
-    ptype = pixel_type or seq.pixel_type
+    ptype = out.pixel_type_for(seq)
     load = _FrameCache(seq, ahead=sorted({k for vf in frames for k in (vf.top, vf.bottom, vf.first, vf.second)}), shared=shared)
     names: list[str] = []
-    with _Staging(out_dir, name, overwrite) as staging:
+    with _Staging(out_dir, name, out.overwrite) as staging:
         with _Writes() as writes:
             for i, vf in enumerate(frames):
                 top, bottom = load(vf.top), load(vf.bottom)
@@ -257,11 +279,11 @@ def telecine_sequence(
                 fname = f"{name}.{seq.first + i:0{seq.padding}d}.exr"
                 writes.submit(
                     write_frame, staging.dir / fname, rgba, meta, fps=rate, timecode=_timecode(start + i, rate, drop_frame),
-                    aovs=aovs or None, pixel_type=ptype, compression=compression,
+                    aovs=aovs or None, pixel_type=ptype, compression=out.compression,
                 )
                 names.append(fname)
-                if progress:
-                    progress(i + 1, len(frames))
+                if out.progress:
+                    out.progress(i + 1, len(frames))
         paths = staging.publish(names)
     return Result(out_dir, paths, rate, film, cadence, None if cadence.blend else order)
 
@@ -325,23 +347,21 @@ def inverse_sequence(
     film_speed: str | Fraction | int | None = None,
     tolerance: float = 0.0,
     use_metadata: bool = True,
-    prefix: str | None = None,
-    out_prefix: str | None = None,
-    pixel_type: str | None = None,
-    compression: str = "zip",
-    overwrite: bool = False,
-    progress: Progress | None = None,
+    output: SequenceOutput = SequenceOutput(),
+    **output_fields: Any,
 ) -> Result:
     """Recover the progressive film frames from an interlaced EXR sequence.
 
     Which film frame fed each field comes from our metadata (`motion:topFieldSource` ...)
     when every frame has it and no pattern is forced; otherwise from detection over
     `pattern` (or 3:2, 2:3:3:2, 2:2). With metadata the frames keep their original numbers;
-    with detection they are numbered from the input's first frame number.
+    with detection they are numbered from the input's first frame number. `output`, or its
+    fields as keywords: how the frames are named and written.
     """
+    out = replace(output, **output_fields)
     in_dir, out_dir = Path(in_dir), Path(out_dir)
-    seq = discover(in_dir, prefix)
-    name = out_prefix or seq.prefix
+    seq = discover(in_dir, out.prefix)
+    name = out.name(seq)
     _check_dirs(seq.directory, out_dir, seq.prefix, name)
     stored = str(seq.first_meta.get("fieldOrder", "tff"))
     if field_order is None and stored not in ("tff", "bff"):
@@ -356,10 +376,10 @@ def inverse_sequence(
 
     cadence = detection.cadence if detection else parse_cadence(str(seq.first_meta.get("cadence", "3:2")))
     film = _recovered_film_rate(seq, cadence, film_speed)
-    ptype = pixel_type or seq.pixel_type
+    ptype = out.pixel_type_for(seq)
     load = _FrameCache(seq)
     names: list[str] = []
-    with _Staging(out_dir, name, overwrite) as staging:
+    with _Staging(out_dir, name, out.overwrite) as staging:
         for i, r in enumerate(recovered):
             top, bottom = load(r.top_from), load(r.bottom_from)
             rgba, aovs = _weave_layers(top, bottom)
@@ -375,10 +395,10 @@ def inverse_sequence(
             fname = f"{name}.{number:0{seq.padding}d}.exr"
             write_frame(
                 staging.dir / fname, rgba, meta, fps=film, timecode=timecode(i, film),
-                aovs=aovs or None, pixel_type=ptype, compression=compression,  # type: ignore[arg-type]
+                aovs=aovs or None, pixel_type=ptype, compression=out.compression,  # type: ignore[arg-type]
             )
             names.append(fname)
-            if progress:
-                progress(i + 1, len(recovered))
+            if out.progress:
+                out.progress(i + 1, len(recovered))
         paths = staging.publish(names)
     return Result(out_dir, paths, film, film, cadence, order, detection)

@@ -118,7 +118,7 @@ def _refuse_negative_frames(in_dir: Path, prefix: str | None) -> None:
 
 
 def _frame_info(seq: Sequence, index: int, number: int, fps: Fraction | None) -> dict[str, Any]:
-    from ..frame_output import motion_meta, read_header, timecode_str
+    from ..frame_output import header_timecode, motion_meta, read_header
 
     header = read_header(seq.paths[index])
     meta = motion_meta(header)
@@ -126,7 +126,7 @@ def _frame_info(seq: Sequence, index: int, number: int, fps: Fraction | None) ->
     # the frame's own timecode (it follows the frame number, and a pulldown's continues the
     # film's: docs/telecine.md); a header without one: the frame number at the nominal rate
     if header.get("timeCode") is not None:
-        info["timecode"] = timecode_str(header["timeCode"])
+        info["timecode"] = header_timecode(header)
     elif fps:
         info["timecode"] = (frame_timecode(number, fps) or "") if round(fps) == fps or fps.denominator == 1001 else ""
     for key in INFO_KEYS:

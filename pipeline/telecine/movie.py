@@ -410,7 +410,6 @@ def sequence_movie(
 def first_timecode(seq: Sequence) -> str | None:
     """The sequence's first frame's `timeCode` attribute as HH:MM:SS:FF (None without one):
     the movie's timecode track starts there, so the movie and its frames agree."""
-    from ..frame_output import read_header, timecode_str
+    from ..frame_output import header_timecode, read_header
 
-    code = read_header(seq.paths[0]).get("timeCode")
-    return timecode_str(code) if code is not None else None
+    return header_timecode(read_header(seq.paths[0]))

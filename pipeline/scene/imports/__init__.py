@@ -93,7 +93,9 @@ def _apply_overrides(spec: Any, index: int, expansion: Expansion, source: "Sourc
     lights in `expansion` (each overridden key located at the override); the problems of
     those that name nothing imported or change what a record is (FIXED_KEYS)."""
     problems: list[Problem] = []
-    by_name = {rec.get("name"): (kind, j) for kind, recs in (("objects", expansion.objects), ("lights", expansion.lights)) for j, (rec, _) in enumerate(recs)}
+    # (kept records that are not mappings, or whose name is not text, never get here: memo._recall makes them again)
+    by_name = {rec["name"]: (kind, j) for kind, recs in (("objects", expansion.objects), ("lights", expansion.lights))
+               for j, (rec, _) in enumerate(recs) if isinstance(rec, dict) and isinstance(rec.get("name"), str)}
     for name, over in spec.overrides.items():
         oloc = ("imports", index, "overrides", name)
         if name not in by_name:

@@ -73,11 +73,12 @@ def _wxyz(xyzw: Any) -> list[float]:
 class GltfReader:
     """One glTF file, read and checked; `expand()` makes the records."""
 
-    def __init__(self, path: Path, shown: str, spec: Any, index: int) -> None:
+    def __init__(self, path: Path, shown: str, spec: Any, index: int, raw: bytes | None = None) -> None:
         import pygltflib
 
         self.path, self.shown, self.spec, self.index = path, shown, spec, index
-        raw = self._read(path, MAX_FILE_BYTES, "glTF file", "<file>")
+        if raw is None or len(raw) > MAX_FILE_BYTES:  # `raw`: the file's bytes as its caller hashed them
+            raw = self._read(path, MAX_FILE_BYTES, "glTF file", "<file>")
         if path.suffix.lower() == ".glb" or raw[:4] == b"glTF":
             self._check_glb(raw)
         self._check_counts(raw)
@@ -901,12 +902,13 @@ def source_digest(path: Path, raw: bytes) -> str:
     return h.hexdigest()
 
 
-def expand_gltf(path: Path, shown: str, spec: Any, index: int) -> Expansion:
-    """The records of one glTF import, read from the file (memo.read_import keeps them);
-    ImportFileError (the file and node) or SpecError (the import entry's field) otherwise."""
+def expand_gltf(path: Path, shown: str, spec: Any, index: int, raw: bytes | None = None) -> Expansion:
+    """The records of one glTF import, read from the file, or parsed from `raw`, its bytes
+    as memo.read_import hashed them for the key it keeps them by; ImportFileError (the file
+    and node) or SpecError (the import entry's field) otherwise."""
     reader = None
     try:
-        reader = GltfReader(path, shown, spec, index)
+        reader = GltfReader(path, shown, spec, index, raw)
         ex = reader.expand()
     except (SpecError, ImportFileError):
         raise

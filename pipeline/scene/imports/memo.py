@@ -18,8 +18,9 @@ from pathlib import Path
 from typing import Any
 
 from ...cache import STORES, code_digest, trusted
-from ..files import digests_recorded, file_digest
-from ...limits import MAX_GLTF_BYTES, MAX_RECORD_BYTES, MAX_USD_LAYER_BYTES, read_json_record
+from ...errors import InputFileError
+from ..files import bytes_digest, digests_recorded, file_digest
+from ...limits import MAX_GLTF_BYTES, MAX_RECORD_BYTES, MAX_USD_LAYER_BYTES, read_bounded, read_json_record
 from .records import Expansion, Origin
 
 STORE = STORES["import-records"]
@@ -43,20 +44,40 @@ def read_import(path: Path, shown: str, spec: Any, index: int, base_dir: Path) -
     # the entry without its overrides, as text: its repr names every field's value (a dump
     # would build the entry's serializer, 0.01 s, for a key)
     settings = repr(spec.model_copy(update={"overrides": {}}))
+    where = (kind, path.suffix.lower(), settings, shown, index, str(base_dir.resolve()))
     digest = file_digest(path)
-    # what decides the records: the reader (kind and the suffix it goes by), the bytes, the entry
-    key = STORE.key(json.dumps([FORMAT, kind, path.suffix.lower(), digest, settings, shown, index, str(base_dir.resolve()), _code(kind)]))
-    memo = STORE.path(key, "records", ".json")
-    kept = _recall(memo, MOST_BYTES[kind])
+    memo = _entry(where, digest)
+    kept = _recall(memo, MOST_BYTES[kind], base_dir)
     if kept is not None:
         STATS["records"] += 1
         return kept
+    raw: bytes | None = None
+    if kind == "gltf":
+        # read once: the records are parsed from the bytes their key is hashed from (a file
+        # swapped between a hash and a read left one file's records under another's digest)
+        try:
+            raw = read_bounded(path, MOST_BYTES[kind], "glTF file")
+        except InputFileError:
+            return _read_file(kind, path, shown, spec, index, base_dir)  # it says why, located
+        read_digest = bytes_digest(raw)
+        if read_digest != digest:  # changed since it was hashed: kept under the bytes read
+            digest, memo = read_digest, _entry(where, read_digest)
     with digests_recorded() as read:
-        ex = _read_file(kind, path, shown, spec, index, base_dir)
+        ex = _read_file(kind, path, shown, spec, index, base_dir, raw)
     read.pop(str(path.resolve()), None)  # the key has it
-    if _unchanged({str(path.resolve()): digest, **read}):  # else a file changed while it was read: its records are not kept
+    parsed = {} if raw is not None else {str(path.resolve()): digest}  # (the glTF's own bytes were the ones hashed)
+    if _unchanged({**parsed, **read}):  # else a file changed while it was read: its records are not kept
         STORE.put(memo, json.dumps({"read": read, "records": _to_json(ex)}).encode(), best_effort=True, doing="keeping an import's records")
     return ex
+
+
+def _entry(where: tuple[Any, ...], digest: str) -> Path:
+    """The kept records' file for an import `where` (the reader's kind and the suffix it
+    goes by, the entry without its overrides, where it is shown, the scene's folder) of
+    the bytes of `digest`, by the reader's code: everything that decides the records."""
+    kind, suffix, settings, shown, index, base = where
+    key = STORE.key(json.dumps([FORMAT, kind, suffix, digest, settings, shown, index, base, _code(kind)]))
+    return STORE.path(key, "records", ".json")
 
 
 def _unchanged(read: dict[str, str]) -> bool:
@@ -72,12 +93,13 @@ def _unchanged(read: dict[str, str]) -> bool:
     return True
 
 
-def _read_file(kind: str, path: Path, shown: str, spec: Any, index: int, base_dir: Path) -> Expansion:
-    """The reader's records (gltf.py, usd.py: numpy and pygltflib, or usd-core)."""
+def _read_file(kind: str, path: Path, shown: str, spec: Any, index: int, base_dir: Path, raw: bytes | None = None) -> Expansion:
+    """The reader's records (gltf.py, usd.py: numpy and pygltflib, or usd-core); a glTF
+    parsed from `raw`, its bytes as hashed, when given."""
     if kind == "gltf":
         from .gltf import expand_gltf
 
-        return expand_gltf(path, shown, spec, index)
+        return expand_gltf(path, shown, spec, index, raw)
     from .usd import read_usd
 
     return read_usd(path, shown, spec, index, root=base_dir)
@@ -88,13 +110,14 @@ def _code(kind: str) -> str:
     return code_digest(tuple(f"scene/imports/{name}" for name in READERS[kind]))
 
 
-def _recall(memo: Path, most_bytes: int) -> Expansion | None:
+def _recall(memo: Path, most_bytes: int, base_dir: Path) -> Expansion | None:
     """The kept records if the entry is ours (`cache.trusted`: another user's planted
     records are never read) and reads whole as a record, every file the reader read has the
     bytes it had (at the same place: a link put on its way since is a difference; grown past
     `most_bytes`, it is not hashed) and every converted file the records name is there. A
-    damaged entry (not JSON, nested too deep, not a mapping, a FIFO) is one warning line and
-    is made again."""
+    damaged entry (not JSON, nested too deep, not a mapping, a FIFO; a record that is not a
+    mapping, a name that is not text, a file named outside the scene's folder `base_dir`
+    and the import cache) is one warning line and is made again."""
     if trusted(memo) is None:
         if memo.exists() or memo.is_symlink():
             STORE.stats["refused"] += 1
@@ -108,16 +131,45 @@ def _recall(memo: Path, most_bytes: int) -> Expansion | None:
             if dep.resolve() != dep or not dep.is_file() or dep.stat().st_size > most_bytes or file_digest(dep) != digest:
                 return None
         ex = _from_json(doc["records"])
-        records = [r for r, _ in ex.objects + ex.materials + ex.lights]
-        files = _files(records)
+        records = [r for r, _ in ex.objects + ex.materials + ex.lights] + [r for _, r, _ in ex.cameras]
+        why = _malformed(ex, records) or _outside(_files(records), base_dir)
+        if why:
+            raise ValueError(why)
     except OSError:
         return None
     except (ValueError, KeyError, TypeError, AttributeError) as exc:
         import logging
 
-        logging.getLogger("motion").warning(f"motion: warning: {memo}: kept import records discarded (not the record expected: {type(exc).__name__}); they are made again")
+        logging.getLogger("motion").warning(f"motion: warning: {memo}: kept import records discarded (not the record expected: {exc if type(exc) is ValueError else type(exc).__name__}); they are made again")
         return None
-    return ex if all(Path(f).is_file() for f in files) else None
+    return ex if all(Path(f).is_file() for f in _files(records)) else None
+
+
+def _malformed(ex: Expansion, records: list[Any]) -> str | None:
+    """Why kept records are not records a reader makes (None when they are): each one a
+    mapping with text keys, its name (and a camera's node name) text."""
+    for rec in records:
+        if not isinstance(rec, dict) or not all(isinstance(k, str) for k in rec):
+            return f"a record is a {type(rec).__name__}, not a mapping"
+        if "name" in rec and not isinstance(rec["name"], str):
+            return f"a record's name is a {type(rec['name']).__name__}, not text"
+    if not all(isinstance(name, str) for name, _, _ in ex.cameras):
+        return "a camera's node name is not text"
+    return None
+
+
+def _outside(files: list[str], base_dir: Path) -> str | None:
+    """The first file named outside the scene's folder tree and the import cache, as a
+    reason (None when every one is inside): kept records may name only files the scene could
+    name itself or files the readers converted."""
+    from .cache import cache_dir
+
+    roots = (base_dir.resolve(), cache_dir().resolve())
+    for f in files:
+        real = Path(f).resolve()
+        if not any(real == root or real.is_relative_to(root) for root in roots):
+            return f"a record names {f}, outside the scene's folder and the import cache"
+    return None
 
 
 def _files(value: Any) -> list[str]:
