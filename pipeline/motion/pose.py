@@ -248,6 +248,13 @@ def quat_normalize(q: np.ndarray) -> np.ndarray:
     return out
 
 
+# Below this sin(theta) a slerp is a lerp (then normalised): one scheme, two precisions. The
+# host's float64 resolves sin(theta) to 1e-6; the render kernel's float32 (render/poses.py
+# `slerp`, the same formula in drjit) loses sin((1 - f) theta) / sin(theta) to rounding
+# below about 1e-4.
+SLERP_LINEAR_BELOW = {"float64": 1e-6, "float32": 1e-4}
+
+
 def slerp(q0: np.ndarray, q1: np.ndarray, s: np.ndarray | float) -> np.ndarray:
     """Spherical linear interpolation [..., 4] with the shortest-path flip; s in [0, 1]."""
     dot = np.sum(q0 * q1, axis=-1, keepdims=True)
@@ -256,7 +263,7 @@ def slerp(q0: np.ndarray, q1: np.ndarray, s: np.ndarray | float) -> np.ndarray:
     s = np.asarray(s)[..., None]
     theta = np.arccos(np.clip(dot, -1.0, 1.0))
     sin_theta = np.sin(theta)
-    small = sin_theta < 1e-6
+    small = sin_theta < SLERP_LINEAR_BELOW["float64"]
     safe = np.where(small, 1.0, sin_theta)
     # (sin((1-s) theta) q0 + sin(s theta) q1) / sin(theta); lerp where theta ~ 0
     a = np.where(small, 1.0 - s, np.sin((1.0 - s) * theta) / safe)

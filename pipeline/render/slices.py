@@ -306,11 +306,12 @@ class SlicedGeometry:
                 t, q, s = fi.objects[g.name]
                 local = fi.vertices[g.name]
                 mesh = g.mesh if g.mesh is not None else plain_render_mesh(g.capacity, g.faces)
+                stretch = fi.stretches.get(g.name)  # a symmetric stretch under a non-uniform parent scale
                 for i in index:
-                    scaled = local[i] * s[i]
+                    scaled = local[i] @ stretch[i].T if stretch is not None else local[i] * s[i]
                     world = np.asarray(quat_rotate(q[i], scaled[mesh.index]) + t[i], np.float32)
                     per_slice.append(world)
-                    if g.smooth and g.rest is not None and mesh.normals is not None:
+                    if g.smooth and g.rest is not None and mesh.normals is not None and stretch is None:
                         key = tuple(float(c) for c in s[i])
                         if key not in g.rest_cache:
                             g.rest_cache.clear()
