@@ -136,10 +136,10 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0, on_progr
     d = loaded.scene.dynamics
     integrator = make_integrator(d.integrator, d.rtol, d.atol)
     g_mag = float(np.linalg.norm(d.gravity))
-    built = build_bodies(loaded, t_start)
+    colliders = build_colliders(loaded, t_start)
+    built = build_bodies(loaded, t_start, colliders)
     track, names, scales = None, [], []
     mass = start = None
-    colliders = build_colliders(loaded)
     if built is not None:
         group, scales = built
         names = group.system.props.names

@@ -26,6 +26,7 @@ from .step import Group, StepContext, bodies_activate
 
 if TYPE_CHECKING:
     from ..geometry import Measure
+    from ..motion.pose import Pose
     from ..scene import LoadedScene
 
 RECORD_BUDGET = 256 * 2**20  # bytes of recorded particle states per system
@@ -40,7 +41,7 @@ def static_matrix(loaded: "LoadedScene", index: int, what: str) -> np.ndarray:
     m = np.eye(4)
     while True:
         if obj.motion.type != "static":
-            raise SceneError([loaded.source.problem(("objects", i, "motion"), f"{what} must not move: '{obj.name}' has {obj.motion.type} motion (moving colliders and emitters are not simulated)")])
+            raise SceneError([loaded.source.problem(("objects", i, "motion"), f"{what} must not move: '{obj.name}' has {obj.motion.type} motion (moving emitters are not simulated)")])
         m = parent_from_object(obj.transform) @ m
         if obj.parent is None:
             return m
@@ -53,41 +54,83 @@ def _file_mesh(loaded: "LoadedScene", obj: object) -> tuple[np.ndarray, np.ndarr
     return load_mesh(loaded.asset(obj.file))  # type: ignore[attr-defined]
 
 
-def build_colliders(loaded: "LoadedScene") -> list[Collider]:
-    """The static colliders of the scene (objects with `collider:` and no dynamics), in
-    world space, each as its shape's collider form (geometry.py)."""
+def moves(loaded: "LoadedScene", index: int) -> bool:
+    """Whether object `index` or a parent has motion of its own, or it hangs from an IK
+    chain: its pose changes over time."""
+    objs = {o.name: o for o in loaded.scene.objects}
+    obj = loaded.scene.objects[index]
+    chains = {n for c in loaded.scene.ik for n in c.chain}
+    node: str | None = obj.name
+    while node is not None:
+        if objs[node].motion.type != "static" or node in chains:
+            return True
+        node = objs[node].parent
+    return False
+
+
+def build_colliders(loaded: "LoadedScene", t_start: float = 0.0, step: float | None = None) -> list[Collider]:
+    """The colliders of the scene (objects with `collider:` and no dynamics), in world
+    space, each as its shape's collider form (geometry.py). A collider that moves (keys,
+    procedural motion, a planned path, IK, a moving parent) is built at its pose at
+    t_start and carries its rigid motion from there (kinematic.py), sampled on the step
+    grid t_start + k step (`step`: the scene's dynamics.step)."""
+    from ..scene.checks import collider_dependency_message, simulated_dependency
+    from .kinematic import kinematic_world_poses, rigid_motion
+
+    step = loaded.scene.dynamics.step if step is None else step
     out: list[Collider] = []
     for i, obj in enumerate(loaded.scene.objects):
         c = obj.collider
         if c is None or obj.motion.type == "dynamics":
             continue
-        m = static_matrix(loaded, i, "a collider")
         entry = shape_geometry(obj.shape)
         if entry.collider is None:
             can = [n for n, e in SHAPES.items() if e.collider is not None]
             raise SceneError([loaded.source.problem(("objects", i, "collider"), f"a {obj.shape} cannot be a collider (use {', '.join(can[:-1])} or {can[-1]})")])
-        form = entry.collider(obj)
-        cols = m[:3, :3]
-        norms = np.linalg.norm(cols, axis=0)
-        rot = cols / norms[None, :]
-        origin = m[:3, 3].copy()
-        base = dict(name=obj.name, restitution=c.restitution, friction=c.friction, static_friction=c.static_friction if c.static_friction is not None else c.friction)
-        if form.kind in ("plane", "disk"):
-            normal = np.cross(cols[:, 0], cols[:, 1])
-            normal /= np.linalg.norm(normal)
-            if form.kind == "plane":
-                out.append(PlaneCollider(**base, point=origin, normal=normal, u=rot[:, 0], v=rot[:, 1], half_u=form.half[0] * norms[0], half_v=form.half[1] * norms[1]))
-            else:
-                out.append(PlaneCollider(**base, point=origin, normal=normal, u=rot[:, 0], v=rot[:, 1], disk_radius=form.radius * float(norms[:2].max())))
-        elif form.kind == "box":
-            out.append(BoxCollider(**base, center=origin, rotation=rot, half=form.half * norms))
-        elif form.kind == "sphere":
-            out.append(SphereCollider(**base, center=origin, radius=form.radius * float(norms.max())))
-        else:  # mesh: the file's, or the primitive's tessellation
-            verts, tris = _file_mesh(loaded, obj) if entry.file_mesh else entry.tessellate(obj, COLLIDER_DETAIL)  # type: ignore[misc]
-            world = verts @ cols.T + origin
-            out.append(MeshCollider(**base, triangles=world[tris]))
+        if not moves(loaded, i):
+            out.append(_collider_form(loaded, obj, static_matrix(loaded, i, "a collider")))
+            continue
+        source = simulated_dependency(loaded.scene, i)
+        if source is not None:
+            raise SceneError([loaded.source.problem(("objects", i, "collider"), collider_dependency_message(obj.name, source))])
+
+        def world_at(times: np.ndarray, name: str = obj.name) -> "Pose":
+            return kinematic_world_poses(loaded, {name}, times)[name]
+
+        def problem(t: float, i: int = i, name: str = obj.name) -> SceneError:
+            return SceneError([loaded.source.problem(("objects", i, "collider"), f"the moving collider '{name}' changes its size or shape at t = {t:.6g} s "
+                                                     "(a scale that is keyed or differs under a rotating parent); a collider moves rigidly: key its scale constant")])
+
+        col = _collider_form(loaded, obj, world_at(np.array([t_start])).matrices()[0])
+        col.motion = rigid_motion(world_at, problem, t_start, step)
+        out.append(col)
     return out
+
+
+def _collider_form(loaded: "LoadedScene", obj: object, m: np.ndarray) -> Collider:
+    """The collider of object `obj` (with a `collider:` block) at world_from_object `m`."""
+    c = obj.collider  # type: ignore[attr-defined]
+    entry = shape_geometry(obj.shape)  # type: ignore[attr-defined]
+    form = entry.collider(obj)  # type: ignore[misc]
+    cols = m[:3, :3]
+    norms = np.linalg.norm(cols, axis=0)
+    rot = cols / norms[None, :]
+    origin = m[:3, 3].copy()
+    base = dict(name=obj.name, restitution=c.restitution, friction=c.friction, static_friction=c.static_friction if c.static_friction is not None else c.friction)  # type: ignore[attr-defined]
+    if form.kind in ("plane", "disk"):
+        normal = np.cross(cols[:, 0], cols[:, 1])
+        normal /= np.linalg.norm(normal)
+        if form.kind == "plane":
+            return PlaneCollider(**base, point=origin, normal=normal, u=rot[:, 0], v=rot[:, 1], half_u=form.half[0] * norms[0], half_v=form.half[1] * norms[1])
+        return PlaneCollider(**base, point=origin, normal=normal, u=rot[:, 0], v=rot[:, 1], disk_radius=form.radius * float(norms[:2].max()))
+    if form.kind == "box":
+        return BoxCollider(**base, center=origin, rotation=rot, half=form.half * norms)
+    if form.kind == "sphere":
+        return SphereCollider(**base, center=origin, radius=form.radius * float(norms.max()))
+    # mesh: the file's, or the primitive's tessellation
+    verts, tris = _file_mesh(loaded, obj) if entry.file_mesh else entry.tessellate(obj, COLLIDER_DETAIL)  # type: ignore[misc]
+    world = verts @ cols.T + origin
+    return MeshCollider(**base, triangles=world[tris])
 
 
 def body_measure(loaded: "LoadedScene", obj: object) -> "Measure":
@@ -143,8 +186,9 @@ def shot_start(loaded: "LoadedScene") -> float:
     return float(timeline.seconds(timeline.first))
 
 
-def build_bodies(loaded: "LoadedScene", t_start: float) -> tuple[Group, list[np.ndarray]] | None:
-    """The group of dynamics bodies (None if the scene has none) and their scales."""
+def build_bodies(loaded: "LoadedScene", t_start: float, colliders: list[Collider] | None = None) -> tuple[Group, list[np.ndarray]] | None:
+    """The group of dynamics bodies (None if the scene has none) and their scales, against
+    `colliders` (default: build_colliders from t_start)."""
     epoch = shot_start(loaded)
     objs = [o for o in loaded.scene.objects if o.motion.type == "dynamics"]
     if not objs:
@@ -200,7 +244,7 @@ def build_bodies(loaded: "LoadedScene", t_start: float) -> tuple[Group, list[np.
     system.x_ref = x_arr.copy()
     X = system.pack(x_arr, np.asarray(v, dtype=np.float64), np.asarray(q), np.asarray(w, dtype=np.float64))
     pairs = np.triu_indices(n, 1)
-    colliders = build_colliders(loaded)
+    colliders = build_colliders(loaded, t_start) if colliders is None else colliders
     if on_penalty.any():
         system.penalty = PenaltySet(on_penalty, spring[0], spring[1], contact_shapes, colliders, (pairs[0], pairs[1]), props.mass, props.inv_mass,
                                     props.inv_inertia, props.radius, props.friction, props.static_friction)
