@@ -30,6 +30,7 @@ from .collisions import Collider, ContactBodies, Hits, _sweep_spheres, resolve_p
 from .guard import Guard
 from ..motion.pose import quat_exp, quat_mul
 from .integrators import Integrator
+from .joints import JointSet, constrain
 from .penalty import handles
 from .rigid import inverse_inertia_world
 from .shapes import ShapeSet, find_contacts, resolve_shaped, true_shape_collider
@@ -233,6 +234,17 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
         if not found:
             break
     return contact, impacts
+
+
+def hold_joints(group: Group, X1: np.ndarray, ctx: StepContext) -> None:
+    """Stage constrain: the joints project the end-of-step state X1 (in place) back onto
+    their constraints, positions then velocities (joints.py); held and pinned bodies are
+    infinite mass."""
+    system = group.system
+    s1 = system.unpack(X1)
+    move = system.moving()
+    p = system.props
+    constrain(group.joints, s1.x, s1.q, s1.v, s1.w, np.where(move, p.inv_mass, 0.0), np.where(move[:, None], p.inv_inertia, 0.0), ctx.dt)
 
 
 def guard_step(group: Group, guard: Guard, X1: np.ndarray, ctx: StepContext) -> tuple[np.ndarray, np.ndarray, float]:
@@ -439,7 +451,7 @@ def coast(group: Group, integrator: Integrator, ctx: StepContext, t0: float, t1:
     does not stop the others from coasting. Anything that comes near it ends the coast."""
     system = group.system
     c = integrator.ballistic
-    if c is None or integrator.adaptive or group.record_stride != 1 or not system.props.names or group.kinematic:
+    if c is None or integrator.adaptive or group.record_stride != 1 or not system.props.names or group.kinematic or group.joints is not None:
         return 0
     a = system.constant_acceleration()
     s = system.unpack(group.X)
@@ -563,6 +575,8 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
         X = group.X
         X1, ctx, h_next = integrate(group, integrator, ctx, t0, step)
         contact, found = collide(group, X, X1, ctx, iterations, g_mag)
+        if group.joints is not None:
+            hold_joints(group, X1, ctx)
         recorder.impacts.extend(found)
         pending |= contact
         energy = guard_step(group, guard, X1, ctx)

@@ -27,6 +27,7 @@ from .step import Group, StepContext, bodies_activate
 if TYPE_CHECKING:
     from ..geometry import Measure
     from ..motion.pose import Pose
+    from .joints import JointSet
     from ..scene import LoadedScene
 
 RECORD_BUDGET = 256 * 2**20  # bytes of recorded particle states per system
@@ -248,8 +249,55 @@ def build_bodies(loaded: "LoadedScene", t_start: float, colliders: list[Collider
     if on_penalty.any():
         system.penalty = PenaltySet(on_penalty, spring[0], spring[1], contact_shapes, colliders, (pairs[0], pairs[1]), props.mass, props.inv_mass,
                                     props.inv_inertia, props.radius, props.friction, props.static_friction)
-    group = Group(system, X, colliders, (pairs[0], pairs[1]), bodies_activate, shapes=ShapeSet(kind, half))
+    group = Group(system, X, colliders, (pairs[0], pairs[1]), bodies_activate, shapes=ShapeSet(kind, half),
+                  joints=build_joints(loaded, names, x_arr, np.asarray(q, dtype=np.float64)))
     return group, scales
+
+
+def build_joints(loaded: "LoadedScene", names: list[str], x: np.ndarray, q: np.ndarray) -> "JointSet | None":
+    """The scene's joints (None without any) between the bodies `names` at their start
+    positions x [n, 3] and orientations q [n, 4]: anchors, axes and the hinge angle's
+    reference direction moved into each body's frame (joints.py)."""
+    from ..motion.pose import quat_to_matrix
+    from .joints import KINDS, WORLD, JointSet
+
+    specs = loaded.scene.dynamics.joints
+    if not specs:
+        return None
+    index = {n: i for i, n in enumerate(names)}
+    R = quat_to_matrix(q)
+    rows: dict[str, list] = {k: [] for k in ("a", "b", "kind", "anchor_a", "anchor_b", "axis_a", "axis_b", "ref_a", "ref_b", "length", "limits", "break_force")}
+
+    def local(body: int, v: np.ndarray, point: bool) -> np.ndarray:
+        if body == WORLD:
+            return v
+        return R[body].T @ (v - x[body] if point else v)
+
+    for spec in specs:
+        a = index[spec.a]
+        b = WORLD if spec.b == "world" else index[spec.b]
+        b_centre = x[b] if b != WORLD else None
+        pivot = np.asarray(spec.anchor, dtype=np.float64) if spec.anchor is not None else b_centre
+        end_a = pivot if spec.type in ("pin", "hinge") else (np.asarray(spec.anchor_a, dtype=np.float64) if spec.anchor_a is not None else x[a])
+        axis = np.asarray(spec.axis if spec.axis is not None else (0.0, 1.0, 0.0), dtype=np.float64)
+        axis = axis / np.linalg.norm(axis)
+        across = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+        across /= np.linalg.norm(across)
+        rows["a"].append(a)
+        rows["b"].append(b)
+        rows["kind"].append(KINDS[spec.type])
+        rows["anchor_a"].append(local(a, end_a, True))
+        rows["anchor_b"].append(local(b, pivot, True))
+        rows["axis_a"].append(local(a, axis, False))
+        rows["axis_b"].append(local(b, axis, False))
+        rows["ref_a"].append(local(a, across, False))
+        rows["ref_b"].append(local(b, across, False))
+        rows["length"].append(float(np.linalg.norm(end_a - pivot)) if spec.length is None else spec.length)
+        lim = spec.limits
+        rows["limits"].append((-np.inf, np.inf) if lim is None else (math.radians(lim[0]), math.radians(lim[1])))
+        rows["break_force"].append(np.inf if spec.break_force is None else spec.break_force)
+    arrays = {k: np.asarray(v, dtype=np.int64 if k in ("a", "b", "kind") else np.float64) for k, v in rows.items()}
+    return JointSet(**arrays, alive=np.ones(len(specs), dtype=bool))
 
 
 def penalty_shape(loaded: "LoadedScene", obj: object, meas: "Measure") -> BodyShape:

@@ -271,6 +271,17 @@ def check_moving_colliders(c: _Check) -> None:
                 node = objs.get(node.parent) if node.parent is not None else None
 
 
+def check_joints(c: _Check) -> None:
+    """A joint's ends are dynamics bodies (or the world for `b`), with a did-you-mean."""
+    bodies = {o.name for o in c.scene.objects if o.motion.type == "dynamics"}
+    for j, joint in enumerate(c.scene.dynamics.joints):
+        for end in ("a", "b"):
+            target = getattr(joint, end)
+            if target not in bodies and not (end == "b" and target == "world"):
+                c.add(("dynamics", "joints", j, end), f"joint end '{target}' is not a dynamics body" + (" (b may be 'world')" if end == "b" else "")
+                      + _suggest(target, sorted(bodies)))
+
+
 def check_penalty_stability(c: _Check) -> None:
     """A penalty contact's spring is within the fixed step's stability bound
     (dynamics_schema.penalty_problems)."""
@@ -357,6 +368,7 @@ SEMANTIC_CHECKS: tuple[Callable[[_Check], None], ...] = (
     check_ik,
     check_springs,
     check_moving_colliders,
+    check_joints,
     check_penalty_stability,
     check_asset_files,
     check_environment_lights,
