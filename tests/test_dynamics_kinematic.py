@@ -101,6 +101,51 @@ def test_a_spinning_parented_bat_pushes_with_its_point_velocity(tmp_path: Path) 
     assert np.abs(sim.bodies.v[-1, 0] - expected).max() < 1e-3 * 2 * w * d
 
 
+def _dust(speed: float, x: float = 3.0) -> dict[str, Any]:
+    """An emitter at (x, 0, 0) firing 20 particles a second along -X at `speed`, elastic."""
+    return {"name": "dust", "shape": "particles", "radius": 0.01, "transform": {"translate": [x, 0, 0]},
+            "emitter": {"rate": 20, "lifetime": 2.0, "direction": [-1, 0, 0], "speed": speed, "spread": 0, "restitution": 1.0, "friction": 0.0}}
+
+
+def _bounced(birth: np.ndarray, t: float, speed: float, u: float, face0: float, x_emit: float = 3.0, r: float = 0.01) -> np.ndarray:
+    """Closed form: a particle born at `birth` at x_emit moving at -speed meets a face at
+    face0 + u t when x_emit - speed (t_c - birth) - r = face0 + u t_c, and leaves at
+    speed + 2u (elastic off a wall moving at u)."""
+    t_c = (x_emit - r - face0 + speed * birth) / (speed + u)
+    x_c = x_emit - speed * (t_c - birth)
+    return np.where(t > t_c, x_c + (speed + 2 * u) * (t - t_c), x_emit - speed * (t - birth))
+
+
+def test_particles_bounce_off_a_moving_body_at_its_pose(tmp_path: Path) -> None:
+    """A 0.5 m crate (a dynamics body) slides at u = 2 m/s towards an emitter firing along
+    -X at 5 m/s: each particle bounces off the crate's face where the face is at that
+    moment (x = 0.25 + u t), leaving at 5 + 2u = 9 m/s; the crate does not feel them (it
+    keeps u exactly). Positions to the float32 records (1e-6 m)."""
+    u, speed = 2.0, 5.0
+    crate = {"name": "crate", "shape": "cube", "size": 0.5, "motion": {"type": "dynamics", "velocity": [u, 0, 0], "restitution": 1.0, "friction": 0.0}}
+    sim = run(tmp_path, [crate, _dust(speed)], 0.6, {"integrator": "rk4", "step": 1e-3, "gravity": [0, 0, 0], "air_density": 0.0})
+    t = 0.6
+    got = sim.particles("dust", np.array([t]))
+    expected = _bounced(sim.systems["dust"].spawns.birth, t, speed, u, 0.25)
+    alive = got.alive[0]
+    assert alive.sum() >= 10 and (expected[alive] > 0.25 + u * t).all()
+    assert np.abs(got.positions[0, alive, 0] - expected[alive]).max() < 1e-6
+    assert np.abs(sim.bodies.v[:, 0] - [u, 0, 0]).max() == 0.0  # one way: the crate is not pushed
+
+
+def test_particles_bounce_off_a_keyed_collider(tmp_path: Path) -> None:
+    """The same against a keyed wall (a box collider moving at u): the same closed form."""
+    u, speed = 2.0, 5.0
+    wall = {"name": "wall", "shape": "cube", "size": 0.5, "collider": {"restitution": 1.0, "friction": 0.0},
+            "motion": {"type": "keyframes", "time_unit": "seconds", "interpolation": "linear",
+                       "channels": {"translate": {"keys": [{"time": 0, "value": [0, 0, 0]}, {"time": 1, "value": [u, 0, 0]}]}}}}
+    sim = run(tmp_path, [wall, _dust(speed)], 0.6, {"integrator": "semi-implicit-euler", "step": 1e-3, "gravity": [0, 0, 0], "air_density": 0.0})
+    got = sim.particles("dust", np.array([0.6]))
+    expected = _bounced(sim.systems["dust"].spawns.birth, 0.6, speed, u, 0.25)
+    alive = got.alive[0]
+    assert np.abs(got.positions[0, alive, 0] - expected[alive]).max() < 1e-6
+
+
 def test_validation_refuses_what_the_dynamics_stage_refuses(tmp_path: Path) -> None:
     """A collider parented to a dynamics body moves with the simulation, and an emitter
     that moves is not simulated: both are located errors when the scene loads (so `motion

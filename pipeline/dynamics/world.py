@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import SceneError
-from ..geometry import BOUND, SHAPES, shape_geometry
+from ..geometry import BOUND, BOX, SHAPES, shape_geometry
 from ..scene.dynamics_schema import penalty_parameters
 from ..motion.rotation import parent_from_object
 from ..motion.rotation import transform_quat as quat_from_rotation
@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from ..geometry import Measure
     from ..motion.pose import Pose
     from .joints import JointSet
+    from .track import Track
     from ..scene import LoadedScene
 
 RECORD_BUDGET = 256 * 2**20  # bytes of recorded particle states per system
@@ -298,6 +299,44 @@ def build_joints(loaded: "LoadedScene", names: list[str], x: np.ndarray, q: np.n
         rows["break_force"].append(np.inf if spec.break_force is None else spec.break_force)
     arrays = {k: np.asarray(v, dtype=np.int64 if k in ("a", "b", "kind") else np.float64) for k, v in rows.items()}
     return JointSet(**arrays, alive=np.ones(len(specs), dtype=bool))
+
+
+def body_colliders(group: Group, track: "Track", step: float) -> list[Collider]:
+    """The rigid bodies as moving colliders for the particles (one way: a particle bounces
+    off a body, the body does not feel it): each body's true box (cubes) or its bounding
+    sphere, in its own frame, moved by its recorded pose (Track.interpolate at any time),
+    with its own restitution and friction, sampled on the step grid of `step` s."""
+    from .kinematic import ColliderMotion
+
+    system = group.system
+    p = system.props
+    out: list[Collider] = []
+    box = group.shapes.kind == BOX if group.shapes is not None else np.zeros(system.n, dtype=bool)
+    cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+    def poses(times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        key = times.tobytes()
+        if key not in cache:  # every body's motion asks for the same window of grid times
+            cache.clear()
+            x, q = track.interpolate(times)
+            cache[key] = (x, q)
+        return cache[key]
+
+    for i, name in enumerate(p.names):
+        base = dict(name=name, restitution=float(p.restitution[i]), friction=float(p.friction[i]), static_friction=float(p.static_friction[i]))
+        col: Collider
+        if box[i]:
+            col = BoxCollider(**base, center=np.zeros(3), rotation=np.eye(3), half=group.shapes.half[i].copy())  # type: ignore[union-attr]
+        else:
+            col = SphereCollider(**base, center=np.zeros(3), radius=float(p.radius[i]))
+
+        def sample(times: np.ndarray, i: int = i) -> tuple[np.ndarray, np.ndarray]:
+            x, q = poses(times)
+            return q[:, i], x[:, i]
+
+        col.motion = ColliderMotion(float(track.times[0]), step, sample)
+        out.append(col)
+    return out
 
 
 def penalty_shape(loaded: "LoadedScene", obj: object, meas: "Measure") -> BodyShape:
