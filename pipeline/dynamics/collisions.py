@@ -90,6 +90,8 @@ def sweep_collider(col: Collider, x0: np.ndarray, x1: np.ndarray, r: np.ndarray,
     if m is None:
         return col.sweep(x0, x1, r)
     hits = col.sweep(m.to_reference(t, x0), m.to_reference(t1, x1), r)
+    if m.outside_only:  # (a body seen by particles: one born inside it is left to leave it)
+        hits.hit &= hits.depth0 <= 0
     if hits.hit.any():
         hits.normal = m.direction_to_world(t1, hits.normal)
     return hits

@@ -49,6 +49,7 @@ class ColliderMotion:
         self._q = self._p = self._R = np.zeros(0)
         self.now = t0  # the time of the state last placed (the guard's energy reads it)
         self.work = 0.0  # J: positive work done on bodies since last read (the guard's budget)
+        self.outside_only = False  # only contacts that start outside it (bodies seen by particles)
 
     def _window(self, k: int) -> None:
         if self._lo <= k and k + 1 < self._lo + len(self._p):

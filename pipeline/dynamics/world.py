@@ -335,6 +335,7 @@ def body_colliders(group: Group, track: "Track", step: float) -> list[Collider]:
             return q[:, i], x[:, i]
 
         col.motion = ColliderMotion(float(track.times[0]), step, sample)
+        col.motion.outside_only = True
         out.append(col)
     return out
 
