@@ -39,6 +39,7 @@ Scheme (one step, after the integrator moved every body from (x0, v0) to (x1, v1
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -65,17 +66,35 @@ def _no_hits(n: int) -> Hits:
 
 @dataclass
 class Collider:
-    """A static collision surface with its material (restitution, kinetic and static friction)."""
+    """A collision surface with its material (restitution, kinetic and static friction);
+    `motion` (kinematic.ColliderMotion) when it moves: its geometry here is then its
+    reference pose, and sweep_collider sweeps bodies in that frame."""
 
     name: str
     restitution: float
     friction: float
     static_friction: float
+    motion: Any = None
 
     def sweep(self, x0: np.ndarray, x1: np.ndarray, r: np.ndarray) -> Hits:
         """Bodies of radius r [n] whose centres move x0 -> x1 ([n, 3]) over the step,
         against this surface: who hits it, when, the normal and the start penetration."""
         raise NotImplementedError
+
+
+def sweep_collider(col: Collider, x0: np.ndarray, x1: np.ndarray, r: np.ndarray, t: float, t1: float) -> Hits:
+    """`col.sweep` over the step t -> t1; for a moving collider, in its reference frame
+    (kinematic.py): the centres move from G(t)^-1 x0 to G(t1)^-1 x1 relative to it, and
+    the normals come back to world space at t1."""
+    m = col.motion
+    if m is None:
+        return col.sweep(x0, x1, r)
+    hits = col.sweep(m.to_reference(t, x0), m.to_reference(t1, x1), r)
+    if m.outside_only:  # (a body seen by particles: one born inside it is left to leave it)
+        hits.hit &= hits.depth0 <= 0
+    if hits.hit.any():
+        hits.normal = m.direction_to_world(t1, hits.normal)
+    return hits
 
 
 @dataclass
@@ -417,14 +436,15 @@ class Impacts:
     other: list[np.ndarray] = field(default_factory=list)
 
 
-def _apply_friction(b: ContactBodies, idx: np.ndarray, n: np.ndarray, normal_impulse: np.ndarray, mu: np.ndarray, mu_s: np.ndarray, lever: np.ndarray) -> None:
+def _apply_friction(b: ContactBodies, idx: np.ndarray, n: np.ndarray, normal_impulse: np.ndarray, mu: np.ndarray, mu_s: np.ndarray, lever: np.ndarray,
+                    surface: np.ndarray | None = None) -> np.ndarray:
     """Coulomb friction impulse at the contact point r = -radius n of bodies idx against a
     static surface (see module docstring). The position moves by lever * dv: friction acts
     over the contact part of the step, (1 - s) h, as a constant deceleration (trapezoid:
     lever = (1 - s) h / 2), so a sticking contact does not creep."""
     inv_m = b.inv_mass[idx]
     r_c = -b.radius[idx, None] * n
-    u = b.v1[idx]
+    u = b.v1[idx] if surface is None else b.v1[idx] - surface
     if b.w1 is not None:
         u = u + cross(b.w1[idx], r_c)
     u_t = u - np.einsum("ij,ij->i", u, n)[:, None] * n
@@ -440,22 +460,31 @@ def _apply_friction(b: ContactBodies, idx: np.ndarray, n: np.ndarray, normal_imp
     b.x1[idx] += lever[:, None] * dv
     if b.w1 is not None and b.inv_inertia_world is not None:
         b.w1[idx] -= np.einsum("nij,nj->ni", b.inv_inertia_world[idx], cross(r_c, jt[:, None] * t_hat))
+    return -jt[:, None] * t_hat
 
 
-def resolve_static(b: ContactBodies, hits: Hits, col: Collider, h: float, v_rest: float) -> np.ndarray:
+def resolve_static(b: ContactBodies, hits: Hits, col: Collider, h: float, v_rest: float, t: float = 0.0) -> np.ndarray:
     """Impulse response of the bodies that hit `col` this step (in place). Returns [6, k]:
     the bodies whose contact was an impact (approach faster than v_rest), their approach
-    speeds (m/s), times of impact (fraction of the step) and centres at impact (x, y, z)."""
+    speeds (m/s), times of impact (fraction of the step) and centres at impact (x, y, z).
+    A moving collider (its motion over the step that starts at `t`) takes part with its
+    own velocity u(x) at the contact: every normal velocity is relative to it, v - u."""
     idx = np.flatnonzero(hits.hit & (b.inv_mass > 0))
     if idx.size == 0:
         return np.zeros((6, 0))
+    m = col.motion
     s = hits.s[idx][:, None]
     n = hits.normal[idx]
     x0, x1, v0, v1 = b.x0[idx], b.x1[idx], b.v0[idx], b.v1[idx]
     xc = x0 + s * (x1 - x0)
     v_c = v0 + s * (v1 - v0)
     dv = v1 - v0
-    vn = np.einsum("ij,ij->i", v_c, n)
+    if m is not None:  # the surface's velocity at the contact, at the time of impact
+        w_lin, w_ang, origin = m.rates(t)
+        u_c = w_lin + cross(np.broadcast_to(w_ang, xc.shape), xc - (origin + s * h * w_lin))
+        vn = np.einsum("ij,ij->i", v_c - u_c, n)
+    else:
+        vn = np.einsum("ij,ij->i", v_c, n)
     approaching = vn < 0
     impact = -vn > v_rest
     eps = np.where(impact, np.minimum(b.restitution[idx], col.restitution), 0.0)
@@ -465,10 +494,16 @@ def resolve_static(b: ContactBodies, hits: Hits, col: Collider, h: float, v_rest
     v_end = v_post + (1.0 - s) * dv
     x_end = xc + (1.0 - s) * h * 0.5 * (v_post + v_end)
     # resting contact: back onto the contact surface, normal velocity clamped to >= 0
-    lift = np.einsum("ij,ij->i", xc - x_end, n) + hits.depth0[idx]
+    if m is None:
+        lift = np.einsum("ij,ij->i", xc - x_end, n) + hits.depth0[idx]
+    else:  # in the collider's frame, where the contact point stays on its surface
+        y0, y1 = m.to_reference(t, x0), m.to_reference(t + h, x1)
+        n_ref = n @ m.at(t + h)[0]
+        lift = np.einsum("ij,ij->i", y0 + s * (y1 - y0) - m.to_reference(t + h, x_end), n_ref) + hits.depth0[idx]
     supported = lift >= 0
     x_end += np.maximum(lift, 0.0)[:, None] * n
-    vn_end = np.einsum("ij,ij->i", v_end, n)
+    u_end = None if m is None else m.velocity(t + h, x_end, t)
+    vn_end = np.einsum("ij,ij->i", v_end if u_end is None else v_end - u_end, n)
     support = np.where(supported & (vn_end < 0), -vn_end, 0.0)
     v_end += support[:, None] * n
     b.x1[idx] = x_end
@@ -476,7 +511,10 @@ def resolve_static(b: ContactBodies, hits: Hits, col: Collider, h: float, v_rest
     normal_impulse = (dvn + support) / b.inv_mass[idx]
     mu = np.sqrt(b.friction[idx] * col.friction)
     mu_s = np.sqrt(b.static_friction[idx] * col.static_friction)
-    _apply_friction(b, idx, n, normal_impulse, mu, mu_s, 0.5 * (1.0 - s[:, 0]) * h)
+    friction = _apply_friction(b, idx, n, normal_impulse, mu, mu_s, 0.5 * (1.0 - s[:, 0]) * h, u_end)
+    if m is not None:  # the work the surface did (impulse . its velocity), for the guard
+        push = normal_impulse[:, None] * n + friction
+        m.work += float(np.maximum(np.einsum("ij,ij->i", push, u_c), 0.0).sum())
     return np.concatenate((np.stack((idx[impact].astype(np.float64), -vn[impact], hits.s[idx][impact])), xc[impact].T))
 
 

@@ -227,6 +227,7 @@ class Contacts:
     c: np.ndarray
     mu: np.ndarray
     mu_s: np.ndarray
+    surface: np.ndarray  # [N, 3] m/s: a moving collider's velocity at the point (else 0)
 
 
 class PenaltySet:
@@ -268,23 +269,32 @@ class PenaltySet:
 
     # --- contacts ---------------------------------------------------------------------------
 
-    def contacts(self, x: np.ndarray, rot: np.ndarray | None, moving: np.ndarray) -> Contacts | None:
+    def contacts(self, x: np.ndarray, rot: np.ndarray | None, moving: np.ndarray, t: float | None = None) -> Contacts | None:
         """Every touching contact point of the state (positions x [n, 3], rotations [n, 3, 3]
-        or None when every point is a body's centre)."""
+        or None when every point is a body's centre) at time t (moving colliders' pose;
+        None: where they were last placed)."""
         parts: list[tuple[np.ndarray, ...]] = []
         live = np.flatnonzero(moving[self.owner] & self.against_colliders)
         owner = self.owner[live]
         rad = self.point_radius[live]
         pw = x[owner] if rot is None else x[owner] + np.einsum("pij,pj->pi", rot[owner], self.local[live])
         for col in self.colliders:
-            d, n = _collider_sdf(col, pw, x[owner])
+            m = col.motion
+            when = (m.now if t is None else t) if m is not None else 0.0
+            if m is None:
+                d, n = _collider_sdf(col, pw, x[owner])
+            else:  # in its reference frame at time t, the normal back in world space
+                d, n = _collider_sdf(col, m.to_reference(when, pw), m.to_reference(when, x[owner]))
+                n = m.direction_to_world(when, n)
             depth = rad - d
             touch = depth > 0
             if not touch.any():
                 continue
             o = owner[touch]
-            parts.append((o, np.full(o.size, -1), pw[touch] - rad[touch, None] * n[touch], n[touch], depth[touch], self.k[o], self.c[o],
-                          np.sqrt(self.friction[o] * col.friction), np.sqrt(self.static_friction[o] * col.static_friction)))
+            point = pw[touch] - rad[touch, None] * n[touch]
+            surface = np.zeros((o.size, 3)) if m is None else m.velocity(when, point)
+            parts.append((o, np.full(o.size, -1), point, n[touch], depth[touch], self.k[o], self.c[o],
+                          np.sqrt(self.friction[o] * col.friction), np.sqrt(self.static_friction[o] * col.static_friction), surface))
         i, j = self.pairs
         if i.size:
             gap = x[i] - x[j]
@@ -351,26 +361,27 @@ class PenaltySet:
         # springs in series: 1/k = 1/k_a + 1/k_b (likewise c)
         k = _series(self.k[a], self.k[b])
         c = _series(self.c[a], self.c[b])
-        return (a, b, point, n, depth, k, c, np.sqrt(self.friction[a] * self.friction[b]), np.sqrt(self.static_friction[a] * self.static_friction[b]))
+        return (a, b, point, n, depth, k, c, np.sqrt(self.friction[a] * self.friction[b]), np.sqrt(self.static_friction[a] * self.static_friction[b]),
+                np.zeros((len(a), 3)))
 
     # --- forces -----------------------------------------------------------------------------
 
     def forces(self, x: np.ndarray, q: np.ndarray | None, v: np.ndarray, w: np.ndarray | None, dt: float,
-               moving: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-        """Contact forces [n, 3] (N) and torques [n, 3] (N m, world frame) on every body, or
-        None when nothing touches. `dt` (s) caps friction so that it stops, never reverses,
-        a slip within the step."""
+               moving: np.ndarray, t: float | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+        """Contact forces [n, 3] (N) and torques [n, 3] (N m, world frame) on every body at
+        time t (moving colliders' pose), or None when nothing touches. `dt` (s) caps
+        friction so that it stops, never reverses, a slip within the step."""
         if not self.owner.size:
             return None
         rot = None if (self.centred or q is None) else quat_to_matrix(quat_normalize(q))
-        c = self.contacts(x, rot, moving)
+        c = self.contacts(x, rot, moving, t)
         if c is None:
             return None
         static = c.j < 0
         jj = np.where(static, 0, c.j)
         r_i = c.point - x[c.i]
         r_j = c.point - x[jj]
-        u = v[c.i] - np.where(static[:, None], 0.0, v[jj])
+        u = v[c.i] - np.where(static[:, None], 0.0, v[jj]) - c.surface
         if w is not None:
             u = u + cross(w[c.i], r_i) - np.where(static[:, None], 0.0, cross(w[jj], r_j))
         un = np.einsum("ij,ij->i", u, c.normal)
@@ -405,6 +416,17 @@ class PenaltySet:
             rot = quat_to_matrix(quat_normalize(q[b]))
             rxt = np.einsum("pji,pj->pi", rot, rxt)  # into the body frame
         return out + np.einsum("pi,pi->p", rxt * inv_i, rxt)
+
+    def collider_power(self, x: np.ndarray, q: np.ndarray | None, v: np.ndarray, moving: np.ndarray, t: float) -> float:
+        """The power (W) the moving colliders' springs put into the bodies at time t,
+        sum max(0, k depth n . u) over their contacts (u: the surface's velocity)."""
+        if not self.owner.size or not any(col.motion is not None for col in self.colliders):
+            return 0.0
+        rot = None if (self.centred or q is None) else quat_to_matrix(quat_normalize(q))
+        c = self.contacts(x, rot, moving, t)
+        if c is None:
+            return 0.0
+        return float(np.maximum(c.k * c.depth * np.einsum("ij,ij->i", c.normal, c.surface), 0.0).sum())
 
     def energy(self, x: np.ndarray, q: np.ndarray | None, moving: np.ndarray) -> float:
         """Energy held in the contact springs, sum 1/2 k delta^2 (J)."""

@@ -99,8 +99,9 @@ class ShapeSet:
 
 
 def true_shape_collider(col: Collider) -> bool:
-    """Colliders against which boxes and cylinders use their true shape."""
-    return isinstance(col, (PlaneCollider, BoxCollider, SphereCollider))
+    """Colliders against which boxes and cylinders use their true shape (static ones: a
+    moving collider meets their bounding sphere)."""
+    return col.motion is None and isinstance(col, (PlaneCollider, BoxCollider, SphereCollider))
 
 
 _CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=np.float64)

@@ -2,8 +2,9 @@
 each group through the step stages (step.py), and keep the recorded tracks (track.py),
 sampled at any times.
 
-Bodies and each particle system are separate groups: particles collide with the static
-colliders only and do not act on bodies, so each group is run on its own. Flocks
+Bodies and each particle system are separate groups: particles collide with the colliders
+and with the bodies at their recorded poses (one way: they do not act on bodies), so the
+bodies run first and each particle system after them. Flocks
 (flock.py) and planned-path followers (follower.py) are simulated here too.
 """
 
@@ -23,7 +24,7 @@ from .integrators import make_integrator
 from .particles import ParticleSamples, Spawns, emit
 from .step import run_group
 from .track import Track
-from .world import build_bodies, build_colliders, emitter_group, shot_start, static_matrix
+from .world import body_colliders, build_bodies, build_colliders, emitter_group, shot_start, static_matrix
 
 if TYPE_CHECKING:
     from ..scene import LoadedScene
@@ -136,10 +137,10 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0, on_progr
     d = loaded.scene.dynamics
     integrator = make_integrator(d.integrator, d.rtol, d.atol)
     g_mag = float(np.linalg.norm(d.gravity))
-    built = build_bodies(loaded, t_start)
+    colliders = build_colliders(loaded, t_start)
+    built = build_bodies(loaded, t_start, colliders)
     track, names, scales = None, [], []
     mass = start = None
-    colliders = build_colliders(loaded)
     if built is not None:
         group, scales = built
         names = group.system.props.names
@@ -148,12 +149,14 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0, on_progr
         guard = Guard(names, d.integrator, d.energy_growth_limit, 0.0, float((p.mass * g_mag * p.radius).sum()) + 1e-9)
         track = run_group(group, integrator, t_start, t_end, d.step, d.contact_iterations, guard, on_progress, d.rk45_max_steps)
     systems: dict[str, ParticleSystem] = {}
+    # particles also bounce off the bodies, at the bodies' recorded poses (one way)
+    seen_by_particles = colliders + (body_colliders(group, track, d.step) if track is not None else [])
     for i, obj in enumerate(loaded.scene.objects):
         if obj.shape != "particles":
             continue
         m = static_matrix(loaded, i, "a particle emitter")
         spawns = emit(obj.emitter, m, t_end, shot_start(loaded))
-        group = emitter_group(loaded, i, spawns, colliders, t_start, t_end, d.step)
+        group = emitter_group(loaded, i, spawns, seen_by_particles, t_start, t_end, d.step)
         p = group.system.props
         guard = Guard([f"{obj.name}[{k}]" for k in range(spawns.count)] if spawns.count <= 100_000 else [obj.name], d.integrator, d.energy_growth_limit, 0.0,
                       float((p.mass * g_mag * np.maximum(p.radius, 1e-3)).sum()) + 1e-9)
@@ -165,7 +168,7 @@ def simulate(loaded: "LoadedScene", t_end: float, t_start: float = 0.0, on_progr
             from .flock import FlockParams, simulate_flock
 
             check_instance_budget(loaded, i)
-            flocks[obj.name] = simulate_flock(FlockParams.from_spec(obj.deform, shot_start(loaded)), colliders, t_start, t_end, obj.name)
+            flocks[obj.name] = simulate_flock(FlockParams.from_spec(obj.deform, shot_start(loaded)), [c for c in colliders if c.motion is None], t_start, t_end, obj.name)
     followers: dict[str, FollowerTrack] = {}
     for i, obj in enumerate(loaded.scene.objects):
         if obj.motion.type == "plan" and obj.motion.follower is not None:

@@ -220,7 +220,7 @@ class System:
         move = self.moving()
         everyone = bool(move.all())
         acc = self.acceleration(t, s.x, s.v, dt)
-        torque = self._contact(s, dt, move, acc)
+        torque = self._contact(t, s, dt, move, acc)
         out = np.zeros(X.shape)
         n = self.n
         if not self.rotating:
@@ -242,7 +242,7 @@ class System:
         s = self.unpack(X)
         move = self.moving()
         acc = self.acceleration(t, s.x, s.v, dt)
-        torque = self._contact(s, dt, move, acc)
+        torque = self._contact(t, s, dt, move, acc)
         everyone = bool(move.all())
         if not everyone:
             acc = np.where(move[:, None], acc, 0.0)
@@ -256,12 +256,12 @@ class System:
             out[3 * n :] = (alpha if everyone else np.where(move[:, None], alpha, 0.0)).ravel()
         return out
 
-    def _contact(self, s: State, dt: float, move: np.ndarray, acc: np.ndarray) -> np.ndarray | None:
+    def _contact(self, t: float, s: State, dt: float, move: np.ndarray, acc: np.ndarray) -> np.ndarray | None:
         """Penalty contacts' share of D: adds their force / m to `acc` in place and returns
         their torques [n, 3] (None: no penalty contact touches)."""
         if self.penalty is None:
             return None
-        out = self.penalty.forces(s.x, s.q, s.v, s.w, dt, move)
+        out = self.penalty.forces(s.x, s.q, s.v, s.w, dt, move, t)
         if out is None:
             return None
         force, torque = out

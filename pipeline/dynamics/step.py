@@ -26,10 +26,11 @@ import numpy as np
 
 from . import forces
 from ..errors import SimulationError
-from .collisions import Collider, ContactBodies, Hits, _sweep_spheres, resolve_pairs, resolve_static
+from .collisions import Collider, ContactBodies, Hits, _sweep_spheres, resolve_pairs, resolve_static, sweep_collider
 from .guard import Guard
 from ..motion.pose import quat_exp, quat_mul
 from .integrators import Integrator
+from .joints import JointSet, constrain
 from .penalty import handles
 from .rigid import inverse_inertia_world
 from .shapes import ShapeSet, find_contacts, resolve_shaped, true_shape_collider
@@ -91,6 +92,12 @@ class Group:
     record_stride: int = 1
     record_dtype: type = np.float64
     shapes: ShapeSet | None = None  # true-shape boxes and cylinders (shapes.py)
+    joints: "JointSet | None" = None  # joints between bodies and to the world (joints.py)
+
+    @property
+    def kinematic(self) -> bool:
+        """Whether a collider of the group moves (kinematic.py): no coasting then."""
+        return any(col.motion is not None for col in self.colliders)
 
 
 def bodies_activate(group: Group, ctx: StepContext) -> None:
@@ -173,7 +180,7 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
     def sweep(col: Collider) -> Hits:
         """The moving bodies' sphere sweeps against `col` (boxes and cylinders against
         plane, box and sphere colliders: their true shape, below)."""
-        hits = col.sweep(s0.x, s1.x, p.radius)
+        hits = sweep_collider(col, s0.x, s1.x, p.radius, ctx.t, ctx.t + ctx.dt)
         hits.hit &= impulse if penalty is not None and handles(col) else moving
         if true_shape_collider(col):
             hits.hit &= ~shaped
@@ -214,7 +221,7 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
                 continue
             found, fresh = True, False
             contact |= hits.hit
-            out = resolve_static(bodies, hits, col, ctx.dt, v_rest)
+            out = resolve_static(bodies, hits, col, ctx.dt, v_rest, ctx.t)
             if out.shape[1]:
                 impacts.append(np.stack((ctx.t + out[2] * ctx.dt, out[0], out[1], np.full(out.shape[1], float(ci)), *out[3:6]), axis=1))
         if pairs[0].size:
@@ -227,6 +234,17 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
         if not found:
             break
     return contact, impacts
+
+
+def hold_joints(group: Group, X1: np.ndarray, ctx: StepContext) -> None:
+    """Stage constrain: the joints project the end-of-step state X1 (in place) back onto
+    their constraints, positions then velocities (joints.py); held and pinned bodies are
+    infinite mass."""
+    system = group.system
+    s1 = system.unpack(X1)
+    move = system.moving()
+    p = system.props
+    constrain(group.joints, s1.x, s1.q, s1.v, s1.w, np.where(move, p.inv_mass, 0.0), np.where(move[:, None], p.inv_inertia, 0.0), ctx.dt)
 
 
 def guard_step(group: Group, guard: Guard, X1: np.ndarray, ctx: StepContext) -> tuple[np.ndarray, np.ndarray, float]:
@@ -245,6 +263,14 @@ def guard_step(group: Group, guard: Guard, X1: np.ndarray, ctx: StepContext) -> 
             )
         moving = system.moving()
         guard.add_work(ctx.dt * float(np.einsum("ij,ij->", f_ext[moving], s1.v[moving])))
+    if group.kinematic:  # what moving colliders did to the bodies (their impulses, penalty forces)
+        for col in group.colliders:
+            if col.motion is not None:
+                col.motion.now = ctx.t_next
+                guard.add_work(col.motion.take_work())
+        if system.penalty is not None:
+            s1 = system.unpack(X1)
+            guard.add_work(ctx.dt * system.penalty.collider_power(s1.x, s1.q, s1.v, system.moving(), ctx.t_next))
     energy = system.energy(X1)
     per_body = energy[0] + energy[1]
     s1 = system.unpack(X1)
@@ -425,7 +451,7 @@ def coast(group: Group, integrator: Integrator, ctx: StepContext, t0: float, t1:
     does not stop the others from coasting. Anything that comes near it ends the coast."""
     system = group.system
     c = integrator.ballistic
-    if c is None or integrator.adaptive or group.record_stride != 1 or not system.props.names:
+    if c is None or integrator.adaptive or group.record_stride != 1 or not system.props.names or group.kinematic or group.joints is not None:
         return 0
     a = system.constant_acceleration()
     s = system.unpack(group.X)
@@ -549,6 +575,8 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
         X = group.X
         X1, ctx, h_next = integrate(group, integrator, ctx, t0, step)
         contact, found = collide(group, X, X1, ctx, iterations, g_mag)
+        if group.joints is not None:
+            hold_joints(group, X1, ctx)
         recorder.impacts.extend(found)
         pending |= contact
         energy = guard_step(group, guard, X1, ctx)

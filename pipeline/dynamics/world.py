@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import SceneError
-from ..geometry import BOUND, SHAPES, shape_geometry
+from ..geometry import BOUND, BOX, SHAPES, shape_geometry
 from ..scene.dynamics_schema import penalty_parameters
 from ..motion.rotation import parent_from_object
 from ..motion.rotation import transform_quat as quat_from_rotation
@@ -26,6 +26,9 @@ from .step import Group, StepContext, bodies_activate
 
 if TYPE_CHECKING:
     from ..geometry import Measure
+    from ..motion.pose import Pose
+    from .joints import JointSet
+    from .track import Track
     from ..scene import LoadedScene
 
 RECORD_BUDGET = 256 * 2**20  # bytes of recorded particle states per system
@@ -40,7 +43,7 @@ def static_matrix(loaded: "LoadedScene", index: int, what: str) -> np.ndarray:
     m = np.eye(4)
     while True:
         if obj.motion.type != "static":
-            raise SceneError([loaded.source.problem(("objects", i, "motion"), f"{what} must not move: '{obj.name}' has {obj.motion.type} motion (moving colliders and emitters are not simulated)")])
+            raise SceneError([loaded.source.problem(("objects", i, "motion"), f"{what} must not move: '{obj.name}' has {obj.motion.type} motion (moving emitters are not simulated)")])
         m = parent_from_object(obj.transform) @ m
         if obj.parent is None:
             return m
@@ -53,41 +56,83 @@ def _file_mesh(loaded: "LoadedScene", obj: object) -> tuple[np.ndarray, np.ndarr
     return load_mesh(loaded.asset(obj.file))  # type: ignore[attr-defined]
 
 
-def build_colliders(loaded: "LoadedScene") -> list[Collider]:
-    """The static colliders of the scene (objects with `collider:` and no dynamics), in
-    world space, each as its shape's collider form (geometry.py)."""
+def moves(loaded: "LoadedScene", index: int) -> bool:
+    """Whether object `index` or a parent has motion of its own, or it hangs from an IK
+    chain: its pose changes over time."""
+    objs = {o.name: o for o in loaded.scene.objects}
+    obj = loaded.scene.objects[index]
+    chains = {n for c in loaded.scene.ik for n in c.chain}
+    node: str | None = obj.name
+    while node is not None:
+        if objs[node].motion.type != "static" or node in chains:
+            return True
+        node = objs[node].parent
+    return False
+
+
+def build_colliders(loaded: "LoadedScene", t_start: float = 0.0, step: float | None = None) -> list[Collider]:
+    """The colliders of the scene (objects with `collider:` and no dynamics), in world
+    space, each as its shape's collider form (geometry.py). A collider that moves (keys,
+    procedural motion, a planned path, IK, a moving parent) is built at its pose at
+    t_start and carries its rigid motion from there (kinematic.py), sampled on the step
+    grid t_start + k step (`step`: the scene's dynamics.step)."""
+    from ..scene.checks import collider_dependency_message, simulated_dependency
+    from .kinematic import kinematic_world_poses, rigid_motion
+
+    step = loaded.scene.dynamics.step if step is None else step
     out: list[Collider] = []
     for i, obj in enumerate(loaded.scene.objects):
         c = obj.collider
         if c is None or obj.motion.type == "dynamics":
             continue
-        m = static_matrix(loaded, i, "a collider")
         entry = shape_geometry(obj.shape)
         if entry.collider is None:
             can = [n for n, e in SHAPES.items() if e.collider is not None]
             raise SceneError([loaded.source.problem(("objects", i, "collider"), f"a {obj.shape} cannot be a collider (use {', '.join(can[:-1])} or {can[-1]})")])
-        form = entry.collider(obj)
-        cols = m[:3, :3]
-        norms = np.linalg.norm(cols, axis=0)
-        rot = cols / norms[None, :]
-        origin = m[:3, 3].copy()
-        base = dict(name=obj.name, restitution=c.restitution, friction=c.friction, static_friction=c.static_friction if c.static_friction is not None else c.friction)
-        if form.kind in ("plane", "disk"):
-            normal = np.cross(cols[:, 0], cols[:, 1])
-            normal /= np.linalg.norm(normal)
-            if form.kind == "plane":
-                out.append(PlaneCollider(**base, point=origin, normal=normal, u=rot[:, 0], v=rot[:, 1], half_u=form.half[0] * norms[0], half_v=form.half[1] * norms[1]))
-            else:
-                out.append(PlaneCollider(**base, point=origin, normal=normal, u=rot[:, 0], v=rot[:, 1], disk_radius=form.radius * float(norms[:2].max())))
-        elif form.kind == "box":
-            out.append(BoxCollider(**base, center=origin, rotation=rot, half=form.half * norms))
-        elif form.kind == "sphere":
-            out.append(SphereCollider(**base, center=origin, radius=form.radius * float(norms.max())))
-        else:  # mesh: the file's, or the primitive's tessellation
-            verts, tris = _file_mesh(loaded, obj) if entry.file_mesh else entry.tessellate(obj, COLLIDER_DETAIL)  # type: ignore[misc]
-            world = verts @ cols.T + origin
-            out.append(MeshCollider(**base, triangles=world[tris]))
+        if not moves(loaded, i):
+            out.append(_collider_form(loaded, obj, static_matrix(loaded, i, "a collider")))
+            continue
+        source = simulated_dependency(loaded.scene, i)
+        if source is not None:
+            raise SceneError([loaded.source.problem(("objects", i, "collider"), collider_dependency_message(obj.name, source))])
+
+        def world_at(times: np.ndarray, name: str = obj.name) -> "Pose":
+            return kinematic_world_poses(loaded, {name}, times)[name]
+
+        def problem(t: float, i: int = i, name: str = obj.name) -> SceneError:
+            return SceneError([loaded.source.problem(("objects", i, "collider"), f"the moving collider '{name}' changes its size or shape at t = {t:.6g} s "
+                                                     "(a scale that is keyed or differs under a rotating parent); a collider moves rigidly: key its scale constant")])
+
+        col = _collider_form(loaded, obj, world_at(np.array([t_start])).matrices()[0])
+        col.motion = rigid_motion(world_at, problem, t_start, step)
+        out.append(col)
     return out
+
+
+def _collider_form(loaded: "LoadedScene", obj: object, m: np.ndarray) -> Collider:
+    """The collider of object `obj` (with a `collider:` block) at world_from_object `m`."""
+    c = obj.collider  # type: ignore[attr-defined]
+    entry = shape_geometry(obj.shape)  # type: ignore[attr-defined]
+    form = entry.collider(obj)  # type: ignore[misc]
+    cols = m[:3, :3]
+    norms = np.linalg.norm(cols, axis=0)
+    rot = cols / norms[None, :]
+    origin = m[:3, 3].copy()
+    base = dict(name=obj.name, restitution=c.restitution, friction=c.friction, static_friction=c.static_friction if c.static_friction is not None else c.friction)  # type: ignore[attr-defined]
+    if form.kind in ("plane", "disk"):
+        normal = np.cross(cols[:, 0], cols[:, 1])
+        normal /= np.linalg.norm(normal)
+        if form.kind == "plane":
+            return PlaneCollider(**base, point=origin, normal=normal, u=rot[:, 0], v=rot[:, 1], half_u=form.half[0] * norms[0], half_v=form.half[1] * norms[1])
+        return PlaneCollider(**base, point=origin, normal=normal, u=rot[:, 0], v=rot[:, 1], disk_radius=form.radius * float(norms[:2].max()))
+    if form.kind == "box":
+        return BoxCollider(**base, center=origin, rotation=rot, half=form.half * norms)
+    if form.kind == "sphere":
+        return SphereCollider(**base, center=origin, radius=form.radius * float(norms.max()))
+    # mesh: the file's, or the primitive's tessellation
+    verts, tris = _file_mesh(loaded, obj) if entry.file_mesh else entry.tessellate(obj, COLLIDER_DETAIL)  # type: ignore[misc]
+    world = verts @ cols.T + origin
+    return MeshCollider(**base, triangles=world[tris])
 
 
 def body_measure(loaded: "LoadedScene", obj: object) -> "Measure":
@@ -143,8 +188,9 @@ def shot_start(loaded: "LoadedScene") -> float:
     return float(timeline.seconds(timeline.first))
 
 
-def build_bodies(loaded: "LoadedScene", t_start: float) -> tuple[Group, list[np.ndarray]] | None:
-    """The group of dynamics bodies (None if the scene has none) and their scales."""
+def build_bodies(loaded: "LoadedScene", t_start: float, colliders: list[Collider] | None = None) -> tuple[Group, list[np.ndarray]] | None:
+    """The group of dynamics bodies (None if the scene has none) and their scales, against
+    `colliders` (default: build_colliders from t_start)."""
     epoch = shot_start(loaded)
     objs = [o for o in loaded.scene.objects if o.motion.type == "dynamics"]
     if not objs:
@@ -200,12 +246,98 @@ def build_bodies(loaded: "LoadedScene", t_start: float) -> tuple[Group, list[np.
     system.x_ref = x_arr.copy()
     X = system.pack(x_arr, np.asarray(v, dtype=np.float64), np.asarray(q), np.asarray(w, dtype=np.float64))
     pairs = np.triu_indices(n, 1)
-    colliders = build_colliders(loaded)
+    colliders = build_colliders(loaded, t_start) if colliders is None else colliders
     if on_penalty.any():
         system.penalty = PenaltySet(on_penalty, spring[0], spring[1], contact_shapes, colliders, (pairs[0], pairs[1]), props.mass, props.inv_mass,
                                     props.inv_inertia, props.radius, props.friction, props.static_friction)
-    group = Group(system, X, colliders, (pairs[0], pairs[1]), bodies_activate, shapes=ShapeSet(kind, half))
+    group = Group(system, X, colliders, (pairs[0], pairs[1]), bodies_activate, shapes=ShapeSet(kind, half),
+                  joints=build_joints(loaded, names, x_arr, np.asarray(q, dtype=np.float64)))
     return group, scales
+
+
+def build_joints(loaded: "LoadedScene", names: list[str], x: np.ndarray, q: np.ndarray) -> "JointSet | None":
+    """The scene's joints (None without any) between the bodies `names` at their start
+    positions x [n, 3] and orientations q [n, 4]: anchors, axes and the hinge angle's
+    reference direction moved into each body's frame (joints.py)."""
+    from ..motion.pose import quat_to_matrix
+    from .joints import KINDS, WORLD, JointSet
+
+    specs = loaded.scene.dynamics.joints
+    if not specs:
+        return None
+    index = {n: i for i, n in enumerate(names)}
+    R = quat_to_matrix(q)
+    rows: dict[str, list] = {k: [] for k in ("a", "b", "kind", "anchor_a", "anchor_b", "axis_a", "axis_b", "ref_a", "ref_b", "length", "limits", "break_force")}
+
+    def local(body: int, v: np.ndarray, point: bool) -> np.ndarray:
+        if body == WORLD:
+            return v
+        return R[body].T @ (v - x[body] if point else v)
+
+    for spec in specs:
+        a = index[spec.a]
+        b = WORLD if spec.b == "world" else index[spec.b]
+        b_centre = x[b] if b != WORLD else None
+        pivot = np.asarray(spec.anchor, dtype=np.float64) if spec.anchor is not None else b_centre
+        end_a = pivot if spec.type in ("pin", "hinge") else (np.asarray(spec.anchor_a, dtype=np.float64) if spec.anchor_a is not None else x[a])
+        axis = np.asarray(spec.axis if spec.axis is not None else (0.0, 1.0, 0.0), dtype=np.float64)
+        axis = axis / np.linalg.norm(axis)
+        across = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
+        across /= np.linalg.norm(across)
+        rows["a"].append(a)
+        rows["b"].append(b)
+        rows["kind"].append(KINDS[spec.type])
+        rows["anchor_a"].append(local(a, end_a, True))
+        rows["anchor_b"].append(local(b, pivot, True))
+        rows["axis_a"].append(local(a, axis, False))
+        rows["axis_b"].append(local(b, axis, False))
+        rows["ref_a"].append(local(a, across, False))
+        rows["ref_b"].append(local(b, across, False))
+        rows["length"].append(float(np.linalg.norm(end_a - pivot)) if spec.length is None else spec.length)
+        lim = spec.limits
+        rows["limits"].append((-np.inf, np.inf) if lim is None else (math.radians(lim[0]), math.radians(lim[1])))
+        rows["break_force"].append(np.inf if spec.break_force is None else spec.break_force)
+    arrays = {k: np.asarray(v, dtype=np.int64 if k in ("a", "b", "kind") else np.float64) for k, v in rows.items()}
+    return JointSet(**arrays, alive=np.ones(len(specs), dtype=bool))
+
+
+def body_colliders(group: Group, track: "Track", step: float) -> list[Collider]:
+    """The rigid bodies as moving colliders for the particles (one way: a particle bounces
+    off a body, the body does not feel it): each body's true box (cubes) or its bounding
+    sphere, in its own frame, moved by its recorded pose (Track.interpolate at any time),
+    with its own restitution and friction, sampled on the step grid of `step` s."""
+    from .kinematic import ColliderMotion
+
+    system = group.system
+    p = system.props
+    out: list[Collider] = []
+    box = group.shapes.kind == BOX if group.shapes is not None else np.zeros(system.n, dtype=bool)
+    cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+    def poses(times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        key = times.tobytes()
+        if key not in cache:  # every body's motion asks for the same window of grid times
+            cache.clear()
+            x, q = track.interpolate(times)
+            cache[key] = (x, q)
+        return cache[key]
+
+    for i, name in enumerate(p.names):
+        base = dict(name=name, restitution=float(p.restitution[i]), friction=float(p.friction[i]), static_friction=float(p.static_friction[i]))
+        col: Collider
+        if box[i]:
+            col = BoxCollider(**base, center=np.zeros(3), rotation=np.eye(3), half=group.shapes.half[i].copy())  # type: ignore[union-attr]
+        else:
+            col = SphereCollider(**base, center=np.zeros(3), radius=float(p.radius[i]))
+
+        def sample(times: np.ndarray, i: int = i) -> tuple[np.ndarray, np.ndarray]:
+            x, q = poses(times)
+            return q[:, i], x[:, i]
+
+        col.motion = ColliderMotion(float(track.times[0]), step, sample)
+        col.motion.outside_only = True
+        out.append(col)
+    return out
 
 
 def penalty_shape(loaded: "LoadedScene", obj: object, meas: "Measure") -> BodyShape:

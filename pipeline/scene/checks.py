@@ -230,6 +230,77 @@ def check_springs(c: _Check) -> None:
             c.add(("dynamics", "springs", j), "a spring needs two different bodies")
 
 
+def simulated_dependency(scene: Scene, index: int) -> str | None:
+    """The name of what makes object `index`'s pose come from the simulation (itself or a
+    parent: a dynamics body, a planned path's follower; or the target or pole of an IK
+    chain it hangs from), else None."""
+    objs = {o.name: o for o in scene.objects}
+
+    def chain_of(name: str | None) -> str | None:
+        while name is not None and name in objs:
+            o = objs[name]
+            if o.motion.type == "dynamics" or o.has_follower:
+                return name
+            name = o.parent
+        return None
+
+    obj = scene.objects[index]
+    found = chain_of(obj.name)
+    if found is not None:
+        return found
+    ancestors: set[str] = set()
+    node: str | None = obj.name
+    while node is not None and node in objs and node not in ancestors:
+        ancestors.add(node)
+        node = objs[node].parent
+    for ik in scene.ik:
+        if ancestors & set(ik.chain):
+            for n in (ik.target, ik.pole):
+                found = chain_of(n)
+                if found is not None:
+                    return found
+    return None
+
+
+def collider_dependency_message(name: str, source: str) -> str:
+    """Why a collider that moves with the simulation is refused (validation and the
+    dynamics stage say the same)."""
+    via = "it is" if source == name else f"it moves with '{source}', which is"
+    return (f"the collider '{name}' cannot move with the simulation: {via} simulated; a collider's motion must come from keys, "
+            "expressions, a planned path without a follower, IK or parents (make it a dynamics body instead)")
+
+
+def check_moving_colliders(c: _Check) -> None:
+    """A collider may move (keys, expressions, plans, IK, parents), but not with the
+    simulation (a dynamics body or a follower above it); a particle emitter does not move.
+    The dynamics stage refuses the same (dynamics/world.py), so validation says it first."""
+    objs = {o.name: o for o in c.scene.objects}
+    for i, obj in enumerate(c.scene.objects):
+        if obj.collider is not None and obj.motion.type != "dynamics":
+            source = simulated_dependency(c.scene, i)
+            if source is not None:
+                c.add(("objects", i, "collider"), collider_dependency_message(obj.name, source))
+        if obj.is_particles:
+            node, seen = obj, set()
+            while node is not None and node.name not in seen:
+                seen.add(node.name)
+                if node.motion.type != "static":
+                    c.add(("objects", i, "motion"), f"a particle emitter must not move: '{node.name}' has {node.motion.type} motion (moving emitters are not simulated)")
+                    break
+                node = objs.get(node.parent) if node.parent is not None else None
+
+
+def check_joints(c: _Check) -> None:
+    """A joint's ends are dynamics bodies (or the world for `b`), with a did-you-mean."""
+    bodies = {o.name for o in c.scene.objects if o.motion.type == "dynamics"}
+    for j, joint in enumerate(c.scene.dynamics.joints):
+        for end in ("a", "b"):
+            target = getattr(joint, end)
+            if target not in bodies and not (end == "b" and target == "world"):
+                c.add(("dynamics", "joints", j, end), f"joint end '{target}' is not a dynamics body" + (" (b may be 'world')" if end == "b" else "")
+                      + _suggest(target, sorted(bodies)))
+
+
 def check_penalty_stability(c: _Check) -> None:
     """A penalty contact's spring is within the fixed step's stability bound
     (dynamics_schema.penalty_problems)."""
@@ -348,6 +419,8 @@ SEMANTIC_CHECKS: tuple[Callable[[_Check], None], ...] = (
     check_world_space_motion,
     check_ik,
     check_springs,
+    check_moving_colliders,
+    check_joints,
     check_penalty_stability,
     check_asset_files,
     check_environment_lights,

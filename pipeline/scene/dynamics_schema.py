@@ -128,6 +128,51 @@ class Spring(Model):
     rest_length: NonNegative | None = None  # metres; default: the initial distance
 
 
+MAX_JOINTS = 10_000  # joints in one scene (each a row of the vectorised solver)
+
+
+class Joint(Model):
+    """A joint between body `a` and body `b` (or the world: `b` omitted or "world"), solved
+    as a constraint after each step (docs/dynamics.md, Joints): `pin` (ball and socket at
+    `anchor`), `hinge` (at `anchor`, turning about `axis` only, optionally within `limits`
+    in degrees), `distance` (a rigid rod) and `rope` (at most `length`, slack below it)
+    between `anchor_a` on a and `anchor` on b. Points and axes are world coordinates at
+    the bodies' start pose; each then moves with its body. A joint whose force passes
+    `break_force` (N) breaks."""
+
+    type: Literal["pin", "hinge", "distance", "rope"]
+    a: str
+    b: str = "world"
+    anchor: Vec3 | None = None  # m: the pivot (pin, hinge), or the end on b; default b's centre
+    anchor_a: Vec3 | None = None  # m: a rod's or rope's end on a; default a's centre
+    axis: Vec3 | None = None  # hinge axis (world, at the start pose)
+    limits: tuple[FiniteFloat, FiniteFloat] | None = None  # degrees: a hinge's angle range from its start pose
+    length: NonNegative | None = None  # m: a rod's or rope's length; default the anchors' initial distance
+    break_force: Positive | None = None  # N
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "Joint":
+        if self.a == self.b:
+            raise ValueError(f"a joint needs two different bodies (a and b are both '{self.a}')")
+        if self.type == "hinge":
+            if self.axis is None:
+                raise ValueError("a hinge needs an axis")
+            if math.sqrt(sum(c * c for c in self.axis)) < 1e-9:
+                raise ValueError(f"a hinge axis must not be zero (got {list(self.axis)})")
+        elif self.axis is not None or self.limits is not None:
+            raise ValueError(f"axis and limits are for a hinge, not a {self.type}")
+        if self.limits is not None and not (-360.0 <= self.limits[0] <= self.limits[1] <= 360.0):
+            raise ValueError(f"limits must be [low, high] degrees with -360 <= low <= high <= 360 (got {list(self.limits)})")
+        if self.type in ("pin", "hinge"):
+            if self.length is not None or self.anchor_a is not None:
+                raise ValueError(f"length and anchor_a are for a distance or rope joint; a {self.type} joins its bodies at `anchor`")
+            if self.b == "world" and self.anchor is None:
+                raise ValueError(f"a {self.type} to the world needs an anchor (the pivot, world coordinates)")
+        elif self.b == "world" and self.anchor is None:
+            raise ValueError(f"a {self.type} to the world needs an anchor (where it is tied, world coordinates)")
+        return self
+
+
 class Fluid(Model):
     """A fluid half-space below `level` along +up (the sea): buoyancy rho V_sub g, and
     the fluid's drag on bodies inside it."""
@@ -161,6 +206,7 @@ class DynamicsSettings(Model):
     newtonian_gravity: NewtonianGravity | None = None
     fluids: list[Fluid] = []
     springs: list[Spring] = []
+    joints: Annotated[list[Joint], Field(max_length=MAX_JOINTS)] = []  # pins, hinges, rods, ropes
     contact_iterations: Annotated[int, Field(ge=1, le=100)] = 8
     contact: Contact = "impulse"  # every body's contact model (a body's own `contact` wins)
     penalty: Penalty = Penalty.default()  # penalty contacts of bodies that give none of their own
