@@ -1,6 +1,6 @@
 """Motion blur that scales: N rigid movers against the same N objects standing still.
 
-    python bench/bench_movers.py [--counts 1,10,100,1000] [--frames 3] [--res 320x180] [--spp 16] [--json FILE]
+    python bench/bench_movers.py [--counts 1,10,100,1000] [--particles 100000] [--frames 3] [--res 320x180] [--spp 16] [--json FILE]
 
 The shot: N small spheres on a square grid under a constant light, each parented to an
 empty that turns (a turntable generator), so every sphere orbits its own centre with
@@ -9,6 +9,8 @@ motion blur; its static twin is the same grid with nothing moving. Each case is 
 pays every first-frame cost: scene build, BVH, kernel compilation); the figures are the
 run report's own per-frame seconds: the first frame, and the median of the warm ones.
 Moving and static cases alternate in one run, so their ratio is measured side by side.
+With --particles P, a spray of P particles (each a sphere on its baked path) against the
+same particles frozen (`motion_blur: off`), and each case's peak memory (max RSS).
 """
 
 from __future__ import annotations
@@ -54,29 +56,50 @@ def shot(count: int, moving: bool, frames: int, res: tuple[int, int], spp: int, 
     return "\n".join(lines) + "\n"
 
 
-def run_case(folder: Path, count: int, moving: bool, frames: int, res: tuple[int, int], spp: int) -> dict[str, Any]:
-    """One `motion render` in a fresh process and cache root; the report's frame times."""
-    case = folder / f"{count}-{'moving' if moving else 'static'}"
+def spray(count: int, blur: bool, frames: int, res: tuple[int, int], spp: int) -> str:
+    """The scene YAML: `count` particles born over the first second, fast, over a ground;
+    rendered at the end of that second, with motion blur or frozen."""
+    return "\n".join([
+        f"name: spray-{count}-{'blur' if blur else 'frozen'}",
+        f"timeline: {{fps: 24, first: 0, last: {24 + frames - 1}}}",
+        "camera: {position: [0, 4, 12], look_at: [0, 2, 0], fov: 45, shutter: {angle: 180}}",
+        "lights: [{type: constant, radiance: 1.0}]",
+        "materials: [{name: water, type: diffuse, color: [0.6, 0.7, 0.9]}, {name: ground, type: diffuse, color: [0.5, 0.5, 0.5]}]",
+        "objects:",
+        "  - {name: ground, shape: rectangle, width: 30, height: 30, material: ground, transform: {rotate: {euler: [-90, 0, 0]}}}",
+        f"  - {{name: spray, shape: particles, radius: 0.02, material: water, emitter: {{rate: {count}, start: 0, stop: 1, lifetime: 10, max_count: {count}, position: [0, 0.2, 0], size: [0.5, 0.1, 0.5], speed: 12, speed_spread: 3, spread: 25}}}}",
+        f"render: {{resolution: [{res[0]}, {res[1]}], spp: {spp}, max_depth: 4, motion_blur: {'stochastic' if blur else 'off'}}}",
+    ]) + "\n"
+
+
+def run_case(folder: Path, count: int, moving: bool, frames: int, res: tuple[int, int], spp: int, particles: bool = False) -> dict[str, Any]:
+    """One `motion render` in a fresh process and cache root; the report's frame times and
+    the process's peak memory."""
+    case = folder / f"{'spray' if particles else 'movers'}-{count}-{'moving' if moving else 'static'}"
     case.mkdir(parents=True, exist_ok=True)
     scene = case / "shot.yaml"
-    scene.write_text(shot(count, moving, frames, res, spp))
+    scene.write_text(spray(count, moving, frames, res, spp) if particles else shot(count, moving, frames, res, spp))
     env = {**os.environ, "MOTION_CACHE_DIR": str(case / "cache"), "MOTION_EXECUTOR": "local"}
     env.pop("DRJIT_CACHE_DIR", None)
     out = case / "out"
-    proc = subprocess.run([sys.executable, "-m", "motion.cli.main", "-q", "render", str(scene), "-o", str(out), "--workers", "1", "--json", "--no-progress"],
-                          capture_output=True, text=True, env=env, cwd=ROOT)
+    frames_arg = ["--frames", f"24-{24 + frames - 1}"] if particles else []
+    timer = ["/usr/bin/time", "-f", "MAXRSS %M"] if Path("/usr/bin/time").exists() else []  # GNU time: the peak memory
+    proc = subprocess.run([*timer, sys.executable, "-m", "motion.cli.main", "-q", "render", str(scene), "-o", str(out), "--workers", "1",
+                           "--json", "--no-progress", *frames_arg], capture_output=True, text=True, env=env, cwd=ROOT)
     if proc.returncode != 0:
         raise SystemExit(f"{case.name}: exit {proc.returncode}\n{proc.stderr[-2000:]}")
     report = json.loads((out / "render-report.json").read_text())
     rows = sorted(report["frames"], key=lambda r: r["frame"])
     seconds = [float(r["setup_s"]) + float(r["render_s"]) for r in rows]
-    return {"first": seconds[0], "warm": statistics.median(seconds[1:]) if len(seconds) > 1 else float("nan")}
+    rss = [int(line.split()[1]) for line in proc.stderr.splitlines() if line.startswith("MAXRSS ")]
+    return {"first": seconds[0], "warm": statistics.median(seconds[1:]) if len(seconds) > 1 else float("nan"), "max_rss_mb": rss[-1] / 1024 if rss else float("nan")}
 
 
 def main() -> None:
     """Run the cases, print the table (and --json)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--counts", default="1,10,100,1000")
+    ap.add_argument("--particles", type=int, default=0, help="also a spray of this many particles, blurred against frozen")
     ap.add_argument("--frames", type=int, default=3)
     ap.add_argument("--res", default="320x180")
     ap.add_argument("--spp", type=int, default=16)
@@ -95,6 +118,13 @@ def main() -> None:
             ratio = moving["warm"] / still["warm"]
             results.append({"n": n, "moving": moving, "static": still, "warm_ratio": ratio})
             print(f"| {n} | {moving['first']:.2f} s | {still['first']:.2f} s | {moving['warm']:.3f} s | {still['warm']:.3f} s | {ratio:.2f}x |", flush=True)
+        if args.particles:
+            blur = run_case(Path(tmp), args.particles, True, args.frames, res, args.spp, particles=True)  # type: ignore[arg-type]
+            frozen = run_case(Path(tmp), args.particles, False, args.frames, res, args.spp, particles=True)  # type: ignore[arg-type]
+            ratio = blur["warm"] / frozen["warm"]
+            results.append({"particles": args.particles, "blur": blur, "frozen": frozen, "warm_ratio": ratio})
+            print(f"\n{args.particles} particles: warm frame blurred {blur['warm']:.3f} s, frozen {frozen['warm']:.3f} s: {ratio:.2f}x; "
+                  f"first frame {blur['first']:.2f} s / {frozen['first']:.2f} s; max RSS {blur['max_rss_mb']:.0f} / {frozen['max_rss_mb']:.0f} MB", flush=True)
     if args.json_out:
         Path(args.json_out).write_text(json.dumps({"cpu": cpu_model(), "results": results}, indent=1))
 

@@ -65,7 +65,7 @@ def test_the_swept_sphere_holds_the_mover_at_every_time_of_the_shutter() -> None
     the ray's time: the sphere must hold the posed bounding sphere at every u, also for a
     rest centre off the origin that swings through large rotations between samples."""
     from motion.pipeline.motion.pose import quat_exp, quat_rotate
-    from motion.pipeline.render.poses import swept_spheres
+    from motion.pipeline.render.broadphase import swept_spheres
     from motion.pipeline.render.shutter_poses import resample
 
     rng = np.random.default_rng(7)
@@ -85,7 +85,7 @@ def test_the_swept_sphere_holds_the_mover_at_every_time_of_the_shutter() -> None
 
 
 def test_a_still_mover_sweeps_its_own_sphere() -> None:
-    from motion.pipeline.render.poses import swept_spheres
+    from motion.pipeline.render.broadphase import swept_spheres
 
     n = 9
     t = np.tile([1.0, 2.0, 3.0], (1, n, 1))

@@ -24,6 +24,9 @@ import numpy as np
 # a ray clipped to the padded box starts before any shape touching the box's faces
 PAD = 1e-3
 GAP = 0.25
+# each cell holds three times the largest template: a mover whose keyed scale grows up to that
+# is replaced in place (`Atlas.replace`), beyond it the atlas is laid out again
+HEADROOM = 3.0
 
 
 @dataclass(frozen=True)
@@ -36,19 +39,22 @@ class Layout:
     offset: np.ndarray
     box: np.ndarray
     sphere: np.ndarray
+    centre: np.ndarray  # [T, 3] the centre of each template's cell
+    cell: float = 1.0  # the cells' edge
 
 
 def lay_out(boxes: np.ndarray, spheres: np.ndarray) -> Layout:
     """A layout for templates with rest-frame boxes [T, 2, 3] (min, max) and bounding
     spheres [T, 4]: a cubic grid of equal cells, each template's box centred in its cell.
-    The cell's edge is the largest box extent plus a gap, so padded boxes never overlap;
+    The cell's edge is three times the largest box extent (`HEADROOM`) plus a gap, so padded boxes
+    never overlap, also after a template grows in place;
     the grid is centred on the origin so atlas coordinates stay small (float precision)."""
     count = len(boxes)
     if count == 0:
-        return Layout(np.zeros((0, 3)), np.zeros((0, 2, 3)), np.zeros((0, 4)))
+        return Layout(np.zeros((0, 3)), np.zeros((0, 2, 3)), np.zeros((0, 4)), np.zeros((0, 3)))
     lo, hi = boxes[:, 0], boxes[:, 1]
     extent = float(np.max(hi - lo)) if count else 1.0
-    cell = max(extent, 1e-6) * (1.0 + GAP) + 1e-4
+    cell = max(extent, 1e-6) * HEADROOM * (1.0 + GAP) + 1e-4
     side = int(np.ceil(count ** (1.0 / 3.0) - 1e-9))
     while side**3 < count:
         side += 1
@@ -58,7 +64,7 @@ def lay_out(boxes: np.ndarray, spheres: np.ndarray) -> Layout:
     offset = centres - (lo + hi) / 2.0
     pad = PAD * cell + 1e-5
     box = np.stack([lo + offset - pad, hi + offset + pad], axis=1)
-    return Layout(offset, box, np.asarray(spheres, dtype=float))
+    return Layout(offset, box, np.asarray(spheres, dtype=float), centres, cell)
 
 
 def translate_shape(mi: Any, shape: Any, offset: np.ndarray) -> None:
@@ -70,6 +76,32 @@ def translate_shape(mi: Any, shape: Any, offset: np.ndarray) -> None:
     else:
         params["to_world"] = mi.Transform4f().translate([float(c) for c in offset]) @ params["to_world"]
     params.update()
+
+
+def copy_shape(mi: Any, params: Any, prefix: str, shape: Any) -> list[str]:
+    """Write a built shape's placement into the shape named `prefix` of a scene's
+    parameters (its to_world, or a mesh's vertices and normals, which hold its transform):
+    the scene and its variables stay, so the kernels that trace it are replayed. Returns the
+    keys written."""
+    fresh = mi.traverse(shape)
+    keys = [k for k in ("to_world", "vertex_positions", "vertex_normals") if k in fresh and f"{prefix}.{k}" in params]
+    for k in keys:
+        params[f"{prefix}.{k}"] = fresh[k]
+    return [f"{prefix}.{k}" for k in keys]
+
+
+def bounds(shapes: Sequence[Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The box (min, max) of built shapes and their bounding sphere (centre, radius)."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for s in shapes:
+        b = s.bbox()
+        lo = np.minimum(lo, np.array(b.min, dtype=float).ravel())
+        hi = np.maximum(hi, np.array(b.max, dtype=float).ravel())
+    if not shapes:
+        lo, hi = np.zeros(3), np.zeros(3)
+    centre = (lo + hi) / 2
+    reach = max((shape_sphere(s, centre) for s in shapes), default=0.0)
+    return lo, hi, np.array([*centre, reach * (1 + 1e-4) + 1e-5])
 
 
 def shape_sphere(shape: Any, centre: np.ndarray) -> float:
@@ -104,18 +136,9 @@ class Atlas:
         `keys` name each template's shapes in the scene dictionary."""
         boxes, spheres = [], []
         for shapes in templates:
-            lo = np.full(3, np.inf)
-            hi = np.full(3, -np.inf)
-            for s in shapes:
-                b = s.bbox()
-                lo = np.minimum(lo, np.array(b.min, dtype=float).ravel())
-                hi = np.maximum(hi, np.array(b.max, dtype=float).ravel())
-            if not shapes:
-                lo, hi = np.zeros(3), np.zeros(3)
-            centre = (lo + hi) / 2
-            reach = max((shape_sphere(s, centre) for s in shapes), default=0.0)
+            lo, hi, sphere = bounds(shapes)
             boxes.append((lo, hi))
-            spheres.append((*centre, reach * (1 + 1e-4) + 1e-5))
+            spheres.append(sphere)
         self.layout = lay_out(np.asarray(boxes, dtype=float).reshape(-1, 2, 3), np.asarray(spheres, dtype=float).reshape(-1, 4))
         d: dict[str, Any] = {"type": "scene"}
         for t, (shapes, key) in enumerate(zip(templates, keys)):
@@ -125,3 +148,25 @@ class Atlas:
         if len(d) == 1:  # an empty atlas still needs a shape to be a scene the kernel can trace
             d["atlas_empty"] = {"type": "sphere", "radius": 1e-6, "to_world": self._mi.ScalarTransform4f().translate([0.0, 0.0, -1e9])}
         self.scene = self._make_scene(d)
+        self.keys = list(keys)
+        self._params = self._mi.traverse(self.scene)
+
+    def replace(self, template: int, shapes: Sequence[Any]) -> bool:
+        """Put new shapes (a mover at a new scale) in place of template `template`'s, in the
+        same scene and cell: written through its parameters, so the kernels are replayed.
+        False where they do not fit the cell (the caller then builds the atlas again)."""
+        layout = self.layout
+        lo, hi, sphere = bounds(shapes)
+        pad = PAD * layout.cell + 1e-5
+        if np.any(hi - lo + 2 * pad > layout.cell / (1.0 + GAP)):
+            return False
+        offset = layout.centre[template] - (lo + hi) / 2
+        for k, s in enumerate(shapes):
+            translate_shape(self._mi, s, offset)
+            if not copy_shape(self._mi, self._params, f"{self.keys[template]}__{k}", s):
+                return False
+        self._params.update()
+        layout.offset[template] = offset
+        layout.box[template] = (lo + offset - pad, hi + offset + pad)
+        layout.sphere[template] = sphere
+        return True

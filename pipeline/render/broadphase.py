@@ -24,8 +24,40 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..motion.pose import quat_rotate
+
 FLOATS = 10  # one ellipsoid in Mitsuba's data buffer: centre (3), semi-axes (3), quaternion (x, y, z, w)
 FAR = 1e9  # where empty proxies sit: no ray reaches them within a scene's reach
+
+
+def swept_spheres(t: np.ndarray, q: np.ndarray, rest: np.ndarray) -> np.ndarray:
+    """Each mover's world-space sphere [M, 4] (centre, radius) that holds it at every time
+    of the shutter, from its N baked samples t [M, N, 3], q [M, N, 4] and its rest-frame
+    bounding sphere rest [M, 4] (`bounding_spheres`).
+
+    Between samples j and j + 1 the rest centre c lies at lerp(t) + slerp(q) c: inside the
+    parallelogram of the four points t_a + R(q_b) c (a, b in {j, j + 1}), but for the arc
+    that the rotation bows out of its chord, by at most |c| (1 - cos(theta / 2)) =
+    |c| (1 - |q_j . q_j+1|). The sphere holds all those corners, that bow and the rest
+    radius, padded for float32 rounding in the kernel (positions far from the origin round
+    to about 6e-8 of their distance)."""
+    m = len(rest)
+    out = np.zeros((m, 4))
+    if m == 0:
+        return out
+    t = np.asarray(t, dtype=float)
+    q = np.asarray(q, dtype=float)
+    c = np.broadcast_to(np.asarray(rest, dtype=float)[:, None, :3], t.shape)
+    rc = quat_rotate(q, c)
+    corners = np.concatenate([t + rc, t[:, :-1] + rc[:, 1:], t[:, 1:] + rc[:, :-1]], axis=1)
+    centre = (corners.min(axis=1) + corners.max(axis=1)) / 2
+    reach = np.sqrt(((corners - centre[:, None]) ** 2).sum(axis=2)).max(axis=1)
+    dots = np.abs((q[:, :-1] * q[:, 1:]).sum(axis=2)) if q.shape[1] > 1 else np.ones((m, 1))
+    bow = np.linalg.norm(rest[:, :3], axis=1) * (1.0 - np.minimum(dots, 1.0)).max(axis=1)
+    radius = reach + bow + rest[:, 3]
+    out[:, :3] = centre
+    out[:, 3] = radius * (1 + 1e-4) + 1e-6 * np.abs(centre).max(axis=1) + 1e-5
+    return out
 
 
 def sphere_proxies(spheres: np.ndarray) -> np.ndarray:

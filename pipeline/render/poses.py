@@ -14,14 +14,14 @@ where the inverse rigid transform is written (docs/rendering.md, "Time per sampl
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple, Sequence
+from typing import Any, NamedTuple
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from ..errors import FrameDataError
-from ..motion.pose import SLERP_LINEAR_BELOW, quat_rotate
+from ..motion.pose import SLERP_LINEAR_BELOW
 
 # The blocks of the per-frame data array, in order (see `FrameData.set`):
 #   mover_t [M, N, 3], mover_q [M, N, 4]   movers' world_from_object across the shutter
@@ -152,10 +152,6 @@ class FrameData:
         # element offsets of each block; the gathers below index in units of 3 or 4 floats
         offsets = np.cumsum([0, *(len(a) for a in flat[:-1])])
         self.at = {name: int(o) for name, o in zip(FRAME_BLOCKS, offsets)}
-        # the old array goes first: its variable index is the one the new array takes, so
-        # with the broadphase's buffer (render/broadphase.py) also new each frame, the
-        # kernel's inputs keep one order and one kernel serves every frame
-        self.array = None
         self.array = mi.Float(np.concatenate(flat))
         # opaque: new values each frame must not become new literals in the kernel
         dr.make_opaque(self.array)
@@ -199,36 +195,6 @@ class FrameData:
 
 
 # --- bounding spheres: rays that miss a mover never pay for its traversal -----------------
-
-
-def swept_spheres(t: np.ndarray, q: np.ndarray, rest: np.ndarray) -> np.ndarray:
-    """Each mover's world-space sphere [M, 4] (centre, radius) that holds it at every time
-    of the shutter, from its N baked samples t [M, N, 3], q [M, N, 4] and its rest-frame
-    bounding sphere rest [M, 4] (`bounding_spheres`).
-
-    Between samples j and j + 1 the rest centre c lies at lerp(t) + slerp(q) c: inside the
-    parallelogram of the four points t_a + R(q_b) c (a, b in {j, j + 1}), but for the arc
-    that the rotation bows out of its chord, by at most |c| (1 - cos(theta / 2)) =
-    |c| (1 - |q_j . q_j+1|). The sphere holds all those corners, that bow and the rest
-    radius, padded for float32 rounding in the kernel (positions far from the origin round
-    to about 6e-8 of their distance)."""
-    m = len(rest)
-    out = np.zeros((m, 4))
-    if m == 0:
-        return out
-    t = np.asarray(t, dtype=float)
-    q = np.asarray(q, dtype=float)
-    c = np.broadcast_to(np.asarray(rest, dtype=float)[:, None, :3], t.shape)
-    rc = quat_rotate(q, c)
-    corners = np.concatenate([t + rc, t[:, :-1] + rc[:, 1:], t[:, 1:] + rc[:, :-1]], axis=1)
-    centre = (corners.min(axis=1) + corners.max(axis=1)) / 2
-    reach = np.sqrt(((corners - centre[:, None]) ** 2).sum(axis=2)).max(axis=1)
-    dots = np.abs((q[:, :-1] * q[:, 1:]).sum(axis=2)) if q.shape[1] > 1 else np.ones((m, 1))
-    bow = np.linalg.norm(rest[:, :3], axis=1) * (1.0 - np.minimum(dots, 1.0)).max(axis=1)
-    radius = reach + bow + rest[:, 3]
-    out[:, :3] = centre
-    out[:, 3] = radius * (1 + 1e-4) + 1e-6 * np.abs(centre).max(axis=1) + 1e-5
-    return out
 
 
 class Movers:

@@ -22,14 +22,13 @@ from ..motion.pose import quat_mul
 from ..scene.lights import light_key
 from ..scene.loader import LoadedScene
 from ..variant import load_dict
-from .atlas import Atlas
-from .broadphase import Broadphase, particle_proxies, reach, separate, sphere_proxies
+from .atlas import Atlas, copy_shape
+from .broadphase import Broadphase, particle_proxies, reach, separate, sphere_proxies, swept_spheres
 from .build import DEFAULT_MATERIAL, emitter_dict, material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
 from .instant import add_lights, add_shapes, light_record, rest_frame, sensor_record
 from .roles import Roles
 from .sbt import SbtOwner, dict_types
-from .poses import swept_spheres
 from .shutter_poses import across_shutter, particles_across_shutter
 from .slices import SlicedGeometry
 
@@ -234,12 +233,23 @@ class SceneCache:
         if not changed:
             return []
         self._mover_stretch = stretches
-        mover_dicts = [self._mover_dicts(name, stretches[name]) for name in self.roles.mover_names]
-        self._build_atlas(mover_dicts)
-        if self._emitters and self.owner is not None:
-            self.owner.forget(self._emitters.values())
-            self._emitters = self._emitter_scenes(mover_dicts)
-        self._moving_changed = True
+        names = self.roles.mover_names
+        atlas = self.atlas
+        # in place where each changed mover still fits its cell (the kernels replay), else
+        # the atlas is laid out and built again
+        fits = atlas is not None and atlas.scene is not None and all(
+            atlas.replace(names.index(name), [load_dict(sd) for sd in self._mover_dicts(name, stretches[name])]) for name in changed
+        )
+        mover_dicts = [self._mover_dicts(name, stretches[name]) for name in names]
+        if not fits:
+            self._build_atlas(mover_dicts)
+            self._moving_changed = True
+        for k, name in enumerate(names):  # an emissive mover's own scene follows, in place
+            if k in self._emitters and name in changed:
+                params = self._mi.traverse(self._emitters[k])
+                for j, sd in enumerate(mover_dicts[k]):
+                    copy_shape(self._mi, params, f"{mitsuba_id(name)}__{j}", load_dict(sd))
+                params.update()
         return [f"mover:{mitsuba_id(name)} (atlas)" for name in changed]
 
     def set_frame(self, fi: StackedFrame, mode: str, u_fixed: float | None = None) -> None:
