@@ -110,8 +110,11 @@ def test_npz_and_json_layouts(tmp_path: Path) -> None:
         read_baked(tmp_path / "bad.json")
 
 
-def test_bake_simulates_dynamics_when_no_simulation_given(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_bake_simulates_dynamics_when_no_simulation_given(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     import motion.pipeline.dynamics as dynamics
+
+    # a cache root of its own: a simulation another test kept (bake/keep.py) is not simulated again
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
 
     calls: list[tuple[float, float]] = []
 
