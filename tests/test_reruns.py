@@ -187,6 +187,9 @@ def test_a_new_machine_estimates_compiling_every_kernel(tmp_path: Path) -> None:
 
     import os
 
+    # the session's cache root comes back afterwards (deleting it left later tests of this
+    # worker in the user's own cache root)
+    old = os.environ.get("MOTION_CACHE_DIR")
     os.environ["MOTION_CACHE_DIR"] = str(tmp_path / "cache")
     try:
         from motion.pipeline.shot.estimate import record
@@ -195,7 +198,10 @@ def test_a_new_machine_estimates_compiling_every_kernel(tmp_path: Path) -> None:
                 *({"frame": f, "status": "rendered", "cold": False, "render_s": 1.0, "kernels_compiled": 0} for f in (1, 2))]
         record("other-shot", "h", 1000, {"frames": rows, "workers": [{}], "totals": {"farm_s": 44.0}}, compiled_all=True)
     finally:
-        del os.environ["MOTION_CACHE_DIR"]
+        if old is None:
+            del os.environ["MOTION_CACHE_DIR"]
+        else:
+            os.environ["MOTION_CACHE_DIR"] = old
     learned = _dry_estimate(scene, tmp_path / "out", tmp_path / "cache", tmp_path / "empty")
     assert learned["compiles_kernels"] and learned["cold_extra_s"] == 39.0 and "as in 1 runs here" in learned["basis"], learned
 
