@@ -169,7 +169,8 @@ class Broadphase:
         """The frame's proxies [P, 10]: one buffer written, one BVH build."""
         mi = self._mi
         data = np.asarray(proxies, dtype=np.float32)
-        if self.scene is None or len(data) != self.count:
+        fresh = self.scene is None or len(data) != self.count
+        if fresh:
             tensor = lambda a: mi.TensorXf(np.ascontiguousarray(a, dtype=np.float32))  # noqa: E731
             shape = {"type": "ellipsoids", "extent": 1.0, "centers": tensor(data[:, :3]), "scales": tensor(data[:, 3:6]), "quaternions": tensor(data[:, 6:10])}
             self.scene = self._make_scene({"type": "scene", "broadphase": shape})
@@ -178,5 +179,25 @@ class Broadphase:
         # written through the parameter update on every frame, the first too: a frame then
         # traces the same variables, in the same order, as the next, and the cold frame's
         # kernels are the warm frames' (a fresh shape's own arrays would compile them again)
-        self._params["broadphase.data"] = mi.Float(data.ravel())
-        self._params.update()
+        import drjit as dr
+
+        # written in place (no new variable each frame): with a new buffer per frame the
+        # render's kernels came in two variants, one or the other per frame. The write is
+        # in place, or a copy where something still holds the buffer (timing decides); a new
+        # scene is written both ways, so both kernels are the cold frame's to compile.
+        for shared in ([True, False] if fresh else [False]):
+            current = self._params["broadphase.data"]
+            held = mi.Float(current) if shared else None  # a second reference: the copying write
+            dr.scatter(current, mi.Float(data.ravel()), dr.arange(mi.UInt32, data.size))
+            self._params.set_dirty("broadphase.data")
+            self._params.update()
+            dr.eval()
+            del held
+        # the BVH built and every value of the update evaluated here, the same way each
+        # frame: one ray traced now (a trace waits for the build). Left to the render's first
+        # trace, the build's own kernels ran inside it on some frames and not on others, and
+        # the render's kernels came in two variants
+
+        probe = mi.Ray3f(mi.Point3f(0.0, 0.0, 0.0), mi.Vector3f(0.0, 0.0, 1.0))
+        dr.eval(self.scene.ray_intersect_preliminary(probe).t)
+        dr.sync_thread()

@@ -55,6 +55,7 @@ class SceneCache:
         self._capacity: list[int] = []  # particles' room per system (grows by 1.5x: one recompile)
         self._moving_changed = True  # the atlas or broadphase scene changed: tell the integrator
         self._holders: dict[str, Any] = {}  # emissive particle system -> its holder sphere's own scene
+        self._reach = 1e-3  # how far behind a ray the broadphase walk starts (broadphase.reach)
         self.sliced: SlicedGeometry | None = None
         self.owner: SbtOwner | None = None  # the SBT owner of every scene the kernel traces
 
@@ -198,6 +199,7 @@ class SceneCache:
         if changed:
             params.update()
         changed += self._update_mover_scales(fi)
+        self._update_broadphase(fi)  # a scene update, before the render: its kernels are the update's
         return tuple(changed)
 
     def _update_lights(self, fi: StackedFrame) -> list[str]:
@@ -271,24 +273,63 @@ class SceneCache:
         cam_t, cam_q = across_shutter(ct, cq, n, mode, u_fixed)
         rel = quat_mul(cam_q, q_frame_inv[None, :])
         lt, lq, rgb = self._moving_light_frame(fi, mode, u_fixed)
-        moving = self._moving_frame(fi, mt, mq, mode, u_fixed)
+        moving = self._moving_frame(fi, mode, u_fixed)
         self.integrator.set_frame(mt, mq, cam_t, rel, ct[0], cam_q, lt, lq, rgb, moving)
         if self.sliced is not None and self.sliced.groups:
             self.sliced.update(fi, mode, u_fixed)
+        # every update above evaluated and finished now (the broadphase's BVH build runs on
+        # drjit's thread pool): left pending, the render's kernel is traced against work that
+        # is done on one frame and not yet on another, and differs between them
+        self._dr.eval()
+        self._dr.sync_thread()
 
-    def _moving_frame(self, fi: StackedFrame, mt: np.ndarray, mq: np.ndarray, mode: str, u_fixed: float | None) -> dict[str, np.ndarray]:
-        """The atlas's templates, the particles across the shutter and the broadphase's
-        proxies for one frame (the broadphase is updated here: one buffer, one BVH)."""
-        n = fi.samples
+    def _update_broadphase(self, fi: StackedFrame) -> None:
+        """The broadphase's proxies for one frame, from every baked row (the frame's time and
+        the N shutter samples: a bound for every blur mode and sub-frame), written as a
+        scene update before the render (one buffer, one BVH build), and the particles'
+        room (a system past its room grows by 1.5x: one recompile)."""
         atlas, broad = self.atlas, self.broadphase
         if atlas is None or broad is None or atlas.scene is None:
-            return {}
+            return
         counts = [_particle_count(fi, name) for name in self.roles.particle_names]
-        if any(c > room for c, room in zip(counts, self._capacity)):  # more particles than room: grow (one recompile)
+        if any(c > room for c, room in zip(counts, self._capacity)):
             self._capacity = [max(room, _room(c)) for c, room in zip(counts, self._capacity)]
         total = int(sum(self._capacity))
+        names = self.roles.mover_names
+        m = len(names)
+        rows = fi.samples + 1
+        mt = np.array([fi.objects[name][0] for name in names], dtype=float).reshape(m, rows, 3)
+        mq = np.array([fi.objects[name][1] for name in names], dtype=float).reshape(m, rows, 4)
+        pp, pa, pr = np.zeros((total, rows, 3)), np.zeros((total, rows), bool), np.zeros(total)
+        at = 0
+        for k, (name, room) in enumerate(zip(self.roles.particle_names, self._capacity)):
+            if name in fi.particles:
+                positions, alive = fi.particles[name]
+                pp[at:at + positions.shape[1]] = np.swapaxes(positions, 0, 1)
+                pa[at:at + positions.shape[1]] = np.swapaxes(alive, 0, 1)
+            pr[at:at + room] = atlas.layout.sphere[m + k, 3]
+            at += room
+        proxies = np.concatenate([sphere_proxies(swept_spheres(mt, mq, atlas.layout.sphere[:m])), particle_proxies(pp, pa, pr)])
+        proxies = separate(proxies, self._walk_scale(fi, proxies))
+        self._reach = reach(proxies)
+        scene_before = broad.scene
+        broad.update(proxies)
+        if scene_before is not None and broad.scene is not scene_before and self.owner is not None:
+            self.owner.forget([scene_before])
+        if broad.scene is not scene_before or self._moving_changed or self.integrator.world.particles != total:
+            self.integrator.set_moving(broad.scene, atlas.scene, m, total, self._emitters, self._particle_emitters())
+            self._moving_changed = False
+
+    def _moving_frame(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> dict[str, np.ndarray]:
+        """The atlas's templates and the particles across the shutter for motion-blur `mode`
+        (the frame data's blocks; the broadphase was updated with the scene)."""
+        n = fi.samples
+        atlas = self.atlas
+        if atlas is None or atlas.scene is None:
+            return {}
+        total = int(sum(self._capacity))
         pp, pa = np.zeros((total, n, 3)), np.zeros((total, n))
-        pt, pr = np.zeros(total), np.zeros(total)
+        pt = np.zeros(total)
         m = len(self.roles.mover_names)
         at = 0
         for k, (name, room) in enumerate(zip(self.roles.particle_names, self._capacity)):
@@ -297,17 +338,7 @@ class SceneCache:
                 p, a = particles_across_shutter(positions, alive, n, mode, u_fixed)
                 pp[at:at + len(p)], pa[at:at + len(p)] = p, a
             pt[at:at + room] = m + k
-            pr[at:at + room] = atlas.layout.sphere[m + k, 3]
             at += room
-        proxies = np.concatenate([sphere_proxies(swept_spheres(mt, mq, atlas.layout.sphere[:m])), particle_proxies(pp, pa > 0.5, pr)])
-        proxies = separate(proxies, self._walk_scale(fi, proxies))
-        scene_before = broad.scene
-        broad.update(proxies)
-        if scene_before is not None and broad.scene is not scene_before and self.owner is not None:
-            self.owner.forget([scene_before])
-        if broad.scene is not scene_before or getattr(self, "_moving_changed", True) or self.integrator.world.particles != total:
-            self.integrator.set_moving(broad.scene, atlas.scene, m, total, self._emitters, self._particle_emitters())
-            self._moving_changed = False
         return {
             "template_offset": atlas.layout.offset,
             "template_box": atlas.layout.box,
@@ -315,7 +346,7 @@ class SceneCache:
             "particle_p": pp,
             "particle_alive": pa,
             "particle_template": pt,
-            "reach": np.array([reach(proxies)]),
+            "reach": np.array([self._reach]),
         }
 
     def _walk_scale(self, fi: StackedFrame, proxies: np.ndarray) -> float:
