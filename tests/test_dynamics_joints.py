@@ -50,6 +50,7 @@ def test_a_point_mass_on_a_rod_swings_at_the_pendulum_period(tmp_path: Path, int
     assert np.abs(np.linalg.norm(tr.x[:, 0], axis=1) - L).max() < 1e-12 * L
 
 
+@pytest.mark.slow  # about 40 s per integrator on a busy 2-core host: CI's second step
 @pytest.mark.parametrize("integrator", ["semi-implicit-euler", "rk4"])
 def test_a_ball_on_a_pin_swings_as_a_physical_pendulum(tmp_path: Path, integrator: str) -> None:
     """A rigid ball (radius r) pinned at the origin, L from its centre: it turns with its
@@ -73,7 +74,7 @@ def _door(**motion: object) -> dict:
             "motion": {"type": "dynamics", **motion}}
 
 
-@pytest.mark.parametrize("integrator,seconds", [("rk4", 10.0), ("semi-implicit-euler", 2.0)])
+@pytest.mark.parametrize("integrator,seconds", [pytest.param("rk4", 10.0, marks=pytest.mark.slow), ("semi-implicit-euler", 2.0)])  # the 10 s run: CI's second step
 def test_a_hinge_keeps_the_rotation_about_its_axis_only(tmp_path: Path, integrator: str, seconds: float) -> None:
     """A door on a hinge about +Y at its edge, launched spinning about a tilted axis and
     moving sideways: after 10 s its Y axis is still the hinge's (off-axis angle < 1e-6 rad)
