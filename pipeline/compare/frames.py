@@ -113,21 +113,10 @@ def find_frames(folder: str | Path, prefix: str | None = None) -> tuple[str, dic
     one when `prefix` is None). Nothing is read or allocated by the span of the numbers (a
     folder may hold frames 0 and 2**31). FrameIOError for a folder without it, several
     sequences, or one number written twice."""
-    from ..telecine.sequence import find_sequences
+    from ..telecine.sequence import choose_sequence
 
     folder = Path(folder)
-    groups = find_sequences(folder)
-    if prefix is not None:
-        if prefix not in groups:
-            raise FrameIOError(f"{folder}: no frames named {prefix}.NNNN.exr")
-        items = groups[prefix]
-    elif not groups:
-        raise FrameIOError(f"{folder}: no EXR sequence (expected files named prefix.NNNN.exr)")
-    elif len(groups) > 1:
-        found = ", ".join(f"{p} ({len(v)} frames)" for p, v in sorted(groups.items()))
-        raise FrameIOError(f"{folder}: several EXR sequences ({found}); choose one with --prefix")
-    else:
-        prefix, items = next(iter(groups.items()))
+    prefix, items = choose_sequence(folder, prefix)
     out: dict[int, Path] = {}
     for number, path in items:
         if number in out:

@@ -178,6 +178,23 @@ def find_sequences(directory: str | Path) -> dict[str, list[tuple[int, Path]]]:
     return groups
 
 
+def choose_sequence(directory: Path, prefix: str | None = None) -> tuple[str, list[tuple[int, Path]]]:
+    """(prefix, [(frame number, file)]) of the `prefix`.NNNN.exr sequence in `directory`, or
+    of the only one there when `prefix` is None. FrameIOError for a folder without it or with
+    several sequences (the message says to choose one with --prefix)."""
+    groups = find_sequences(directory)
+    if prefix is not None:
+        if prefix not in groups:
+            raise FrameIOError(f"{directory}: no frames named {prefix}.NNNN.exr")
+        return prefix, groups[prefix]
+    if not groups:
+        raise FrameIOError(f"{directory}: no EXR sequence (expected files named prefix.NNNN.exr)")
+    if len(groups) > 1:
+        found = ", ".join(f"{p} ({len(v)} frames)" for p, v in sorted(groups.items()))
+        raise FrameIOError(f"{directory}: several EXR sequences ({found}); choose one with --prefix")
+    return next(iter(groups.items()))
+
+
 def discover(
     directory: str | Path,
     prefix: str | None = None,
@@ -193,18 +210,7 @@ def discover(
     `allow_gaps` absent frame numbers are not an error; they are listed in `missing`.
     """
     directory = Path(directory)
-    groups = find_sequences(directory)
-    if prefix is not None:
-        if prefix not in groups:
-            raise FrameIOError(f"{directory}: no frames named {prefix}.NNNN.exr")
-        items = groups[prefix]
-    elif not groups:
-        raise FrameIOError(f"{directory}: no EXR sequence (expected files named prefix.NNNN.exr)")
-    elif len(groups) > 1:
-        found = ", ".join(f"{p} ({len(v)} frames)" for p, v in sorted(groups.items()))
-        raise FrameIOError(f"{directory}: several EXR sequences ({found}); choose one with --prefix")
-    else:
-        prefix, items = next(iter(groups.items()))
+    prefix, items = choose_sequence(directory, prefix)
 
     numbers = [n for n, _ in items]
     dup = next((a for a, b in zip(numbers, numbers[1:]) if a == b), None)  # (sorted: a repeat is adjacent)
