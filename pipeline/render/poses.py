@@ -21,7 +21,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..errors import FrameDataError
-from ..motion.pose import quat_rotate
+from ..motion.pose import SLERP_LINEAR_BELOW, quat_rotate
 
 # The blocks of the per-frame data array, in order (see `FrameData.set`):
 #   mover_t [M, N, 3], mover_q [M, N, 4]   movers' world_from_object across the shutter
@@ -55,7 +55,7 @@ def slerp(q0: Any, q1: Any, f: Any) -> Any:
     d = dr.abs(d)
     theta = dr.acos(dr.minimum(d, 1.0))
     s = dr.sin(theta)
-    small = s < 1e-4
+    small = s < SLERP_LINEAR_BELOW["float32"]
     w0 = dr.select(small, 1 - f, dr.sin((1 - f) * theta) / s)
     w1 = dr.select(small, f, dr.sin(f * theta) / s)
     return dr.normalize(w0 * q0 + w1 * q1)
