@@ -82,9 +82,11 @@ def test_every_scene_traced_in_one_kernel_shares_one_sbt_owner_covering_its_shap
     gc.collect()
     built = _built_scenes(monkeypatch)
     cache = FrameRenderer(loaded).cache
-    cache.build(stack_frame(baked))
+    stacked = stack_frame(baked)
+    cache.build(stacked)
+    cache.set_frame(stacked, "stochastic")  # the broadphase is made with the frame's proxies
     world = cache.integrator.world
-    traced = [cache.scene, *world.movers, *(s for group in world.slices for s in group)]
+    traced = world.traced(cache.scene)
     owners = []
     for k, scene in enumerate(traced):
         assert id(scene) in built, f"{name}: traced scene {k} was not built from a dictionary"
@@ -154,18 +156,24 @@ def test_a_render_whose_scenes_do_not_share_the_owner_stops_before_tracing() -> 
     from motion.pipeline.variant import load_dict
 
     register()
-    owner = SbtOwner({"Mesh", "Sphere"})
+    from motion.pipeline.render.broadphase import Broadphase, sphere_proxies
+
+    owner = SbtOwner({"Mesh", "Sphere", "Ellipsoids"})
     scene = owner.scene({"type": "scene", "integrator": {"type": "motion_path"}, "floor": {"type": "rectangle"},
                          "sensor": {"type": "perspective", "to_world": mi.ScalarTransform4f().translate([0, 0, -4]), "film": {"type": "hdrfilm", "width": 4, "height": 4}}})
     integrator = scene.integrator()
     integrator.set_sbt_owner(owner)
     frame = (np.zeros((1, 2, 3)), np.tile([1.0, 0, 0, 0], (1, 2, 1)), np.zeros((2, 3)), np.tile([1.0, 0, 0, 0], (2, 1)), np.zeros(3))
-    integrator.set_movers([owner.scene({"type": "scene", "ball": {"type": "sphere"}})], 2)
-    integrator.set_frame(*frame)
+    moving = {"template_offset": np.zeros((1, 3)), "template_box": np.array([[[-1.0] * 3, [1.0] * 3]]), "template_sphere": np.array([[0.0, 0.0, 0.0, 1.0]]), "reach": np.array([3.0])}
+    broad = Broadphase(mi, owner.scene)
+    broad.update(sphere_proxies(np.array([[0.0, 0.0, 0.0, 1.0]])))
+    integrator.set_samples(2)
+    integrator.set_moving(broad.scene, owner.scene({"type": "scene", "ball": {"type": "sphere"}}), 1, 0, {})
+    integrator.set_frame(*frame, moving=moving)
     assert np.array(integrator.render(scene, spp=1)).shape == (4, 4, 4)
-    integrator.set_movers([load_dict({"type": "scene", "ball": {"type": "sphere"}})], 2)  # built without the owner
-    integrator.set_frame(*frame)
-    with pytest.raises(SbtOwnerError, match="traced scene 1 of 2 was not built by the kernel's SBT owner"):
+    integrator.set_moving(broad.scene, load_dict({"type": "scene", "ball": {"type": "sphere"}}), 1, 0, {})  # built without the owner
+    integrator.set_frame(*frame, moving=moving)
+    with pytest.raises(SbtOwnerError, match="traced scene 2 of 3 was not built by the kernel's SBT owner"):
         integrator.render(scene, spp=1)
 
 

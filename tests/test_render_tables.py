@@ -50,7 +50,7 @@ def test_a_frame_of_the_wrong_shape_is_a_frame_data_error() -> None:
 
     register()
     integrator = mi.load_dict({"type": "motion_path"})
-    integrator.set_movers([], 3)
+    integrator.set_samples(3)
     n = 3
     good = (np.zeros((0, n, 3)), np.zeros((0, n, 4)), np.zeros((n, 3)), np.tile([1.0, 0, 0, 0], (n, 1)), np.zeros(3))
     integrator.set_frame(*good)  # the shapes of its job: accepted
@@ -71,7 +71,7 @@ def test_fewer_than_one_sample_per_pixel_is_a_sample_count_error() -> None:
 
     register()
     scene = mi.load_dict({"type": "scene", "integrator": {"type": "motion_path"}, "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 4, "height": 4}}})
-    scene.integrator().set_movers([], 2)
+    scene.integrator().set_samples(2)
     scene.integrator().set_frame(np.zeros((0, 2, 3)), np.zeros((0, 2, 4)), np.zeros((2, 3)), np.tile([1.0, 0, 0, 0], (2, 1)), np.zeros(3))
     with pytest.raises(SampleCountError, match="at least 1 sample per pixel, got -1"):
         scene.integrator().render(scene, spp=-1)

@@ -4,8 +4,9 @@ roulette) in which every camera sample carries its own time inside the shutter.
 Mitsuba 3 has no animated shapes, so motion is ours (docs/rendering.md):
 
 * The static set lives in one `mi.Scene` whose BVH is built once per worker and never
-  touched again. Each rigid mover lives in its own tiny scene, in its rest frame; the
-  scene queries over all of them at a path's time are `world.World`'s.
+  touched again. Rigid movers and particles are reached through one broadphase walk and
+  one atlas of rest-frame shapes, whatever their number; the scene queries over all of
+  them at a path's time are `world.World`'s.
 * The sensor's shutter is fixed to [0, 1]: `ray.time` is the sample's shutter fraction u,
   drawn by the sampler (stratified across a pixel's samples).
 * At u, each mover's world_from_object = T(u) R(u) is interpolated from the baked samples
@@ -36,8 +37,8 @@ import numpy as np
 from . import aovs as aov_table
 from . import film
 from .lights import LightChoice
-from .poses import FrameData, KernelPose, MoverTracks, eager_movers, swept_spheres
-from .world import World
+from .poses import FrameData, KernelPose, Movers
+from .world import NONE, World
 
 
 def _mis(a: Any, b: Any) -> Any:
@@ -58,7 +59,6 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         self.rr_depth = int(props.get("rr_depth", 5))
         self.aovs = [a for a in str(props.get("aovs", "")).split(",") if a]
         self._projection = ("perspective", 1.0, 0.0, 0.0)  # kind, scale (px per unit), cx, cy
-        self._eager: list[bool] | None = None  # movers posed once per path (poses.eager_movers), chosen on the first frame
         self.world = World()
         self.frame_data = FrameData()
         self.lights: list[tuple[bool, Any]] = []  # moving lights: (at infinity, emitter in its rest frame)
@@ -67,12 +67,16 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
 
     # --- per-job and per-frame state --------------------------------------------------
 
-    def set_movers(self, movers: Sequence[mi.Scene], n_samples: int) -> None:
-        """The rest-frame scenes of the rigid movers (fixed for a job) and the number of
-        baked samples across the shutter."""
-        self.world.set_movers(movers)
+    def set_samples(self, n_samples: int) -> None:
+        """The number of baked samples across the shutter (fixed for a job)."""
         self.frame_data.n_samples = max(2, int(n_samples))
-        self._eager = None
+
+    def set_moving(self, broadphase: Any, atlas: Any, rigid: int, particles: int, emitters: dict[int, Any], particle_emitters: Sequence[tuple[int, int, Any]] = ()) -> None:
+        """Everything that moves rigidly or as particles (render/world.py): the broadphase
+        and atlas scenes, how many rigid movers and particles they hold, the emissive
+        movers' rest-frame scenes and the emissive particle systems' ranges and holder
+        scenes (for emitter sampling)."""
+        self.world.set_moving(broadphase, atlas, rigid, particles, emitters, particle_emitters)
 
     def set_sbt_owner(self, owner: Any) -> None:
         """The SBT owner every traced scene of the job was built against (render/sbt.py)."""
@@ -96,8 +100,8 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         self._projection = (kind, float(scale), width / 2.0, height / 2.0)
 
     def set_slices(self, groups: Sequence[Sequence[mi.Scene]]) -> None:
-        """Time-sliced geometry (render/slices.py): for each deforming object or particle
-        system, one world-space scene per baked shutter sample."""
+        """Time-sliced geometry (render/slices.py): for each deforming object, one
+        world-space scene per baked shutter sample."""
         self.world.set_slices(groups)
 
     def set_frame(
@@ -111,23 +115,24 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         light_translation: np.ndarray | None = None,
         light_rotation: np.ndarray | None = None,
         light_color: np.ndarray | None = None,
+        moving: dict[str, np.ndarray] | None = None,
     ) -> None:
         """Per-frame poses. mover_*: [M, N, 3|4]; camera_*: [N, 3|4], where the camera
         rotation is relative to the sensor's (C(u) C(frame)^-1); sensor_origin: [3];
         light_*: [L, N, 3|4] world_from_light across the shutter and light_color [L, 3]
-        (the moving lights of `set_lights`, in order). Each mover's bounding sphere in its
-        rest frame (from its scene's box, which follows a per-frame scale) joins them.
-        A shape other than these is a `FrameDataError`."""
-        m, n, nl = len(self.world.movers), self.frame_data.n_samples, len(self.lights)
+        (the moving lights of `set_lights`, in order); `moving`: the atlas's templates and
+        the particles (`template_offset` [T, 3], `template_box` [T, 2, 3],
+        `template_sphere` [T, 4], `particle_p` [C, N, 3], `particle_alive` [C, N],
+        `particle_template` [C], `reach` [1]; render/scene_cache.py). A shape other than
+        these is a `FrameDataError`."""
+        m, n, nl = self.world.rigid, self.frame_data.n_samples, len(self.lights)
+        c = self.world.particles
         if camera_rotation is None:
             camera_rotation = camera_rotation_rel
         if light_translation is None:
             light_translation, light_rotation, light_color = np.zeros((0, n, 3)), np.zeros((0, n, 4)), np.zeros((0, 3))
-        rest_spheres = self.world.bounding_spheres()
-        swept = swept_spheres(mover_translation, mover_rotation, rest_spheres) if np.shape(mover_translation) == (m, n, 3) and np.shape(mover_rotation) == (m, n, 4) else np.zeros((m, 4))
-        if self._eager is None:  # once per job: a new choice would compile a new kernel
-            kind, scale, cx, cy = self._projection
-            self._eager = eager_movers(swept, np.asarray(sensor_origin, dtype=float).ravel(), (kind, scale), int(4 * cx * cy))
+        moving = moving or {}
+        t = len(moving.get("template_offset", ()))
         self.frame_data.set(
             {
                 "mover_t": (mover_translation, (m, n, 3)),
@@ -139,8 +144,13 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
                 "light_t": (light_translation, (nl, n, 3)),
                 "light_q": (light_rotation, (nl, n, 4)),
                 "light_rgb": (light_color, (nl, 3)),
-                "mover_sphere": (rest_spheres, (m, 4)),
-                "mover_swept": (swept, (m, 4)),
+                "template_offset": (moving.get("template_offset", np.zeros((0, 3))), (t, 3)),
+                "template_box": (moving.get("template_box", np.zeros((0, 2, 3))), (t, 2, 3)),
+                "template_sphere": (moving.get("template_sphere", np.zeros((0, 4))), (t, 4)),
+                "particle_p": (moving.get("particle_p", np.zeros((0, n, 3))), (c, n, 3)),
+                "particle_alive": (moving.get("particle_alive", np.zeros((0, n))), (c, n)),
+                "particle_template": (moving.get("particle_template", np.zeros(0)), (c,)),
+                "reach": (moving.get("reach", np.zeros(1)), (1,)),
             }
         )
 
@@ -153,7 +163,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         si: Any,
         bsdf: Any,
         ctx: Any,
-        movers: MoverTracks,
+        movers: Movers,
         light_poses: list[KernelPose],
         k_slice: Any,
         active: Any,
@@ -177,14 +187,21 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         # area emitters on movers: sampled in the mover's rest frame, MIS against BSDF sampling
         for k in self.world.emissive:
             pose = movers.pose(k)
-            ds, weight = self.world.movers[k].sample_emitter_direction(pose.interaction_to_rest(si), sampler.next_2d(), False, active)
+            ds, weight = self.world.emitters[k].sample_emitter_direction(pose.interaction_to_rest(si), sampler.next_2d(), False, active)
             d = pose.vector_to_world(ds.d)
             ok = active & (ds.pdf != 0.0)
             ok &= ~self.world.occluded(scene, si.spawn_ray_to(pose.point_to_world(ds.p)), movers, ok, k_slice)
             value, bsdf_pdf = bsdf.eval_pdf(ctx, si, si.to_local(d), ok)
             mis = dr.select(ds.delta, 1.0, _mis(ds.pdf, bsdf_pdf))
             L += dr.select(ok, mis * value * weight, 0.0)
-        # area emitters on deforming meshes and particles: the slice at the path's time
+        # emissive particle systems: one particle of each, sampled at the path's time
+        for g in range(len(self.world.particle_emitters)):
+            ds, weight = self.world.sample_particle_emitter(g, movers, si, sampler.next_1d(), sampler.next_2d(), active)
+            ok = active & (ds.pdf != 0.0)
+            ok &= ~self.world.occluded(scene, si.spawn_ray_to(ds.p), movers, ok, k_slice)
+            value, bsdf_pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), ok)
+            L += dr.select(ok, _mis(ds.pdf, bsdf_pdf) * value * weight, 0.0)
+        # area emitters on deforming meshes: the slice at the path's time
         for g in self.world.emissive_slices:
             ds, weight = self.world.sample_slice_emitter(g, si, sampler.next_2d(), k_slice, active)
             ok = active & (ds.pdf != 0.0)
@@ -193,14 +210,14 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             L += dr.select(ok, _mis(ds.pdf, bsdf_pdf) * value * weight, 0.0)
         return L
 
-    def _mover_emitter_pdf(self, ds: Any, ref: Any, hit_mover: Any, movers: MoverTracks, pdf: Any, active: Any) -> Any:
+    def _mover_emitter_pdf(self, ds: Any, ref: Any, hit_mover: Any, movers: Movers, pdf: Any, active: Any) -> Any:
         """The solid-angle pdf with which `_moving_light_terms` would have sampled the
         emitter that a BSDF-sampled ray hit on a mover (in the mover's rest frame)."""
         for k in self.world.emissive:
             pose = movers.pose(k)
             mine = active & (hit_mover == k)
             local = pose.direction_sample_to_rest(ds)
-            pdf = dr.select(mine, self.world.movers[k].pdf_emitter_direction(pose.interaction_to_rest(ref), local, mine), pdf)
+            pdf = dr.select(mine, self.world.emitters[k].pdf_emitter_direction(pose.interaction_to_rest(ref), local, mine), pdf)
         return pdf
 
     def _choice(self, scene: mi.Scene) -> LightChoice:
@@ -222,18 +239,17 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             x, y = local.x / z * scale, local.y / z * scale
         return mi.Vector2f(cx - x, cy - y)
 
-    def _motion_vector(self, si: Any, hit_mover: Any, movers: MoverTracks, active: Any) -> Any:
+    def _motion_vector(self, si: Any, hit: Any, movers: Movers, active: Any) -> Any:
         """Screen-space motion of the first hit across the shutter, in pixels: a point on
-        a mover follows the mover from the first baked sample to the last."""
+        a mover or a particle follows it from the first baked sample to the last."""
         last = self.frame_data.n_samples - 1
         p0, p1 = mi.Vector3f(si.p), mi.Vector3f(si.p)
-        if len(movers):
-            mine = active & (hit_mover < len(movers))
-            index = dr.select(mine, hit_mover, 0)
-            rest = movers.pose(index).point_to_rest(si.p)
-            r = index * self.frame_data.n_samples
-            p0 = dr.select(mine, self.frame_data.sample_pose("mover_t", "mover_q", r, mine).point_to_world(rest), p0)
-            p1 = dr.select(mine, self.frame_data.sample_pose("mover_t", "mover_q", r + last, mine).point_to_world(rest), p1)
+        if movers.total:
+            mine = active & (hit < movers.total)
+            index = dr.select(mine, hit, 0)
+            rest = movers.proxy(index, mine)[0].point_to_rest(si.p)
+            p0 = dr.select(mine, movers.proxy_at_sample(index, 0, mine).point_to_world(rest), p0)
+            p1 = dr.select(mine, movers.proxy_at_sample(index, last, mine).point_to_world(rest), p1)
         v = self._project(p1, last, active) - self._project(p0, 0, active)
         return dr.select(si.is_valid(), v, 0.0)
 
@@ -271,7 +287,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         return {a.name: zeros[a.name] for a in aov_table.computed(self.aovs)}
 
     def _first_hit_aovs(
-        self, aov: dict[str, Any], scene: mi.Scene, si: Any, ray: Any, data: FrameData, ci: Any, cf: Any, hit_mover: Any, movers: MoverTracks, depth: Any, active: Any
+        self, aov: dict[str, Any], scene: mi.Scene, si: Any, ray: Any, data: FrameData, ci: Any, cf: Any, hit_mover: Any, movers: Movers, depth: Any, active: Any
     ) -> dict[str, Any]:
         """`aov` with the lanes whose path is at its first vertex set to that vertex's
         values (the others keep theirs)."""
@@ -291,7 +307,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         return aov
 
     def _emission_hit(
-        self, scene: mi.Scene, si: Any, prev_si: Any, prev_bsdf_pdf: Any, prev_bsdf_delta: Any, on_mover: Any, hit_mover: Any, choice: LightChoice, movers: MoverTracks, k_slice: Any, depth: Any
+        self, scene: mi.Scene, si: Any, prev_si: Any, prev_bsdf_pdf: Any, prev_bsdf_delta: Any, on_mover: Any, hit_mover: Any, choice: LightChoice, movers: Movers, k_slice: Any, depth: Any
     ) -> tuple[Any, Any]:
         """The direction sample of the emitter a BSDF-sampled segment reached, and its MIS
         weight against emitter sampling of the same emitter: the static scene's (chosen by
@@ -300,11 +316,12 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
         em_pdf = dr.select(~prev_bsdf_delta & ~on_mover, choice.pdf(prev_si, ds, ~prev_bsdf_delta & ~on_mover), 0.0)
         em_pdf = self._mover_emitter_pdf(ds, prev_si, hit_mover, movers, em_pdf, ~prev_bsdf_delta & on_mover)
+        em_pdf = self.world.particle_emitter_pdf(ds, prev_si, hit_mover, movers, em_pdf, ~prev_bsdf_delta & on_mover)
         em_pdf = self.world.slice_emitter_pdf(ds, prev_si, hit_mover, k_slice, em_pdf, ~prev_bsdf_delta & on_mover)
         return ds, dr.select(depth == 0, 1.0, _mis(prev_bsdf_pdf, em_pdf))
 
     def _static_light_term(
-        self, scene: mi.Scene, sampler: mi.Sampler, si: Any, bsdf: Any, bsdf_ctx: Any, choice: LightChoice, movers: MoverTracks, k_slice: Any, beta: Any, active_next: Any
+        self, scene: mi.Scene, sampler: mi.Sampler, si: Any, bsdf: Any, bsdf_ctx: Any, choice: LightChoice, movers: Movers, k_slice: Any, beta: Any, active_next: Any
     ) -> Any:
         """Emitter sampling of the static scene's lights (chosen by contribution: lights.py),
         the shadow ray tested across all scenes at the path's time, MIS against BSDF
@@ -339,7 +356,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         ci, cf = data.segment(u)
         ray = self._primary_ray(ray, ci, cf, active)
 
-        movers = MoverTracks(data, len(self.world.movers), u, active, self._eager or ())
+        movers = Movers(data, self.world.rigid, self.world.particles, u, active)
         light_poses = data.poses("light_t", "light_q", len(self.lights), u, active)
         k_slice = self.world.slice_of(u)
         choice = self._choice(scene)
@@ -428,7 +445,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
 
     def to_string(self) -> str:
         """Mitsuba's description of the integrator."""
-        return f"MotionPathIntegrator[max_depth={self.max_depth}, movers={len(self.world.movers)}]"
+        return f"MotionPathIntegrator[max_depth={self.max_depth}, movers={self.world.rigid}, particles={self.world.particles}]"
 
 
 _registered = False

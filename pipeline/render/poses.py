@@ -14,14 +14,14 @@ where the inverse rigid transform is written (docs/rendering.md, "Time per sampl
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple, Sequence
+from typing import Any, NamedTuple
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
 from ..errors import FrameDataError
-from ..motion.pose import SLERP_LINEAR_BELOW, quat_rotate
+from ..motion.pose import SLERP_LINEAR_BELOW
 
 # The blocks of the per-frame data array, in order (see `FrameData.set`):
 #   mover_t [M, N, 3], mover_q [M, N, 4]   movers' world_from_object across the shutter
@@ -30,9 +30,17 @@ from ..motion.pose import SLERP_LINEAR_BELOW, quat_rotate
 #   camera_q [N, 4]                        camera rotation across the shutter
 #   light_t [L, N, 3], light_q [L, N, 4]   moving lights' world_from_light across the shutter
 #   light_rgb [L, 3]                       moving lights' colours at the frame time
-#   mover_sphere [M, 4]                    movers' rest-frame bounding spheres (centre, radius)
-#   mover_swept [M, 4]                     movers' world-space spheres across the shutter
-FRAME_BLOCKS = ("mover_t", "mover_q", "camera_t", "camera_rel", "sensor_origin", "camera_q", "light_t", "light_q", "light_rgb", "mover_sphere", "mover_swept")
+#   template_offset [T, 3]                 each template's offset in the atlas (render/atlas.py)
+#   template_box [T, 2, 3]                 each template's padded box in the atlas
+#   template_sphere [T, 4]                 each template's rest-frame bounding sphere
+#   particle_p [C, N, 3]                   particles' centres across the shutter
+#   particle_alive [C, N]                  1 where a particle is alive at a sample, else 0
+#   particle_template [C]                  the template (its system's holder) of each particle
+#   reach [1]                              how far behind a ray the broadphase walk starts
+FRAME_BLOCKS = (
+    "mover_t", "mover_q", "camera_t", "camera_rel", "sensor_origin", "camera_q", "light_t", "light_q", "light_rgb",
+    "template_offset", "template_box", "template_sphere", "particle_p", "particle_alive", "particle_template", "reach",
+)
 
 
 def qrot(q: Any, v: Any) -> Any:
@@ -49,7 +57,8 @@ def qconj(q: Any) -> Any:
 
 
 def slerp(q0: Any, q1: Any, f: Any) -> Any:
-    """Shortest-arc spherical interpolation of unit quaternions (w, x, y, z)."""
+    """Shortest-arc spherical interpolation of unit quaternions (w, x, y, z): motion.pose's
+    `slerp` in drjit, with the float32 threshold of `SLERP_LINEAR_BELOW`."""
     d = dr.dot(q0, q1)
     q1 = dr.select(d < 0, -q1, q1)
     d = dr.abs(d)
@@ -160,6 +169,10 @@ class FrameData:
         comps = [dr.gather(mi.Float, self.array, base + c, active) for c in range(width)]
         return mi.Vector3f(*comps) if width == 3 else mi.Vector4f(*comps)
 
+    def scalar(self, block: str, j: Any, active: Any) -> Any:
+        """Element j of the one-float records of `block` (mi.Float)."""
+        return dr.gather(mi.Float, self.array, self.at[block] + j, active)
+
     def pose(self, t_block: str, q_block: str, record: int, i: Any, f: Any, active: Any) -> KernelPose:
         """The pose of the track starting at sample `record` of the blocks, at position f
         of segment i: translation lerped, rotation slerped."""
@@ -184,133 +197,92 @@ class FrameData:
 # --- bounding spheres: rays that miss a mover never pay for its traversal -----------------
 
 
-def bounding_spheres(movers: Sequence[mi.Scene]) -> np.ndarray:
-    """Each mover's bounding sphere in its rest frame (centre, radius): about the centre of
-    its box, as tight as its shapes allow: a mesh's farthest vertex, a sphere's own radius,
-    otherwise the farthest corner of the shape's box. A sphere is culled by a sphere 1.73x
-    smaller across than its box's, so rays near it, and the branches they take in
-    world.py, are a third as many. Padded a little so a grazing ray is never culled by
-    rounding."""
-    out = np.zeros((len(movers), 4))
-    for k, mover in enumerate(movers):
-        box = mover.bbox()
-        lo, hi = np.array(box.min, dtype=float).ravel(), np.array(box.max, dtype=float).ravel()
-        centre = (lo + hi) / 2
-        reach = 0.0
-        for shape in mover.shapes():
-            reach = max(reach, _shape_reach(shape, centre))
-        out[k, :3] = centre
-        out[k, 3] = reach * (1 + 1e-4) + 1e-5
-    return out
+class Movers:
+    """Everything the broadphase holds, at a path's time u, read from the frame data:
+    proxy k < `rigid` is rigid mover k (its pose lerped and slerped between the baked
+    samples around u); proxy k >= `rigid` is particle k - rigid (its centre lerped between
+    the samples around u, no rotation). Each proxy draws a template of the atlas
+    (render/atlas.py): a mover its own, a particle its system's holder sphere. Poses are
+    computed where a ray needs them, per lane, by index: one code path for any count."""
 
-
-def _shape_reach(shape: Any, centre: np.ndarray) -> float:
-    """The farthest any point of `shape` lies from `centre` (an upper bound)."""
-    box = shape.bbox()
-    lo, hi = np.array(box.min, dtype=float).ravel(), np.array(box.max, dtype=float).ravel()
-    if shape.is_mesh():
-        vertices = np.array(shape.vertex_positions_buffer(), dtype=float).reshape(-1, 3)
-        if len(vertices):
-            return float(np.sqrt(((vertices - centre) ** 2).sum(axis=1).max()))
-    elif shape.shape_type() == int(mi.ShapeType.Sphere):
-        return float(np.linalg.norm((lo + hi) / 2 - centre) + (hi[0] - lo[0]) / 2)
-    return float(np.linalg.norm(np.maximum(np.abs(lo - centre), np.abs(hi - centre))))
-
-
-def swept_spheres(t: np.ndarray, q: np.ndarray, rest: np.ndarray) -> np.ndarray:
-    """Each mover's world-space sphere [M, 4] (centre, radius) that holds it at every time
-    of the shutter, from its N baked samples t [M, N, 3], q [M, N, 4] and its rest-frame
-    bounding sphere rest [M, 4] (`bounding_spheres`).
-
-    Between samples j and j + 1 the rest centre c lies at lerp(t) + slerp(q) c: inside the
-    parallelogram of the four points t_a + R(q_b) c (a, b in {j, j + 1}), but for the arc
-    that the rotation bows out of its chord, by at most |c| (1 - cos(theta / 2)) =
-    |c| (1 - |q_j . q_j+1|). The sphere holds all those corners, that bow and the rest
-    radius, padded for float32 rounding in the kernel (positions far from the origin round
-    to about 6e-8 of their distance)."""
-    m = len(rest)
-    out = np.zeros((m, 4))
-    if m == 0:
-        return out
-    t = np.asarray(t, dtype=float)
-    q = np.asarray(q, dtype=float)
-    c = np.broadcast_to(np.asarray(rest, dtype=float)[:, None, :3], t.shape)
-    rc = quat_rotate(q, c)
-    corners = np.concatenate([t + rc, t[:, :-1] + rc[:, 1:], t[:, 1:] + rc[:, :-1]], axis=1)
-    centre = (corners.min(axis=1) + corners.max(axis=1)) / 2
-    reach = np.sqrt(((corners - centre[:, None]) ** 2).sum(axis=2)).max(axis=1)
-    dots = np.abs((q[:, :-1] * q[:, 1:]).sum(axis=2)) if q.shape[1] > 1 else np.ones((m, 1))
-    bow = np.linalg.norm(rest[:, :3], axis=1) * (1.0 - np.minimum(dots, 1.0)).max(axis=1)
-    radius = reach + bow + rest[:, 3]
-    out[:, :3] = centre
-    out[:, 3] = radius * (1 + 1e-4) + 1e-6 * np.abs(centre).max(axis=1) + 1e-5
-    return out
-
-
-class MoverTracks:
-    """The rigid movers at a path's time u, read from the frame data.
-
-    A mover's pose is computed either once per path, before the first ray (`eager`), or
-    on demand where a ray needs it. A ray first meets each mover's swept sphere (`swept`:
-    one value for all lanes, from `swept_spheres`); only lanes past it need the mover's
-    pose at their own time (`pose`) and its posed bounding sphere (`posed_sphere`),
-    exactly as tight as before. On demand, a mover few rays come near costs next to
-    nothing, where its eager pose would cost every path a slerp and keep 7 floats a lane
-    live across the whole path loop (16 movers: 30% of the frame); but a mover that many
-    rays meet at every bounce is posed again at each, and there the eager pose is cheaper
-    (a close-up spinning top: about 10%). `eager_movers` decides per mover, once per job.
-    The pixels are the same bits either way."""
-
-    def __init__(self, data: FrameData, count: int, u: Any, active: Any, eager: Sequence[bool] = ()) -> None:
+    def __init__(self, data: FrameData, rigid: int, particles: int, u: Any, active: Any) -> None:
         self.data = data
-        self.count = count
+        self.rigid = rigid
+        self.particles = particles
         self.active = active
         self.segment = data.segment(u)
-        self._poses: dict[int, KernelPose] = {k: self._pose(k) for k in range(count) if k < len(eager) and eager[k]}
 
     def __len__(self) -> int:
-        return self.count
+        return self.rigid
 
-    def _pose(self, index: Any) -> KernelPose:
+    @property
+    def total(self) -> int:
+        """Rigid movers and particles: the broadphase's proxies."""
+        return self.rigid + self.particles
+
+    def pose(self, index: Any) -> KernelPose:
+        """Rigid mover `index` (an int, or a mi.UInt32 per lane below the count) at the path's time."""
         i, f = self.segment
         return self.data.pose("mover_t", "mover_q", index * self.data.n_samples, i, f, self.active)
 
-    def pose(self, index: Any) -> KernelPose:
-        """Mover `index` (an int, or a mi.UInt32 per lane below the count) at the path's time."""
-        if isinstance(index, int) and index in self._poses:
-            return self._poses[index]
-        return self._pose(index)
+    def particle(self, j: Any, active: Any) -> tuple[Any, Any]:
+        """Particle j's centre at the path's time and whether it is alive then: lerped
+        between the samples around u where it is alive at both, else the nearer one's
+        (a particle born or dying inside the segment)."""
+        i, f = self.segment
+        n = self.data.n_samples
+        a0 = self.data.scalar("particle_alive", j * n + i, active) > 0.5
+        a1 = self.data.scalar("particle_alive", j * n + i + 1, active) > 0.5
+        c0 = self.data.vec("particle_p", 3, j * n + i, active)
+        c1 = self.data.vec("particle_p", 3, j * n + i + 1, active)
+        both = a0 & a1
+        centre = dr.select(both, dr.lerp(c0, c1, f), dr.select(a0, c0, c1))
+        alive = both | dr.select(f < 0.5, a0, a1)
+        return centre, alive
 
-    def swept(self, index: int) -> tuple[Any, Any]:
-        """Mover `index`'s sphere across the whole shutter (world centre, squared radius)."""
-        s = self.data.vec("mover_swept", 4, mi.UInt32(index), self.active)
-        return mi.Vector3f(s.x, s.y, s.z), dr.square(s.w)
+    def proxy(self, k: Any, active: Any) -> tuple[KernelPose, Any, Any]:
+        """Proxy k's pose at the path's time (world_from_rest), its template and whether
+        it exists then (a particle alive)."""
+        rigid = k < self.rigid
+        if self.particles == 0:
+            return self.pose(dr.select(rigid, k, 0)), k, mi.Bool(active)
+        if self.rigid == 0:
+            j = k - self.rigid
+            centre, alive = self.particle(j, active)
+            template = mi.UInt32(self.data.scalar("particle_template", j, active))
+            return KernelPose(centre, mi.Vector4f(1.0, 0.0, 0.0, 0.0)), template, active & alive
+        mover = self.pose(dr.select(rigid, k, 0))
+        j = dr.select(rigid, 0, k - self.rigid)
+        centre, alive = self.particle(j, active & ~rigid)
+        template = dr.select(rigid, k, mi.UInt32(self.data.scalar("particle_template", j, active & ~rigid)))
+        pose = KernelPose(dr.select(rigid, mover.t, centre), dr.select(rigid, mover.q, mi.Vector4f(1.0, 0.0, 0.0, 0.0)))
+        return pose, template, active & (rigid | alive)
 
-    def posed_sphere(self, index: int, pose: KernelPose) -> tuple[Any, Any]:
-        """Mover `index`'s bounding sphere at the path's time (world centre, squared radius)."""
-        s = self.data.vec("mover_sphere", 4, mi.UInt32(index), self.active)
-        return qrot(pose.q, mi.Vector3f(s.x, s.y, s.z)) + pose.t, dr.square(s.w)
+    def proxy_at_sample(self, k: Any, record: int, active: Any) -> KernelPose:
+        """Proxy k's pose at baked sample `record` (0 .. N-1), for motion vectors."""
+        n = self.data.n_samples
+        rigid = k < self.rigid
+        mover = self.data.sample_pose("mover_t", "mover_q", dr.select(rigid, k, 0) * n + record, active & rigid) if self.rigid else None
+        if self.particles == 0:
+            return mover  # type: ignore[return-value]
+        j = dr.select(rigid, 0, k - self.rigid)
+        centre = self.data.vec("particle_p", 3, j * n + record, active & ~rigid)
+        still = KernelPose(centre, mi.Vector4f(1.0, 0.0, 0.0, 0.0))
+        if mover is None:
+            return still
+        return KernelPose(dr.select(rigid, mover.t, still.t), dr.select(rigid, mover.q, still.q))
 
+    def template_sphere(self, template: Any, pose: KernelPose, active: Any) -> tuple[Any, Any]:
+        """A template's bounding sphere posed at the path's time (world centre, squared radius)."""
+        s = self.data.vec("template_sphere", 4, template, active)
+        return pose.point_to_world(mi.Vector3f(s.x, s.y, s.z)), dr.square(s.w)
 
-def eager_movers(swept: np.ndarray, eye: np.ndarray, projection: tuple[str, float], pixels: int, share: float = 0.02) -> list[bool]:
-    """Which movers `MoverTracks` poses once per path: those whose swept sphere [M, 4]
-    covers more than `share` of the image seen from `eye` (camera rays that meet it are
-    likely to meet it again at later bounces); the others on demand. `projection`: the
-    kind (perspective, orthographic) and scale, pixels per unit at distance 1 (perspective)
-    or per metre (orthographic); `pixels`: the image's pixel count."""
-    kind, scale = projection
-    out = []
-    for centre, radius in zip(swept[:, :3], swept[:, 3]):
-        distance = float(np.linalg.norm(centre - eye))
-        if kind == "orthographic":
-            rho = scale * radius
-        elif distance <= radius:
-            out.append(True)  # the camera is inside it
-            continue
-        else:
-            rho = scale * radius / np.sqrt(distance**2 - radius**2)
-        out.append(bool(np.pi * rho**2 > share * pixels))
-    return out
+    def template_box(self, template: Any, active: Any) -> tuple[Any, Any, Any]:
+        """A template's atlas offset and padded box (min, max)."""
+        offset = self.data.vec("template_offset", 3, template, active)
+        lo = self.data.vec("template_box", 3, template * 2, active)
+        hi = self.data.vec("template_box", 3, template * 2 + 1, active)
+        return offset, lo, hi
 
 
 def may_hit(sphere: tuple[Any, Any], ray: Any, active: Any, maxt: Any = None) -> Any:

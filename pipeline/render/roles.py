@@ -1,8 +1,9 @@
 """What each object and light of a scene is to the renderer, fixed for a job.
 
 An object is static (in the static set, built once, its BVH never rebuilt), a rigid mover
-(its own rest-frame scene, posed per path: render/poses.py) or time-sliced geometry
-(particle systems and deforming meshes: render/slices.py). A light is static, moving (a
+(in the atlas, posed per path: render/world.py), a particle system (each particle a sphere
+on its baked path, in the same traversal) or a deforming mesh (time slices:
+render/slices.py). A light is static, moving (a
 record that is `posed_per_path`: point, spot, directional; posed per path by the
 integrator) or animated in another way (an environment light: updated per frame).
 """
@@ -39,9 +40,15 @@ class Roles:
 
     static_names: list[str]
     mover_names: list[str]
-    slice_names: list[str]
+    slice_names: list[str]  # non-rigid geometry: particle systems and deforming meshes
     moving_lights: list[tuple[int, Any]]  # posed per path by the integrator
     animated_lights: list[tuple[int, Any]]  # other lights that change: updated per frame
+    particle_names: tuple[str, ...] = ()  # the particle systems among `slice_names`
+
+    @property
+    def deform_names(self) -> list[str]:
+        """The deforming meshes: the non-rigid objects that are not particle systems."""
+        return [n for n in self.slice_names if n not in self.particle_names]
 
 
 def sort_scene(loaded: LoadedScene) -> Roles:
@@ -65,6 +72,7 @@ def sort_scene(loaded: LoadedScene) -> Roles:
         static_names=static_names,
         mover_names=mover_names,
         slice_names=slice_names,
+        particle_names=tuple(o.name for o in objects if o.name in slice_names and o.is_particles),
         moving_lights=[(i, light) for i, light in animated if light.posed_per_path],
         animated_lights=[(i, light) for i, light in animated if not light.posed_per_path],
     )

@@ -38,15 +38,27 @@ PLUGIN_TYPES: dict[str, str] = {
     "sphere": "Sphere",
     "disk": "Disk",
     "cylinder": "Cylinder",
+    "ellipsoids": "Ellipsoids",
     **{plugin: "Mesh" for plugin in ("cube", "rectangle", "obj", "ply", "serialized")},
 }
 
-# one tiny stand-in per ShapeType: never traced, only its program group matters
-STAND_INS: dict[str, dict[str, Any]] = {
+def _ellipsoid_stand_in() -> dict[str, Any]:
+    """One tiny ellipsoid (the broadphase's shape type: render/broadphase.py)."""
+    import mitsuba as mi
+    import numpy as np
+
+    tensor = lambda a: mi.TensorXf(np.asarray(a, dtype=np.float32))  # noqa: E731
+    return {"type": "ellipsoids", "extent": 1.0, "centers": tensor([[0.0, 0.0, 0.0]]), "scales": tensor([[1e-3] * 3]), "quaternions": tensor([[0.0, 0.0, 0.0, 1.0]])}
+
+
+# one tiny stand-in per ShapeType: never traced, only its program group matters (a
+# callable where the record needs the variant's types)
+STAND_INS: dict[str, Any] = {
     "Mesh": {"type": "cube"},
     "Sphere": {"type": "sphere", "radius": 1e-3},
     "Disk": {"type": "disk"},
     "Cylinder": {"type": "cylinder", "radius": 1e-3},
+    "Ellipsoids": _ellipsoid_stand_in,
 }
 
 
@@ -118,7 +130,7 @@ class SbtOwner:
         if unknown:
             raise SbtOwnerError(f"no SBT stand-in for shape types {unknown} (known: {sorted(STAND_INS)})")
         self.share = shares_sbt() if share is None else bool(share)
-        self.root = load_dict({"type": "scene", **{f"stand_in_{t.lower()}": dict(STAND_INS[t]) for t in self.types}}) if self.share else None
+        self.root = load_dict({"type": "scene", **{f"stand_in_{t.lower()}": STAND_INS[t]() if callable(STAND_INS[t]) else dict(STAND_INS[t]) for t in self.types}}) if self.share else None
         self.bits = _type_bits(self.types)
         self._members: dict[int, Any] = {}  # id -> scene, held so that ids stay unique
 

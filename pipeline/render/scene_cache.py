@@ -2,12 +2,14 @@
 on the cold frame, and the little that changes per warm frame.
 
 Cold (`SceneCache.build`): the static set and its BVH (through the shared disk cache of
-converted assets), the rigid movers' rest-frame scenes, the moving lights' unit emitters,
-the time-sliced groups, and the integrator's job state. Warm (`update`, then `set_frame`):
-the sensor's pose and field of view (a parameter update that rebuilds no BVH), animated
-environment lights' parameters, a mover's scale where it changed (only that mover's small
-BVH), and the per-frame poses of movers, camera and moving lights (one opaque array read
-by the integrator: no BVH rebuild, no recompilation), plus the slices' vertices.
+converted assets), the atlas of the rigid movers' rest-frame shapes and the particle
+systems' holder spheres (render/atlas.py), the moving lights' unit emitters, the
+time-sliced deforming meshes, and the integrator's job state. Warm (`update`, then
+`set_frame`): the sensor's pose and field of view (a parameter update that rebuilds no
+BVH), animated environment lights' parameters, the atlas again where a mover's scale
+changed, the per-frame poses of movers, particles, camera and moving lights (one opaque
+array read by the integrator: no recompilation), the broadphase's proxies (one buffer, one
+BVH build: render/broadphase.py), and the slices' vertices.
 """
 
 from __future__ import annotations
@@ -20,12 +22,14 @@ from ..motion.pose import quat_mul
 from ..scene.lights import light_key
 from ..scene.loader import LoadedScene
 from ..variant import load_dict
-from .build import material_dict, mitsuba_id, object_shapes, unit_light_dict
+from .atlas import Atlas, copy_shape
+from .broadphase import Broadphase, particle_proxies, reach, separate, sphere_proxies, swept_spheres
+from .build import DEFAULT_MATERIAL, emitter_dict, material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
 from .instant import add_lights, add_shapes, light_record, rest_frame, sensor_record
 from .roles import Roles
 from .sbt import SbtOwner, dict_types
-from .shutter_poses import across_shutter
+from .shutter_poses import across_shutter, particles_across_shutter
 from .slices import SlicedGeometry
 
 if TYPE_CHECKING:
@@ -43,9 +47,15 @@ class SceneCache:
         self.max_depth = max_depth
         self.scene: Any = None  # None until the cold frame is built
         self._params: Any = None
-        self._movers: list[Any] = []
-        self._mover_scale: dict[str, np.ndarray] = {}
-        self._mover_params: dict[str, Any] = {}
+        self._mover_stretch: dict[str, np.ndarray] = {}  # name -> [4, 4] the stretch baked into its atlas shapes
+        self._materials: dict[str, Any] = {}
+        self.atlas: Atlas | None = None
+        self.broadphase: Broadphase | None = None
+        self._emitters: dict[int, Any] = {}  # emissive mover -> its rest-frame scene
+        self._capacity: list[int] = []  # particles' room per system (grows by 1.5x: one recompile)
+        self._moving_changed = True  # the atlas or broadphase scene changed: tell the integrator
+        self._holders: dict[str, Any] = {}  # emissive particle system -> its holder sphere's own scene
+        self._reach = 1e-3  # how far behind a ray the broadphase walk starts (broadphase.reach)
         self.sliced: SlicedGeometry | None = None
         self.owner: SbtOwner | None = None  # the SBT owner of every scene the kernel traces
 
@@ -82,29 +92,29 @@ class SceneCache:
         static = [o for o in scene.objects if o.name in set(self.roles.static_names)]
         add_shapes(d, loaded, static, fi, materials)
         add_lights(d, loaded, fi, skip=frozenset(i for i, _ in self.roles.moving_lights))
-        # movers: one rest-frame scene each (scale kept in the rest frame)
-        mover_dicts: list[dict[str, Any]] = []
-        self._mover_scale = {}
-        for name in self.roles.mover_names:
-            obj = next(o for o in scene.objects if o.name == name)
-            t, q, s = fi.objects[name]
-            md: dict[str, Any] = {"type": "scene"}
-            for k, shape in enumerate(object_shapes(obj, loaded, np.diag([*s[0], 1.0]), materials)):
-                md[f"{mitsuba_id(name)}__{k}"] = shape
-            mover_dicts.append(md)
-            self._mover_scale[name] = np.array(s[0])
         # every scene the kernel traces is built against one SBT owner covering their
         # shape types (render/sbt.py: on CUDA the others' traces would be disabled)
-        types = set().union(dict_types(d), *(dict_types(md) for md in mover_dicts), {"Mesh"} if self.roles.slice_names else set())
+        self._materials = materials
+        self._mover_stretch = {name: rest_frame(fi, name) for name in self.roles.mover_names}
+        mover_dicts = [self._mover_dicts(name, self._mover_stretch[name]) for name in self.roles.mover_names]
+        types = set().union(dict_types(d), *(dict_types({str(k): v for k, v in enumerate(md)}) for md in mover_dicts))
+        if self.roles.deform_names:
+            types.add("Mesh")
+        if self.roles.particle_names:
+            types.add("Sphere")
+        if self.roles.mover_names or self.roles.particle_names:
+            types.add("Ellipsoids")
         self.owner = SbtOwner(types)
         self.scene = self.owner.scene(d)
         self._params = mi.traverse(self.scene)
-        movers = [self.owner.scene(md) for md in mover_dicts]
-        self._mover_params = {name: mi.traverse(m) for name, m in zip(self.roles.mover_names, movers)}
-        self._movers = movers
         integrator = self.integrator
         integrator.set_sbt_owner(self.owner)
-        integrator.set_movers(movers, fi.samples)
+        integrator.set_samples(fi.samples)
+        self._emitters = self._emitter_scenes(mover_dicts)
+        self.atlas = Atlas(mi, self.owner.scene)
+        self.broadphase = Broadphase(mi, self.owner.scene)
+        self._capacity = [_room(_particle_count(fi, name)) for name in self.roles.particle_names]
+        self._build_atlas(mover_dicts)
         integrator.set_lights([load_dict(unit_light_dict(light, loaded)) for _, light in self.roles.moving_lights])
         w, h = settings.resolution
         if scene.camera.type == "orthographic":
@@ -112,10 +122,62 @@ class SceneCache:
         else:
             x_fov = float(np.asarray(self._params["sensor.x_fov"]).ravel()[0]) if "sensor.x_fov" in self._params else float(fi.fov[0])
             integrator.set_projection("perspective", (w / 2) / np.tan(np.radians(x_fov) / 2), w, h)
-        self.sliced = SlicedGeometry(mi, loaded, self.roles.slice_names, fi, materials, integrator.set_slices, self.owner)
+        self.sliced = SlicedGeometry(mi, loaded, self.roles.deform_names, fi, materials, integrator.set_slices, self.owner)
         # route the sensor pose through the same parameter update warm frames use, so the
         # first warm frame replays the cold frame's kernels instead of compiling new ones
         self.update(fi)
+
+    def _mover_dicts(self, name: str, stretch: np.ndarray) -> list[dict[str, Any]]:
+        """A mover's shape dictionaries in its rest frame, its stretch [4, 4] baked in."""
+        obj = next(o for o in self.loaded.scene.objects if o.name == name)
+        return object_shapes(obj, self.loaded, stretch, self._materials)
+
+    def _emitter_scenes(self, mover_dicts: list[list[dict[str, Any]]]) -> dict[int, Any]:
+        """The emissive movers' own rest-frame scenes (emitter sampling in the kernel)."""
+        owner = self.owner
+        if owner is None:
+            return {}
+        return {
+            k: owner.scene({"type": "scene", **{f"{mitsuba_id(name)}__{j}": sd for j, sd in enumerate(md)}})
+            for k, (name, md) in enumerate(zip(self.roles.mover_names, mover_dicts))
+            if any("emitter" in sd for sd in md)
+        }
+
+    def _particle_emitters(self) -> list[tuple[int, int, Any]]:
+        """Each emissive particle system's (first particle, room, holder scene), its holder
+        sphere built once per job at the origin (emitter sampling in the kernel)."""
+        out, first = [], 0
+        for k, (name, room) in enumerate(zip(self.roles.particle_names, self._capacity)):
+            holder = self._holders.get(name)
+            if holder is None and self.owner is not None and any("emitter" in d for d in self._holder_dicts(name)):
+                holder = self._holders[name] = self.owner.scene({"type": "scene", "holder": self._holder_dicts(name)[0]})
+            if holder is not None:
+                out.append((first, room, holder))
+            first += room
+        return out
+
+    def _holder_dicts(self, name: str) -> list[dict[str, Any]]:
+        """A particle system's holder: one sphere of the particles' radius at the origin,
+        wearing their material (and emitter); every particle is this sphere, moved."""
+        obj = next(o for o in self.loaded.scene.objects if o.name == name)
+        d: dict[str, Any] = {"type": "sphere", "radius": float(obj.radius)}
+        d["bsdf"] = self._materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
+        if obj.emission is not None:
+            d["emitter"] = emitter_dict(obj.emission, self.loaded)
+        return [d]
+
+    def _build_atlas(self, mover_dicts: list[list[dict[str, Any]]]) -> None:
+        """The atlas of every mover (at its current scale) and particle holder."""
+        atlas = self.atlas
+        if atlas is None:
+            return
+        templates = [[load_dict(sd) for sd in md] for md in mover_dicts]
+        templates += [[load_dict(sd) for sd in self._holder_dicts(name)] for name in self.roles.particle_names]
+        keys = [f"m{k}_{mitsuba_id(n)}" for k, n in enumerate(self.roles.mover_names)] + [f"p{k}_{mitsuba_id(n)}" for k, n in enumerate(self.roles.particle_names)]
+        if templates:
+            if atlas.scene is not None and self.owner is not None:
+                self.owner.forget([atlas.scene])  # the old atlas is no longer traced
+            atlas.build(templates, keys)
 
     # --- per frame (warm) ---------------------------------------------------------------
 
@@ -137,6 +199,7 @@ class SceneCache:
         if changed:
             params.update()
         changed += self._update_mover_scales(fi)
+        self._update_broadphase(fi)  # a scene update, before the render: its kernels are the update's
         return tuple(changed)
 
     def _update_lights(self, fi: StackedFrame) -> list[str]:
@@ -165,52 +228,138 @@ class SceneCache:
 
     def _update_mover_scales(self, fi: StackedFrame) -> list[str]:
         """A mover's stretch (its scale, or the full symmetric stretch under a non-uniform
-        parent scale) is applied in its rest frame, per frame (not per sample): only that
-        mover's small BVH is rebuilt, and only when its stretch changed."""
-        keys: list[str] = []
-        scene = self.loaded.scene
-        for name in self.roles.mover_names:
-            s = rest_frame(fi, name)
-            before = self._mover_scale[name]
-            if np.allclose(s, np.diag([*before, 1.0]) if before.ndim == 1 else before):
-                continue
-            obj = next(o for o in scene.objects if o.name == name)
-            params = self._mover_params[name]
-            for k, shape in enumerate(object_shapes(obj, self.loaded, s, {})):
-                prefix = f"{mitsuba_id(name)}__{k}"
-                if f"{prefix}.to_world" in params:
-                    params[f"{prefix}.to_world"] = shape["to_world"]
-                    keys.append(f"mover:{prefix}.to_world")
-                    continue
-                # a mesh (cube, mesh file) holds its transform in its vertices: the fresh shape's
-                fresh = self._mi.traverse(load_dict(shape))
-                for field in ("vertex_positions", "vertex_normals"):
-                    if field in fresh and f"{prefix}.{field}" in params:
-                        params[f"{prefix}.{field}"] = fresh[field]
-                        keys.append(f"mover:{prefix}.{field}")
-            params.update()
-            self._mover_scale[name] = s
-        return keys
+        parent scale: `instant.rest_frame`) is baked into its atlas shapes, per frame (not per
+        sample): where any mover's stretch changed, the atlas is laid out and built again."""
+        stretches = {name: rest_frame(fi, name) for name in self.roles.mover_names}
+        changed = [name for name in self.roles.mover_names if not np.allclose(stretches[name], self._mover_stretch[name])]
+        if not changed:
+            return []
+        self._mover_stretch = stretches
+        names = self.roles.mover_names
+        atlas = self.atlas
+        # in place where each changed mover still fits its cell (the kernels replay), else
+        # the atlas is laid out and built again
+        fits = atlas is not None and atlas.scene is not None and all(
+            atlas.replace(names.index(name), [load_dict(sd) for sd in self._mover_dicts(name, stretches[name])]) for name in changed
+        )
+        mover_dicts = [self._mover_dicts(name, stretches[name]) for name in names]
+        if not fits:
+            self._build_atlas(mover_dicts)
+            self._moving_changed = True
+        for k, name in enumerate(names):  # an emissive mover's own scene follows, in place
+            if k in self._emitters and name in changed:
+                params = self._mi.traverse(self._emitters[k])
+                for j, sd in enumerate(mover_dicts[k]):
+                    copy_shape(self._mi, params, f"{mitsuba_id(name)}__{j}", load_dict(sd))
+                params.update()
+        return [f"mover:{mitsuba_id(name)} (atlas)" for name in changed]
 
     def set_frame(self, fi: StackedFrame, mode: str, u_fixed: float | None = None) -> None:
-        """The integrator's per-frame poses (movers, camera, moving lights) and the slices'
-        geometry for motion-blur `mode`: the baked samples across the shutter, all at the
-        frame's time (`off`), or all at shutter fraction `u_fixed` (one sub-frame)."""
+        """The integrator's per-frame poses (movers, particles, camera, moving lights), the
+        broadphase's proxies and the slices' geometry for motion-blur `mode`: the baked
+        samples across the shutter, all at the frame's time (`off`), or all at shutter
+        fraction `u_fixed` (one sub-frame)."""
         n = fi.samples
-        m = len(self.roles.mover_names)
-        mt = np.zeros((m, n, 3))
-        mq = np.zeros((m, n, 4))
-        for k, name in enumerate(self.roles.mover_names):
-            t, q, _ = fi.objects[name]
-            mt[k], mq[k] = across_shutter(t, q, n, mode, u_fixed)
+        names = self.roles.mover_names
+        if mode == "off" or u_fixed is not None:
+            poses = [across_shutter(fi.objects[name][0], fi.objects[name][1], n, mode, u_fixed) for name in names]
+            mt = np.array([p[0] for p in poses]).reshape(len(names), n, 3)
+            mq = np.array([p[1] for p in poses]).reshape(len(names), n, 4)
+        else:  # the baked samples as they are: one stack, no per-mover work
+            mt = np.array([fi.objects[name][0][1:] for name in names], dtype=float).reshape(len(names), n, 3)
+            mq = np.array([fi.objects[name][1][1:] for name in names], dtype=float).reshape(len(names), n, 4)
         ct, cq = fi.camera
         q_frame_inv = cq[0] * np.array([1, -1, -1, -1])
         cam_t, cam_q = across_shutter(ct, cq, n, mode, u_fixed)
         rel = quat_mul(cam_q, q_frame_inv[None, :])
         lt, lq, rgb = self._moving_light_frame(fi, mode, u_fixed)
-        self.integrator.set_frame(mt, mq, cam_t, rel, ct[0], cam_q, lt, lq, rgb)
+        moving = self._moving_frame(fi, mode, u_fixed)
+        self.integrator.set_frame(mt, mq, cam_t, rel, ct[0], cam_q, lt, lq, rgb, moving)
         if self.sliced is not None and self.sliced.groups:
             self.sliced.update(fi, mode, u_fixed)
+        # every update above evaluated and finished now (the broadphase's BVH build runs on
+        # drjit's thread pool): left pending, the render's kernel is traced against work that
+        # is done on one frame and not yet on another, and differs between them
+        self._dr.eval()
+        self._dr.sync_thread()
+
+    def _update_broadphase(self, fi: StackedFrame) -> None:
+        """The broadphase's proxies for one frame, from every baked row (the frame's time and
+        the N shutter samples: a bound for every blur mode and sub-frame), written as a
+        scene update before the render (one buffer, one BVH build), and the particles'
+        room (a system past its room grows by 1.5x: one recompile)."""
+        atlas, broad = self.atlas, self.broadphase
+        if atlas is None or broad is None or atlas.scene is None:
+            return
+        counts = [_particle_count(fi, name) for name in self.roles.particle_names]
+        if any(c > room for c, room in zip(counts, self._capacity)):
+            self._capacity = [max(room, _room(c)) for c, room in zip(counts, self._capacity)]
+        total = int(sum(self._capacity))
+        names = self.roles.mover_names
+        m = len(names)
+        rows = fi.samples + 1
+        mt = np.array([fi.objects[name][0] for name in names], dtype=float).reshape(m, rows, 3)
+        mq = np.array([fi.objects[name][1] for name in names], dtype=float).reshape(m, rows, 4)
+        pp, pa, pr = np.zeros((total, rows, 3)), np.zeros((total, rows), bool), np.zeros(total)
+        at = 0
+        for k, (name, room) in enumerate(zip(self.roles.particle_names, self._capacity)):
+            if name in fi.particles:
+                positions, alive = fi.particles[name]
+                pp[at:at + positions.shape[1]] = np.swapaxes(positions, 0, 1)
+                pa[at:at + positions.shape[1]] = np.swapaxes(alive, 0, 1)
+            pr[at:at + room] = atlas.layout.sphere[m + k, 3]
+            at += room
+        proxies = np.concatenate([sphere_proxies(swept_spheres(mt, mq, atlas.layout.sphere[:m])), particle_proxies(pp, pa, pr)])
+        proxies = separate(proxies, self._walk_scale(fi, proxies))
+        self._reach = reach(proxies)
+        scene_before = broad.scene
+        broad.update(proxies)
+        if scene_before is not None and broad.scene is not scene_before and self.owner is not None:
+            self.owner.forget([scene_before])
+        if broad.scene is not scene_before or self._moving_changed or self.integrator.world.particles != total:
+            self.integrator.set_moving(broad.scene, atlas.scene, m, total, self._emitters, self._particle_emitters())
+            self._moving_changed = False
+
+    def _moving_frame(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> dict[str, np.ndarray]:
+        """The atlas's templates and the particles across the shutter for motion-blur `mode`
+        (the frame data's blocks; the broadphase was updated with the scene)."""
+        n = fi.samples
+        atlas = self.atlas
+        if atlas is None or atlas.scene is None:
+            return {}
+        total = int(sum(self._capacity))
+        pp, pa = np.zeros((total, n, 3)), np.zeros((total, n))
+        pt = np.zeros(total)
+        m = len(self.roles.mover_names)
+        at = 0
+        for k, (name, room) in enumerate(zip(self.roles.particle_names, self._capacity)):
+            if name in fi.particles:
+                positions, alive = fi.particles[name]
+                p, a = particles_across_shutter(positions, alive, n, mode, u_fixed)
+                pp[at:at + len(p)], pa[at:at + len(p)] = p, a
+            pt[at:at + room] = m + k
+            at += room
+        return {
+            "template_offset": atlas.layout.offset,
+            "template_box": atlas.layout.box,
+            "template_sphere": atlas.layout.sphere,
+            "particle_p": pp,
+            "particle_alive": pa,
+            "particle_template": pt,
+            "reach": np.array([self._reach]),
+        }
+
+    def _walk_scale(self, fi: StackedFrame, proxies: np.ndarray) -> float:
+        """A bound on the distances of a broadphase walk (`broadphase.separate`): twice the
+        farthest of the static scene's box, the camera and the live proxies from the
+        origin, plus the walk's start behind a ray."""
+        box = self.scene.bbox()
+        far = float(np.abs(np.concatenate([np.array(box.min, dtype=float).ravel(), np.array(box.max, dtype=float).ravel()])).max()) if box.valid() else 0.0
+        live = proxies[np.abs(proxies[:, 0]) < 1e8]
+        if len(live):
+            far = max(far, float((np.abs(live[:, :3]).max(axis=1) + live[:, 3:6].max(axis=1)).max()))
+        far = max(far, float(np.abs(fi.camera[0]).max()))
+        return 2.0 * far * np.sqrt(3.0) + reach(proxies)
 
     def _moving_light_frame(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The moving lights' world_from_light across the shutter ([L, N, 3], [L, N, 4],
@@ -231,3 +380,14 @@ class SceneCache:
         (offset, step): the image rows drawn, a field's with `--fields` (film.render)."""
         self.integrator.set_rows(rows)
         return self._mi.render(self.scene, seed=seed, spp=spp)
+
+
+def _particle_count(fi: StackedFrame, name: str) -> int:
+    """How many particles a system has in this frame's bake."""
+    return int(fi.particles[name][0].shape[1]) if name in fi.particles else 0
+
+
+def _room(count: int) -> int:
+    """Room for `count` particles: a power of two with half as many again to spare, at
+    least 64, so a growing system recompiles rarely."""
+    return max(64, 1 << int(np.ceil(np.log2(max(count, 1) * 1.5))))

@@ -1,12 +1,24 @@
 """The scene a path meets at its own time, for the `motion_path` integrator: the static
-set (one `mi.Scene`, its BVH never rebuilt), the time-sliced groups of non-rigid geometry
-(render/slices.py: one scene per baked sample, a path sees the slice nearest its time) and
-the rigid movers (one rest-frame scene each, posed per path: render/poses.py).
+set (one `mi.Scene`, its BVH never rebuilt), everything that moves rigidly or as particles
+(one broadphase and one atlas, walked in ONE symbolic loop), and the time-sliced deforming
+meshes (render/slices.py: one scene per baked sample, a path sees the slice nearest its
+time).
 
 `intersect` finds the nearest hit over all of them and returns it in world space;
-`occluded` answers a shadow ray against the same set at the same time. All of them are
-traced in one kernel: on CUDA they must share one SBT owner (render/sbt.py), which
-`check_shared` verifies before each render, on every variant.
+`occluded` answers a shadow ray against the same set at the same time. Rigid movers and
+particles cost the kernel the same trace sites whatever their number
+(docs/rendering.md, "One traversal for everything that moves"):
+
+1. the broadphase (render/broadphase.py): one ellipsoid per mover or particle holding it
+   across the shutter, in the engine's own BVH; the walk visits the ellipsoids a ray
+   enters, in order, from `reach` behind its origin up to the nearest hit found so far;
+2. for each one entered, the exact test at the lane's own time: the proxy's pose at u
+   (a mover's slerped pose, a particle's lerped centre), its posed bounding sphere, then
+   the ray in the template's rest frame, moved to its cell of the atlas
+   (render/atlas.py), clipped to the cell's box, and traced there.
+
+All scenes are traced in one kernel: on CUDA they must share one SBT owner (render/sbt.py),
+which `check_shared` verifies before each render, on every variant.
 """
 
 from __future__ import annotations
@@ -15,27 +27,58 @@ from typing import Any, Sequence
 
 import drjit as dr
 import mitsuba as mi
-import numpy as np
 
-from .poses import MoverTracks, bounding_spheres, may_hit
+from .poses import Movers, may_hit
 from .sbt import SbtOwner, check_shared
+
+NONE = 0xFFFFFFFF  # `hit` of a ray that met nothing that moves
+TRACES: list[str] = []  # every trace site this process has traced into a kernel (`trace`)
+
+
+def trace(kind: str, scene: mi.Scene, ray: Any, active: Any, preliminary: bool = False) -> Any:
+    """The one place a kernel traces a scene: `kind` is "intersect" or "occluded". Each
+    call while a kernel is traced is one trace site in it; `TRACES` counts them, so a test
+    can check that the count does not grow with the scene."""
+    TRACES.append(kind)
+    if kind == "occluded":
+        return scene.ray_test(ray, active)
+    if preliminary:
+        return scene.ray_intersect_preliminary(ray, coherent=False, active=active)
+    return scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
 
 
 class World:
-    """The geometry of one job besides the static scene: movers and slice groups."""
+    """The geometry of one job besides the static scene: the broadphase and atlas of
+    movers and particles, the emissive movers' own scenes, and the slice groups."""
 
     def __init__(self) -> None:
-        self.movers: list[mi.Scene] = []
-        self.slices: list[list[mi.Scene]] = []  # per non-rigid object: one scene per shutter sample
-        self.emissive: list[int] = []  # indices of movers that carry area emitters
+        self.broadphase: mi.Scene | None = None  # render/broadphase.py
+        self.atlas: mi.Scene | None = None  # render/atlas.py
+        self.rigid = 0  # rigid movers (proxies 0 .. rigid - 1)
+        self.particles = 0  # particle capacity (proxies rigid .. rigid + particles - 1)
+        self.emitters: dict[int, mi.Scene] = {}  # emissive mover -> its rest-frame scene (emitter sampling)
+        self.particle_emitters: list[tuple[int, int, mi.Scene]] = []  # emissive particle systems: (first particle, room, holder scene)
+        self.slices: list[list[mi.Scene]] = []  # per deforming object: one scene per shutter sample
         self.emissive_slices: list[int] = []  # indices of slice groups that carry area emitters
-        self._spheres: tuple[list[tuple[float, ...]], np.ndarray] | None = None  # (boxes, spheres)
         self.owner: SbtOwner | None = None  # the SBT owner of every scene traced (render/sbt.py)
         self._checked: tuple[int, ...] | None = None  # the set of scenes `check_shared` last passed
 
+    @property
+    def emissive(self) -> list[int]:
+        """Indices of the rigid movers that carry area emitters."""
+        return sorted(self.emitters)
+
+    @property
+    def moving(self) -> bool:
+        """Whether anything is in the broadphase."""
+        return self.rigid + self.particles > 0 and self.broadphase is not None and self.atlas is not None
+
     def traced(self, scene: mi.Scene) -> list[mi.Scene]:
-        """Every scene one kernel traces: the static `scene`, the movers, every slice."""
-        return [scene, *self.movers, *(s for group in self.slices for s in group)]
+        """Every scene one kernel traces: the static `scene`, the broadphase and atlas, the
+        emissive movers' scenes, every slice."""
+        moving = [self.broadphase, self.atlas] if self.moving else []
+        holders = [h for _, _, h in self.particle_emitters]
+        return [scene, *moving, *(self.emitters[k] for k in self.emissive), *holders, *(s for group in self.slices for s in group)]  # type: ignore[list-item]
 
     def set_owner(self, owner: SbtOwner | None) -> None:
         """The SBT owner every traced scene was built against (render/sbt.py)."""
@@ -52,32 +95,54 @@ class World:
             check_shared(traced, self.owner)
             self._checked = key
 
-    def set_movers(self, movers: Sequence[mi.Scene]) -> None:
-        """The rigid movers' rest-frame scenes (fixed for a job)."""
-        self.movers = list(movers)
-        self.emissive = [k for k, m in enumerate(self.movers) if len(m.emitters()) > 0]
-        self._spheres = None
+    def set_moving(self, broadphase: mi.Scene | None, atlas: mi.Scene | None, rigid: int, particles: int, emitters: dict[int, mi.Scene],
+                   particle_emitters: Sequence[tuple[int, int, mi.Scene]] = ()) -> None:
+        """The broadphase and atlas scenes, the counts of rigid movers and particles they
+        hold, the emissive movers' rest-frame scenes, and for each emissive particle system
+        its particles' range (first, room) and its holder sphere's own scene."""
+        self.broadphase, self.atlas = broadphase, atlas
+        self.rigid, self.particles = rigid, particles
+        self.emitters = dict(emitters)
+        self.particle_emitters = list(particle_emitters)
         self._checked = None
 
-    def bounding_spheres(self) -> np.ndarray:
-        """The movers' rest-frame bounding spheres [M, 4] (`poses.bounding_spheres`), made
-        again only when a mover's box changed (a keyed scale): a mesh mover's sphere reads
-        its vertices, which a warm frame need not do."""
-        boxes = [tuple(np.array(b.min, dtype=float).ravel()) + tuple(np.array(b.max, dtype=float).ravel()) for b in (m.bbox() for m in self.movers)]
-        if self._spheres is None or self._spheres[0] != boxes:
-            self._spheres = (boxes, bounding_spheres(self.movers))
-        return self._spheres[1]
+    def sample_particle_emitter(self, system: int, movers: Movers, si: Any, sample1: Any, sample2: Any, active: Any) -> tuple[Any, Any]:
+        """An emitter sample of emissive particle system `system` at the path's time: one of
+        its particle slots chosen uniformly (a slot dead at that time gives nothing), a
+        point of that sphere sampled by solid angle from si (its holder's own sampling, the
+        sphere moved to the particle's centre). (DirectionSample3f in world space with the
+        slot's choice in its pdf, weight)."""
+        first, room, holder = self.particle_emitters[system]
+        slot = dr.minimum(mi.UInt32(sample1 * room), room - 1)
+        centre, alive = movers.particle(slot + first, active)
+        ok = active & alive
+        ref = mi.Interaction3f(si.t, si.time, si.wavelengths, si.p - centre, si.n)
+        ds, weight = holder.sample_emitter_direction(ref, sample2, False, ok)
+        ds.p = ds.p + centre
+        ds.pdf = ds.pdf / room
+        return ds, dr.select(ok, weight * room, 0.0)
+
+    def particle_emitter_pdf(self, ds: Any, ref: Any, hit: Any, movers: Movers, pdf: Any, active: Any) -> Any:
+        """The solid-angle pdf with which `sample_particle_emitter` would have chosen the
+        point a BSDF-sampled ray hit on an emissive particle (`pdf` elsewhere)."""
+        for first, room, holder in self.particle_emitters:
+            base = self.rigid + first
+            mine = active & (hit >= base) & (hit < base + room)
+            centre, _ = movers.particle(dr.select(mine, hit - self.rigid, 0), mine)
+            local_ref = mi.Interaction3f(ref.t, ref.time, ref.wavelengths, ref.p - centre, ref.n)
+            local = mi.DirectionSample3f(ds.p - centre, ds.n, ds.uv, ds.time, ds.pdf, ds.delta, ds.d, ds.dist, ds.emitter)
+            pdf = dr.select(mine, holder.pdf_emitter_direction(local_ref, local, mine) / room, pdf)
+        return pdf
 
     def set_slices(self, groups: Sequence[Sequence[mi.Scene]]) -> None:
-        """For each deforming object or particle system, one world-space scene per slice."""
+        """For each deforming object, one world-space scene per slice."""
         self.slices = [list(g) for g in groups]
         self._checked = None
         self.emissive_slices = [k for k, g in enumerate(self.slices) if g and len(g[0].emitters()) > 0]
 
     def slice_hit(self, group: int) -> int:
-        """The `hit_mover` value of a hit on slice group `group`: past the movers' indices
-        and their "none" (len(movers)), so mover tests never match it."""
-        return len(self.movers) + 1 + group
+        """The `hit` value of a hit on slice group `group`: below `NONE`, above any proxy."""
+        return NONE - 1 - group
 
     def sample_slice_emitter(self, group: int, si: Any, sample: Any, k: Any, active: Any) -> tuple[Any, Any]:
         """An emitter direction sample from the emissive slice group `group` at the path's
@@ -104,80 +169,135 @@ class World:
         count = len(self.slices[0]) if self.slices else 1
         return mi.UInt32(dr.round(dr.clip(u, 0.0, 1.0) * (count - 1)))
 
-    def intersect(self, scene: mi.Scene, ray: mi.Ray3f, movers: MoverTracks, active: Any, k: Any) -> tuple[Any, Any, Any]:
-        """Nearest hit over all scenes, in world space; whether it is on a mover or a
-        slice; and which mover (len(movers) for none). `movers`: the movers at the path's
-        time; k: its slice."""
-        si = scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
+    # --- the traversal of everything that moves --------------------------------------------
+
+    def _cell_ray(self, movers: Movers, k: Any, ray: Any, active: Any, maxt: Any) -> tuple[Any, Any, Any, Any]:
+        """Proxy k's exact test, up to the trace: (the ray in its template's atlas cell,
+        clipped to the cell's box and starting at its entry; that entry's distance t0 along
+        the world ray; whether there is anything to trace; the proxy's pose at u)."""
+        pose, template, exists = movers.proxy(k, active)
+        near = may_hit(movers.template_sphere(template, pose, exists), ray, exists, maxt)
+        offset, lo, hi = movers.template_box(template, near)
+        local = pose.ray_to_rest(ray)
+        o = local.o + offset
+        d = local.d
+        # slab test of the ray's segment [0, maxt] against the cell's box (a zero component
+        # of d: a huge finite inverse, never inf * 0)
+        inv = dr.rcp(dr.select(dr.abs(d) < 1e-30, dr.select(d < 0, -1e-30, 1e-30), d))
+        ta, tb = (lo - o) * inv, (hi - o) * inv
+        t0 = dr.maximum(dr.max(dr.minimum(ta, tb)), 0.0)
+        t1 = dr.minimum(dr.min(dr.maximum(ta, tb)), maxt)
+        ok = near & (t0 <= t1)
+        cell = mi.Ray3f(ray)
+        cell.o = o + d * t0
+        cell.d = d
+        cell.maxt = dr.maximum(t1 - t0, 0.0)
+        return cell, t0, ok, pose
+
+    def _walk(self, movers: Movers, ray: Any, active: Any, state: tuple[Any, ...], visit: Any, maxt_of: Any) -> tuple[Any, ...]:
+        """The broadphase walk: from `reach` behind the ray's origin, each ellipsoid entry in
+        order, `visit(k, state, live)` for the proxy k entered; stops where the next entry
+        lies beyond `maxt_of(state)` (the nearest hit so far, or the shadow ray's end) or
+        `visit` clears the lane."""
+        reach = self.reach(movers)
+        start = ray.o - ray.d * reach
+
+        def cond(t_b: Any, live: Any, *rest: Any) -> Any:
+            return live
+
+        def body(t_b: Any, live: Any, *rest: Any) -> tuple[Any, ...]:
+            probe = mi.Ray3f(ray)
+            probe.o = start + ray.d * t_b
+            probe.maxt = dr.maximum(reach + maxt_of(rest) - t_b, 0.0)
+            pb = trace("intersect", self.broadphase, probe, live, preliminary=True)
+            found = live & pb.is_valid()
+            rest, live_after = visit(mi.UInt32(pb.prim_index), rest, found)
+            entered = t_b + pb.t
+            # past this entry (never 0: an ellipsoid just entered is not entered again)
+            t_b = dr.select(found, entered + dr.maximum(entered * 2e-7, 1e-7), t_b)
+            return (t_b, found & live_after, *rest)
+
+        out = dr.while_loop((mi.Float(0.0), mi.Bool(active), *state), cond, body, labels=("t_b", "live", *(f"s{i}" for i in range(len(state)))), label="broadphase")
+        return tuple(out[2:])
+
+    def reach(self, movers: Movers) -> Any:
+        """How far behind a ray its broadphase walk starts (render/broadphase.py `reach`)."""
+        return movers.data.scalar("reach", mi.UInt32(0), True)
+
+    def _nearest_moving(self, movers: Movers, ray: Any, active: Any, nearest: Any) -> tuple[Any, Any, Any, Any]:
+        """The nearest hit on anything that moves closer than `nearest`: (its preliminary
+        intersection in the atlas, its distance, the proxy index or NONE, the distance t0 of
+        its cell entry)."""
+        state = (dr.zeros(mi.PreliminaryIntersection3f), mi.Float(nearest), mi.UInt32(NONE), mi.Float(0.0))
+
+        def visit(k: Any, st: tuple[Any, ...], live: Any) -> tuple[tuple[Any, ...], Any]:
+            best, near_t, hit, hit_t0 = st
+            cell, t0, ok, _ = self._cell_ray(movers, k, ray, live, near_t)
+            pi = trace("intersect", self.atlas, cell, ok, preliminary=True)
+            t = pi.t + t0
+            closer = ok & pi.is_valid() & (t < near_t)
+            return (dr.select(closer, pi, best), dr.select(closer, t, near_t), dr.select(closer, k, hit), dr.select(closer, t0, hit_t0)), live
+
+        best, near_t, hit, hit_t0 = self._walk(movers, ray, active, state, visit, lambda st: st[1])
+        return best, near_t, hit, hit_t0
+
+    # --- the queries --------------------------------------------------------------------------
+
+    def intersect(self, scene: mi.Scene, ray: mi.Ray3f, movers: Movers, active: Any, k: Any) -> tuple[Any, Any, Any]:
+        """Nearest hit over all scenes, in world space; whether it is on something that
+        moves or a slice; and what it is (`hit`): a proxy index (a rigid mover below
+        `movers.rigid`, a particle above), `slice_hit(g)` for an emissive slice group, NONE
+        otherwise. `movers`: the movers at the path's time; k: its slice."""
+        si = trace("intersect", scene, ray, active)
         on_mover = mi.Bool(False)
-        hit_mover = mi.UInt32(len(self.movers))
+        hit = mi.UInt32(NONE)
         for g, group in enumerate(self.slices):
             for s, slice_scene in enumerate(group):
                 mine = active & (k == s)
-                si_s = slice_scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=mine)
+                si_s = trace("intersect", slice_scene, ray, mine)
                 closer = mine & si_s.is_valid() & (si_s.t < si.t)
                 si = dr.select(closer, si_s, si)
                 on_mover |= closer
                 if g in self.emissive_slices:
-                    hit_mover = dr.select(closer, mi.UInt32(self.slice_hit(g)), hit_mover)
-        # movers: a preliminary hit per mover (traversal only, and only for rays that meet
-        # its swept sphere and then its bounding sphere at their time); the surface
-        # interaction of the nearest is computed once, in its rest frame, and moved to
-        # world space
+                    hit = dr.select(closer, mi.UInt32(self.slice_hit(g)), hit)
+        if not self.moving:
+            return si, on_mover, hit
         nearest = dr.select(si.is_valid(), si.t, dr.inf)
-        best = dr.zeros(mi.PreliminaryIntersection3f)
-        for index, mover in enumerate(self.movers):
-            # only up to the nearest hit so far: a mover whose sphere lies beyond it cannot be closer
-            swept = may_hit(movers.swept(index), ray, active, nearest)
+        best, _, proxy, t0 = self._nearest_moving(movers, ray, active, nearest)
+        won = active & (proxy != NONE)
 
-            def visit(best: Any, nearest: Any, hit_mover: Any, mover: Any = mover, index: int = index, swept: Any = swept) -> tuple[Any, Any, Any]:
-                # posed at the lane's own time only past the swept sphere: the exact test
-                pose = movers.pose(index)
-                near = may_hit(movers.posed_sphere(index, pose), ray, swept, nearest)
-                local = pose.ray_to_rest(ray)
-                local.maxt = dr.minimum(local.maxt, nearest)
-                pi = mover.ray_intersect_preliminary(local, coherent=False, active=near)
-                closer = near & pi.is_valid() & (pi.t < nearest)
-                return dr.select(closer, pi, best), dr.select(closer, pi.t, nearest), dr.select(closer, mi.UInt32(index), hit_mover)
+        # the winner's surface interaction, in its atlas cell, moved to world space: a
+        # branch, so packets in which no lane hit anything moving skip it
+        def surface(si: Any) -> Any:
+            pose, template, _ = movers.proxy(dr.select(won, proxy, 0), won)
+            offset = movers.template_box(template, won)[0]
+            local = pose.ray_to_rest(ray)
+            cell = mi.Ray3f(local)
+            cell.o = local.o + offset + local.d * t0  # the traversal's cell ray, as traced
+            cell.maxt = dr.inf
+            si_m = best.compute_surface_interaction(cell, mi.RayFlags.All, won)
+            si_m.t = si_m.t + t0
+            si_m.p = si_m.p - offset
+            return dr.select(won, pose.surface_to_world(si_m), si)
 
-            best, nearest, hit_mover = _if_any(swept, visit, (best, nearest, hit_mover))
-        if self.movers:
-            won = active & (hit_mover < len(self.movers))
+        si = dr.if_stmt((si,), won, surface, lambda si: si, label="moving_surface")
+        return si, on_mover | won, dr.select(won, proxy, hit)
 
-            # a branch too: packets in which no lane hit a mover skip the winner's pose,
-            # its surface interaction and the selects over the whole interaction
-            def surface(si: Any) -> Any:
-                pose = movers.pose(dr.select(won, hit_mover, 0))
-                si_m = best.compute_surface_interaction(pose.ray_to_rest(ray), mi.RayFlags.All, won)
-                return dr.select(won, pose.surface_to_world(si_m), si)
-
-            si = _if_any(won, surface, (si,))
-            on_mover |= won
-        return si, on_mover, hit_mover
-
-    def occluded(self, scene: mi.Scene, ray: mi.Ray3f, movers: MoverTracks, active: Any, k: Any) -> Any:
+    def occluded(self, scene: mi.Scene, ray: mi.Ray3f, movers: Movers, active: Any, k: Any) -> Any:
         """Whether a shadow ray is blocked by any scene at the path's time."""
-        hit = scene.ray_test(ray, active)
+        hit = trace("occluded", scene, ray, active)
         for group in self.slices:
             for s, slice_scene in enumerate(group):
-                hit |= slice_scene.ray_test(ray, active & ~hit & (k == s))
-        for index, mover in enumerate(self.movers):
-            swept = may_hit(movers.swept(index), ray, active & ~hit)
+                hit |= trace("occluded", slice_scene, ray, active & ~hit & (k == s))
+        if not self.moving:
+            return hit
 
-            def test(hit: Any, mover: Any = mover, index: int = index, swept: Any = swept) -> Any:
-                pose = movers.pose(index)
-                near = may_hit(movers.posed_sphere(index, pose), ray, swept)
-                return hit | mover.ray_test(pose.ray_to_rest(ray), near)
+        def visit(proxy: Any, st: tuple[Any, ...], live: Any) -> tuple[tuple[Any, ...], Any]:
+            (blocked,) = st
+            cell, _, ok, _ = self._cell_ray(movers, proxy, ray, live, ray.maxt)
+            blocked |= trace("occluded", self.atlas, cell, ok)
+            return (blocked,), live & ~blocked
 
-            hit = _if_any(swept, test, (hit,))
-        return hit
+        (blocked,) = self._walk(movers, ray, active & ~hit, (mi.Bool(False),), visit, lambda st: ray.maxt)
+        return hit | blocked
 
-
-def _if_any(cond: Any, body: Any, state: tuple[Any, ...]) -> Any:
-    """`body(*state)` where `cond` holds, else the state unchanged, as a symbolic branch:
-    on the LLVM backend a packet of lanes none of which meets a mover's swept sphere
-    jumps over its pose, its rest-frame ray, its BVH call and the selects (and one in
-    which no lane hit a mover, over the winner's surface interaction), so a frame pays
-    for the movers its rays can hit, not for every mover on every ray (masked lanes alone
-    would still compute all of it). The values are those of the masked code, bit for bit."""
-    return dr.if_stmt(state, cond, body, lambda *unchanged: unchanged if len(unchanged) > 1 else unchanged[0], label="mover")

@@ -1,0 +1,203 @@
+"""The broadphase over everything that moves: one ellipsoid per moving thing, holding it
+across the whole shutter, in ONE Mitsuba scene whose BVH (the engine's own) is rebuilt
+per frame from one buffer.
+
+Mitsuba's `ellipsoids` shape reports a ray's *entry* into an ellipsoid only (a ray that
+starts inside one does not see it). The kernel (render/world.py) walks a ray's entries in
+order, each a candidate for the exact test at the ray's own time, starting the walk a
+distance `reach` behind the ray's origin: every proxy is smaller across than `reach`, so
+each one that the ray's segment meets is entered after that start, and none is missed
+(docs/rendering.md, "One traversal for everything that moves").
+
+Proxies, computed here on the host from the baked samples across the shutter:
+- a rigid mover: its swept sphere (render/poses.py `swept_spheres`);
+- a particle: the capsule its sphere sweeps along its path (the chord from the first to
+  the last sample, thickened by the farthest sample from that chord), held by a sphere
+  when the path is short, else by an ellipsoid along the chord (semi-axes sqrt(2) (h + r)
+  and sqrt(2) r hold a capsule of half-length h and radius r); a particle dead at every
+  sample has an empty proxy far away.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+
+from ..motion.pose import quat_rotate
+
+FLOATS = 10  # one ellipsoid in Mitsuba's data buffer: centre (3), semi-axes (3), quaternion (x, y, z, w)
+FAR = 1e9  # where empty proxies sit: no ray reaches them within a scene's reach
+
+
+def swept_spheres(t: np.ndarray, q: np.ndarray, rest: np.ndarray) -> np.ndarray:
+    """Each mover's world-space sphere [M, 4] (centre, radius) that holds it at every time
+    of the shutter, from its N baked samples t [M, N, 3], q [M, N, 4] and its rest-frame
+    bounding sphere rest [M, 4] (`bounding_spheres`).
+
+    Between samples j and j + 1 the rest centre c lies at lerp(t) + slerp(q) c: inside the
+    parallelogram of the four points t_a + R(q_b) c (a, b in {j, j + 1}), but for the arc
+    that the rotation bows out of its chord, by at most |c| (1 - cos(theta / 2)) =
+    |c| (1 - |q_j . q_j+1|). The sphere holds all those corners, that bow and the rest
+    radius, padded for float32 rounding in the kernel (positions far from the origin round
+    to about 6e-8 of their distance)."""
+    m = len(rest)
+    out = np.zeros((m, 4))
+    if m == 0:
+        return out
+    t = np.asarray(t, dtype=float)
+    q = np.asarray(q, dtype=float)
+    c = np.broadcast_to(np.asarray(rest, dtype=float)[:, None, :3], t.shape)
+    rc = quat_rotate(q, c)
+    corners = np.concatenate([t + rc, t[:, :-1] + rc[:, 1:], t[:, 1:] + rc[:, :-1]], axis=1)
+    centre = (corners.min(axis=1) + corners.max(axis=1)) / 2
+    reach = np.sqrt(((corners - centre[:, None]) ** 2).sum(axis=2)).max(axis=1)
+    dots = np.abs((q[:, :-1] * q[:, 1:]).sum(axis=2)) if q.shape[1] > 1 else np.ones((m, 1))
+    bow = np.linalg.norm(rest[:, :3], axis=1) * (1.0 - np.minimum(dots, 1.0)).max(axis=1)
+    radius = reach + bow + rest[:, 3]
+    out[:, :3] = centre
+    out[:, 3] = radius * (1 + 1e-4) + 1e-6 * np.abs(centre).max(axis=1) + 1e-5
+    return out
+
+
+def sphere_proxies(spheres: np.ndarray) -> np.ndarray:
+    """Ellipsoid records [P, 10] for spheres [P, 4] (centre, radius)."""
+    out = np.zeros((len(spheres), FLOATS))
+    out[:, :3] = spheres[:, :3]
+    out[:, 3:6] = spheres[:, 3:4]
+    out[:, 9] = 1.0
+    return out
+
+
+def particle_proxies(positions: np.ndarray, alive: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """Ellipsoid records [C, 10] holding each particle across the shutter: positions
+    [C, N, 3] and alive [C, N] at the N samples, radius [C]."""
+    count = len(positions)
+    out = np.zeros((count, FLOATS))
+    out[:, 9] = 1.0
+    if count == 0:
+        return out
+    live = alive.any(axis=1)
+    # the path's ends: the first and last samples the particle is alive at
+    first = np.argmax(alive, axis=1)
+    last = alive.shape[1] - 1 - np.argmax(alive[:, ::-1], axis=1)
+    rows = np.arange(count)
+    a, b = positions[rows, first], positions[rows, last]
+    chord = b - a
+    length = np.linalg.norm(chord, axis=1)
+    axis = np.where(length[:, None] > 0, chord / np.where(length > 0, length, 1.0)[:, None], np.array([1.0, 0.0, 0.0]))
+    # the farthest live sample from the chord segment (a path that bends: gravity)
+    rel = positions - a[:, None, :]
+    s = np.clip(np.einsum("cnk,ck->cn", rel, axis), 0.0, length[:, None])
+    off = np.linalg.norm(rel - s[..., None] * axis[:, None, :], axis=2)
+    dev = np.where(alive, off, 0.0).max(axis=1)
+    r = np.asarray(radius, dtype=float) + dev
+    h = length / 2
+    centre = (a + b) / 2
+    # float32 rounding in the kernel (positions far from the origin round to ~6e-8 of their distance)
+    pad = 1e-4 * (h + r) + 1e-6 * np.abs(centre).max(axis=1) + 1e-6
+    sphere = h < 0.68 * r  # a short path: a sphere of radius h + r is the smaller proxy
+    semi_long = np.where(sphere, h + r, np.sqrt(2.0) * (h + r)) + pad
+    semi_side = np.where(sphere, h + r, np.sqrt(2.0) * r) + pad
+    out[:, :3] = centre
+    out[:, 3] = semi_long
+    out[:, 4:6] = semi_side[:, None]
+    out[:, 6:10] = _quat_from_x(axis)
+    out[~live, :3] = FAR
+    out[~live, 3:6] = 1e-6
+    return out
+
+
+def _quat_from_x(axis: np.ndarray) -> np.ndarray:
+    """Unit quaternions (x, y, z, w) [C, 4] turning +X onto each unit `axis` [C, 3]."""
+    x = np.array([1.0, 0.0, 0.0])
+    c = axis @ x
+    v = np.cross(np.broadcast_to(x, axis.shape), axis)
+    q = np.concatenate([v, (1.0 + c)[:, None]], axis=1)
+    opposite = c < -1.0 + 1e-12  # half a turn: about +Z
+    q[opposite] = [0.0, 0.0, 1.0, 0.0]
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def separate(proxies: np.ndarray, scale: float) -> np.ndarray:
+    """The proxies [P, 10] with coincident ones made apart: proxies whose centres lie
+    within a few float steps of each other (the parts of one rigid body share one swept
+    sphere; particles emitted from one point) are entered at the same distance, and the
+    walk, which steps past each entry it visits, would skip all but one. Within each such
+    group the semi-axes grow by a gap per rank, so their entries along any ray differ by
+    more than the walk's step. `scale`: a bound on the walk's distances (its step is
+    about 2e-7 of the distance)."""
+    out = np.array(proxies, dtype=float, copy=True)
+    if len(out) < 2:
+        return out
+    tol = 4e-7 * scale + 2e-7
+    gap = 4.0 * tol
+    cells = np.floor(out[:, :3] / (8.0 * tol)).astype(np.int64)
+    order = np.lexsort((out[:, 3], cells[:, 2], cells[:, 1], cells[:, 0]))
+    c = cells[order]
+    same = np.concatenate([[False], np.all(c[1:] == c[:-1], axis=1)])
+    if not same.any():
+        return out
+    # rank within each run of one cell: 0, 1, 2, ... (runs start where `same` is False)
+    start = np.maximum.accumulate(np.where(~same, np.arange(len(order)), 0))
+    rank = np.arange(len(order)) - start
+    out[order, 3:6] += (rank * gap)[:, None]
+    return out
+
+
+def reach(proxies: np.ndarray) -> float:
+    """How far behind a ray's origin its broadphase walk starts: more than any live proxy
+    is across (twice its largest semi-axis), padded."""
+    live = proxies[np.abs(proxies[:, 0]) < FAR / 2] if len(proxies) else proxies
+    if len(live) == 0:
+        return 1e-3
+    return float(2.0 * live[:, 3:6].max() * (1 + 1e-3) + 1e-3)
+
+
+class Broadphase:
+    """The ellipsoids scene of one job, with room for `capacity` proxies (a larger count
+    rebuilds it: one new kernel). `make_scene`: the SBT owner's scene builder."""
+
+    def __init__(self, mi: Any, make_scene: Callable[[dict[str, Any]], Any]) -> None:
+        self._mi = mi
+        self._make_scene = make_scene
+        self.scene: Any = None
+        self._params: Any = None
+        self.count = 0
+
+    def update(self, proxies: np.ndarray) -> None:
+        """The frame's proxies [P, 10]: one buffer written, one BVH build."""
+        mi = self._mi
+        data = np.asarray(proxies, dtype=np.float32)
+        fresh = self.scene is None or len(data) != self.count
+        if fresh:
+            tensor = lambda a: mi.TensorXf(np.ascontiguousarray(a, dtype=np.float32))  # noqa: E731
+            shape = {"type": "ellipsoids", "extent": 1.0, "centers": tensor(data[:, :3]), "scales": tensor(data[:, 3:6]), "quaternions": tensor(data[:, 6:10])}
+            self.scene = self._make_scene({"type": "scene", "broadphase": shape})
+            self._params = mi.traverse(self.scene)
+            self.count = len(data)
+        # written through the parameter update on every frame, the first too: a frame then
+        # traces the same variables, in the same order, as the next, and the cold frame's
+        # kernels are the warm frames' (a fresh shape's own arrays would compile them again)
+        import drjit as dr
+
+        # written in place (no new variable each frame): with a new buffer per frame the
+        # render's kernels came in two variants, one or the other per frame. The write is
+        # in place, or a copy where something still holds the buffer (timing decides); a new
+        # scene is written both ways, so both kernels are the cold frame's to compile.
+        for shared in ([True, False] if fresh else [False]):
+            current = self._params["broadphase.data"]
+            held = mi.Float(current) if shared else None  # a second reference: the copying write
+            dr.scatter(current, mi.Float(data.ravel()), dr.arange(mi.UInt32, data.size))
+            self._params.set_dirty("broadphase.data")
+            self._params.update()
+            dr.eval()
+            del held
+        # the BVH built and every value of the update evaluated here, the same way each
+        # frame: one ray traced now (a trace waits for the build). Left to the render's first
+        # trace, the build's own kernels ran inside it on some frames and not on others, and
+        # the render's kernels came in two variants
+
+        probe = mi.Ray3f(mi.Point3f(0.0, 0.0, 0.0), mi.Vector3f(0.0, 0.0, 1.0))
+        dr.eval(self.scene.ray_intersect_preliminary(probe).t)
+        dr.sync_thread()
