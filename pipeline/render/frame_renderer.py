@@ -76,7 +76,7 @@ def _collector_held(cold: bool) -> Iterator[None]:
     shape and emitter of the process (the domains of its virtual calls): a stray instance
     in a reference cycle, or one the collector frees half way through the build (when it
     runs depends on allocation counts, which other threads move), gives the scene other
-    ids and so a kernel `motion cache warm` never compiled (issue 38.6)."""
+    ids and so a kernel `motion cache warm` never compiled."""
     if not cold:
         yield
         return

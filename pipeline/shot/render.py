@@ -205,7 +205,7 @@ def preflight(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: 
 def worker_memory_problem(loaded: LoadedScene) -> Any:
     """A frame whose render pass cannot fit the address space a worker may use (RLIMIT_AS,
     which workers inherit), located at render.resolution: found here, not as a
-    std::bad_alloc on every attempt after the bake (4096x4096 under 2 GiB: exit 3 after 54 s)."""
+    std::bad_alloc on every attempt after the bake (docs/scene-format.md, "a render pass")."""
     from ..limits import FRAME_BYTES_PER_PIXEL, PASS_BYTES_PER_LANE, WORKER_BASE_BYTES, address_space_limit, pass_lanes
 
     limit = address_space_limit()
@@ -277,8 +277,8 @@ INLINE_MAX_WORK_S = 1.5  # estimated seconds of warm frames under which a job re
 
 def choose_inline(req: RenderRequest, cost: dict[str, Any], todo: list[int]) -> bool:
     """Whether the job's frames are cheaper to render here than to spread over spawned
-    workers: each worker costs an import of the stack and a cold scene build (about 0.6 s
-    on 2 cores) and parallel workers save at most the frames' own time, so a job whose
+    workers: each worker costs an import of the stack and a cold scene build (docs/farm.md,
+    "Tasks, executors, threads") and parallel workers save at most the frames' own time, so a job whose
     frames are estimated at under INLINE_MAX_WORK_S renders inline (farm/inline.py). Not
     with --workers (processes asked for), --scheduler, --fields, or
     $MOTION_EXECUTOR=local; $MOTION_EXECUTOR=inline forces it."""

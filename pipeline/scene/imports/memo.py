@@ -1,4 +1,4 @@
-"""The records of a glTF or USD import, kept between loads (issue 28).
+"""The records of a glTF or USD import, kept between loads.
 
 An import's records depend only on the bytes of the files its reader reads (the .gltf or
 .glb and the buffers and images it names; a USD stage's layers and the textures it
@@ -7,7 +7,7 @@ converts), the import entry without its overrides, where it is shown, the scene'
 file in the import cache, beside the converted meshes, textures and skins they name, with
 the digest of every file the reader read (`scene/files.digests_recorded`). A later load checks
 those digests and that every converted file is still there, and then never imports the
-reader: numpy and pygltflib (0.05 s of `motion validate`), or usd-core (0.3 s). Any
+reader: numpy and pygltflib, or usd-core (their import times: docs/imports.md). Any
 difference, or an entry that does not read whole, and the file is read again.
 """
 
