@@ -167,18 +167,16 @@ EMPTY_KERNEL_CACHE_BYTES = 64 * 1024
 
 
 def kernel_bytes() -> int:
-    """Bytes in drjit's kernel cache (0 when it is missing or unreadable)."""
-    from ..cache import kernels_dir
+    """Bytes of drjit's files in its kernel cache (`cache.kernel_files`: another's file in a
+    shared $DRJIT_CACHE_DIR is no kernel); 0 when it is missing or unreadable."""
+    from ..cache import kernel_files
 
     total = 0
-    try:
-        for e in os.scandir(kernels_dir()):
-            try:
-                total += e.stat().st_size if e.is_file() else 0
-            except OSError:
-                continue
-    except OSError:
-        return 0
+    for path in kernel_files():
+        try:
+            total += path.stat().st_size
+        except OSError:
+            continue  # a sweep took it
     return total
 
 
