@@ -91,7 +91,8 @@ def deliver_view(req: RenderRequest) -> Any:
     """The deliverables' `ViewTransform` from the request's exposure and OCIO options."""
     from ..telecine.movie import ViewTransform
 
-    return ViewTransform(**{k: v for k, v in req.deliver_view.items() if v is not None})
+    view = req.deliver_view
+    return ViewTransform(view.exposure, view.ocio_config, view.ocio_display, view.ocio_view)
 
 
 def shot_frames(loaded: Any) -> list[int]:
