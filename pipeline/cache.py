@@ -259,10 +259,10 @@ class Store:
 
     def make(self, entry: Path, write: Callable[[Path], None], doing: str, verify: Callable[[Path], bool] | None = None, hold: bool = True) -> Path:
         """Make `entry` by `write(tmp)` under a temporary name beside it, renamed into place
-        whole (pipeline/files.py: a full disk is one DiskFaultError line and leaves nothing);
+        whole (pipeline/write_policy.py: a full disk is one DiskFaultError line and leaves nothing);
         then its folder is held to the cap (unless `hold` is False: the caller holds it once
         after a run of writes)."""
-        from .files import writing
+        from .write_policy import writing
 
         with writing(entry, doing, suffix=entry.suffix or ".tmp", verify=verify) as tmp:
             write(tmp)

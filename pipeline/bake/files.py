@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import BakeFileError
-from ..files import writing
+from ..write_policy import writing
 from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
 from .checks import motion_problems
 from .records import BakedFrame, BakedMotion

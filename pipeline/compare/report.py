@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import UsageError
-from ..files import write_atomic
+from ..write_policy import write_atomic
 from ..timeline import format_frames
 from .sequence import Comparison, FrameOutcome
 

@@ -47,7 +47,7 @@ from ..errors import FrameIOError, InputFileError, UsageError
 from ..farm.frames import format_frames, parse_frames
 from ..timeline import format_range
 from ..farm.report import write_report
-from ..files import confined, disk_faults, publish, publish_path, staging
+from ..write_policy import confined, disk_faults, publish, publish_path, staging
 from ..frame_output import disk_fault, frame_pixels_digest, inside
 from ..limits import read_bounded
 from ..scene.files import file_digest

@@ -31,7 +31,7 @@ import statistics
 from pathlib import Path
 from typing import Any
 
-from ..files import write_best_effort
+from ..write_policy import write_best_effort
 
 HISTORY_FILE = "estimates.json"
 MAX_SCENES = 200  # scenes kept (the oldest go first)

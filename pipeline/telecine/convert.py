@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from ..errors import FrameIOError, UsageError
-from ..files import publish_path, staging
+from ..write_policy import publish_path, staging
 from ..frame_output import Frame, read_meta, write_frame
 from ..timeline import timecode
 from .cadence import Cadence, Tail, film_rate, output_rate, parse_cadence, plan
@@ -164,9 +164,9 @@ def _blend_layers(a: Frame, b: Frame) -> tuple[np.ndarray, dict[str, np.ndarray]
 
 class _Staging:
     """The output sequence of a conversion, written into a hidden folder inside `out_dir`
-    (the write policy's `files.staging`) one frame at a time (`write`: named, typed and
+    (the write policy's `write_policy.staging`) one frame at a time (`write`: named, typed and
     compressed as `out` says, progress after each); `publish` moves the frames into
-    `out_dir` (files.publish_path) and removes the old sequence's others."""
+    `out_dir` (write_policy.publish_path) and removes the old sequence's others."""
 
     def __init__(self, out_dir: Path, seq: Sequence, out: SequenceOutput, total: int) -> None:
         prefix = out.name(seq)

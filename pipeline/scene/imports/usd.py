@@ -460,7 +460,7 @@ def check_layers(path: Path, root: Path, shown: str) -> None:
 
     from pxr import Sdf, Tf
 
-    from ...files import confined
+    from ...write_policy import confined
 
     base = root.resolve()
     seen: set[Path] = set()
