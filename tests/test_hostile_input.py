@@ -116,7 +116,7 @@ def _npz_bake(mutate: str) -> bytes:
     import io
     import tempfile
 
-    from motion.pipeline.bake.files import read_baked, write_baked
+    from motion.pipeline.bake.file_format import read_baked, write_baked
 
     with tempfile.TemporaryDirectory() as tmp:
         (Path(tmp) / "m.json").write_bytes(_bake_json(""))
