@@ -97,7 +97,7 @@ def _timeline_sequence(in_dir: Path, prefix: str | None, allow_gaps: bool = Fals
     if shot is None or not shot[1].foreign or not shot[1].timeline:
         return None
     loaded, found = shot
-    from motion.pipeline.farm.frames import format_frames
+    from motion.pipeline.farm.selection import format_frames
     from motion.pipeline.timeline import format_range
     from motion.pipeline.telecine.sequence import sequence_of
 

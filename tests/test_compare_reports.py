@@ -146,7 +146,7 @@ def test_notes_name_their_frames_as_the_frames_grammar_reads_them() -> None:
     """A note's frames are printed by the timeline's one range printer: frames below 0 as
     'A..B' (read back as written by --frames), not '-5--3'."""
     from motion.pipeline.compare.sequence import gather_notes
-    from motion.pipeline.farm.frames import parse_frames
+    from motion.pipeline.farm.selection import parse_frames
 
     lines = gather_notes({-5: ["spp differs"], -4: ["spp differs"], -3: ["spp differs"], 7: ["spp differs"]})
     assert lines == ["frames -5..-3,7: spp differs"]

@@ -44,7 +44,7 @@ from typing import Any, Callable, Mapping
 
 from ..deliverables import FORMATS
 from ..errors import FrameIOError, InputFileError, UsageError
-from ..farm.frames import format_frames, parse_frames
+from ..farm.selection import format_frames, parse_frames
 from ..timeline import format_range
 from ..farm.report import write_report
 from ..write_policy import confined, disk_faults, publish, publish_path, staging

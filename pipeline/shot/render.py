@@ -22,8 +22,8 @@ from ..bake import BakedFrame, by_number
 from ..errors import IncompleteJobError, UsageError
 from ..farm.claims import Claimant, RunLock, clear_stale, new_run_id, release_run_lock, take_run_lock
 from ..farm.config import FarmConfig, load_farm_config
-from ..farm.frames import chunks as make_chunks
-from ..farm.frames import default_chunk_size, format_frames, parse_frames, parse_shard, shard
+from ..farm.selection import chunks as make_chunks
+from ..farm.selection import default_chunk_size, format_frames, parse_frames, parse_shard, shard
 from ..timeline import format_range
 from ..farm.progress import Progress
 from ..farm.report import build_report, check_writable, merge_previous, write_report, write_report_somewhere
