@@ -10,7 +10,7 @@ import click
 from motion.cli.export import view_options
 from motion.cli.options import GivenPath, FiniteFloat
 from motion.pipeline.errors import FrameIOError, UsageError
-from motion.pipeline.progress import count_bar
+from motion.pipeline.count_bar import count_bar
 
 CODEC_NAMES = ["prores", "prores4444", "h264"]
 
