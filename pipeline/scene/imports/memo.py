@@ -21,12 +21,12 @@ from ...cache import STORES, code_digest, trusted
 from ...errors import InputFileError
 from ..files import bytes_digest, digests_recorded, file_digest
 from ...limits import MAX_GLTF_BYTES, MAX_RECORD_BYTES, MAX_USD_LAYER_BYTES, read_bounded, read_json_record
-from .records import Expansion, Origin
+from .expansion import Expansion, Origin
 
 STORE = STORES["import-records"]
 
 # each reader's code is part of the key: a changed reader rebuilds
-READERS = {"gltf": ("gltf.py", "records.py", "cache.py", "memo.py"), "usd": ("usd.py", "gltf.py", "records.py", "cache.py", "memo.py")}
+READERS = {"gltf": ("gltf.py", "expansion.py", "cache.py", "memo.py"), "usd": ("usd.py", "gltf.py", "expansion.py", "cache.py", "memo.py")}
 FORMAT = 3  # of an entry: 2 adds the digests of the files read; 3 the file's suffix in the key
 # no file larger than its reader accepts is hashed here (the reader refuses it unread)
 MOST_BYTES = {"gltf": MAX_GLTF_BYTES, "usd": MAX_USD_LAYER_BYTES}

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .records import Expansion, ImportFileError, Origin, SpecError, import_frames
+from .expansion import Expansion, ImportFileError, Origin, SpecError, import_frames
 from ..files import file_digest
 from ...limits import MAX_USD_LAYER_BYTES as MAX_LAYER_BYTES
 from ...limits import MAX_USD_POINT_SAMPLES, MAX_USD_POINT_VALUES
