@@ -25,7 +25,7 @@ from .expansion import Expansion, ImportFileError, Origin, SpecError, import_fra
 from ..files import file_digest
 from ...limits import MAX_USD_LAYER_BYTES as MAX_LAYER_BYTES
 from ...limits import MAX_USD_POINT_SAMPLES, MAX_USD_POINT_VALUES
-from .cache import cached, hold_cap, write_ply
+from .converted import cached, hold_cap, write_ply
 from .gltf import _Names, sanitize
 
 MAX_SAMPLES = 100_000  # time samples per prim we are willing to key
