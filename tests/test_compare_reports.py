@@ -145,7 +145,7 @@ def test_denoised_frames_are_tested_on_their_noisy_layer(tmp_path: Path) -> None
 def test_notes_name_their_frames_as_the_frames_grammar_reads_them() -> None:
     """A note's frames are printed by the timeline's one range printer: frames below 0 as
     'A..B' (read back as written by --frames), not '-5--3'."""
-    from motion.pipeline.compare.sequence import gather_notes
+    from motion.pipeline.compare.comparison import gather_notes
     from motion.pipeline.farm.selection import parse_frames
 
     lines = gather_notes({-5: ["spp differs"], -4: ["spp differs"], -3: ["spp differs"], 7: ["spp differs"]})

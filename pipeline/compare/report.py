@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import UsageError
 from ..write_policy import write_atomic
 from ..timeline import format_frames
-from .sequence import Comparison, FrameOutcome
+from .comparison import Comparison, FrameOutcome
 
 # characters XML 1.0 cannot hold (a control character in a file name): shown as U+FFFD
 _NOT_XML = re.compile("[^\\t\\n\\r\\x20-\\ud7ff\\ue000-\\ufffd\\U00010000-\\U0010ffff]")
