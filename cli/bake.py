@@ -21,7 +21,7 @@ def bake(scene: Path, output: Path, frames: str | None, preset: str | None) -> N
 
     from motion.pipeline.bake import bake as bake_motion
     from motion.pipeline.bake import summary, write_baked
-    from motion.pipeline.farm.frames import parse_frames
+    from motion.pipeline.farm.selection import parse_frames
     from motion.pipeline.presets import load_preset, overrides_from
     from motion.pipeline.scene import load_scene
 

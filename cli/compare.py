@@ -42,7 +42,7 @@ def compare(new_dir: Path, ref_dir: Path, bless: bool, allow_different_settings:
     material, a setting) are compared, each difference a `note:` (docs/compare.md)."""
     frames = None
     if frames_spec:
-        from motion.pipeline.farm.frames import parse_frames
+        from motion.pipeline.farm.selection import parse_frames
 
         frames = parse_frames(frames_spec)
     if bless:

@@ -133,8 +133,8 @@ def main(argv: list[str] | None = None, gc_was_enabled: bool | None = None) -> i
 
 # A command that leaves nothing to finish (`nothing_to_finish`) ends its process without
 # the interpreter's teardown: freeing every module and object of the pydantic and click
-# stacks one by one cost 0.022 s of each 0.145 s `motion validate` (issue 28). Its output is
-# flushed first; a command with threads, child processes, temporary files or outputs to
+# stacks one by one is a visible part of a short command such as `motion validate`
+# (docs/ci-sharding.md, "What validation keeps"). Its output is flushed first; a command with threads, child processes, temporary files or outputs to
 # close never asks for it.
 _nothing_to_finish = False
 
@@ -160,7 +160,7 @@ def _exit_now(code: int) -> None:
 
 # The cyclic garbage collector is off while the command starts: importing click and pydantic
 # and making the scene format's ~75 record classes allocate many objects and free few, and
-# the collector's passes over them cost 0.01 s of each `motion validate` (issue 28). The
+# the collector's passes over them are wasted (docs/ci-sharding.md, "What validation keeps"). The
 # console script (`motion.cli.start`) turns it off before click is imported, `main` when it
 # is called otherwise. A command is looked up (LazyGroup.get_command) before it runs: every
 # command but those marked `start_up_only` (validate, whose work is one bounded scene load;

@@ -110,7 +110,7 @@ def render(
     allow_different_settings: bool,
 ) -> None:
     """Render SCENE's frames to OpenEXR files."""
-    from motion.pipeline.shot import RenderRequest
+    from motion.pipeline.shot import DeliverView, RenderRequest
 
     request = RenderRequest(
         scene=scene, output_dir=output_dir, frames_spec=frames_spec, shard=shard, preset=preset, motion_file=motion_file, report=report_path,
@@ -118,7 +118,7 @@ def render(
         output_overrides={"aovs": list(dict.fromkeys(aovs)) or None},
         cache=not no_cache, resume=resume, overwrite=overwrite, progress=progress, check=check, dry_run=dry_run,
         deliver=deliver_spec, deliver_frames=deliver_frames,
-        deliver_view={"exposure": exposure, "ocio_config": ocio_config, "ocio_display": ocio_display, "ocio_view": ocio_view},
+        deliver_view=DeliverView(exposure=exposure, ocio_config=ocio_config, ocio_display=ocio_display, ocio_view=ocio_view),
         workers=workers, scheduler=scheduler, transfer=transfer, threads=threads, chunk_size=chunk_size, retries=retries, task_timeout_s=task_timeout_s,
         compare=None if dry_run else compare_ref,
     )

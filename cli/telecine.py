@@ -10,7 +10,7 @@ import click
 from motion.cli.export import view_options
 from motion.cli.options import GivenPath, FiniteFloat
 from motion.pipeline.errors import FrameIOError, UsageError
-from motion.pipeline.progress import count_bar
+from motion.pipeline.count_bar import count_bar
 
 CODEC_NAMES = ["prores", "prores4444", "h264"]
 
@@ -97,7 +97,7 @@ def _timeline_sequence(in_dir: Path, prefix: str | None, allow_gaps: bool = Fals
     if shot is None or not shot[1].foreign or not shot[1].timeline:
         return None
     loaded, found = shot
-    from motion.pipeline.farm.frames import format_frames
+    from motion.pipeline.farm.selection import format_frames
     from motion.pipeline.timeline import format_range
     from motion.pipeline.telecine.sequence import sequence_of
 

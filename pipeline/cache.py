@@ -259,10 +259,10 @@ class Store:
 
     def make(self, entry: Path, write: Callable[[Path], None], doing: str, verify: Callable[[Path], bool] | None = None, hold: bool = True) -> Path:
         """Make `entry` by `write(tmp)` under a temporary name beside it, renamed into place
-        whole (pipeline/files.py: a full disk is one DiskFaultError line and leaves nothing);
+        whole (pipeline/write_policy.py: a full disk is one DiskFaultError line and leaves nothing);
         then its folder is held to the cap (unless `hold` is False: the caller holds it once
         after a run of writes)."""
-        from .files import writing
+        from .write_policy import writing
 
         with writing(entry, doing, suffix=entry.suffix or ".tmp", verify=verify) as tmp:
             write(tmp)
@@ -371,7 +371,7 @@ def hold_to_cap(folder: Path, cap_bytes: int | None, cap_files: int | None = Non
 # entry here and its use through the Store's methods.
 STORES: dict[str, Store] = {s.name: s for s in (
     Store("assets", "assets", "meshes and roughness textures converted for Mitsuba (render/assets.py)", tag="ply-v2"),
-    Store("imports", "assets/imports", "meshes, textures and skins converted from glTF and USD imports (scene/imports/cache.py)", tag="import-v2"),
+    Store("imports", "assets/imports", "meshes, textures and skins converted from glTF and USD imports (scene/imports/converted.py)", tag="import-v2"),
     Store("import-records", "assets/imports/records", "the records of glTF and USD imports (scene/imports/memo.py)", tag="records-v3", cap_files=4096),
     Store("passes", "validation/assets", "asset files whose bytes passed their checks (scene/checked.py)", tag="pass-v2",
           code=("images.py", "meshes.py", "limits.py"), cap_bytes=False, cap_files=1024, shards=True),

@@ -17,7 +17,7 @@ import numpy as np
 import OpenEXR
 
 from .errors import DiskFaultError, FrameIOError
-from .files import DISK_FAULT_ERRNOS, _UMASK, _unlink_quietly, confined, disk_fault, disk_fault_errno, lost_write, publish, write_atomic, writing  # noqa: F401  (the write policy, re-exported)
+from .write_policy import DISK_FAULT_ERRNOS, _UMASK, _unlink_quietly, confined, disk_fault, disk_fault_errno, lost_write, publish, write_atomic, writing  # noqa: F401  (the write policy, re-exported)
 from .timeline import MAX_TIMECODE_FRAMES, timecode_fields, timecode_group
 
 PixelType = Literal["half", "float"]

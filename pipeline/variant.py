@@ -27,7 +27,7 @@ from typing import Any, Literal, Mapping
 
 from .cache import cache_root
 from .errors import RendererError
-from .files import write_best_effort
+from .write_policy import write_best_effort
 
 VariantName = Literal["auto", "llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb"]
 

@@ -227,7 +227,7 @@ def test_a_damaged_or_foreign_import_record_is_read_again(tmp_path: Path, monkey
     """A kept import record nested 100,000 deep, not a mapping, with wrong fields, a FIFO,
     or planted by another user: the import is read again (the same scene), a damaged one is
     one warning line, and the load never hangs or fails."""
-    from motion.pipeline.scene.imports import cache as import_cache
+    from motion.pipeline.scene.imports import converted as import_cache
 
     if damage == "other user" and not _can_chown():
         pytest.skip("needs to plant a file as another user")
@@ -263,7 +263,7 @@ def test_an_import_swapped_while_it_is_read_is_not_kept(tmp_path: Path, monkeypa
     it: the reader parses the bytes that were hashed (memo.read_import reads the file once),
     so the records kept under the first file's hash are the first file's, and the other
     file, loaded in its turn, gets its own."""
-    from motion.pipeline.scene.imports import cache as import_cache
+    from motion.pipeline.scene.imports import converted as import_cache
     from motion.pipeline.scene.imports import memo
 
     monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))

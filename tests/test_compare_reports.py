@@ -140,3 +140,14 @@ def test_denoised_frames_are_tested_on_their_noisy_layer(tmp_path: Path) -> None
         write_frame(tmp_path / side / f"shot.{frame:04d}.exr", pic, meta, aovs={"noisy": noisy, "albedo": pic[..., :3]}, pixel_type="half")
     result = compare_sequences(tmp_path / "new", tmp_path / "ref", workers=1)
     assert [(f.layer, f.outcome) for f in result.frames] == [("noisy", "equal"), ("noisy", "different")]
+
+
+def test_notes_name_their_frames_as_the_frames_grammar_reads_them() -> None:
+    """A note's frames are printed by the timeline's one range printer: frames below 0 as
+    'A..B' (read back as written by --frames), not '-5--3'."""
+    from motion.pipeline.compare.comparison import gather_notes
+    from motion.pipeline.farm.selection import parse_frames
+
+    lines = gather_notes({-5: ["spp differs"], -4: ["spp differs"], -3: ["spp differs"], 7: ["spp differs"]})
+    assert lines == ["frames -5..-3,7: spp differs"]
+    assert parse_frames(lines[0].split(" ")[1][:-1]) == [-5, -4, -3, 7]

@@ -216,7 +216,7 @@ def _fill(disk: Path) -> None:
     ["telecine", "SRC", "-o", "TMP/60i", "--movie", "DISK/60i.mov"],
 ])
 def test_every_writer_reports_a_full_disk_in_one_line(small_disk: Path, tmp_path: Path, command: list[str]) -> None:
-    """Issue 24/26: every writer goes through the one write policy (pipeline/files.py):
+    """Issue 24/26: every writer goes through the one write policy (pipeline/write_policy.py):
     on a full disk `export`, `contact-sheet`, `view` and `bake -o` end with one line and
     exit 4 (tracebacks, exit 1, or exit 2 before), leaving no temporary file; `plot`
     said 'writing ?' and left a partial file (it wrote with savefig in place)."""
@@ -242,7 +242,7 @@ def test_the_writers_inside_a_render_report_a_full_disk_in_one_line(small_disk: 
     caches whose loss costs only recomputation (the variant probe, the cost history) say
     nothing and leave nothing."""
     from motion.pipeline.errors import DiskFaultError
-    from motion.pipeline.files import staging, write_best_effort
+    from motion.pipeline.write_policy import staging, write_best_effort
     from motion.pipeline.render.temporal import process_frame
 
     src = tmp_path / "src"

@@ -60,3 +60,18 @@ def test_an_inline_job_is_estimated_without_a_workers_start(tmp_path: Path, monk
     got = est.run_inline(est.estimate("s", "h", 100, 3, 2))
     assert got["startup_s"] < 0.1 and got["cold_extra_s"] < 1.0 and got["seconds"] < 1.5, got
     assert est.estimate("s", "h", 100, 3, 2)["startup_s"] == est.DEFAULT_STARTUP_S  # workers: no inline figure borrowed
+
+
+def test_only_drjits_files_count_as_compiled_kernels(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A $DRJIT_CACHE_DIR shared with other files (a subfolder, a file of another tool) holds
+    no kernel for the estimate: only the files `cache.kernel_files` names are counted."""
+    from motion.pipeline.shot import estimate as est
+
+    kernels = tmp_path / "kernels"
+    (kernels / "sub").mkdir(parents=True)
+    (kernels / "notes.bin").write_bytes(b"x" * (2 * est.EMPTY_KERNEL_CACHE_BYTES))
+    (kernels / "sub" / ("0" * 32 + ".llvm.v6.bin")).write_bytes(b"x" * 1000)
+    monkeypatch.setenv("DRJIT_CACHE_DIR", str(kernels))
+    assert est.kernel_bytes() == 0
+    (kernels / ("ab" * 16 + ".llvm.v6.bin")).write_bytes(b"x" * 123)
+    assert est.kernel_bytes() == 123

@@ -178,7 +178,7 @@ def test_no_command_allocates_by_the_span_of_frame_numbers(tmp_path: Path) -> No
 def test_a_range_from_below_0_is_printed_one_way_and_read_back() -> None:
     """A timeline from -10 printed 'frames -10-37' (is that -10 to 37, or -10 and -37?):
     every range that starts below 0 is printed A..B, which --frames reads back as written."""
-    from motion.pipeline.farm.frames import parse_frames
+    from motion.pipeline.farm.selection import parse_frames
     from motion.pipeline.timeline import format_frames, format_range
 
     assert format_range(-10, 37) == "-10..37" and format_range(-5, -1) == "-5..-1" and format_range(0, 119) == "0-119"

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from motion.pipeline.errors import UsageError
 from motion.pipeline.farm.claims import Claimant, claim_path, release, try_claim
 from motion.pipeline.farm.config import FarmConfig, load_farm_config
-from motion.pipeline.farm.frames import chunks, default_chunk_size, format_frames, parse_frames, parse_shard, shard
+from motion.pipeline.farm.selection import chunks, default_chunk_size, format_frames, parse_frames, parse_shard, shard
 
 
 @pytest.mark.parametrize(

@@ -116,7 +116,7 @@ def _npz_bake(mutate: str) -> bytes:
     import io
     import tempfile
 
-    from motion.pipeline.bake.files import read_baked, write_baked
+    from motion.pipeline.bake.file_format import read_baked, write_baked
 
     with tempfile.TemporaryDirectory() as tmp:
         (Path(tmp) / "m.json").write_bytes(_bake_json(""))
@@ -799,7 +799,7 @@ def test_the_import_cache_keeps_to_the_asset_cache_cap(tmp_path: Path, monkeypat
     """The import cache ignored MOTION_ASSET_CACHE_CAP (it grew without bound); it now
     evicts its least recently used entries like the converted-asset cache, never the entry
     just made."""
-    from motion.pipeline.scene.imports import cache
+    from motion.pipeline.scene.imports import converted as cache
 
     monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setenv("MOTION_ASSET_CACHE_CAP", "2500")
@@ -817,7 +817,7 @@ def test_a_damaged_cache_entry_is_made_again_not_a_hit(tmp_path: Path, monkeypat
 
     from motion.pipeline.meshes import load_mesh
     from motion.pipeline.render.assets import mesh_file
-    from motion.pipeline.scene.imports import cache
+    from motion.pipeline.scene.imports import converted as cache
     from motion.pipeline.variant import activate
 
     monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))

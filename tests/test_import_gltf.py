@@ -598,7 +598,7 @@ def test_metallic_roughness_texture_splits_into_grey_textures(tmp_path):
 def test_second_load_is_warm_and_the_same(asset, tmp_path):
     """The second load reads the cached records and converted files, decoding nothing;
     a changed source file is converted again."""
-    from motion.pipeline.scene.imports import cache
+    from motion.pipeline.scene.imports import converted as cache
 
     tmp, _, _ = asset
     shutil.copy(tmp / "rig.glb", tmp_path / "rig.glb")
@@ -661,7 +661,7 @@ def test_kept_gltf_records_follow_the_buffer_file_a_gltf_names(tmp_path: Path, m
     import struct
 
     from motion.pipeline.meshes import load_mesh
-    from motion.pipeline.scene.imports import cache
+    from motion.pipeline.scene.imports import converted as cache
 
     monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
 

@@ -89,7 +89,7 @@ def test_a_record_naming_a_file_outside_the_scene_and_the_cache_is_refused(tmp_p
 
 
 def test_a_record_naming_a_file_in_the_cache_or_the_scene_folder_is_kept(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from motion.pipeline.scene.imports import cache as import_cache
+    from motion.pipeline.scene.imports import converted as import_cache
 
     monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
     path, _, memo = _forge(tmp_path)

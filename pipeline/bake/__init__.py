@@ -4,8 +4,8 @@ data contract from bake to worker (docs/bake-format.md).
 - `records`: `BakedFrame` (what a worker renders: `at_frame` and `across_shutter`
   SceneMotions, named) and `BakedMotion` (a bake).
 - `timing`: each frame's sample times and the one simulation time range.
-- `evaluate`: `bake(loaded, frames)` and `evaluate_frames`.
-- `files`: `write_baked` and `read_baked`, the one reader of bake files.
+- `baking`: `bake(loaded, frames)` and `evaluate_frames`.
+- `file_format`: `write_baked` and `read_baked`, the one writer and the one reader of bake files.
 - `checks`: finite values, unit rotations, the particle budget.
 - `fingerprint`: one digest over every animated value (the `--resume` motion hash),
   name-independent with an `Order`, and per moving thing (`frame_digests`).
@@ -15,8 +15,8 @@ from __future__ import annotations
 
 from ..errors import BakeFileError, FrameNotBakedError
 from .checks import check_motion, motion_problems, pose_problem, scalar_problem
-from .evaluate import bake, evaluate_frames
-from .files import FORMAT, VERSION, read_baked, write_baked
+from .baking import bake, evaluate_frames
+from .file_format import FORMAT, VERSION, read_baked, write_baked
 from .fingerprint import Order, fingerprint, frame_digests, leaves
 from .records import BakedFrame, BakedFrames, BakedMotion, by_number, summary
 from .timing import sample_seconds, simulate_for, simulation_range

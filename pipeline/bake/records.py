@@ -45,8 +45,7 @@ class BakedFrames(Sequence[BakedFrame]):
     own arrays: one `SceneMotion` over every frame time and then every shutter sample time
     (`bake()`'s single vectorised evaluation). A `BakedFrame` is a view of those arrays
     (`SceneMotion.take`), so holding the frames costs the arrays alone, not a record per
-    frame: a 100,000-frame job of the farm test scene held 1.16 GB as a list of records
-    and holds 0.15 GB as this table (bench/bench_farm.py, "client memory").
+    frame (docs/bake-format.md has the figures).
     `by_number` is the same frames as a mapping by frame number."""
 
     def __init__(self, frames: Sequence[int], times: np.ndarray, shutters: np.ndarray, sample_times: np.ndarray, motion: "SceneMotion") -> None:

@@ -21,7 +21,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from ..errors import FrameIOError, ReferenceMismatchError, UsageError
-from ..files import write_atomic
+from ..write_policy import write_atomic
 from ..frame_output import META_PREFIX, read_frame, write_exr
 from ..scene.files import file_digest
 from .frames import find_frames, frame_facts, incomparable, notes, read_pixels

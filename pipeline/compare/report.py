@@ -25,8 +25,9 @@ from typing import Any
 import numpy as np
 
 from ..errors import UsageError
-from ..files import write_atomic
-from .sequence import Comparison, FrameOutcome, ranges
+from ..write_policy import write_atomic
+from ..timeline import format_frames
+from .comparison import Comparison, FrameOutcome
 
 # characters XML 1.0 cannot hold (a control character in a file name): shown as U+FFFD
 _NOT_XML = re.compile("[^\\t\\n\\r\\x20-\\ud7ff\\ue000-\\ufffd\\U00010000-\\U0010ffff]")
@@ -237,7 +238,7 @@ def write_html(comparison: Comparison, folder: str | Path) -> Path:
         sections.append(f'<section id="frame-{f.frame}" class="frame"><h2>Frame {f.frame}: <span class="different">different</span></h2>'
                         f'<p>new {e(str(f.new))} (variant {e(str(f.new_facts.get("variant")))}), reference {e(str(f.ref))} '
                         f'(variant {e(str(f.ref_facts.get("variant")))}); tested layer {f.layer}</p><ol>{regions}</ol><div class="maps">{"".join(figs)}</div></section>')
-    variants = "".join(f"<li>{e(v)}: {len(fr)} frame(s) ({e(ranges(fr))})</li>" for v, fr in comparison.variants().items())
+    variants = "".join(f"<li>{e(v)}: {len(fr)} frame(s) ({e(format_frames(fr))})</li>" for v, fr in comparison.variants().items())
     allowed = "".join(f"<li>{e(a)}</li>" for a in comparison.notes)
     page = f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>motion compare: {e(str(comparison.new_dir))}</title><style>{_STYLE}</style></head>

@@ -139,7 +139,7 @@ def kinematic_world_poses(loaded: "LoadedScene", names: set[str], t: np.ndarray)
     from dataclasses import replace
 
     from ..motion.graph import evaluation_order
-    from ..motion.local import local_pose, object_base
+    from ..motion.local_pose import local_pose, object_base
     from ..motion.pose import compose
 
     scene = loaded.scene

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import UsageError
-from ..files import writing
+from ..write_policy import writing
 from .world import shot_start
 
 FORMATS = (".png", ".pdf", ".svg")

@@ -3,6 +3,6 @@ retries, exclusion of failing workers, timeouts, claims, resume, progress and a 
 (docs/farm.md). What a render runs, and in which order, is the shot stage's
 (motion.pipeline.shot)."""
 
-from .frames import chunks, default_chunk_size, parse_frames, parse_shard, shard
+from .selection import chunks, default_chunk_size, parse_frames, parse_shard, shard
 
 __all__ = ["chunks", "default_chunk_size", "parse_frames", "parse_shard", "shard"]

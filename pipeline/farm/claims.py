@@ -5,7 +5,7 @@ holding JSON with its owner: run id, host, pid and time. The claim is written wh
 temporary file first and then hard-linked to its name (`link` fails if the name exists:
 atomic on local file systems and on NFS), so a claim is never seen empty or half-written;
 where the file system has no hard links, `O_CREAT | O_EXCL` and a write are used instead
-(both are the write policy's `files.create_exclusive`).
+(both are the write policy's `write_policy.create_exclusive`).
 While the claim exists no other render touches the frame; the worker removes it once the
 frame has been renamed into place (or has failed).
 
@@ -38,7 +38,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from ..errors import InputFileError
-from ..files import create_exclusive, disk_faults, write_atomic
+from ..write_policy import create_exclusive, disk_faults, write_atomic
 from ..limits import read_bounded
 
 CLAIM_DIR = ".motion-claims"
@@ -133,7 +133,7 @@ def is_stale(path: Path, info: dict, stale_after_s: float) -> bool:
 
 def try_claim(frame_file: str | Path, who: Claimant, stale_after_s: float) -> tuple[bool, dict | None]:
     """Claim a frame. Returns (True, None) when we hold it, else (False, holder info).
-    Raises DiskFaultError when the disk refuses the claim (files.create_exclusive: the
+    Raises DiskFaultError when the disk refuses the claim (write_policy.create_exclusive: the
     claim appears whole or not at all)."""
     path = claim_path(frame_file)
     body = json.dumps({**asdict(who), "time": time.time()}).encode()
@@ -274,7 +274,7 @@ def take_run_lock(out_dir: str | Path, who: Claimant, scene: str, version: str) 
     is made from). Raises OutputInUseError naming the other run when a live run of another
     version holds it; DiskFaultError when the disk refuses the lock."""
     from ..errors import OutputConfinementError, OutputInUseError
-    from ..files import confined
+    from ..write_policy import confined
 
     folder = Path(out_dir) / CLAIM_DIR
     path = folder / f"{RUN_LOCK_PREFIX}{who.run_id}{RUN_LOCK_SUFFIX}"

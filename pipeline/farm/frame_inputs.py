@@ -46,7 +46,7 @@ def _check_meta(baked: BakedMotion, loaded: LoadedScene, path: Path) -> None:
 
 def file_inputs(loaded: LoadedScene, path: str | Path, frames: Sequence[int]) -> list[BakedFrame]:
     """`frames` from a `motion bake` file (.json or .npz), checked against the scene."""
-    from .frames import format_frames
+    from .selection import format_frames
 
     path = Path(path)
     nonrigid = [o.name for o in loaded.scene.objects if o.is_nonrigid]

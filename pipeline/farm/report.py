@@ -16,7 +16,7 @@ from ..frame_output import disk_fault, write_atomic
 from ..render.job import RenderJob
 from ..scene.loader import LoadedScene
 from .config import FarmConfig
-from .frames import format_frames
+from .selection import format_frames
 from .lifecycle import FINAL_FRAME_STATES
 from .scheduler import Scheduler
 

@@ -100,7 +100,7 @@ def auto_weights(vertices: np.ndarray, heads: np.ndarray, tails: np.ndarray) -> 
 
 def bone_poses(loaded: "LoadedScene", loc: "Loc", skin: Skinning, t: np.ndarray) -> tuple[list[str], Pose, Pose]:
     """object_from_bone at times t ([B] poses stacked as [B, T, ...]) and at bind."""
-    from .local import local_pose as _local, object_base as _object_base  # the same local-pose rules as objects
+    from .local_pose import local_pose as _local, object_base as _object_base  # the same local-pose rules as objects
     from .graph import evaluation_order
 
     names = [b.name for b in skin.bones]
@@ -233,7 +233,7 @@ def _file_mesh(loaded: "LoadedScene", obj: Any) -> tuple[np.ndarray, np.ndarray]
 
 def morph_weights(loaded: "LoadedScene", loc: "Loc", deform: MorphTargets, t: np.ndarray) -> np.ndarray:
     """Weights [T, K] of the targets: keyed channels by target name, else `weight`."""
-    from .local import local_pose as _local  # the same keyframe rules as every channel
+    from .local_pose import local_pose as _local  # the same keyframe rules as every channel
 
     names = [target.name for target in deform.targets]
     weights = np.tile(np.array([target.weight for target in deform.targets]), (len(t), 1))

@@ -19,7 +19,7 @@ from ..scene.lights import light_key
 from ..scene.schema import Camera
 from ..scene.types import Transform
 from .graph import evaluation_order
-from .local import broadcast, local_pose, object_base, transform_base, vec3
+from .local_pose import broadcast, local_pose, object_base, transform_base, vec3
 from .pose import Pose, UnrepresentablePoseError, compose
 from .rotation import aim_quats, direction_quat, look_at_quat
 

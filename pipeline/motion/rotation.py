@@ -2,10 +2,11 @@
 
 The conversions (Euler in any order, axis-angle, matrices) follow scipy's `Rotation`
 exactly (same convention, composition order and sign; tests compare them to 1 ulp) but are
-written with numpy: importing scipy.spatial costs every process about 0.15 s (scipy.sparse
-and the k-d tree come with it), most of a small job's start-up. Segment interpolation is written with `quat_exp`/`quat_log` (pose.py) because scipy's
-`Slerp` cannot represent multi-turn segments (`turns:`) nor the cumulative spherical
-Bezier we use for catmull-rom and bezier keys (docs/motion.md, "Rotations").
+written with numpy: importing scipy.spatial (scipy.sparse and the k-d tree come with it)
+would be most of a small job's start-up (docs/motion.md). Segment interpolation is written
+with `quat_exp`/`quat_log` (pose.py) because scipy's `Slerp` cannot represent multi-turn
+segments (`turns:`) nor the cumulative spherical Bezier we use for catmull-rom and bezier
+keys (docs/motion.md, "Rotations").
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ def euler_quat(angles_deg, order: str = "xyz") -> np.ndarray:  # type: ignore[no
     axes, the first letter first), uppercase = intrinsic (about the turning axes): scipy's
     `Rotation.from_euler` convention and composition order, so the same quaternion, sign
     included (tests/test_motion_rotation.py compares every order). Written with numpy
-    because importing scipy.spatial costs every process about 0.15 s (docs/motion.md)."""
+    because importing scipy.spatial would weigh on every process (docs/motion.md)."""
     half = np.radians(np.asarray(angles_deg, dtype=np.float64)) / 2.0
     out = None
     for i, axis in enumerate(order):

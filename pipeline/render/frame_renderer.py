@@ -76,7 +76,7 @@ def _collector_held(cold: bool) -> Iterator[None]:
     shape and emitter of the process (the domains of its virtual calls): a stray instance
     in a reference cycle, or one the collector frees half way through the build (when it
     runs depends on allocation counts, which other threads move), gives the scene other
-    ids and so a kernel `motion cache warm` never compiled (issue 38.6)."""
+    ids and so a kernel `motion cache warm` never compiled."""
     if not cold:
         yield
         return
@@ -141,30 +141,30 @@ class FrameRenderer:
         """The cached time-slice groups."""
         return self.cache.sliced.groups if self.cache.sliced is not None else []
 
-    def _full_scene(self, fi: StackedFrame, u: float | None) -> Any:
+    def _full_scene(self, stacked: StackedFrame, u: float | None) -> Any:
         """The whole scene at one instant with Mitsuba's `path` (the scalar fallback's)."""
-        return self.fallback.scene(fi, u)
+        return self.fallback.scene(stacked, u)
 
-    def _full_scene_dict(self, fi: StackedFrame, u: float | None) -> dict[str, Any]:
+    def _full_scene_dict(self, stacked: StackedFrame, u: float | None) -> dict[str, Any]:
         """The Mitsuba dictionary of `_full_scene`."""
-        return self.fallback.scene_dict(fi, u)
+        return self.fallback.scene_dict(stacked, u)
 
-    def _render_scalar(self, fi: StackedFrame, mode: str, seed: int) -> Any:
+    def _render_scalar(self, stacked: StackedFrame, mode: str, seed: int) -> Any:
         """A frame with the scalar fallback: the frame's instant for `off`, else sub-frames."""
         if mode == "off":
-            return self.fallback.render_at(fi, None, seed, self.spp)
-        return accumulate_subframes(lambda u, s, n: self.fallback.render_at(fi, u, s, n), self.settings.subframes, self.spp, seed)
+            return self.fallback.render_at(stacked, None, seed, self.spp)
+        return accumulate_subframes(lambda u, s, n: self.fallback.render_at(stacked, u, s, n), self.settings.subframes, self.spp, seed)
 
-    def _render_cached(self, fi: StackedFrame, mode: str, seed: int, rows: tuple[int, int] = (0, 1)) -> Any:
+    def _render_cached(self, stacked: StackedFrame, mode: str, seed: int, rows: tuple[int, int] = (0, 1)) -> Any:
         """A frame with the cached motion_path scene (built or updated already)."""
         if mode == "subframes":
 
             def render_at(u: float, s: int, n: int) -> Any:
-                self.cache.set_frame(fi, mode, u_fixed=u)
+                self.cache.set_frame(stacked, mode, u_fixed=u)
                 return self.cache.render(s, n, rows)
 
             return accumulate_subframes(render_at, self.settings.subframes, self.spp, seed)
-        self.cache.set_frame(fi, mode)
+        self.cache.set_frame(stacked, mode)
         return self.cache.render(seed, self.spp, rows)
 
     def render(self, frame: BakedFrame, mode: str | None = None) -> tuple[np.ndarray, FrameStats]:
@@ -189,18 +189,18 @@ class FrameRenderer:
         return rows(rgba), {k: rows(v) for k, v in aovs.items()}, stats
 
     def _render(self, frame: BakedFrame, mode: str | None = None, rows: tuple[int, int] = (0, 1)) -> tuple[np.ndarray, dict[str, np.ndarray], FrameStats]:
-        fi = stack_frame(frame)
+        stacked = stack_frame(frame)
         from . import assets
 
         dr = self._dr
         mode = mode or self.settings.motion_blur
         if not self.vectorized:
             t0 = time.perf_counter()
-            seed = frame_seed(self.settings.seed, fi.frame, self.settings.seed_policy)
-            rgba = _with_alpha(np.array(self._render_scalar(fi, mode, seed), dtype=np.float32))
+            seed = frame_seed(self.settings.seed, stacked.frame, self.settings.seed_policy)
+            rgba = _with_alpha(np.array(self._render_scalar(stacked, mode, seed), dtype=np.float32))
             cold = self._frames_done == 0
             self._frames_done += 1
-            return rgba, {}, FrameStats(fi.frame, cold, 0.0, time.perf_counter() - t0, 0, 0, 0, False)
+            return rgba, {}, FrameStats(stacked.frame, cold, 0.0, time.perf_counter() - t0, 0, 0, 0, False)
         hits0 = assets.STATS["hits"]
         t0 = time.perf_counter()
         cold = self.cache.scene is None
@@ -209,14 +209,14 @@ class FrameRenderer:
         # frame (render/engine_log.py)
         with watching() as engine, _collector_held(cold):
             if cold:
-                self.cache.build(fi)
+                self.cache.build(stacked)
             else:
-                updated = self.cache.update(fi)
-            seed = frame_seed(self.settings.seed, fi.frame, self.settings.seed_policy)
+                updated = self.cache.update(stacked)
+            seed = frame_seed(self.settings.seed, stacked.frame, self.settings.seed_policy)
             dr.kernel_history()  # clear
             setup_s = time.perf_counter() - t0
             t1 = time.perf_counter()
-            img = self._render_cached(fi, mode, seed, rows)
+            img = self._render_cached(stacked, mode, seed, rows)
             dr.eval(img)
             dr.sync_thread()
             rgba = np.array(img, dtype=np.float32)
@@ -230,7 +230,7 @@ class FrameRenderer:
         rgba = _with_alpha(rgba)
         self._frames_done += 1
         return rgba, aovs, FrameStats(
-            frame=fi.frame,
+            frame=stacked.frame,
             cold=cold,
             setup_s=setup_s,
             render_s=render_s,

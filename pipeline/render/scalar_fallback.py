@@ -32,22 +32,22 @@ class ScalarFallback:
         self.spp = spp
         self.max_depth = max_depth
 
-    def scene_dict(self, fi: StackedFrame, u: float | None) -> dict[str, Any]:
+    def scene_dict(self, stacked: StackedFrame, u: float | None) -> dict[str, Any]:
         """The Mitsuba dictionary of the whole scene at the frame's time (u None) or at
         shutter fraction u: rigid objects and lights, Mitsuba's `path` integrator."""
         loaded = self.loaded
         scene = loaded.scene
         materials = {m.name: material_dict(m, loaded) for m in scene.materials}
         d: dict[str, Any] = {"type": "scene", "integrator": {"type": "path", "max_depth": self.max_depth, "rr_depth": scene.render.rr_depth}}
-        d["sensor"] = sensor_record(loaded, self.spp, fi, u)
-        add_shapes(d, loaded, scene.objects, fi, materials, u)
-        add_lights(d, loaded, fi, u)
+        d["sensor"] = sensor_record(loaded, self.spp, stacked, u)
+        add_shapes(d, loaded, scene.objects, stacked, materials, u)
+        add_lights(d, loaded, stacked, u)
         return d
 
-    def scene(self, fi: StackedFrame, u: float | None) -> Any:
+    def scene(self, stacked: StackedFrame, u: float | None) -> Any:
         """The loaded `mi.Scene` of `scene_dict`."""
-        return load_dict(self.scene_dict(fi, u))
+        return load_dict(self.scene_dict(stacked, u))
 
-    def render_at(self, fi: StackedFrame, u: float | None, seed: int, spp: int) -> Any:
+    def render_at(self, stacked: StackedFrame, u: float | None, seed: int, spp: int) -> Any:
         """The image of the scene at one instant (u None: the frame's time)."""
-        return self._mi.render(self.scene(fi, u), seed=seed, spp=spp)
+        return self._mi.render(self.scene(stacked, u), seed=seed, spp=spp)

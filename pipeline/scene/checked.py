@@ -1,8 +1,8 @@
-"""Asset files whose exact bytes passed their check before (issue 28).
+"""Asset files whose exact bytes passed their check before.
 
 The validation stage opens and decodes every image and mesh a scene names before any task
-(`images.check_image`, `meshes.load_mesh`): about 0.015 s for a 300 KB JPEG, seconds for a
-shot's textures, paid by every `motion validate` and every render's main process. A check
+(`images.check_image`, `meshes.load_mesh`), paid by every `motion validate` and every
+render's main process (docs/ci-sharding.md, "What validation keeps", has the figures). A check
 is a function of the file's bytes, the reader its suffix picks and the checking code, so its
 passing is kept: one empty file in the `passes` store (`cache.STORES`, under the cache
 root's `validation/assets/`), named by the SHA-256 of the check's kind, the file's suffix,

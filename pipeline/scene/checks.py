@@ -771,7 +771,7 @@ REACH = {"hold": 1, "nearest": 1, "linear": 1}
 
 
 def key_warnings(scene: Scene) -> list[str]:
-    """Keys that the shot never sees (issue 38), one line per track naming them. A key's
+    """Keys that the shot never sees, one line per track naming them. A key's
     time counts from frame 0 (`time_unit: frames`) or second 0, whatever the timeline's
     `first`: keys written as 0, 12, 23 in a shot of frames 1001-1024 all lie before it, and
     the shot holds the last one's value. The shot's span is the first frame's shutter open

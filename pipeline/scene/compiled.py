@@ -1,11 +1,11 @@
-"""The validators of the scene format's root records, kept between processes (issue 28).
+"""The validators of the scene format's root records, kept between processes.
 
 pydantic makes the scene's validator from its ~75 record classes when a process first
-validates a scene: it walks every field's annotation into a core schema (about 0.035 s on
-the 2-core bench machine, a fifth of `motion validate`; 0.017 s for the `imports:` list),
-and pydantic-core compiles that in well under a millisecond. The core schema depends only
-on the record classes, so the first process keeps it in the cache root (`validation/`,
-one entry per root record) and later processes load it (about 1 ms).
+validates a scene: it walks every field's annotation into a core schema (a large part of a
+`motion validate`: docs/ci-sharding.md, "What validation keeps", has the figures), and
+pydantic-core compiles that quickly. The core schema depends only on the record classes,
+so the first process keeps it in the cache root (`validation/`, one entry per root record)
+and later processes load it.
 
 The entry is the validator pickled (pydantic-core pickles a validator as its core schema and
 config; classes and validator functions by their import names), behind a list of the source
@@ -22,7 +22,7 @@ shared cache root is never opened (one warning line; the validator is made again
 is read bounded (a FIFO in its place is never waited on). Even then the unpickler resolves
 only the names a validator needs (`_Unpickler.find_class`): the scene stage's record
 classes, pydantic-core's SchemaValidator and an attribute lookup on those classes.
-Rebuilding instead of keeping would cost about 0.035 s of every `motion validate`
+Rebuilding instead of keeping would cost that walk in every `motion validate`
 (docs/ci-sharding.md, "Caches").
 """
 

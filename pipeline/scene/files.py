@@ -240,7 +240,7 @@ def file_digests(loaded: Located) -> dict[str, str]:
     in a frame's header (`motion:files`) so that a rerun can name the file that changed.
     An import's converted file is named `import:<its name>` (its path lies in this
     machine's cache folder, which does not belong in a deliverable)."""
-    from .imports.cache import converted_file
+    from .imports.converted import converted_file
 
     out = {}
     for rel, digest in named_digests(loaded.scene, loaded.base_dir).items():

@@ -9,9 +9,9 @@ LIGHT_TYPES, from which the `Light` union is made: adding a light type is one cl
 (docs/architecture.md). scene/schema.py re-exports these names.
 """
 
-# No `from __future__ import annotations` in the schema modules: pydantic would compile and
-# evaluate every field's annotation string when each model class is made, about 0.03 s of
-# every process that loads a scene (issue 28, docs/ci-sharding.md).
+# No `from __future__ import annotations` in the schema modules: pydantic would then compile
+# and evaluate every field's annotation string when each model class is made, in every
+# process that loads a scene (docs/ci-sharding.md, "What validation keeps").
 
 from typing import Annotated, Any, Callable, ClassVar, Literal, Protocol, Union, get_args
 

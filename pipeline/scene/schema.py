@@ -5,9 +5,9 @@ into Mitsuba dictionaries through a registry keyed by `type`, and the motion sta
 evaluates their `motion` blocks.
 """
 
-# No `from __future__ import annotations` in the schema modules: pydantic would compile and
-# evaluate every field's annotation string when each model class is made, about 0.03 s of
-# every process that loads a scene (issue 28, docs/ci-sharding.md).
+# No `from __future__ import annotations` in the schema modules: pydantic would then compile
+# and evaluate every field's annotation string when each model class is made, in every
+# process that loads a scene (docs/ci-sharding.md, "What validation keeps").
 
 from fractions import Fraction
 from typing import Annotated, ClassVar, Literal, Union

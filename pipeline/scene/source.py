@@ -253,9 +253,9 @@ _READERS_DIFFER = re.compile("[\t?!\ufeff\x85\u2028\u2029]|[|>][-+0-9]*#")
 
 
 def _compose_fast(text: str) -> tuple[yaml.Node | None, _CLoader, list[yaml.Mark]]:
-    """The same node graph by libyaml, about ten times faster (3 to 9 ms of each example's
-    load): one pass over its events bounds nesting and values written first, as
-    `_Loader.compose_node` does (libyaml composes recursively, in C), with the same errors.
+    """The same node graph by libyaml, about ten times faster (docs/ci-sharding.md, "What
+    validation keeps"): one pass over its events bounds nesting and values written first,
+    as `_Loader.compose_node` does (libyaml composes recursively, in C), with the same errors.
     A character PyYAML refuses, or any error of libyaml's, raises _Reparse: `_compose`
     then refuses the document in PyYAML's words."""
     if yaml.reader.Reader.NON_PRINTABLE.search(text) or _READERS_DIFFER.search(text, 1 if text[:1] == "\ufeff" else 0):

@@ -4,9 +4,9 @@ Every model is frozen and rejects unknown keys (`extra="forbid"`); the loader tu
 pydantic's errors into `FILE:LINE:COL: yaml.path: message` lines.
 """
 
-# No `from __future__ import annotations` in the schema modules: pydantic would compile and
-# evaluate every field's annotation string when each model class is made, about 0.03 s of
-# every process that loads a scene (issue 28, docs/ci-sharding.md).
+# No `from __future__ import annotations` in the schema modules: pydantic would then compile
+# and evaluate every field's annotation string when each model class is made, in every
+# process that loads a scene (docs/ci-sharding.md, "What validation keeps").
 
 import math
 from typing import Annotated, Any, Literal, Self, Union
@@ -40,7 +40,7 @@ class Model(BaseModel):
     def default(cls) -> Self:
         """The record with every field at its default, for a field's default value: made
         without the class's validator, which `cls()` would build when the module is
-        imported (0.015 s for Transform, most of it again inside the scene's validator).
+        imported (most of that work again inside the scene's validator; docs/ci-sharding.md).
         Defaults are valid by construction; tests/test_cli_startup.py checks that each
         such default equals `cls()`."""
         return cls.model_construct()

@@ -11,6 +11,6 @@ deliverables (checked before the first frame, assembled after the last), `fields
 from .fields import run_field_render
 from .dry_run import plan_text
 from .render import run_render
-from .request import RenderRequest
+from .request import DeliverView, RenderRequest
 
-__all__ = ["RenderRequest", "plan_text", "run_field_render", "run_render"]
+__all__ = ["DeliverView", "RenderRequest", "plan_text", "run_field_render", "run_render"]

@@ -10,7 +10,7 @@ from typing import Any
 
 from ..compare import Comparison, check_report_targets, compare_sequences, write_reports
 from ..compare.frames import frame_facts
-from ..compare.sequence import reference_frames
+from ..compare.comparison import reference_frames
 from ..errors import FrameIOError, ReferenceMismatchError
 
 

@@ -44,10 +44,10 @@ from typing import Any, Callable, Mapping
 
 from ..deliverables import FORMATS
 from ..errors import FrameIOError, InputFileError, UsageError
-from ..farm.frames import format_frames, parse_frames
+from ..farm.selection import format_frames, parse_frames
 from ..timeline import format_range
 from ..farm.report import write_report
-from ..files import confined, disk_faults, publish, publish_path, staging
+from ..write_policy import confined, disk_faults, publish, publish_path, staging
 from ..frame_output import disk_fault, frame_pixels_digest, inside
 from ..limits import read_bounded
 from ..scene.files import file_digest
@@ -91,7 +91,8 @@ def deliver_view(req: RenderRequest) -> Any:
     """The deliverables' `ViewTransform` from the request's exposure and OCIO options."""
     from ..telecine.movie import ViewTransform
 
-    return ViewTransform(**{k: v for k, v in req.deliver_view.items() if v is not None})
+    view = req.deliver_view
+    return ViewTransform(view.exposure, view.ocio_config, view.ocio_display, view.ocio_view)
 
 
 def shot_frames(loaded: Any) -> list[int]:

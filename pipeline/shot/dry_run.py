@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import IncompleteJobError
-from ..farm.frames import format_frames
+from ..farm.selection import format_frames
 from .request import RenderRequest
 
 

@@ -12,14 +12,13 @@ machine's cost per sample; a machine that has rendered nothing from built-in fig
 (`basis` says which). bench/bench_estimate.py measures the estimate against the real time
 on the examples.
 
-The cold costs are estimated apart (issue 38: a first run on a new machine took 99.8 s
-against 10.4 s estimated). A worker's first frame compiles the renderer's kernels unless
-drjit's kernel cache holds them, and converts the scene's assets unless the asset cache
-holds them. Kernels are mostly shared between scenes (on a 2-core EPYC a second scene's
-first run cost 4 s more than its next, the first scene's 19 s), so what decides is whether
-the kernel cache is empty (a new machine, a fresh CI runner, a cleared cache): then every
-kernel is compiled, estimated from this machine's runs that did so, else a built-in
-figure. A run records whether it did. The first ETA (before frames are measured) counts
+The cold costs are estimated apart: on a new machine they can be most of a first run
+(docs/reruns.md, "The first run's estimate", has the measurements). A worker's first frame
+compiles the renderer's kernels unless drjit's kernel cache holds them, and converts the
+scene's assets unless the asset cache holds them. Kernels are mostly shared between
+scenes, so what decides is whether the kernel cache is empty (a new machine, a fresh CI
+runner, a cleared cache): then every kernel is compiled, estimated from this machine's
+runs that did so, else a built-in figure. A run records whether it did. The first ETA (before frames are measured) counts
 these cold costs down (farm/progress.py `overhead_s`) before the warm frames.
 """
 
@@ -32,7 +31,7 @@ import statistics
 from pathlib import Path
 from typing import Any
 
-from ..files import write_best_effort
+from ..write_policy import write_best_effort
 
 HISTORY_FILE = "estimates.json"
 MAX_SCENES = 200  # scenes kept (the oldest go first)
@@ -40,15 +39,13 @@ MAX_RUNS = 8  # observations kept per scene (one per settings)
 # A warm frame costs a fixed part (the frame's Python, its film and EXR, at small sizes the
 # whole cost) plus a part per camera sample, plus the denoiser's part per pixel. Built-in
 # figures (nothing recorded on this machine yet), measured on a 2-core AMD EPYC shared with
-# other jobs (issue 38: the earlier ones, 10x lower, made a first run's estimate 3-20x low):
+# other jobs (docs/reruns.md, "The first run's estimate"):
 # ci-smoke frames (9,216 samples) 10-25 ms; preview frames (320x180, 16 spp, depth 4) render
 # in 0.9-2.0 s; OIDN denoises 57,600-129,600 pixels in 4.4-5.0 us a pixel, one frame beside
 # another worker's (the showcase at 480x270: 0.57 s; 960x540: 2.5 us a pixel); a worker's
 # cold first frame (its scene build and asset conversion, and the kernels compiled when the
 # kernel cache is empty: 14 of them for the examples) costs 2.5-4.6 s more than a warm one;
-# two workers start in about 4 s (spawn, imports: 3.9 s measured). With these, a fresh
-# cache's estimate of the showcase at --spp 1 is 41 s against 42 s measured (it was 108 s
-# with 20 us a pixel of denoising and a 2 s start).
+# two workers start in about 4 s (spawn, imports: 3.9 s measured).
 DEFAULT_FRAME_OVERHEAD_S = 0.012
 DEFAULT_S_PER_SAMPLE = 1.5e-6
 DEFAULT_DENOISE_S_PER_PIXEL = 5.0e-6
@@ -170,18 +167,16 @@ EMPTY_KERNEL_CACHE_BYTES = 64 * 1024
 
 
 def kernel_bytes() -> int:
-    """Bytes in drjit's kernel cache (0 when it is missing or unreadable)."""
-    from ..cache import kernels_dir
+    """Bytes of drjit's files in its kernel cache (`cache.kernel_files`: another's file in a
+    shared $DRJIT_CACHE_DIR is no kernel); 0 when it is missing or unreadable."""
+    from ..cache import kernel_files
 
     total = 0
-    try:
-        for e in os.scandir(kernels_dir()):
-            try:
-                total += e.stat().st_size if e.is_file() else 0
-            except OSError:
-                continue
-    except OSError:
-        return 0
+    for path in kernel_files():
+        try:
+            total += path.stat().st_size
+        except OSError:
+            continue  # a sweep took it
     return total
 
 

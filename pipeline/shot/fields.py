@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import UsageError
-from ..farm.frames import parse_frames
+from ..farm.selection import parse_frames
 from ..presets import load_preset, overrides_from, spread
 from ..scene.loader import load_scene
 from ..field_model import check_field_order

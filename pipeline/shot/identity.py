@@ -19,7 +19,7 @@ import stat
 from pathlib import Path
 
 from ..errors import InputFileError, ShotFolderTakenError, UsageError
-from ..files import write_atomic
+from ..write_policy import write_atomic
 from ..limits import read_bounded, read_json_record
 from ..render.job import scene_reference
 
@@ -94,7 +94,7 @@ def check_owner(out_dir: Path, scene: Path, overwrite: bool) -> Path | None:
 
 
 def record_owner(out_dir: Path, scene: Path) -> None:
-    """Write the folder's record naming `scene` (atomically, through files.py), unless it
+    """Write the folder's record naming `scene` (atomically, through write_policy.py), unless it
     already does."""
     _refuse_folder(out_dir)
     owner = recorded_scene(out_dir, warn=False)

@@ -22,8 +22,8 @@ from ..bake import BakedFrame, by_number
 from ..errors import IncompleteJobError, UsageError
 from ..farm.claims import Claimant, RunLock, clear_stale, new_run_id, release_run_lock, take_run_lock
 from ..farm.config import FarmConfig, load_farm_config
-from ..farm.frames import chunks as make_chunks
-from ..farm.frames import default_chunk_size, format_frames, parse_frames, parse_shard, shard
+from ..farm.selection import chunks as make_chunks
+from ..farm.selection import default_chunk_size, format_frames, parse_frames, parse_shard, shard
 from ..timeline import format_range
 from ..farm.progress import Progress
 from ..farm.report import build_report, check_writable, merge_previous, write_report, write_report_somewhere
@@ -205,7 +205,7 @@ def preflight(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: 
 def worker_memory_problem(loaded: LoadedScene) -> Any:
     """A frame whose render pass cannot fit the address space a worker may use (RLIMIT_AS,
     which workers inherit), located at render.resolution: found here, not as a
-    std::bad_alloc on every attempt after the bake (4096x4096 under 2 GiB: exit 3 after 54 s)."""
+    std::bad_alloc on every attempt after the bake (docs/scene-format.md, "a render pass")."""
     from ..limits import FRAME_BYTES_PER_PIXEL, PASS_BYTES_PER_LANE, WORKER_BASE_BYTES, address_space_limit, pass_lanes
 
     limit = address_space_limit()
@@ -277,8 +277,8 @@ INLINE_MAX_WORK_S = 1.5  # estimated seconds of warm frames under which a job re
 
 def choose_inline(req: RenderRequest, cost: dict[str, Any], todo: list[int]) -> bool:
     """Whether the job's frames are cheaper to render here than to spread over spawned
-    workers: each worker costs an import of the stack and a cold scene build (about 0.6 s
-    on 2 cores) and parallel workers save at most the frames' own time, so a job whose
+    workers: each worker costs an import of the stack and a cold scene build (docs/farm.md,
+    "Tasks, executors, threads") and parallel workers save at most the frames' own time, so a job whose
     frames are estimated at under INLINE_MAX_WORK_S renders inline (farm/inline.py). Not
     with --workers (processes asked for), --scheduler, --fields, or
     $MOTION_EXECUTOR=local; $MOTION_EXECUTOR=inline forces it."""
@@ -392,7 +392,7 @@ def version_of(req: RenderRequest, job: RenderJob) -> str:
 
 
 @dataclass(frozen=True)
-class Settled:
+class RunSetup:
     """What a run settles before the bake, every check passed: the farm settings, the
     scene with its preset, the frames, the output folder, the deliverables wanted, the job
     and its executor's size, the scene file whose folder it takes over (if any), its id."""
@@ -416,7 +416,7 @@ class Settled:
 
 
 @dataclass(frozen=True)
-class FramesAtHand:
+class SortedFrames:
     """After the bake: its time, each frame's motion, each frame's path, which frames are
     complete (and kept) and which render, and the folder's frames outside the timeline."""
 
@@ -441,7 +441,7 @@ class Chunking:
     inline: bool
 
 
-def settle(req: RenderRequest, held: list[RunLock]) -> Settled:
+def settle(req: RenderRequest, held: list[RunLock]) -> RunSetup:
     """Every check that can fail before the first task, in order; then the output folder's
     run lock, which goes into `held` (not with --check or --dry-run)."""
     cfg: FarmConfig = load_farm_config().with_overrides(retries=req.retries, task_timeout_s=req.task_timeout_s, chunk_size=req.chunk_size)
@@ -476,10 +476,10 @@ def settle(req: RenderRequest, held: list[RunLock]) -> Settled:
     run_id = new_run_id()
     if not req.check and not req.dry_run:
         held.append(take_run_lock(out_dir, Claimant.here(run_id), str(loaded.path), version_of(req, job)))
-    return Settled(cfg, preset, loaded, sel, out_dir, wanted, job, workers, threads, taken_from, run_id)
+    return RunSetup(cfg, preset, loaded, sel, out_dir, wanted, job, workers, threads, taken_from, run_id)
 
 
-def bake_and_sort(req: RenderRequest, s: Settled) -> FramesAtHand:
+def bake_and_sort(req: RenderRequest, s: RunSetup) -> SortedFrames:
     """Bake the motion once, then sort the frames: complete ones are kept, the others
     render; frames in the folder outside the timeline are foreign (a warning)."""
     loaded, out_dir, frames = s.loaded, s.out_dir, s.frames
@@ -507,28 +507,28 @@ def bake_and_sort(req: RenderRequest, s: Settled) -> FramesAtHand:
         logging.getLogger("motion").warning(
             f"motion: {out_dir}: frames {format_frames(foreign)} lie outside the timeline {format_range(loaded.scene.timeline.first, loaded.scene.timeline.last)}: "
             "foreign, left as they are and in no deliverable")
-    return FramesAtHand(bake_s, by_frame, paths, states, skipped, todo, foreign, simulation)
+    return SortedFrames(bake_s, by_frame, paths, states, skipped, todo, foreign, simulation)
 
 
-def check_run(req: RenderRequest, s: Settled, at: FramesAtHand) -> dict[str, Any]:
+def check_run(req: RenderRequest, s: RunSetup, sort: SortedFrames) -> dict[str, Any]:
     """--check: what a render would do, and the deliverables made from the frames there."""
-    result = check_only(s.loaded.name, s.out_dir, s.frames, at.todo, at.paths, at.states.stale)
-    if at.foreign:
-        result["foreign"] = format_frames(at.foreign)
+    result = check_only(s.loaded.name, s.out_dir, s.frames, sort.todo, sort.paths, sort.states.stale)
+    if sort.foreign:
+        result["foreign"] = format_frames(sort.foreign)
     if s.wanted:
         say = Progress(total=0, live=False).log
-        say_outputs(s.wanted, s.frames, at.paths, say)
+        say_outputs(s.wanted, s.frames, sort.paths, say)
         if s.wanted:
             result["deliverables"] = deliver_and_record(req, s.out_dir, s.wanted, shot_paths(s.loaded, s.out_dir, s.wanted), s.loaded.name, result, None, say)
     return result
 
 
-def cut_chunks(req: RenderRequest, s: Settled, at: FramesAtHand) -> tuple[Settled, Chunking]:
+def cut_chunks(req: RenderRequest, s: RunSetup, sort: SortedFrames) -> tuple[RunSetup, Chunking]:
     """The chunks, sized by the cost estimate; a small job runs inline in this process,
-    one worker and one chunk (the returned Settled says so)."""
-    cfg, loaded, job, workers, threads, todo = s.cfg, s.loaded, s.job, s.workers, s.threads, at.todo
+    one worker and one chunk (the returned RunSetup says so)."""
+    cfg, loaded, job, workers, threads, todo = s.cfg, s.loaded, s.job, s.workers, s.threads, sort.todo
     chunk_size = cfg.chunk_size or default_chunk_size(len(todo), workers if not req.scheduler else 2)
-    cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), workers if not req.scheduler else 1, at.bake_s, denoised_pixels(loaded.scene))
+    cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), workers if not req.scheduler else 1, sort.bake_s, denoised_pixels(loaded.scene))
     inline = choose_inline(req, cost, todo)
     if inline:
         from ..farm.local import threads_per_worker
@@ -541,52 +541,52 @@ def cut_chunks(req: RenderRequest, s: Settled, at: FramesAtHand) -> tuple[Settle
     return s, Chunking(chunk_size, make_chunks(todo, chunk_size), cost, inline)
 
 
-def report_name(req: RenderRequest, s: Settled) -> Path:
+def report_name(req: RenderRequest, s: RunSetup) -> Path:
     """Where the report goes: --report, else the output folder's (one per shard)."""
     shard_spec = s.sel.shard_spec
     default_name = f"render-report.shard-{shard_spec[0]}-of-{shard_spec[1]}.json" if shard_spec else "render-report.json"
     return Path(req.report or s.out_dir / default_name)
 
 
-def dry_run_plan(req: RenderRequest, s: Settled, at: FramesAtHand, c: Chunking) -> dict[str, Any]:
+def dry_run_plan(req: RenderRequest, s: RunSetup, sort: SortedFrames, c: Chunking) -> dict[str, Any]:
     """--dry-run: the plan, nothing rendered or written."""
-    planned = plan(req, s.loaded, s.out_dir, s.sel.selected, s.frames, s.sel.shard_spec, at.skipped, c.chunk_list, c.chunk_size, s.workers, s.threads, at.paths,
-                   report_name(req, s), at.states.stale, s.wanted, resolved_settings(req, s.loaded, s.preset), c.cost)
+    planned = plan(req, s.loaded, s.out_dir, s.sel.selected, s.frames, s.sel.shard_spec, sort.skipped, c.chunk_list, c.chunk_size, s.workers, s.threads, sort.paths,
+                   report_name(req, s), sort.states.stale, s.wanted, resolved_settings(req, s.loaded, s.preset), c.cost)
     if c.inline:
         planned["executor"]["kind"] = "inline"
-    if at.foreign:
-        planned["foreign"] = format_frames(at.foreign)
+    if sort.foreign:
+        planned["foreign"] = format_frames(sort.foreign)
     return planned
 
 
-def open_output(req: RenderRequest, s: Settled, at: FramesAtHand) -> TaskContext:
+def open_output(req: RenderRequest, s: RunSetup, sort: SortedFrames) -> TaskContext:
     """The output folder made and recorded as this scene's, stale claims on the kept
     frames cleared; the tasks' context."""
     s.out_dir.mkdir(parents=True, exist_ok=True)
     record_owner(s.out_dir, s.loaded.path)
     if s.taken_from is not None:
         logging.getLogger("motion").warning(f"motion: {s.out_dir} held the frames of {s.taken_from}; it is now {s.loaded.path}'s folder")
-    ctx = TaskContext(run_id=s.run_id, paths=at.paths, resume=req.resume and not req.overwrite, stale_after_s=s.cfg.stale_after_s)
-    clear_stale([at.paths[f] for f in at.skipped], s.cfg.stale_after_s)
+    ctx = TaskContext(run_id=s.run_id, paths=sort.paths, resume=req.resume and not req.overwrite, stale_after_s=s.cfg.stale_after_s)
+    clear_stale([sort.paths[f] for f in sort.skipped], s.cfg.stale_after_s)
     return ctx
 
 
-def start_progress(req: RenderRequest, s: Settled, at: FramesAtHand, c: Chunking) -> tuple[str, Progress]:
+def start_progress(req: RenderRequest, s: RunSetup, sort: SortedFrames, c: Chunking) -> tuple[str, Progress]:
     """The run's label and progress display, opened with the plan and the frames replaced."""
-    frames, shard_spec, todo = s.frames, s.sel.shard_spec, at.todo
+    frames, shard_spec, todo = s.frames, s.sel.shard_spec, sort.todo
     label = f"{s.loaded.name}" + (f" shard {shard_spec[0]}/{shard_spec[1]}" if shard_spec else "")
-    progress = Progress(total=len(frames), already=len(at.skipped), label=label, live=req.progress, estimate_s=c.cost["per_frame_s"] if todo else None,
+    progress = Progress(total=len(frames), already=len(sort.skipped), label=label, live=req.progress, estimate_s=c.cost["per_frame_s"] if todo else None,
                         overhead_s=c.cost["startup_s"] + c.cost["cold_extra_s"] if todo else 0.0)
     progress.note(
         f"motion: {label}: {len(frames)} frames ({format_frames(frames) or 'none'}) -> {s.out_dir}; "
-        f"{len(at.skipped)} already complete, {len(todo)} to render in {len(c.chunk_list)} chunks of <= {c.chunk_size}"
+        f"{len(sort.skipped)} already complete, {len(todo)} to render in {len(c.chunk_list)} chunks of <= {c.chunk_size}"
     )
-    for line in at.states.describe():
+    for line in sort.states.describe():
         progress.log(f"motion: {line}", logging.WARNING)
     return label, progress
 
 
-def executor_info(req: RenderRequest, s: Settled, c: Chunking, sched: Scheduler | None) -> dict[str, Any]:
+def executor_info(req: RenderRequest, s: RunSetup, c: Chunking, sched: Scheduler | None) -> dict[str, Any]:
     """The report's executor: kind, size, chunks, and what crossed the network."""
     info = {"kind": "dask" if req.scheduler else ("inline" if c.inline else "local"), "workers": s.workers if not req.scheduler else None, "threads": s.threads, "scheduler": req.scheduler, "chunk_size": c.chunk_size, "chunks": len(c.chunk_list)}
     if sched is not None and hasattr(sched.ex, "transfer_stats"):
@@ -594,7 +594,7 @@ def executor_info(req: RenderRequest, s: Settled, c: Chunking, sched: Scheduler 
     return info
 
 
-def make_report(req: RenderRequest, s: Settled, at: FramesAtHand, c: Chunking, sched: Scheduler | None, interrupted: bool, timings: dict[str, float]) -> dict[str, Any]:
+def make_report(req: RenderRequest, s: RunSetup, sort: SortedFrames, c: Chunking, sched: Scheduler | None, interrupted: bool, timings: dict[str, float]) -> dict[str, Any]:
     """The run's report, merged with the previous one's frames still there, its cost
     recorded for the next estimate."""
     loaded, job = s.loaded, s.job
@@ -605,7 +605,7 @@ def make_report(req: RenderRequest, s: Settled, at: FramesAtHand, c: Chunking, s
         frames=s.frames,
         selected=s.sel.selected,
         shard_spec=s.sel.shard_spec,
-        skipped=at.skipped,
+        skipped=sort.skipped,
         sched=sched,
         cfg=s.cfg,
         executor_info=executor_info(req, s, c, sched),
@@ -615,15 +615,15 @@ def make_report(req: RenderRequest, s: Settled, at: FramesAtHand, c: Chunking, s
         motion_file=str(req.motion_file) if req.motion_file else None,
     )
     report["report"] = str(report_name(req, s))
-    if at.simulation is not None:
-        report["simulation"] = at.simulation  # kept: read from an earlier run's (bake/keep.py)
-    if at.states.stale:
-        report["replaced"] = [{"frame": f, "reason": why} for f, why in sorted(at.states.stale.items())]
+    if sort.simulation is not None:
+        report["simulation"] = sort.simulation  # kept: read from an earlier run's (bake/keep.py)
+    if sort.states.stale:
+        report["replaced"] = [{"frame": f, "reason": why} for f, why in sorted(sort.states.stale.items())]
     timeline = loaded.scene.timeline
     # the folder's record holds the timeline's frames; others are foreign (shot/stale.py: folder_frames)
     merge_previous(report, report_name(req, s), lambda f: timeline.first <= f <= timeline.last and os.path.exists(frame_path(job, loaded, f)))
-    if at.foreign:
-        report["foreign"] = format_frames(at.foreign)
+    if sort.foreign:
+        report["foreign"] = format_frames(sort.foreign)
     record_cost(loaded.name, job.settings_hash, samples_of(loaded.scene), report, compiled_all=bool(c.cost.get("compiles_kernels")))
     return report
 
@@ -632,24 +632,24 @@ def _run_render(req: RenderRequest, held: list[RunLock]) -> dict[str, Any]:
     """run_render's steps; the run lock it takes goes into `held`."""
     t_start = time.perf_counter()
     s = settle(req, held)
-    at = bake_and_sort(req, s)
+    sort = bake_and_sort(req, s)
     if req.check:
-        return check_run(req, s, at)
-    s, c = cut_chunks(req, s, at)
+        return check_run(req, s, sort)
+    s, c = cut_chunks(req, s, sort)
     if req.dry_run:
-        return dry_run_plan(req, s, at, c)
+        return dry_run_plan(req, s, sort, c)
 
-    ctx = open_output(req, s, at)
-    label, progress = start_progress(req, s, at, c)
+    ctx = open_output(req, s, sort)
+    label, progress = start_progress(req, s, sort, c)
     t_farm = time.perf_counter()
-    sched, interrupted = run_chunks(c.chunk_list, s.job, at.by_frame, ctx, s.cfg, progress, scheduler=req.scheduler, workers=s.workers, threads=s.threads, inline=c.inline)
+    sched, interrupted = run_chunks(c.chunk_list, s.job, sort.by_frame, ctx, s.cfg, progress, scheduler=req.scheduler, workers=s.workers, threads=s.threads, inline=c.inline)
     farm_s = time.perf_counter() - t_farm
-    report = make_report(req, s, at, c, sched, interrupted, {"bake_s": at.bake_s, "farm_s": farm_s, "wall_s": time.perf_counter() - t_start})
+    report = make_report(req, s, sort, c, sched, interrupted, {"bake_s": sort.bake_s, "farm_s": farm_s, "wall_s": time.perf_counter() - t_start})
     report_path, report_fault = write_report_somewhere(report, report_name(req, s), s.run_id)
     progress.log(summary_line(label, report["totals"], report_path))
     stop_on_disk_fault(sched, report, report_path, report_fault)
     if interrupted:
         raise KeyboardInterrupt
     raise_failures(report, s.frames)
-    finish(req, s.loaded, s.job, s.out_dir, s.frames, s.workers, report, report_path, progress.log, s.wanted, at.paths)
+    finish(req, s.loaded, s.job, s.out_dir, s.frames, s.workers, report, report_path, progress.log, s.wanted, sort.paths)
     return report

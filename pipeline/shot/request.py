@@ -7,6 +7,17 @@ from pathlib import Path
 from typing import Any
 
 
+@dataclass(frozen=True)
+class DeliverView:
+    """How the deliverables show the scene-linear frames (--exposure, --ocio, --ocio-display,
+    --ocio-view): the arguments of their `telecine.movie.ViewTransform` (None: its default)."""
+
+    exposure: float = 0.0  # stops
+    ocio_config: str | None = None  # a config file or ocio://NAME; "none": the plain sRGB curve
+    ocio_display: str | None = None
+    ocio_view: str | None = None
+
+
 @dataclass
 class RenderRequest:
     """Everything `motion render` was asked to do (flags left None use the defaults)."""
@@ -21,7 +32,7 @@ class RenderRequest:
     cache: bool = True
     deliver: str | None = None
     deliver_frames: str | None = None  # --deliver-frames: deliverables of part of the shot, named apart (default: the whole shot)
-    deliver_view: dict[str, Any] = field(default_factory=dict)  # exposure / OCIO for the deliverables
+    deliver_view: DeliverView = DeliverView()  # exposure / OCIO for the deliverables
     resume: bool = True
     overwrite: bool = False
     shard: str | None = None

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from ..errors import FrameIOError
-from ..farm.frames import format_frames
+from ..farm.selection import format_frames
 from ..frame_output import is_complete, read_meta
 from ..render.look import MOVING
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UsageError
-from ..files import writing
+from ..write_policy import writing
 from ..timeline import format_range, rate_label
 from .movie import ViewTransform
 from .sequence import Sequence, discover, frame_digits, read_mapped

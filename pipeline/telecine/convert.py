@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any, Callable
 import numpy as np
 
 from ..errors import FrameIOError, UsageError
-from ..files import publish_path, staging
+from ..write_policy import publish_path, staging
 from ..frame_output import Frame, read_meta, write_frame
 from ..timeline import timecode
 from .cadence import Cadence, Tail, film_rate, output_rate, parse_cadence, plan
@@ -163,17 +163,22 @@ def _blend_layers(a: Frame, b: Frame) -> tuple[np.ndarray, dict[str, np.ndarray]
 
 
 class _Staging:
-    """A hidden folder inside `out_dir` (the write policy's `files.staging`); `publish` moves
-    its files into `out_dir` (files.publish_path) and removes the old sequence's others."""
+    """The output sequence of a conversion, written into a hidden folder inside `out_dir`
+    (the write policy's `write_policy.staging`) one frame at a time (`write`: named, typed and
+    compressed as `out` says, progress after each); `publish` moves the frames into
+    `out_dir` (write_policy.publish_path) and removes the old sequence's others."""
 
-    def __init__(self, out_dir: Path, prefix: str, overwrite: bool) -> None:
+    def __init__(self, out_dir: Path, seq: Sequence, out: SequenceOutput, total: int) -> None:
+        prefix = out.name(seq)
         existing = find_sequences(out_dir).get(prefix, []) if out_dir.is_dir() else []
-        if existing and not overwrite:
+        if existing and not out.overwrite:
             raise UsageError(
                 f"{out_dir} already holds {len(existing)} frames named {prefix}.NNNN.exr; "
                 "use --overwrite to replace them"
             )
-        self.out_dir, self.prefix = out_dir, prefix
+        self.out_dir, self.prefix, self.seq, self.out, self.total = out_dir, prefix, seq, out, total
+        self.pixel_type = out.pixel_type_for(seq)
+        self.names: list[str] = []
         self.old = [p for _, p in existing]
         self._folder = staging(out_dir, "writing the telecine frames in", prefix=".telecine-")
         self.dir = Path()
@@ -182,9 +187,27 @@ class _Staging:
         self.dir = self._folder.__enter__()
         return self
 
-    def publish(self, names: list[str]) -> tuple[Path, ...]:
-        """Move the staged frames `names` into the output folder; the old sequence's frames
-        that are not among them go."""
+    def write(
+        self, number: int, rgba: np.ndarray, meta: dict[str, Any], aovs: dict[str, np.ndarray], *,
+        fps: Fraction, timecode: str, submit: Callable[..., Any] | None = None,
+    ) -> None:
+        """Stage frame `number` of the output sequence (padded as the input's), written now or
+        through `submit` (a background writer's), then report progress."""
+        name = f"{self.prefix}.{frame_digits(number, self.seq.padding)}.exr"
+        args = (self.dir / name, rgba, meta)
+        options = dict(fps=fps, timecode=timecode, aovs=aovs or None, pixel_type=self.pixel_type, compression=self.out.compression)
+        if submit is None:
+            write_frame(*args, **options)  # type: ignore[arg-type]
+        else:
+            submit(write_frame, *args, **options)
+        self.names.append(name)
+        if self.out.progress:
+            self.out.progress(len(self.names), self.total)
+
+    def publish(self) -> tuple[Path, ...]:
+        """Move the staged frames into the output folder; the old sequence's frames that are
+        not among them go."""
+        names = self.names
         keep = set(names)
         for path in self.old:
             if path.name not in keep:
@@ -242,16 +265,13 @@ def telecine_sequence(
     out = replace(output, **output_fields)
     in_dir, out_dir = Path(in_dir), Path(out_dir)
     seq = sequence or discover(in_dir, out.prefix, require_even_height=not cadence.blend)
-    name = out.name(seq)
-    _check_dirs(seq.directory, out_dir, seq.prefix, name)
+    _check_dirs(seq.directory, out_dir, seq.prefix, out.name(seq))
     frames = plan(len(seq), cadence, order, tail)
     if drop_frame:
         _timecode(0, rate, True)
     start = max(0, seq.first) * round(rate) // max(1, round(film))  # the film's start, in video frames
-    ptype = out.pixel_type_for(seq)
     load = _FrameCache(seq, ahead=sorted({k for vf in frames for k in (vf.top, vf.bottom, vf.first, vf.second)}), shared=shared)
-    names: list[str] = []
-    with _Staging(out_dir, name, out.overwrite) as staging:
+    with _Staging(out_dir, seq, out, len(frames)) as staging:
         with _Writes() as writes:
             for i, vf in enumerate(frames):
                 top, bottom = load(vf.top), load(vf.bottom)
@@ -276,15 +296,8 @@ def telecine_sequence(
                     videoFrame=i,
                     tail=tail,
                 )
-                fname = f"{name}.{frame_digits(seq.first + i, seq.padding)}.exr"
-                writes.submit(
-                    write_frame, staging.dir / fname, rgba, meta, fps=rate, timecode=_timecode(start + i, rate, drop_frame),
-                    aovs=aovs or None, pixel_type=ptype, compression=out.compression,
-                )
-                names.append(fname)
-                if out.progress:
-                    out.progress(i + 1, len(frames))
-        paths = staging.publish(names)
+                staging.write(seq.first + i, rgba, meta, aovs, fps=rate, timecode=_timecode(start + i, rate, drop_frame), submit=writes.submit)
+        paths = staging.publish()
     return Result(out_dir, paths, rate, film, cadence, None if cadence.blend else order)
 
 
@@ -361,8 +374,7 @@ def inverse_sequence(
     out = replace(output, **output_fields)
     in_dir, out_dir = Path(in_dir), Path(out_dir)
     seq = discover(in_dir, out.prefix)
-    name = out.name(seq)
-    _check_dirs(seq.directory, out_dir, seq.prefix, name)
+    _check_dirs(seq.directory, out_dir, seq.prefix, out.name(seq))
     stored = str(seq.first_meta.get("fieldOrder", "tff"))
     if field_order is None and stored not in ("tff", "bff"):
         raise UsageError(f"{seq.paths[0]}: frames are marked {stored!r}, not interlaced; give --field-order to force")
@@ -376,10 +388,8 @@ def inverse_sequence(
 
     cadence = detection.cadence if detection else parse_cadence(str(seq.first_meta.get("cadence", "3:2")))
     film = _recovered_film_rate(seq, cadence, film_speed)
-    ptype = out.pixel_type_for(seq)
     load = _FrameCache(seq)
-    names: list[str] = []
-    with _Staging(out_dir, name, out.overwrite) as staging:
+    with _Staging(out_dir, seq, out, len(recovered)) as staging:
         for i, r in enumerate(recovered):
             top, bottom = load(r.top_from), load(r.bottom_from)
             rgba, aovs = _weave_layers(top, bottom)
@@ -392,13 +402,6 @@ def inverse_sequence(
             if detection is not None:
                 meta["cadencePhase"] = detection.phase
             number = r.source if numbered_by_source else seq.first + r.source
-            fname = f"{name}.{frame_digits(number, seq.padding)}.exr"
-            write_frame(
-                staging.dir / fname, rgba, meta, fps=film, timecode=timecode(i, film),
-                aovs=aovs or None, pixel_type=ptype, compression=out.compression,  # type: ignore[arg-type]
-            )
-            names.append(fname)
-            if out.progress:
-                out.progress(i + 1, len(recovered))
-        paths = staging.publish(names)
+            staging.write(number, rgba, meta, aovs, fps=film, timecode=timecode(i, film))
+        paths = staging.publish()
     return Result(out_dir, paths, film, film, cadence, order, detection)

@@ -27,7 +27,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import UsageError
-from ..files import writing
+from ..write_policy import writing
 from ..timeline import frame_timecode, rate_label
 from .movie import ViewTransform
 from .sequence import Sequence, discover, frame_digits, read_checked

@@ -27,7 +27,7 @@ from typing import Callable, Iterable, Iterator, Mapping
 import numpy as np
 
 from ..errors import FrameIOError, UsageError
-from ..files import writing
+from ..write_policy import writing
 from ..timeline import rate_label
 from ..field_model import FieldOrder, check_field_order
 from .sequence import Sequence, discover, read_mapped
@@ -343,7 +343,7 @@ def write_movie(
 ) -> Path:
     """Encode linear RGBA frames into a movie at `rate`; interlaced when `field_order` is given.
 
-    Written through the write policy (files.writing): a hidden temporary file next to `path`,
+    Written through the write policy (write_policy.writing): a hidden temporary file next to `path`,
     renamed when complete; a full disk is one DiskFaultError line.
     """
     path = Path(path)

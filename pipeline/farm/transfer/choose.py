@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from ...files import write_atomic
+from ...write_policy import write_atomic
 from ...render.job import RenderJob
 from ...scene.files import readable_digests
 from ...scene.loader import LoadedScene

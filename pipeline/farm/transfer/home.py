@@ -12,7 +12,7 @@ from typing import Callable, Sequence
 
 from ...bake import BakedFrame
 from ...errors import DiskFaultError
-from ...files import confined, writing
+from ...write_policy import confined, writing
 from ...frame_output import is_complete
 from ...render.job import FrameResult, RenderJob, expected_meta
 from ..claims import release
@@ -70,7 +70,7 @@ def run_chunk_away(run: Callable[[int, RenderJob, Sequence[BakedFrame], TaskCont
 
 def publish_home(pre: ChunkResult, res: ChunkResult, job: RenderJob, ctx: TaskContext) -> ChunkResult:
     """On the client: publish each frame a shipped chunk brought home at its planned path
-    under the output folder, atomically and read back (pipeline/files.py), release this
+    under the output folder, atomically and read back (pipeline/write_policy.py), release this
     run's claims, and merge what `claim_home` settled before sending. A frame reported
     written whose bytes did not arrive is failed (the farm retries it as after a lost
     worker); a disk fault on the output folder marks the result so the farm stops as for

@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Callable, Iterable, Sequence
 
 from ...errors import AssetError
-from ...files import confined
+from ...write_policy import confined
 from ...limits import env_size
 from ...scene.loader import LoadedScene
 from .manifest import ShippedAsset, manifest_key

@@ -12,7 +12,7 @@ from typing import Iterable
 
 from ...errors import AssetError
 from ...scene.files import NamedFile, file_digest, named_files, renamed
-from ...scene.imports.cache import converted_file
+from ...scene.imports.converted import converted_file
 from ...scene.schema import Scene
 from ...scene.source import yaml_path
 

@@ -32,7 +32,7 @@ def store(sha256: str, data: bytes, folder: Path | None = None, rel: str = "") -
     """Keep `data` in the content-addressed cache as `<folder>/<sha256><suffix of rel>` and
     return its path.
     Bytes that do not hash to `sha256` (damaged in transit) raise AssetError and are not
-    kept; a full cache disk raises the one-line DiskFaultError (pipeline/files.py); the cache
+    kept; a full cache disk raises the one-line DiskFaultError (pipeline/write_policy.py); the cache
     is then held to $MOTION_ASSET_CACHE_CAP, least recently used first, keeping this entry."""
     folder = folder if folder is not None else shipped_cache_dir()
     got = bytes_digest(data)

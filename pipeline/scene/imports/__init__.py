@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ...errors import Problem, SceneError
-from .records import Expansion, ImportFileError, Origin, SpecError
+from .expansion import Expansion, ImportFileError, Origin, SpecError
 
 if TYPE_CHECKING:
     from ..source import SourceMap

@@ -25,8 +25,8 @@ from ..files import bytes_digest, file_digest
 from ...errors import InputFileError
 from ...limits import MAX_GLTF_BYTES as MAX_FILE_BYTES  # refuse absurd files before reading them
 from ...limits import MAX_GLTF_KEYS, MAX_IMAGE_BYTES, read_bounded
-from .records import Expansion, ImportFileError, Origin, SpecError, import_frames
-from .cache import cached, write_atomic, write_ply
+from .expansion import Expansion, ImportFileError, Origin, SpecError, import_frames
+from .converted import cached, write_atomic, write_ply
 
 COMPONENTS = {5120: np.dtype("<i1"), 5121: np.dtype("<u1"), 5122: np.dtype("<i2"), 5123: np.dtype("<u2"), 5125: np.dtype("<u4"), 5126: np.dtype("<f4")}
 WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}

@@ -1,4 +1,4 @@
-"""The records of a glTF or USD import, kept between loads (issue 28).
+"""The records of a glTF or USD import, kept between loads.
 
 An import's records depend only on the bytes of the files its reader reads (the .gltf or
 .glb and the buffers and images it names; a USD stage's layers and the textures it
@@ -7,7 +7,7 @@ converts), the import entry without its overrides, where it is shown, the scene'
 file in the import cache, beside the converted meshes, textures and skins they name, with
 the digest of every file the reader read (`scene/files.digests_recorded`). A later load checks
 those digests and that every converted file is still there, and then never imports the
-reader: numpy and pygltflib (0.05 s of `motion validate`), or usd-core (0.3 s). Any
+reader: numpy and pygltflib, or usd-core (their import times: docs/imports.md). Any
 difference, or an entry that does not read whole, and the file is read again.
 """
 
@@ -21,12 +21,12 @@ from ...cache import STORES, code_digest, trusted
 from ...errors import InputFileError
 from ..files import bytes_digest, digests_recorded, file_digest
 from ...limits import MAX_GLTF_BYTES, MAX_RECORD_BYTES, MAX_USD_LAYER_BYTES, read_bounded, read_json_record
-from .records import Expansion, Origin
+from .expansion import Expansion, Origin
 
 STORE = STORES["import-records"]
 
 # each reader's code is part of the key: a changed reader rebuilds
-READERS = {"gltf": ("gltf.py", "records.py", "cache.py", "memo.py"), "usd": ("usd.py", "gltf.py", "records.py", "cache.py", "memo.py")}
+READERS = {"gltf": ("gltf.py", "expansion.py", "converted.py", "memo.py"), "usd": ("usd.py", "gltf.py", "expansion.py", "converted.py", "memo.py")}
 FORMAT = 3  # of an entry: 2 adds the digests of the files read; 3 the file's suffix in the key
 # no file larger than its reader accepts is hashed here (the reader refuses it unread)
 MOST_BYTES = {"gltf": MAX_GLTF_BYTES, "usd": MAX_USD_LAYER_BYTES}
@@ -36,7 +36,7 @@ def read_import(path: Path, shown: str, spec: Any, index: int, base_dir: Path) -
     """The records of one glTF or USD import: kept ones when current, else the reader's (and
     kept); ImportFileError (the file and node or prim) or SpecError (the import entry's
     field) otherwise."""
-    from .cache import STATS
+    from .converted import STATS
 
     kind = "gltf" if path.suffix.lower() in (".gltf", ".glb") else "usd"
     if path.stat().st_size > MOST_BYTES[kind]:
@@ -162,7 +162,7 @@ def _outside(files: list[str], base_dir: Path) -> str | None:
     """The first file named outside the scene's folder tree and the import cache, as a
     reason (None when every one is inside): kept records may name only files the scene could
     name itself or files the readers converted."""
-    from .cache import cache_dir
+    from .converted import cache_dir
 
     roots = (base_dir.resolve(), cache_dir().resolve())
     for f in files:

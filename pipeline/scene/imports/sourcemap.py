@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 from ...errors import Problem
 from ..source import Loc, SourceMap, yaml_path
-from .records import Origin
+from .expansion import Origin
 
 
 @dataclass(frozen=True)

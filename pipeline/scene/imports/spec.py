@@ -9,9 +9,9 @@
           walker.Body: {material: red}
 """
 
-# No `from __future__ import annotations` in the schema modules: pydantic would compile and
-# evaluate every field's annotation string when each model class is made, about 0.03 s of
-# every process that loads a scene (issue 28, docs/ci-sharding.md).
+# No `from __future__ import annotations` in the schema modules: pydantic would then compile
+# and evaluate every field's annotation string when each model class is made, in every
+# process that loads a scene (docs/ci-sharding.md, "What validation keeps").
 
 from typing import Annotated, Any, Literal, Union
 

@@ -21,11 +21,11 @@ from typing import Any
 
 import numpy as np
 
-from .records import Expansion, ImportFileError, Origin, SpecError, import_frames
+from .expansion import Expansion, ImportFileError, Origin, SpecError, import_frames
 from ..files import file_digest
 from ...limits import MAX_USD_LAYER_BYTES as MAX_LAYER_BYTES
 from ...limits import MAX_USD_POINT_SAMPLES, MAX_USD_POINT_VALUES
-from .cache import cached, hold_cap, write_ply
+from .converted import cached, hold_cap, write_ply
 from .gltf import _Names, sanitize
 
 MAX_SAMPLES = 100_000  # time samples per prim we are willing to key
@@ -460,7 +460,7 @@ def check_layers(path: Path, root: Path, shown: str) -> None:
 
     from pxr import Sdf, Tf
 
-    from ...files import confined
+    from ...write_policy import confined
 
     base = root.resolve()
     seen: set[Path] = set()

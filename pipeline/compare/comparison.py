@@ -25,6 +25,7 @@ from typing import Any, Literal, Mapping
 import numpy as np
 
 from ..errors import FrameIOError, ReferenceMismatchError
+from ..timeline import format_frames
 from .frames import FrameFacts, facts_from_header, find_frames, frame_facts, incomparable, notes, read_pixels
 from .golden import NOISY_LAYER, read_manifest
 from .stats import ALPHA, FILTER_KAPPA, Region, compare_frame
@@ -230,23 +231,7 @@ def gather_notes(per_frame: dict[int, list[str]]) -> list[str]:
     for number in sorted(per_frame):
         for note in per_frame[number]:
             frames.setdefault(note, []).append(number)
-    return [f"frame{'s' if len(f) > 1 else ''} {ranges(f)}: {note}" for note, f in frames.items()]
-
-
-def ranges(numbers: list[int]) -> str:
-    """[1, 2, 3, 7] -> '1-3, 7'."""
-    out, start, prev = [], None, None
-    for n in sorted(numbers):
-        if start is None:
-            start = prev = n
-        elif n == prev + 1:  # type: ignore[operator]
-            prev = n
-        else:
-            out.append(f"{start}-{prev}" if prev != start else str(start))
-            start = prev = n
-    if start is not None:
-        out.append(f"{start}-{prev}" if prev != start else str(start))
-    return ", ".join(out)
+    return [f"frame{'s' if len(f) > 1 else ''} {format_frames(f)}: {note}" for note, f in frames.items()]
 
 
 def reference_frames(ref_dir: str | Path, prefix: str | None) -> tuple[str | None, dict[int, Path]]:

@@ -1,4 +1,4 @@
-"""The one way motion writes a file (issue 26): through a temporary file in the destination
+"""The one way motion writes a file: through a temporary file in the destination
 folder and an atomic rename, so a reader sees the old file or the whole new one; on any
 failure the temporary file goes; a disk that refuses the write (full, over quota,
 read-only, not ours) is one `DiskFaultError` line naming what was being written and where.

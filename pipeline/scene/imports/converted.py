@@ -54,7 +54,7 @@ def hold_cap(keep: Path | None = None) -> None:
 
 def write_atomic(target: Path, write: Callable[[Path], None], cap: bool = True) -> None:
     """`write(tmp)` to a temporary name beside `target`, then rename it into place (the one
-    write policy, pipeline/files.py: a concurrent reader sees the whole file or none, a full
+    write policy, pipeline/write_policy.py: a concurrent reader sees the whole file or none, a full
     cache disk is one line and leaves no partial entry); then the cache is held to
     $MOTION_ASSET_CACHE_CAP (the store's one eviction policy; unless `cap` is False: the
     caller then holds it once after a run of writes, `hold_cap`)."""

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..errors import BakeFileError
-from ..files import writing
+from ..write_policy import writing
 from ..timeline import MAX_FRAME_NUMBER, MAX_FRAMES
 from .checks import motion_problems
 from .records import BakedFrame, BakedMotion
@@ -272,9 +272,9 @@ def read_baked(path: str | Path, half: bool = False, frames: Collection[int] | N
     JSON carries no vertices or particles; NPZ carries them at the frame time and across
     the shutter (docs/bake-format.md). `half`: the frames it feeds are half-float, so a
     light's radiance seen directly must be one a half holds (limits.py). `frames`: build
-    and check only these frame numbers (a job's selection): a file of a million frames within
-    its byte budget made a record of every one (100,000 took 33 s and 2 GB) before the job
-    used two. A file of more than MAX_BAKE_FRAMES frames is refused before any is built."""
+    and check only these frame numbers (a job's selection), so a long file within its byte
+    budget never costs a record per frame the job does not use (docs/bake-format.md). A
+    file of more than MAX_BAKE_FRAMES frames is refused before any is built."""
     path = Path(path)
     doc = read_document(path)
     try:
