@@ -16,21 +16,35 @@ from typing import Any
 from ..scene.loader import LoadedScene
 
 
-def is_static(loaded: LoadedScene, name: str) -> bool:
-    """An object is static iff neither it nor any ancestor moves."""
+def moving_objects(loaded: LoadedScene) -> set[str]:
+    """The names of the objects that move: their own motion or any ancestor's (one walk up
+    each object's parents, memoised: linear in the number of objects)."""
     by_name = {o.name: o for o in loaded.scene.objects}
-    node = by_name.get(name)
-    while node is not None:
-        if node.motion.type != "static":
-            return False
-        node = by_name.get(node.parent) if node.parent else None
-    return True
+    moves: dict[str, bool] = {}
+
+    def walk(name: str) -> bool:
+        chain: list[str] = []
+        node = by_name.get(name)
+        result = False
+        while node is not None and node.name not in moves:
+            chain.append(node.name)
+            if node.motion.type != "static":
+                result = True
+                break
+            node = by_name.get(node.parent) if node.parent else None
+        else:
+            result = moves.get(node.name, False) if node is not None else False
+        for n in chain:
+            moves[n] = result
+        return result
+
+    return {name for name in by_name if walk(name)}
 
 
-def _aims_at_mover(loaded: LoadedScene, light: Any) -> bool:
+def _aims_at_mover(light: Any, moving: set[str]) -> bool:
     """A spot light or projector whose `look_at` names an object that moves: it turns."""
     target = getattr(light, "look_at", None)
-    return isinstance(target, str) and not is_static(loaded, target)
+    return isinstance(target, str) and target in moving
 
 
 @dataclass(frozen=True)
@@ -54,25 +68,28 @@ class Roles:
 def sort_scene(loaded: LoadedScene) -> Roles:
     """The roles of every object and light of `loaded`."""
     objects = loaded.scene.objects
-    # non-rigid geometry: particle systems and deforming meshes render as time slices
+    moving = moving_objects(loaded)
+    # non-rigid geometry: particle systems and deforming meshes
     slice_names = [o.name for o in objects if o.visible and o.is_nonrigid]
-    static_names = [o.name for o in objects if is_static(loaded, o.name) and o.name not in slice_names]
+    sliced = set(slice_names)
+    static_names = [o.name for o in objects if o.name not in moving and o.name not in sliced]
+    static = set(static_names)
     mover_names = [
         o.name
         for o in objects
-        if o.name not in static_names and o.name not in slice_names and o.shape != "empty" and not o.is_particles and o.visible
+        if o.name not in static and o.name not in sliced and o.shape != "empty" and not o.is_particles and o.visible
     ]
     # lights whose pose can change (their own motion, a moving parent, or an aim at a moving object)
     animated = [
         (i, light)
         for i, light in enumerate(loaded.scene.lights)
-        if light.motion.type != "static" or (light.parent is not None and not is_static(loaded, light.parent)) or _aims_at_mover(loaded, light)
+        if light.motion.type != "static" or (light.parent is not None and light.parent in moving) or _aims_at_mover(light, moving)
     ]
     return Roles(
         static_names=static_names,
         mover_names=mover_names,
         slice_names=slice_names,
-        particle_names=tuple(o.name for o in objects if o.name in slice_names and o.is_particles),
+        particle_names=tuple(o.name for o in objects if o.name in sliced and o.is_particles),
         moving_lights=[(i, light) for i, light in animated if light.posed_per_path],
         animated_lights=[(i, light) for i, light in animated if not light.posed_per_path],
     )
