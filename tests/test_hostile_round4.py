@@ -18,8 +18,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from test_hostile_input import BASE as HOSTILE_BASE
-from test_scene_validation import _parse_both
+from tests.cli.test_hostile_input import BASE as HOSTILE_BASE
+from tests.scene.test_validation import _parse_both
 from farm_util import SCENE, SLOW, TINY, frames_in, leftovers, motion, report, start_motion, wait_for, worker_pids
 from motion.pipeline.errors import OutputInUseError
 from motion.pipeline.farm import claims

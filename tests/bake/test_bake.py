@@ -17,7 +17,7 @@ from motion.pipeline.scene import load_scene
 if TYPE_CHECKING:
     from motion.pipeline.bake import BakedFrame
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SCENES = ROOT / "scenes"
 MOTION = ROOT / ".venv" / "bin" / "motion"
 

@@ -19,7 +19,7 @@ from _support import run_motion
 from motion.pipeline.errors import SceneError
 from motion.pipeline.scene import load_scene
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 OTHER_UID = 54321  # a user who is not us (the tests may run as root: os.chown works)
 OBJ = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
 SCENE = ("timeline: {fps: 24, first: 0, last: 0}\nrender: {resolution: [16, 12], spp: 2}\n"

@@ -178,7 +178,7 @@ def test_cannonball_scene_through_evaluate():
     from motion.pipeline.motion import evaluate
     from motion.pipeline.scene import load_scene
 
-    loaded = load_scene(Path(__file__).parents[1] / "scenes" / "cannonball.yaml", overrides={"timeline": {"last": 240}})
+    loaded = load_scene(Path(__file__).parents[2] / "scenes" / "cannonball.yaml", overrides={"timeline": {"last": 240}})
     sim = simulate(loaded, 10.5)
     t = np.array([0.0, 1.0 / 96, 3.3333, 7.77, 10.0])
     got = evaluate(loaded, t, simulation=sim).objects["ball"].translation

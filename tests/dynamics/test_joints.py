@@ -164,7 +164,7 @@ WRECKING_BALL = """
 def test_the_wrecking_ball_example_of_the_docs_loads_and_swings(tmp_path: Path) -> None:
     """docs/dynamics.md's wrecking ball: a ball on a rope in four lines of YAML. It swings
     on the rope (length 8 m, its initial distance) through the bottom of its arc."""
-    docs = (Path(__file__).resolve().parents[1] / "docs" / "dynamics.md").read_text()
+    docs = (Path(__file__).resolve().parents[2] / "docs" / "dynamics.md").read_text()
     block = re.search(r"```yaml\n(dynamics:\n  joints:\n(?:.*\n)*?)```", docs)
     assert block is not None, "the wrecking-ball example is in docs/dynamics.md"
     joints = yaml.safe_load(block.group(1))["dynamics"]["joints"]

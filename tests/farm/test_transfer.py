@@ -179,7 +179,7 @@ def test_an_imported_scene_ships_its_converted_meshes(tmp_path: Path) -> None:
     from motion.pipeline.farm.transfer.shipment import BytesByHash, ship_job
     from motion.pipeline.render.job import RenderJob
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     shot = tmp_path / "shot"
     shutil.copytree(root / "scenes" / "assets", shot / "assets")
     shutil.copy(root / "scenes" / "walker.yaml", shot / "walker.yaml")

@@ -14,7 +14,7 @@ from motion.pipeline.motion.graph import ParentCycleError, evaluation_order
 from motion.pipeline.motion.pose import quat_angle
 from motion.pipeline.scene import load_scene
 
-SCENES = Path(__file__).resolve().parents[1] / "scenes"
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
 
 CHAIN = """
 camera:

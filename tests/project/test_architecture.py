@@ -8,7 +8,7 @@ import importlib.util
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _checker():
@@ -37,7 +37,7 @@ def test_no_assert_in_pipeline_or_cli() -> None:
     import ast
     from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     found = [
         f"{path.relative_to(root)}:{node.lineno}"
         for folder in ("pipeline", "cli")

@@ -9,7 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from conftest import SCRATCH
+from tests.conftest import SCRATCH
 
 
 def _listing(folder: Path) -> dict[str, tuple[int, int]]:
@@ -48,10 +48,10 @@ def test_the_suites_fixtures_leave_the_users_cache_root_and_temp_folder_alone(tm
     before = _listing(marker)
     env = {k: v for k, v in os.environ.items() if k not in ("DRJIT_CACHE_DIR", "XDG_CACHE_HOME", "PYTEST_XDIST_WORKER", "PYTEST_CURRENT_TEST")}
     env.update(MOTION_CACHE_DIR=str(marker), HOME=str(home), TMPDIR=str(tmpdir), MPLCONFIGDIR=str(tmp_path / "mpl"))
-    tests = ["tests/test_bake_keep.py::test_second_run_reads_the_kept_simulation_and_it_is_the_same",
-             "tests/test_smoke_render.py::test_cli_flag_beats_preset_beats_scene"]
+    tests = ["tests/bake/test_keep.py::test_second_run_reads_the_kept_simulation_and_it_is_the_same",
+             "tests/cli/examples/test_smoke.py::test_cli_flag_beats_preset_beats_scene"]
     run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-n", "0", "-p", "no:cacheprovider", *tests],
-                         cwd=Path(__file__).resolve().parents[1], env=env, capture_output=True, text=True, timeout=300)
+                         cwd=Path(__file__).resolve().parents[2], env=env, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-2000:]
     assert _listing(marker) == before
     assert not (home / ".cache").exists()

@@ -328,7 +328,7 @@ def _card_reference(tmp_path: Path, holes: str) -> dict[str, Any]:
 def _gltf_card(tmp_path: Path, images: dict[str, bytes], normal_scale: float = 1.0, alpha_mode: str = "MASK", alpha: float = 1.0) -> str:
     import sys
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tools"))
     from gltf_writer import GltfBuilder
 
     b = GltfBuilder()

@@ -199,7 +199,7 @@ def test_a_frame_with_a_disabled_trace_fails_and_the_job_exits_3(tmp_path: Path,
     monkeypatch.setattr(SceneCache, "set_frame", frame_with_disabled_trace)
     monkeypatch.setenv("MOTION_EXECUTOR", "inline")  # this process: the patched frame
     out = tmp_path / "out"
-    code = main(["render", str(Path(__file__).parent / "data" / "farm-tiny.yaml"), "-o", str(out), "--frames", "0-2", "--retries", "0", "--no-progress"])
+    code = main(["render", str(Path(__file__).parents[1] / "data" / "farm-tiny.yaml"), "-o", str(out), "--frames", "0-2", "--retries", "0", "--no-progress"])
     err = capsys.readouterr().err
     assert code == 3, err
     failed = [line for line in err.splitlines() if line.startswith("error: frame 1:")]

@@ -23,7 +23,7 @@ from motion.pipeline.scene.files import (
     snapshot,
 )
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 HOME = ROOT / "pipeline" / "scene" / "files.py"
 
 

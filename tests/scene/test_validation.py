@@ -455,7 +455,7 @@ def test_libyaml_and_pyyaml_read_every_document_alike(name: str, monkeypatch: py
 
 def test_libyaml_and_pyyaml_read_every_example_and_preset_alike(monkeypatch: pytest.MonkeyPatch) -> None:
     """Every example scene and built-in preset: the same data and the same position of every value."""
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     files = sorted(SCENES.glob("*.yaml")) + sorted((root / "configs").glob("*.yaml"))
     assert len(files) >= 14
     for path in files:

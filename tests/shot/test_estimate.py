@@ -13,7 +13,7 @@ import pytest
 
 from farm_util import MOTION
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 # `motion render scenes/cannonball-splash.yaml --spp 1 --deliver none` with an empty cache
 # and kernel cache, on a 2-core AMD EPYC (shared): 42.0 s wall (41.4 s printed); bake 1.0 s,
 # farm start 3.9 s, cold first frames 4.6 s over warm ones, warm frames 0.95 s (render

@@ -14,7 +14,7 @@ from typing import Callable
 
 import psutil
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SCENE = ROOT / "tests" / "data" / "farm-tiny.yaml"
 BIN = Path(sys.executable).parent
 MOTION = str(BIN / "motion")

@@ -17,8 +17,8 @@ import pytest
 
 from farm_util import DASK, SLOW, TINY, frames_in, kill, leftovers, motion, report, start_motion, stop_processes, wait_for
 from motion.pipeline.frame_output import read_frame
-from test_farm_dask import _free_port, _try, _workers_connected
-from test_farm_transfer import _scene
+from tests.cli.farm.test_dask import _free_port, _try, _workers_connected
+from tests.farm.test_transfer import _scene
 
 pytestmark = pytest.mark.render
 
@@ -108,7 +108,7 @@ def test_an_imported_skinned_character_ships(hidden_cluster, monkeypatch: pytest
     cache, which the workers cannot see either (kept inside the hidden folder here). They
     travel as `.motion-imports/<name>`; the frames equal a local render's."""
     client = hidden_cluster["client"]
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[3]
     shutil.copytree(root / "scenes" / "assets", client / "walker" / "assets")
     shutil.copy(root / "scenes" / "walker.yaml", client / "walker" / "walker.yaml")
     monkeypatch.setenv("MOTION_CACHE_DIR", str(client / "client-cache"))  # the client's import cache: hidden too

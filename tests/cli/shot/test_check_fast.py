@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from farm_util import TINY, motion
-from test_reruns import SHOT
+from tests.cli.shot.test_reruns import SHOT
 
 
 def _write(path: Path, doc: dict) -> Path:

@@ -11,7 +11,7 @@ from pathlib import Path
 import yaml
 
 from farm_util import TINY, motion
-from test_reruns import SHOT
+from tests.cli.shot.test_reruns import SHOT
 
 
 def _shot_with_foreign_frames(tmp_path: Path) -> tuple[Path, Path]:

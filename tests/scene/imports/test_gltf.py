@@ -23,7 +23,7 @@ from motion.pipeline.errors import SceneError
 from motion.pipeline.motion.evaluate import evaluate
 from motion.pipeline.scene.loader import load_scene
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(ROOT / "tools"))
 from gltf_writer import GltfBuilder  # noqa: E402
 

@@ -17,7 +17,7 @@ import pytest
 from motion.pipeline.errors import SceneError
 from motion.pipeline.scene import load_scene
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[3]
 
 
 def _walker(tmp_path: Path) -> Path:
