@@ -32,17 +32,10 @@ from motion.pipeline.errors import SceneError
 from motion.pipeline.presets import load_preset
 from motion.pipeline.scene import load_scene
 
+from _scenes import BASE
+
 MEMORY_LIMIT = 2 << 30  # bytes of address space for the driver process (RLIMIT_AS)
 SECONDS_PER_CASE = 15.0  # each case's own bound (most take well under a second)
-
-BASE = """\
-timeline: {fps: 24, first: 0, last: 2}
-camera: {position: [0, 1, 5], look_at: [0, 0, 0]}
-lights: [{type: constant, radiance: 0.5}]
-render: {resolution: [16, 12], spp: 1, max_depth: 2, shutter_samples: 2, variant: scalar_rgb}
-objects:
-  - {name: ball, shape: sphere, radius: 0.5}
-"""
 
 
 def _obj(extra: str) -> str:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from farm_util import frames_in, motion
-from tests.cli.test_hostile_input import BASE
+from _scenes import BASE
 from motion.pipeline.frame_output import header_timecode, read_header, write_frame
 from motion.pipeline.timeline import frame_timecode, parse_fps, timecode_group
 
