@@ -6,10 +6,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from _dynamics_scenes import ball, floor, write_scene
 from _support import run_motion
+from farm_util import motion
 
 
 def _shot(tmp_path: Path) -> Path:
@@ -49,3 +51,20 @@ def test_until_is_on_the_same_clock(tmp_path: Path) -> None:
     proc = run_motion("plot", str(_shot(tmp_path)), "--until", "0.3", "-o", str(tmp_path / "e.png"), env={"MOTION_CACHE_DIR": str(tmp_path / "cache")})
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "e.png").stat().st_size > 0
+
+
+def test_energy_per_body_with_its_zero_at_height_0(tmp_path: Path) -> None:
+    from _dynamics_scenes import ball, floor, write_scene
+
+    from motion.pipeline.dynamics import simulate
+    from motion.pipeline.scene import load_scene
+
+    path = write_scene(tmp_path, [ball("a", 2.0, mass=0.5), ball("b", 1.0, x=1.0, mass=2.0), floor(restitution=0.5)], {"integrator": "rk4", "step": 0.002})
+    sim = simulate(load_scene(path), 0.3)  # before either lands
+    energies = {name: (k, p) for name, _, k, p in sim.body_energy()}
+    assert set(energies) == {"a", "b"}
+    for name, m, h in (("a", 0.5, 2.0), ("b", 2.0, 1.0)):
+        k, p = energies[name]
+        assert p[0] == pytest.approx(m * 9.81 * h) and np.allclose(k + p, m * 9.81 * h, rtol=1e-9)
+    res = motion("plot", path, "--what", "energy", "-o", tmp_path / "e.png")
+    assert res.returncode == 0 and (tmp_path / "e.png").stat().st_size > 10_000, res.stderr

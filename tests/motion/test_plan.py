@@ -259,3 +259,19 @@ def test_a_plan_on_the_camera_is_refused(tmp_path: Path) -> None:
     with pytest.raises(SceneError) as err:
         load_scene(scene)
     assert "camera.motion.type" in str(err.value) and "objects only" in str(err.value)
+
+
+def test_a_plan_with_no_margin_in_a_corridor_is_refused_in_bounded_time() -> None:
+    """margin 0 in a corridor exactly the agent's width: each refinement round doubled the
+    spline's vertices (42 -> 100,904 in 13 rounds) and the bake never finished."""
+    import time
+
+    from motion.pipeline.motion.plan import Grid, _Located, build_path
+
+    wall = np.ones((60, 60), bool)
+    wall[10:15, 5:46] = False
+    wall[10:51, 41:46] = False
+    t0 = time.perf_counter()
+    with pytest.raises(_Located, match="give a larger margin"):
+        build_path(Grid(wall, 0.1, np.array([0.0, 0.0])), [[0.75, 0.0, 1.25], [4.35, 0.0, 4.8]], 0.25, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, "none")
+    assert time.perf_counter() - t0 < 10

@@ -96,3 +96,10 @@ def kill(pid: int, sig: int = signal.SIGKILL) -> None:
         os.kill(pid, sig)
     except ProcessLookupError:
         pass
+
+
+def _auto(env_extra: dict[str, str] | None = None) -> dict[str, str]:
+    """This environment without MOTION_EXECUTOR (the suite's conftest sets it to `local`), so
+    `motion` chooses its executor itself; `env_extra` added."""
+    env = {k: v for k, v in os.environ.items() if k != "MOTION_EXECUTOR"}
+    return {**env, **(env_extra or {})}

@@ -90,3 +90,18 @@ def test_movie_and_contact_sheet_through_builtin_config(tmp_path: Path) -> None:
     y0 = 30 + 4
     for k in range(3):
         assert abs(img[y0 + 8, 4 + k * 36 + 16, 0] - expected[k]) <= 1 / 255
+
+
+def test_the_default_view_keeps_a_bright_sky_from_clipping() -> None:
+    """The deliverables' default view is OCIO's ACES 2.0 SDR (a tone curve): an HDR sky of
+    1.5-6 scene-linear clips under 1% of its pixels (the plain sRGB curve clipped them all)."""
+    import numpy as np
+
+    from motion.pipeline.telecine.movie import ViewTransform
+
+    sky = np.ones((64, 64, 4), np.float32)
+    sky[..., 0], sky[..., 1], sky[..., 2] = np.linspace(1.5, 4.0, 64)[:, None], np.linspace(2.0, 5.0, 64)[:, None], np.linspace(3.0, 6.0, 64)[:, None]
+    clipped = lambda view: float((view.encode(sky) >= 1.0 - 1e-6).any(axis=-1).mean())  # noqa: E731
+    assert clipped(ViewTransform()) < 0.01
+    assert clipped(ViewTransform(ocio_config="none")) == 1.0
+    assert "ACES 2.0" in ViewTransform().description

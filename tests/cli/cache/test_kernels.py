@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from farm_util import MOTION, SCENE, report
+from farm_util import MOTION, SCENE, _auto, report
 
 pytestmark = pytest.mark.render
 
@@ -88,3 +88,21 @@ def test_cache_warm_renders_the_jobs_frames_and_twice_adds_nothing(tmp_path: Pat
     rows = report(tmp_path / "out")["frames"]
     assert sum(1 for r in rows if r.get("cold")) == 2
     assert [(r["frame"], r.get("kernels_compiled")) for r in rows] == [(0, 0), (24, 0), (47, 0)]
+
+
+def test_cache_warm_makes_a_ci_jobs_first_frame_warm(tmp_path: Path) -> None:
+    """`motion cache warm SCENE --preset P` compiles the job's kernels into a fresh cache;
+    the job then compiles none; `motion cache key` names what the cache depends on."""
+    env = _auto({"MOTION_CACHE_DIR": str(tmp_path / "cache"), "DRJIT_CACHE_DIR": str(tmp_path / "cache" / "kernels")})
+    key = subprocess.run([MOTION, "cache", "key"], capture_output=True, text=True, env=env, timeout=60)
+    assert key.returncode == 0 and key.stdout.startswith("motion-kernels-") and str(tmp_path / "cache" / "kernels") in key.stdout
+    warm = subprocess.run([MOTION, "cache", "warm", str(SCENE), "--preset", "ci-smoke"], capture_output=True, text=True, env=env, timeout=300)
+    assert warm.returncode == 0, warm.stderr
+    assert "motion-warm-" not in warm.stdout + warm.stderr  # no path in the folder it removes
+    compiled = int(warm.stdout.split("kernels: ")[1].split()[0])
+    assert compiled > 0, warm.stdout
+    job = subprocess.run([MOTION, "render", str(SCENE), "--preset", "ci-smoke", "-o", str(tmp_path / "out"), "--no-progress"],
+                         capture_output=True, text=True, env=env, timeout=300)
+    assert job.returncode == 0, job.stderr
+    rows = report(tmp_path / "out")["frames"]
+    assert sum(int(r.get("kernels_compiled") or 0) for r in rows) == 0, [(r["frame"], r.get("worker"), r.get("cold"), r.get("kernels_compiled")) for r in rows]

@@ -3,6 +3,8 @@ as a user types it; the EXRs read back with the right size, channels and real pi
 
 from __future__ import annotations
 
+import os
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +12,7 @@ import pytest
 
 from motion.pipeline.frame_output import read_frame
 from _support import SCENES, run_motion
+from farm_util import ROOT, frames_in
 
 EXAMPLES = sorted(p.stem for p in SCENES.glob("*.yaml"))
 
@@ -64,3 +67,21 @@ def test_cli_flag_beats_preset_beats_scene(tmp_path: Path) -> None:
     frame = read_frame(tmp_path / "cannonball.0000.exr")
     assert frame.rgba.shape == (10, 20, 4)  # CLI flag over the preset's 64x36
     assert frame.meta["spp"] == 4  # preset over the scene's 16
+
+
+@pytest.mark.render
+def test_make_render_twice_with_the_readmes_smoke_args(tmp_path: Path) -> None:
+    """The README's `make render ARGS="--preset ci-smoke -o DIR"`, twice: both exit 0, the
+    second renders nothing, and the paths printed are the true ones under DIR (before:
+    exit 2 on the gaps, then paths under out/cannonball-splash echoed anyway)."""
+    out = tmp_path / "smoke"
+    env = {**os.environ, "MAKEFLAGS": ""}
+    cmd = ["make", "-s", "-C", str(ROOT), "render", f"ARGS=--preset ci-smoke --resolution 32x18 --spp 1 -o {out} --no-progress"]
+    first = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
+    assert first.returncode == 0, first.stdout + first.stderr
+    assert len(frames_in(out)) == 3
+    assert f"frames: {out}/cannonball-splash.0000.exr" in first.stderr
+    assert "out/cannonball-splash" not in (first.stdout + first.stderr).replace(str(out), "")
+    second = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env=env)
+    assert second.returncode == 0, second.stdout + second.stderr
+    assert "0 rendered, 3 skipped" in second.stderr and "contact: up to date" in second.stderr

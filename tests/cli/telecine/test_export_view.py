@@ -5,6 +5,7 @@ is installed (apt-get install chromium), and its structure is checked either way
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 from html.parser import HTMLParser
@@ -13,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from farm_util import SCENE, TINY, motion
+from farm_util import MOTION, SCENE, TINY, motion
 from motion.pipeline.frame_output import read_frame
 from motion.pipeline.telecine.export import to_8bit
 from motion.pipeline.telecine.movie import ViewTransform
@@ -185,3 +186,13 @@ def test_a_range_from_below_0_is_printed_one_way_and_read_back() -> None:
     for frames in (list(range(-10, 38)), list(range(-5, 0)), list(range(-10, 31, 2)), [-3, -1, 4, 5, 6]):
         assert parse_frames(format_frames(frames)) == frames
     assert format_frames(list(range(-10, 38))) == "-10..37" and format_frames(list(range(-10, 31, 2))) == "-10..30x2"
+
+
+def test_view_open_on_a_headless_machine_says_so(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    assert motion("render", SCENE, "-o", out, "--frames", "0-1", *TINY).returncode == 0
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "BROWSER")}
+    res = subprocess.run([MOTION, "view", str(out), "--open"],
+                         capture_output=True, text=True, env={**env, "PATH": "/usr/bin:/bin"}, timeout=120)
+    assert res.returncode == 2 and "no web browser can be started here" in res.stderr, res.stderr
+    assert (out / "flipbook" / "index.html").is_file()

@@ -1,6 +1,6 @@
-"""Scripting conventions (issue 16): --dry-run, --json, -v/-q through logging, a timecode
-track in movies, chromaticities and a portable scene path in EXRs, energy plots per body
-with a stated zero."""
+"""What the command prints and records: --json summaries, -v/-q through logging, progress
+lines when stderr is not a terminal; and, on the same rendered job, the EXRs'
+chromaticities and portable scene path and the movie's timecode track."""
 
 from __future__ import annotations
 
@@ -25,19 +25,6 @@ def job(tmp_path_factory) -> tuple[Path, Path, object]:
     res = motion("-v", "render", scene, "-o", root / "out", "--frames", "5-9", *TINY, "--workers", "1", "--chunk-size", "5", "--deliver", "24p", "--deliver-frames", "5-9", "--json")
     assert res.returncode == 0, res.stderr
     return root, scene, res
-
-
-def test_dry_run_plans_and_writes_nothing(tmp_path: Path) -> None:
-    out = tmp_path / "out"
-    res = motion("render", SCENE, "-o", out, "--frames", "0-9", "--workers", "2", "--deliver", "24p,contact", "--deliver-frames", "0-9", "--dry-run")
-    assert res.returncode == 0, res.stderr
-    assert "nothing rendered (--dry-run)" in res.stdout and "to render: 0-9 in" in res.stdout and "farm-tiny_24p_0-9_v001.mov" in res.stdout
-    assert not out.exists()
-    res = motion("render", SCENE, "-o", out, "--frames", "0-9", "--workers", "2", "--chunk-size", "3", "--dry-run", "--json")
-    plan = json.loads(res.stdout)
-    assert plan["dry_run"] and plan["to_render"] == "0-9" and plan["chunks"] == ["0-2", "3-5", "6-8", "9"]
-    assert plan["executor"] == {"kind": "local", "workers": 2, "threads": 1, "scheduler": None}
-    assert plan["outputs"]["first_frame"] == str(out / "farm-tiny.0000.exr") and not out.exists()
 
 
 def test_render_json_summary_and_verbose_log(job) -> None:
@@ -81,18 +68,31 @@ def test_movie_has_a_timecode_track_from_the_frames(job) -> None:
         assert data and data[0].metadata.get("timecode") == "00:00:00:05"  # the first frame is 5 at 24 fps
 
 
-def test_energy_per_body_with_its_zero_at_height_0(tmp_path: Path) -> None:
-    from _dynamics_scenes import ball, floor, write_scene
+LINES = [a for a in TINY if a != "--no-progress"]  # stderr is not a terminal: plain progress lines
 
-    from motion.pipeline.dynamics import simulate
-    from motion.pipeline.scene import load_scene
 
-    path = write_scene(tmp_path, [ball("a", 2.0, mass=0.5), ball("b", 1.0, x=1.0, mass=2.0), floor(restitution=0.5)], {"integrator": "rk4", "step": 0.002})
-    sim = simulate(load_scene(path), 0.3)  # before either lands
-    energies = {name: (k, p) for name, _, k, p in sim.body_energy()}
-    assert set(energies) == {"a", "b"}
-    for name, m, h in (("a", 0.5, 2.0), ("b", 2.0, 1.0)):
-        k, p = energies[name]
-        assert p[0] == pytest.approx(m * 9.81 * h) and np.allclose(k + p, m * 9.81 * h, rtol=1e-9)
-    res = motion("plot", path, "--what", "energy", "-o", tmp_path / "e.png")
-    assert res.returncode == 0 and (tmp_path / "e.png").stat().st_size > 10_000, res.stderr
+def test_verbose_says_each_frame_path_and_time_and_no_progress_is_quiet(tmp_path: Path) -> None:
+    out = tmp_path / "v"
+    res = motion("-v", "render", SCENE, "-o", out, "--frames", "0-2", *LINES, "--workers", "1")
+    assert res.returncode == 0, res.stderr
+    for f in range(3):
+        path = out / f"farm-tiny.{f:04d}.exr"
+        assert any(line.startswith(f"  frame {f}: {path} in ") for line in res.stderr.splitlines()), res.stderr
+    quiet = motion("render", SCENE, "-o", tmp_path / "q", "--frames", "0-5", *TINY, "--workers", "1")
+    assert quiet.returncode == 0, quiet.stderr
+    lines = quiet.stderr.splitlines()
+    assert not [line for line in lines if "frames/min, 0 failed" in line and "rendered" not in line], lines  # no periodic lines
+    assert not [line for line in lines if "bake:" in line or "executor:" in line], lines
+    assert any("6 rendered, 0 skipped" in line for line in lines)
+
+
+def test_render_prints_the_bake_rate(tmp_path, monkeypatch) -> None:
+    from test_range_independence import _scene
+
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))  # a root of its own: no simulation kept by another test
+
+    res = motion("render", _scene(tmp_path), "-o", tmp_path / "out", "--frames", "0-1", *LINES, "--workers", "1")
+    assert res.returncode == 0, res.stderr
+    line = next(l for l in res.stderr.splitlines() if l.startswith("motion: bake:"))
+    # the whole timeline is simulated (frame 0 opens at -1/96 s, frame 47 closes at 47/24 + 1/96 s), not 2 frames
+    assert "simulated 1.98 s" in line and "simulated s per s" in line and "2 frames baked" in line
