@@ -12,6 +12,8 @@ from motion.pipeline.motion import evaluate
 from motion.pipeline.motion.deform import bind_mesh, bone_poses, normalise_weights, skin_weights
 from motion.pipeline.scene import load_scene
 
+from _scenes import ARM_BONES
+
 ARM = """
 camera: {position: [0, 0, 5], look_at: [0, 0, 0]}
 objects:
@@ -23,17 +25,7 @@ objects:
       type: skinning
       %s
       detail: 8
-      bones:
-        - {name: upper, transform: {translate: [0, -1, 0]}, length: 1}
-        - name: lower
-          parent: upper
-          transform: {translate: [0, 1, 0]}
-          length: 1
-          motion:
-            type: keyframes
-            time_unit: seconds
-            channels: {rotate: {keys: [{time: 0, euler: [0, 0, 0]}, {time: 1, euler: [0, 0, 90]}]}}
-"""
+""" + ARM_BONES
 
 
 def _load(tmp_path: Path, text: str):  # type: ignore[no-untyped-def]

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from _render_support import load, render
+from _scenes import ARM_BONES
 
 pytestmark = pytest.mark.render
 
@@ -52,15 +53,7 @@ objects:
     deform:
       type: skinning
       auto: true
-      bones:
-        - {name: upper, transform: {translate: [0, -1, 0]}, length: 1.0}
-        - name: lower
-          parent: upper
-          transform: {translate: [0, 1, 0]}
-          length: 1.0
-          motion:
-            type: keyframes
-            channels: {rotate: {keys: [{time: 0, euler: [0, 0, 0]}, {time: 24, euler: [0, 0, 90]}]}}
+""" + ARM_BONES + """\
 render: {resolution: [64, 64], spp: 4, max_depth: 2, shutter_samples: 3, motion_blur: off}
 """
 

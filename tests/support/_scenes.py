@@ -13,3 +13,21 @@ objects:
 """
 
 TWO_FRAMES = BASE.replace("last: 2", "last: 1")  # two frames
+
+
+# The two-bone arm a skinning deformer bends: `upper` from y=-1 to 0, `lower` from 0 to 1,
+# `lower` keyed from 0 to 90 degrees about z over the first second (frame 24 at 24 fps).
+# The `bones:` block of an object's `deform:` (indented for it); the deformation tests and
+# the render of a skinned mesh start from it.
+ARM_BONES = """\
+      bones:
+        - {name: upper, transform: {translate: [0, -1, 0]}, length: 1}
+        - name: lower
+          parent: upper
+          transform: {translate: [0, 1, 0]}
+          length: 1
+          motion:
+            type: keyframes
+            time_unit: seconds
+            channels: {rotate: {keys: [{time: 0, euler: [0, 0, 0]}, {time: 1, euler: [0, 0, 90]}]}}
+"""
