@@ -2,7 +2,7 @@
 workers running out and interrupts, driven through the real `Scheduler` by a scripted
 executor (each worker's outcome per chunk written down in advance) and a clock the test
 moves; then the frame and chunk state machine (`farm/lifecycle.py`) alone, fed events by
-hand. Milliseconds each; tests/test_farm_local.py keeps the end-to-end checks with real
+hand. Milliseconds each; tests/cli/farm/test_local.py keeps the end-to-end checks with real
 processes and signals."""
 
 from __future__ import annotations

@@ -117,7 +117,7 @@ objects:
 def test_the_box_animated_hierarchy_in_scene_yaml_matches_the_4x4_product(tmp_path: Path):
     """BoxAnimated's hierarchy written directly in YAML (a cube of half extents
     (0.33504, 0.5, 0.33504) under a root scaled [1, 2, 1]): at frame 45 the box spans
-    y 1.85-3.19 and z -0.5..0.5, like the glTF import (tests/test_import_gltf.py), and a
+    y 1.85-3.19 and z -0.5..0.5, like the glTF import (tests/scene/imports/test_gltf.py), and a
     grandchild under it is the product of the three matrices."""
     path = tmp_path / "box.yaml"
     path.write_text(HIERARCHY)

@@ -1,6 +1,6 @@
 """Deforming geometry (render/slices.py) against Mitsuba's own `path` on the same asset
 written by hand: texture coordinates from the file, smooth normals, emission, emissive
-particles. The method of the light tests (tests/test_render_correctness.py): the
+particles. The method of the light tests (tests/render/test_correctness.py): the
 reference never goes through our builders, and |ours - ref| is judged against the noise
 floor |ref(seed a) - ref(seed b)|. Frames 0 (cold) and 1 (warm) are both checked."""
 

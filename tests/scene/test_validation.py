@@ -415,7 +415,7 @@ HOSTILE_YAML = {
     "unicode": "name: caf\u00e9 \U0001f600\nv: [1.5e3, .inf, -0x1f, 0o17, ~, yes, 2001-12-14]\n",
     "anchors": "base: &b {x: 1, y: [1, 2]}\nother: {<<: *b, y: 3}\n",
     "block-scalars": "a: |\n  line 1\n  line 2\nb: >-\n  folded\n  text\n",
-    # where the two readers differed (issue 36; the fuzz in tests/test_hostile_round4.py finds more)
+    # where the two readers differed (issue 36; the fuzz in tests/scene/test_yaml_readers.py finds more)
     "tab-after-key": "a:\t1\nb: 2\n",
     "tab-after-key-before-block": "a:\t\n  - 1\n",
     "tab-before-value": "a: \tx\n",

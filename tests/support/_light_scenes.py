@@ -1,5 +1,5 @@
 """One light-agreement scene, two ways: our YAML and the same scene written by hand in
-Mitsuba's own terms (rendered with `path`). Shared by tests/test_render_correctness.py and
+Mitsuba's own terms (rendered with `path`). Shared by tests/render/test_correctness.py and
 bench/bench_lights.py. The reference never goes through our light builder: a light that we
 place wrongly cannot agree with itself."""
 

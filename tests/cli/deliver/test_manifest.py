@@ -105,7 +105,7 @@ def test_deliver_frames_reversed_is_reported_as_deliver_frames(tmp_path: Path) -
 
 @pytest.fixture
 def small_disk(tmp_path: Path) -> Iterator[Path]:
-    """A 2 MiB tmpfs (a real disk that fills), as tests/test_disk_faults.py mounts one."""
+    """A 2 MiB tmpfs (a real disk that fills), as tests/cli/output/test_disk_faults.py mounts one."""
     disk = tmp_path / "disk"
     if os.geteuid() != 0:
         pytest.skip("needs root to mount a tmpfs (the fault is a real full file system)")
