@@ -23,7 +23,7 @@ def test_a_cache_folder_that_is_a_file_is_one_line_before_any_work(tmp_path: Pat
     # a scene that imports a glTF file converts it into the cache while it loads: validate
     # and the dry run (which load before the render's own check) said NotADirectoryError
     # in a traceback
-    walker = str(Path(__file__).resolve().parents[2] / "scenes" / "walker.yaml")
+    walker = str(Path(__file__).resolve().parents[3] / "scenes" / "walker.yaml")
     for args in (["validate", walker], ["render", walker, "--dry-run", "-o", str(tmp_path / "out")]):
         res = subprocess.run([str(Path(sys.executable).with_name("motion")), *args], capture_output=True, text=True, env=env, timeout=120)
         assert res.returncode == 2 and "is a file; point MOTION_CACHE_DIR at a folder" in res.stderr and "Traceback" not in res.stderr, res.stderr

@@ -36,7 +36,7 @@ def _gltf(folder: Path, edit: Any = None, keys: int = 0, texture: bytes | None =
 
     import numpy as np
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[4] / "tools"))
     from gltf_writer import GltfBuilder
 
     b = GltfBuilder()
