@@ -87,7 +87,7 @@ def test_verbose_says_each_frame_path_and_time_and_no_progress_is_quiet(tmp_path
 
 
 def test_render_prints_the_bake_rate(tmp_path, monkeypatch) -> None:
-    from test_range_independence import _scene
+    from tests.bake.test_range_independence import _scene
 
     monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))  # a root of its own: no simulation kept by another test
 
