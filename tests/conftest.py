@@ -77,6 +77,7 @@ def motion_cli():
 CLI_TIER = Path(__file__).resolve().parent / "cli"
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Every test under tests/cli/ (it drives the installed `motion` command and reads what
     it prints) carries the `cli` marker, so the layer runs or is skipped as one

@@ -56,3 +56,18 @@ def test_the_suites_fixtures_leave_the_users_cache_root_and_temp_folder_alone(tm
     assert _listing(marker) == before
     assert not (home / ".cache").exists()
     assert not list(tmpdir.iterdir()), list(tmpdir.iterdir())
+
+
+def test_every_test_file_lives_in_a_concept_folder() -> None:
+    """Tests are filed by concept (docs/tests.md): no test module sits flat in tests/, and
+    every folder that holds tests is a concept of pipeline/ (tests/farm/ for pipeline/farm/),
+    the command's layer (tests/cli/, mirroring the same concepts) or the project's own."""
+    tests = Path(__file__).resolve().parents[1]
+    concepts = {"bake", "cache", "compare", "deliver", "dynamics", "farm", "motion", "output", "render", "scene", "shot", "telecine", "timeline", "examples", "project"}
+    flat = sorted(p.name for p in tests.glob("test_*.py"))
+    assert not flat, f"test files flat in tests/: {flat}"
+    for path in tests.rglob("test_*.py"):
+        parts = path.relative_to(tests).parts[:-1]
+        if parts[0] == "cli":
+            parts = parts[1:]
+        assert not parts or parts[0] in concepts, path
