@@ -4,7 +4,7 @@ The repository keeps the stages in top-level folders (`pipeline/`, `cli/`, `conf
 installed package maps each onto `motion.<name>`. Every package under those folders is found
 here from the folders themselves, so a new subpackage can never be left out of a wheel
 (a hand-kept list in pyproject.toml once left out `bake` and `shot`: `pip install .` could not
-render). `tests/test_wheel.py` builds the wheel, installs it into a fresh environment and renders.
+render). `tests/cli/test_wheel.py` builds the wheel, installs it into a fresh environment and renders.
 """
 
 from setuptools import find_packages, setup

@@ -238,7 +238,7 @@ def flicker(path: Path, label: str, n: int, ref_spp: int, res: tuple[int, int]) 
 
 
 def ghosting(folder: Path) -> dict[str, Any]:
-    """The sliding bar of tests/test_render_blur.py: frame 1 (blended with frames 0 and 2,
+    """The sliding bar of tests/render/test_blur.py: frame 1 (blended with frames 0 and 2,
     all the shot has) against the closed-form trapezoid: raw, per-frame denoised and
     temporal, from 16 and from 256 spp."""
     from test_render_blur import _profile, _slide_scene, _trapezoid

@@ -25,7 +25,7 @@ from motion.pipeline.errors import MotionError, SceneError
 # Each command and the module of motion.cli that defines it (in its `commands` list), in
 # the order of `motion --help`. A command's module is imported only when that command runs
 # (or for --help): `motion validate` never imports the renderer's, the farm's or the
-# movies' stack (tests/test_cli_startup.py checks this table against the modules).
+# movies' stack (tests/cli/test_startup.py checks this table against the modules).
 COMMANDS: dict[str, str] = {
     "render": "render",
     "validate": "validate",

@@ -1,4 +1,5 @@
-"""Shared fixtures. Helpers that tests import live in `_support.py`."""
+"""Shared fixtures and the suite's layers. Helpers that tests import live in tests/support/
+(`_support.py`, `farm_util.py`, ...: importable by name from every folder)."""
 
 from __future__ import annotations
 
@@ -71,3 +72,16 @@ def pytest_unconfigure(config: pytest.Config) -> None:
 @pytest.fixture
 def motion_cli():
     return run_motion
+
+
+CLI_TIER = Path(__file__).resolve().parent / "cli"
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Every test under tests/cli/ (it drives the installed `motion` command and reads what
+    it prints) carries the `cli` marker, so the layer runs or is skipped as one
+    (`-m cli`, `-m "not cli"`) and a new file there cannot forget it."""
+    for item in items:
+        if item.path.is_relative_to(CLI_TIER):
+            item.add_marker(pytest.mark.cli)

@@ -5,7 +5,7 @@ lower stage to a higher one, and public definitions with docstrings.
 
 Every import counts, also those inside functions (a lazy import is still a dependency).
 The stages, lowest first, are STAGES below; a module may import its own stage and lower
-ones. tests/test_architecture.py runs this check.
+ones. tests/project/test_architecture.py runs this check.
 """
 from __future__ import annotations
 

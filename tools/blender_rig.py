@@ -1,6 +1,6 @@
 """Run under Blender's Python (the `bpy` module): build a keyed, parented and skinned scene,
 export it to glTF with Blender's own exporter, and write Blender's matrix_world and evaluated
-skinned vertices at several frames to JSON, for tests/test_import_gltf.py.
+skinned vertices at several frames to JSON, for tests/scene/imports/test_gltf.py.
 
     python tools/blender_rig.py OUT.glb OUT.json       # with a Python that has bpy
 """

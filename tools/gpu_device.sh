@@ -64,5 +64,5 @@ print(f"showcase: {len(fr)} rendered; variants {sorted({f.get('variant') for f i
 PY
 step bench 110 python3 bench/bench_vs_mitsuba.py --quick --frames 3 --json "$out/bench_vs_mitsuba.json"
 step tests 150 python3 -m pytest -q -p no:cacheprovider -o addopts= --durations=8 \
-  tests/test_render_correctness.py tests/test_render_blur.py tests/test_render_nonrigid.py tests/test_render_sbt.py \
-  tests/test_render_updates.py tests/test_render_culling.py tests/test_smoke_render.py
+  tests/render/test_correctness.py tests/render/test_blur.py tests/render/test_nonrigid.py tests/render/test_sbt.py \
+  tests/render/test_updates.py tests/render/test_culling.py tests/cli/examples/test_smoke.py

@@ -5,7 +5,7 @@ whole import of the stack and a cold scene build, far more than the frames (docs
 gives the figure). When the plan's estimate says the frames cost less than a worker's
 start would save (`shot/render.py: choose_executor`), the farm runs them here through
 the same scheduler: the same claims, resume checks, retries, per-frame progress and report,
-and the same pixels (tests/test_farm_ci.py renders the same frames inline, on 1 and on 2
+and the same pixels (tests/cli/farm/test_ci.py renders the same frames inline, on 1 and on 2
 workers and compares them bit for bit).
 
 What it cannot do, and why that is fine for a small job: a chunk cannot be timed out or

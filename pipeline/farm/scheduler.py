@@ -47,7 +47,7 @@ class Scheduler:
     ) -> None:
         """`clock` gives the time in seconds for timeouts, claim checks and the no-worker
         grace (tests drive the decisions with a scripted executor and a clock of their own:
-        tests/test_farm_scheduler.py)."""
+        tests/farm/test_scheduler.py)."""
         self.clock = clock
         self.ex = executor
         self.job = job

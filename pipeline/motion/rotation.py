@@ -28,7 +28,7 @@ def euler_quat(angles_deg, order: str = "xyz") -> np.ndarray:  # type: ignore[no
     """Euler angles in degrees -> (w, x, y, z); lowercase order = extrinsic (about the fixed
     axes, the first letter first), uppercase = intrinsic (about the turning axes): scipy's
     `Rotation.from_euler` convention and composition order, so the same quaternion, sign
-    included (tests/test_motion_rotation.py compares every order). Written with numpy
+    included (tests/motion/test_rotation.py compares every order). Written with numpy
     because importing scipy.spatial would weigh on every process (docs/motion.md)."""
     half = np.radians(np.asarray(angles_deg, dtype=np.float64)) / 2.0
     out = None

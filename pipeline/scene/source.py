@@ -240,7 +240,7 @@ def _compose(text: str) -> tuple[yaml.Node | None, _Loader, list[yaml.Mark]]:
         raise
 
 
-# What the two readers read differently (found by tests/test_hostile_round4.py's fuzz), so
+# What the two readers read differently (found by tests/scene/test_yaml_readers.py's fuzz), so
 # the fast path leaves it to PyYAML, whose meaning is the reference: a tab (libyaml takes it
 # as white space after a key, in a flow, before a comment: PyYAML refuses it); a BOM after
 # the first character (libyaml drops a second one at the start, and one alone on a line);

@@ -41,7 +41,7 @@ class Model(BaseModel):
         """The record with every field at its default, for a field's default value: made
         without the class's validator, which `cls()` would build when the module is
         imported (most of that work again inside the scene's validator; docs/ci-sharding.md).
-        Defaults are valid by construction; tests/test_cli_startup.py checks that each
+        Defaults are valid by construction; tests/cli/test_startup.py checks that each
         such default equals `cls()`."""
         return cls.model_construct()
 
