@@ -88,7 +88,7 @@ def code_version() -> str:
     return _code_version
 
 
-def _plain(value: Any, depth: int = 0) -> Any:
+def plain(value: Any, depth: int = 0) -> Any:
     """A validated record as JSON data: each model as its type and fields (walked here:
     pydantic's own `model_dump` builds its serializers first, 0.25 s a process)."""
     from fractions import Fraction
@@ -104,11 +104,11 @@ def _plain(value: Any, depth: int = 0) -> Any:
     if isinstance(value, Fraction):
         return {"fraction": str(value)}
     if isinstance(value, BaseModel):
-        return {"type": type(value).__name__, **{k: _plain(getattr(value, k), depth + 1) for k in type(value).model_fields}}
+        return {"type": type(value).__name__, **{k: plain(getattr(value, k), depth + 1) for k in type(value).model_fields}}
     if isinstance(value, (list, tuple)):
-        return [_plain(v, depth + 1) for v in value]
+        return [plain(v, depth + 1) for v in value]
     if isinstance(value, dict):
-        return {str(k): _plain(v, depth + 1) for k, v in value.items()}
+        return {str(k): plain(v, depth + 1) for k, v in value.items()}
     return {type(value).__name__: repr(value)}
 
 
@@ -127,8 +127,8 @@ def dynamics_inputs(loaded: "LoadedScene") -> dict[str, Any]:
             digest = readable_digests([loaded.base_dir / named.rel])[0]
             digests[named.rel] = f"sha256:{digest}" if digest else f"unreadable:{named.rel}"
     scene = renamed(loaded.scene, lambda f: digests.get(f.rel) if moves(f.loc) else None) if digests else loaded.scene
-    objects = [{k: v for k, v in _plain(o).items() if k not in _LOOK_ONLY} for o in scene.objects]
-    return {"timeline": _plain(scene.timeline), "objects": objects, "dynamics": _plain(scene.dynamics), "ik": _plain(scene.ik)}
+    objects = [{k: v for k, v in plain(o).items() if k not in _LOOK_ONLY} for o in scene.objects]
+    return {"timeline": plain(scene.timeline), "objects": objects, "dynamics": plain(scene.dynamics), "ik": plain(scene.ik)}
 
 
 def simulation_key(loaded: "LoadedScene", t_start: float, t_end: float) -> str:
