@@ -24,6 +24,7 @@ import numpy as np
 
 from ..errors import FrameIOError
 from ..frame_output import META_PREFIX, check_data_window, read_header
+from ..identity.record import stored_parts
 
 # settings that change only the noise of a frame, never what it converges to
 NOISE_ONLY = frozenset({"seed", "seed_policy", "variant"})
@@ -86,26 +87,13 @@ def facts_from_header(path: Path, header: Mapping[str, Any]) -> FrameFacts:
     return FrameFacts(path=path, width=int(hi[0]) - int(lo[0]) + 1, height=int(hi[1]) - int(lo[1]) + 1,
                       scene=_str(meta.get("scene")), scene_digest=_str(meta.get("scene_hash")), renderer=_str(meta.get("renderer")),
                       variant=_str(meta.get("variant")), seed=_int(meta.get("seed")), spp=_int(meta.get("spp")), settings=settings,
-                      look_parts=_parts(meta.get("look_parts")), motion_hash=_str(meta.get("motion_hash")))
+                      look_parts=stored_parts(meta.get("look_parts")), motion_hash=_str(meta.get("motion_hash")))
 
 
 def _finite_float(text: str) -> float | None:
     """A JSON number as a float, or None when it is out of range (1e400)."""
     value = float(text)
     return value if math.isfinite(value) else None
-
-
-def _parts(raw: Any) -> dict[str, str] | None:
-    """The header's `look_parts` ({part: digest} as JSON), or None when absent or not that."""
-    if not isinstance(raw, (str, bytes)):
-        return None
-    try:
-        parts = json.loads(raw)
-    except (ValueError, RecursionError):
-        return None
-    if not isinstance(parts, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in parts.items()):
-        return None
-    return parts
 
 
 def find_frames(folder: str | Path, prefix: str | None = None) -> tuple[str, dict[int, Path]]:

@@ -21,9 +21,12 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any, Mapping
 
+import numpy as np
+import OpenEXR
+
 from ..bake.records import BakedFrame
 from ..errors import FrameIOError
-from ..frame_output import is_complete, read_meta
+from ..frame_output import META_PREFIX, PIXELS_KEY, check_data_window, is_complete, pixel_digest, read_header, read_meta
 from .inputs import RENDERER_VERSION, render_settings
 from .look import MOVING
 from .motion_digest import Order, frame_digests
@@ -105,6 +108,23 @@ class WholeFrames:
         return True
 
 
+def frame_pixels_digest(path: str | Path) -> str:
+    """The pixel digest of the EXR at `path`: the one its header records (written with the
+    frame, no pixel decoded), or, for a frame written without one, computed from its decoded
+    channels. FrameIOError for a file that does not read."""
+    path = Path(path)
+    header = read_header(path)
+    recorded = header.get(META_PREFIX + PIXELS_KEY)
+    if isinstance(recorded, str) and len(recorded) == 64 and all(c in "0123456789abcdef" for c in recorded):
+        return recorded
+    check_data_window(path, header)  # before a pixel is allocated
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            return pixel_digest({name: np.asarray(ch.pixels) for name, ch in f.channels().items()})
+    except Exception as exc:  # the bindings raise RuntimeError for any bad file
+        raise FrameIOError(f"{path}: not a readable OpenEXR file ({exc})") from None
+
+
 def complete_as(path: str | Path, expect: FrameIdentity, whole: WholeFrames | None = None) -> bool:
     """Whether the EXR at `path` reads back whole (every channel decoded, or known whole
     by `whole`) and its header carries the identity `expect`: what `--resume` keeps, and
@@ -125,6 +145,21 @@ def _stored_dict(stored: Any) -> dict[str, Any] | None:
     except ValueError:
         return None
     return value if isinstance(value, dict) else None
+
+
+def stored_parts(raw: Any) -> dict[str, str] | None:
+    """The parts of a digest as a header keeps them (`look_parts`, `motion_parts`: JSON
+    {part: digest}), or None when absent or not that: the one reader of them (reruns,
+    compare)."""
+    if not isinstance(raw, (str, bytes)):
+        return None
+    try:
+        parts = json.loads(raw)
+    except (ValueError, RecursionError):
+        return None
+    if not isinstance(parts, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in parts.items()):
+        return None
+    return parts
 
 
 def settings_change(stored: Any, current: Mapping[str, Any]) -> str | None:
@@ -184,7 +219,7 @@ def parts_change(stored: Any, current: Mapping[str, str], names: Mapping[str, st
     """The names of the parts whose digests differ between a header's (JSON) and this
     run's, in the order of `names` (a part this scene lacks by its label), or None when the
     header has none."""
-    before = _stored_dict(stored)
+    before = stored_parts(stored)
     if before is None or not current:
         return None
     differ = [p for p in sorted(set(before) | set(current)) if before.get(p) != current.get(p)]
@@ -203,8 +238,6 @@ def reads_whole(path: str | Path) -> bool:
     (every chunk the offset table names starts inside the file) and the file's last
     scanline chunk decoded, so a copy cut short anywhere is found. A chunk damaged in
     the middle is found only by decoding it (is_complete)."""
-    import OpenEXR
-
     try:
         f = OpenEXR.InputFile(str(path))
     except Exception:  # the bindings raise their own error for any bad file
