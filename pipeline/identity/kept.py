@@ -5,8 +5,8 @@ shot again (docs/identity.md, "Kept identities").
 A frame's identity is a function of the validated scene with every override and every file
 it names by its bytes (the settings digest, identity/inputs.py), the frame's number and the
 code that simulates, evaluates, bakes and digests the motion and makes the look. An entry
-is keyed by exactly these: the settings digest and the digest of that code (with numpy's,
-scipy's and pydantic's versions). It holds the look's parts and, per frame, the motion
+is keyed by exactly these: the settings digest and the version of that code and of the
+installed numpy, scipy and pydantic (`code_version`). It holds the look's parts and, per frame, the motion
 digest and its parts, as JSON; a run that bakes adds the frames it baked. An entry that is
 not ours, over its bound, or not of the format is not believed: the run bakes as if there
 were none, and writes it again.
@@ -14,6 +14,7 @@ were none, and writes it again.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import re
@@ -21,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from ..cache import STORES, Store, code_digest
+from ..cache import STORES, Store
 from .record import FrameIdentity, WholeFrames
 
 log = logging.getLogger("motion")
@@ -29,30 +30,43 @@ log = logging.getLogger("motion")
 STORE: Store = STORES["frame-keys"]
 FORMAT = "motion-frame-keys/1"
 MAX_BYTES = 64 << 20  # one entry: 1,024 parts of 30 bytes for each of 2,000 frames
-# the code a kept identity depends on beside what the kept simulation's key covers (bake/keep.py)
+# the code a kept identity depends on: the simulation's (bake/keep.py) and the bake's, the
+# identity's own, and what the look reads beside the scene's records
 _CODE_FOLDERS = ("bake", "identity")
 _CODE_FILES = ("render/roles.py", "scene/files.py", "scene/lights.py")
+_LIBRARIES = ("numpy", "scipy", "pydantic")  # the look's parts are pydantic's JSON dumps
 _HEX16 = re.compile(r"[0-9a-f]{16}\Z")
 _code_version: str | None = None
 
 
 def code_version() -> str:
-    """The version of the code a frame's identity comes from: the simulation's
-    (`bake.keep.code_version`), the bake's and the identity's own, the renderer's sorting of
-    the scene, and pydantic's version (the look's parts are its JSON dumps)."""
+    """The version of the code a frame's identity comes from (`_CODE_FOLDERS`,
+    `_CODE_FILES` and the simulation's `bake.keep.CODE_FOLDERS` and `CODE_FILES`, and the
+    installed numpy, scipy and pydantic), by each source file's path, size and modification
+    time: what Python itself checks before it runs a module's cached bytecode, so any code
+    that would run differently is another version; read in a few stats, not by hashing
+    every file."""
     global _code_version
     if _code_version is None:
-        from importlib.metadata import PackageNotFoundError, version
+        import importlib.util
 
-        from ..bake.keep import code_version as simulation_code
+        from ..bake.keep import CODE_FILES, CODE_FOLDERS
 
         source = Path(__file__).resolve().parents[1]
-        files = sorted(str(p.relative_to(source)) for folder in _CODE_FOLDERS for p in (source / folder).glob("*.py"))
-        try:
-            pydantic = version("pydantic")
-        except PackageNotFoundError:
-            pydantic = "?"
-        _code_version = f"{simulation_code()}|{code_digest(files + list(_CODE_FILES))}|pydantic={pydantic}"
+        files = sorted({p for folder in (*CODE_FOLDERS, *_CODE_FOLDERS) for p in (source / folder).glob("*.py")} |
+                       {source / name for name in (*CODE_FILES, *_CODE_FILES)})
+        for name in _LIBRARIES:
+            spec = importlib.util.find_spec(name)
+            if spec is not None and spec.origin:
+                files.append(Path(spec.origin))
+        stamps = []
+        for path in files:
+            try:
+                st = path.stat()
+                stamps.append(f"{path}:{st.st_size}:{st.st_mtime_ns}")
+            except OSError:
+                stamps.append(f"{path}:absent")
+        _code_version = hashlib.sha256("\n".join(stamps).encode()).hexdigest()
     return _code_version
 
 

@@ -18,7 +18,7 @@ import time
 from dataclasses import asdict, dataclass
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Mapping, Protocol, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Protocol, Sequence
 
 import numpy as np
 
@@ -28,8 +28,9 @@ from ..frame_output import write_frame
 from ..identity import FrameIdentity, Order, frame_identity, header_attributes, render_settings, scene_hashes
 from ..scene.loader import LoadedScene, load_scene
 from ..timeline import frame_timecode
-from ..variant import device_of
-from .frame_renderer import FrameRenderer, frame_seed
+
+if TYPE_CHECKING:  # the renderer (drjit, Mitsuba) is imported where a frame is rendered, not where a job is planned
+    from .frame_renderer import FrameRenderer
 
 @dataclass(frozen=True)
 class RenderJob:
@@ -142,6 +143,7 @@ def worker_id() -> str:
 def _renderer(job: RenderJob) -> tuple[FrameRenderer, LoadedScene, str]:
     """The worker's cached renderer for this job (built on first use, reused after)."""
     from .. import variant as variant_mod
+    from .frame_renderer import FrameRenderer
 
     # the key's settings hash reads every file the scene names by its bytes (`content_named`):
     # the same scene text with other textures (another shot's folder) is another key
@@ -232,6 +234,8 @@ def _header(job: RenderJob, baked: BakedFrame, loaded: LoadedScene, variant: str
     """Step 3, header: the frame's identity (identity/record.py: what `--resume` and
     stale-frame checks compare), how it was rendered, and the standard attributes (capDate,
     owner, comments)."""
+    from .frame_renderer import frame_seed
+
     scene = loaded.scene
     meta = {
         **header_attributes(job.identity(baked), settings_hash=job.settings_hash, scene_hash=job.scene_hash, look_parts=job.look_parts, files=job.files),
@@ -278,6 +282,8 @@ def _write(out: Path, baked: BakedFrame, scene: Any, drawn: _Drawn, meta: dict[s
 def _render_one(job: RenderJob, baked: BakedFrame, out: Path | None = None) -> FrameResult:
     """One frame through the worker's named steps: render, denoise, header, write (to
     `out`, the task's path for it, else `frame_path`)."""
+    from ..variant import device_of
+
     t_setup = time.perf_counter()
     try:
         renderer, loaded, variant = _renderer(job)  # a fresh one every frame without the cache
