@@ -2,8 +2,9 @@
 its reference another picture.
 
 A frame rendered by `motion render` carries `motion:` attributes (render/job.py `_header`):
-the frame's key (the look's parts, `look_parts`, and the digest of its own baked motion,
-`motion_hash`: what reruns compare, docs/reruns.md), the render settings as JSON
+the frame's identity (identity/record.py, docs/identity.md: the look's parts, `look_parts`,
+read by `stored_parts`, and the digest of its own baked motion, `motion_hash`: what reruns
+compare), the render settings as JSON
 (`render_settings`), the renderer's version, the Mitsuba variant, the seed and the samples
 per pixel. A seed, a variant (CPU or GPU), a thread count or a machine change only the
 noise, and the scene file's bytes (a comment, a name) not even that: none of them is noted.
@@ -129,7 +130,7 @@ def incomparable(new: Mapping[str, Any], ref: Mapping[str, Any]) -> list[str]:
 
 def part_name(part: str, names: Mapping[str, str] | None = None) -> str:
     """A look part's name for a note: `m1` -> 'material 2 of the scene (m1)', or with the
-    scene's `names` (render/look.py part_names) 'material iron (m1)'."""
+    scene's `names` (identity/look.py part_names) 'material iron (m1)'."""
     if names and part in names:
         return f"{names[part]} ({part})"
     if part in _PART_NAMES:
