@@ -125,14 +125,16 @@ def frame_pixels_digest(path: str | Path) -> str:
         raise FrameIOError(f"{path}: not a readable OpenEXR file ({exc})") from None
 
 
-def complete_as(path: str | Path, expect: FrameIdentity, whole: WholeFrames | None = None) -> bool:
+def complete_as(path: str | Path, expect: FrameIdentity, whole: WholeFrames | None = None, meta: Mapping[str, Any] | None = None) -> bool:
     """Whether the EXR at `path` reads back whole (every channel decoded, or known whole
     by `whole`) and its header carries the identity `expect`: what `--resume` keeps, and
-    what a shipped frame must be before it is sent home."""
-    try:
-        meta = read_meta(path)
-    except FrameIOError:
-        return False
+    what a shipped frame must be before it is sent home. `meta`: its header's attributes
+    when already read."""
+    if meta is None:
+        try:
+            meta = read_meta(path)
+        except FrameIOError:
+            return False
     if not all(meta.get(k) == v for k, v in expect.expected().items()):
         return False
     return whole.is_whole(path) if whole is not None else is_complete(path)
@@ -284,7 +286,7 @@ def why_stale(path: str, expect: FrameIdentity, now: CurrentKeys, decode: bool =
         return "were made from other motion (the scene's animation or simulation changed)"
     if meta.get("frame") != expect.frame:
         return f"hold frame {meta.get('frame')}"
-    if not (complete_as(path, expect, whole) if decode else reads_whole(path)):
+    if not (complete_as(path, expect, whole, meta) if decode else reads_whole(path)):
         return "do not read back whole (a truncated or damaged file)"
     return None
 
