@@ -12,7 +12,8 @@ Jobs (each a fresh process, alternating, medians, with the CPU named):
 - a one-frame preview render of bouncing-balls;
 - `motion validate` of every example, `--dry-run` of bouncing-balls, `motion --help`;
 - a rerun of the ci-smoke job of the simulated examples that renders nothing (`--resume`
-  over its own frames: the kept simulation is read, bake/keep.py), beside their validate;
+  over its own frames), and of the whole 48-frame wrecking shot at its own settings,
+  beside their validate (every frame's identity kept: identity/kept.py, no bake);
 - with a Python that has `bpy` (`--cycles-python PY` or $BENCH_CYCLES_PYTHON; skipped
   otherwise): one frame of the bench shot of bench_equal_error.py (100k-triangle terrain,
   4 moving balls, sky + sun, 320x180, 16 spp, 180-degree shutter) in a fresh process, ours
@@ -77,6 +78,8 @@ def main() -> None:
     for name, path in RERUN.items():  # the untimed pass renders the frames; every timed run renders nothing (the kept simulation, bake/keep.py)
         jobs[f"rerun ci-smoke {name}, renders nothing"] = [MOTION, "-q", "render", str(path), "--preset", "ci-smoke", "-o", str(tmp / f"rerun-{name}"), "--resume"]
         jobs.setdefault(f"validate {name}", [MOTION, "validate", str(path)])
+    # the whole 48-frame shot at the scene's own settings: every frame's identity known without a bake (identity/kept.py)
+    jobs["rerun full wrecking, renders nothing"] = [MOTION, "-q", "render", str(RERUN["wrecking"]), "-o", str(tmp / "rerun-full-wrecking"), "--resume"]
     jobs["--dry-run bouncing-balls"] = [MOTION, "-q", "render", str(ROOT / "scenes" / "bouncing-balls.yaml"), "--dry-run", "-o", str(tmp / "dry")]
     jobs["--help"] = [MOTION, "--help"]
     if args.only:
@@ -109,7 +112,7 @@ def main() -> None:
         ratio = f"  {med / anchor:5.2f}x plain" if name.startswith("ci-smoke bouncing-balls") or name.startswith("plain") else ""
         if name == "one bench-shot frame, ours (16 spp)":
             ratio = f"  {med / statistics.median(times['one bench-shot frame, Cycles (16 spp)']):5.2f}x Cycles"
-        scene = name.split()[2].rstrip(",") if name.startswith("rerun ci-smoke ") else ""
+        scene = name.split()[2].rstrip(",") if name.startswith(("rerun ci-smoke ", "rerun full ")) else ""
         if scene and f"validate {scene}" in times:
             ratio = f"  {med / statistics.median(times['validate ' + scene]):5.2f}x validate"
         print(f"{name:42} {med:7.3f} s  {statistics.median(rss[name]):6.0f} MB{ratio}")

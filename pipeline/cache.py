@@ -378,4 +378,6 @@ STORES: dict[str, Store] = {s.name: s for s in (
     Store("validators", "validation", "the scene format's validators (scene/compiled.py)", tag="validator-v2", cap_bytes=False, cap_files=64),
     Store("shipped", "shipped", "assets a shipped job carried to this worker (farm/transfer/store.py)"),
     Store("simulations", "simulations", "dynamics simulations kept for reruns whose dynamics inputs did not change (bake/keep.py)", tag="sim-v1", cap_files=64),
+    Store("probes", "probes", "the denoiser probe's answer, by the library's files and this machine (render/denoise.py)", tag="oidn-probe-v1", cap_files=64),
+    Store("frame-keys", "frame-keys", "each frame's identity and the look, kept for reruns that render nothing (identity/kept.py)", tag="keys-v1", cap_files=256),
 )}

@@ -219,7 +219,7 @@ class RotationValueError(MotionError):
 
 class ShotFolderTakenError(UsageError):
     """An output folder already holds the frames of another scene file (two scenes with
-    the same `name:` share `out/<name>`): refused, naming both (shot/identity.py)."""
+    the same `name:` share `out/<name>`): refused, naming both (shot/folder_owner.py)."""
 
 
 class OutputInUseError(UsageError):

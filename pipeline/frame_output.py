@@ -231,7 +231,8 @@ def _single_channels(channels: Mapping[str, np.ndarray]) -> list[tuple[str, np.n
 def pixel_digest(channels: Mapping[str, np.ndarray]) -> str:
     """SHA-256 of a frame's pixels, whatever its header says: every channel (all layers),
     in name order, each as its name, type, shape and samples. The same for the arrays
-    given to the writer and for the channels read back from the file (frame_pixels_digest),
+    given to the writer and for the channels read back from the file (identity/record.py
+    `frame_pixels_digest`),
     so it identifies the picture: a rerun that writes the same pixels writes the same digest."""
     import hashlib
 
@@ -240,23 +241,6 @@ def pixel_digest(channels: Mapping[str, np.ndarray]) -> str:
         h.update(f"{name}\0{plane.dtype.str}\0{plane.shape}\0".encode())
         h.update(np.ascontiguousarray(plane).data)
     return h.hexdigest()
-
-
-def frame_pixels_digest(path: str | Path) -> str:
-    """The pixel digest of the EXR at `path`: the one its header records (written with the
-    frame, no pixel decoded), or, for a frame written without one, computed from its decoded
-    channels. FrameIOError for a file that does not read."""
-    path = Path(path)
-    header = read_header(path)
-    recorded = header.get(META_PREFIX + PIXELS_KEY)
-    if isinstance(recorded, str) and len(recorded) == 64 and all(c in "0123456789abcdef" for c in recorded):
-        return recorded
-    check_data_window(path, header)  # before a pixel is allocated
-    try:
-        with OpenEXR.File(str(path), separate_channels=True) as f:
-            return pixel_digest({name: np.asarray(ch.pixels) for name, ch in f.channels().items()})
-    except Exception as exc:  # the bindings raise RuntimeError for any bad file
-        raise FrameIOError(f"{path}: not a readable OpenEXR file ({exc})") from None
 
 
 def _reads_back(tmp: Path) -> bool:
@@ -343,15 +327,18 @@ def read_frame(path: str | Path) -> Frame:
     return Frame(rgba=rgba, aovs=aovs, header=header)
 
 
-def is_complete(path: str | Path, expect: Mapping[str, Any] | None = None) -> bool:
-    """True when the EXR reads back whole and its `motion:` attributes match `expect`.
-
-    Used by --resume: a truncated or foreign file, or one made from other settings,
-    is not complete.
-    """
+def is_complete(path: str | Path) -> bool:
+    """True when the EXR at `path` reads back whole: its header, a data window we can hold
+    and every channel decoded (not converted: nothing is kept). A truncated or foreign file
+    is not. Whether it is the frame a run wants is its identity's question (identity/
+    record.py `complete_as`)."""
     try:
-        frame = read_frame(path)
+        check_data_window(Path(path), read_header(path))  # before a pixel is allocated
+        with OpenEXR.File(str(path)) as f:
+            for ch in f.channels().values():
+                np.asarray(ch.pixels)
     except FrameIOError:
         return False
-    meta = frame.meta
-    return all(meta.get(k) == v for k, v in (expect or {}).items())
+    except Exception:  # the bindings raise RuntimeError for a short or corrupt file
+        return False
+    return True

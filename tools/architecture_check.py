@@ -26,7 +26,7 @@ STAGES: list[tuple[str, ...]] = [
     ("motion.pipeline.motion",),  # evaluation takes a simulation's records as arguments, never imports dynamics
     ("motion.pipeline.dynamics",),  # simulates on top of motion's poses and keyframes
     ("motion.pipeline.bake",),
-    ("motion.pipeline.variant", "motion.pipeline.presets", "motion.pipeline.frame_output"),
+    ("motion.pipeline.variant", "motion.pipeline.presets", "motion.pipeline.frame_output", "motion.pipeline.identity"),  # identity reads frame headers; the renderer gives it its sorting of the scene
     ("motion.pipeline.render",),
     ("motion.pipeline.telecine", "motion.pipeline.compare"),  # compare reads frames, makes its report images through telecine's view
     ("motion.pipeline.farm",),

@@ -7,8 +7,9 @@ data contract from bake to worker (docs/bake-format.md).
 - `baking`: `bake(loaded, frames)` and `evaluate_frames`.
 - `file_format`: `write_baked` and `read_baked`, the one writer and the one reader of bake files.
 - `checks`: finite values, unit rotations, the particle budget.
-- `fingerprint`: one digest over every animated value (the `--resume` motion hash),
-  name-independent with an `Order`, and per moving thing (`frame_digests`).
+
+The digest of a frame's baked motion (the half of a frame's identity that is motion) lives
+with the rest of the frame's identity, in identity/motion_digest.py.
 """
 
 from __future__ import annotations
@@ -17,7 +18,6 @@ from ..errors import BakeFileError, FrameNotBakedError
 from .checks import check_motion, motion_problems, pose_problem, scalar_problem
 from .baking import bake, evaluate_frames
 from .file_format import FORMAT, VERSION, read_baked, write_baked
-from .fingerprint import Order, fingerprint, frame_digests, leaves
 from .records import BakedFrame, BakedFrames, BakedMotion, by_number, summary
 from .timing import sample_seconds, simulate_for, simulation_range
 
@@ -29,15 +29,11 @@ __all__ = [
     "BakedFrames",
     "BakedMotion",
     "FrameNotBakedError",
-    "Order",
     "bake",
     "by_number",
     "check_motion",
     "evaluate_frames",
-    "fingerprint",
-    "frame_digests",
     "sample_seconds",
-    "leaves",
     "motion_problems",
     "pose_problem",
     "read_baked",

@@ -42,8 +42,8 @@ STORE: Store = STORES["simulations"]
 FORMAT = "motion-simulation/1"
 _OUTLINE = "__outline__"  # the JSON outline, as uint8
 # what the simulation's code is: the stages it runs and the modules they read below them
-_CODE_FOLDERS = ("dynamics", "motion")
-_CODE_FILES = ("bake/keep.py", "bake/timing.py", "geometry.py", "meshes.py", "expr.py", "timeline.py", "scene/dynamics_schema.py",
+CODE_FOLDERS = ("dynamics", "motion")
+CODE_FILES = ("bake/keep.py", "bake/timing.py", "geometry.py", "meshes.py", "expr.py", "timeline.py", "scene/dynamics_schema.py",
                "scene/motion_schema.py", "scene/schema.py", "scene/types.py")
 _LOOK_ONLY = ("material", "emission")  # object fields the simulation never reads
 _code_version: str | None = None
@@ -70,7 +70,7 @@ def _record_class(name: str) -> type | None:
 
 
 def code_version() -> str:
-    """The digest of the simulation's code (`_CODE_FOLDERS`' modules and `_CODE_FILES`) and
+    """The digest of the simulation's code (`CODE_FOLDERS`' modules and `CODE_FILES`) and
     of the numeric libraries' versions; read once a process."""
     global _code_version
     if _code_version is None:
@@ -79,16 +79,16 @@ def code_version() -> str:
         from ..cache import code_digest
 
         source = Path(__file__).resolve().parents[1]
-        files = sorted(str(p.relative_to(source)) for folder in _CODE_FOLDERS for p in (source / folder).glob("*.py"))
+        files = sorted(str(p.relative_to(source)) for folder in CODE_FOLDERS for p in (source / folder).glob("*.py"))
         try:
             scipy = version("scipy")
         except PackageNotFoundError:
             scipy = "?"
-        _code_version = code_digest(files + list(_CODE_FILES)) + f"|numpy={np.__version__}|scipy={scipy}"
+        _code_version = code_digest(files + list(CODE_FILES)) + f"|numpy={np.__version__}|scipy={scipy}"
     return _code_version
 
 
-def _plain(value: Any, depth: int = 0) -> Any:
+def plain(value: Any, depth: int = 0) -> Any:
     """A validated record as JSON data: each model as its type and fields (walked here:
     pydantic's own `model_dump` builds its serializers first, 0.25 s a process)."""
     from fractions import Fraction
@@ -104,11 +104,14 @@ def _plain(value: Any, depth: int = 0) -> Any:
     if isinstance(value, Fraction):
         return {"fraction": str(value)}
     if isinstance(value, BaseModel):
-        return {"type": type(value).__name__, **{k: _plain(getattr(value, k), depth + 1) for k in type(value).model_fields}}
+        return {"type": type(value).__name__, **{k: plain(getattr(value, k), depth + 1) for k in type(value).model_fields}}
     if isinstance(value, (list, tuple)):
-        return [_plain(v, depth + 1) for v in value]
+        return [plain(v, depth + 1) for v in value]
     if isinstance(value, dict):
-        return {str(k): _plain(v, depth + 1) for k, v in value.items()}
+        return {str(k): plain(v, depth + 1) for k, v in value.items()}
+    if isinstance(value, np.ndarray):  # exact: a long array's repr elides its middle
+        data = np.ascontiguousarray(value)
+        return {"array": [data.dtype.str, list(data.shape), hashlib.sha256(data.tobytes()).hexdigest()]}
     return {type(value).__name__: repr(value)}
 
 
@@ -127,8 +130,8 @@ def dynamics_inputs(loaded: "LoadedScene") -> dict[str, Any]:
             digest = readable_digests([loaded.base_dir / named.rel])[0]
             digests[named.rel] = f"sha256:{digest}" if digest else f"unreadable:{named.rel}"
     scene = renamed(loaded.scene, lambda f: digests.get(f.rel) if moves(f.loc) else None) if digests else loaded.scene
-    objects = [{k: v for k, v in _plain(o).items() if k not in _LOOK_ONLY} for o in scene.objects]
-    return {"timeline": _plain(scene.timeline), "objects": objects, "dynamics": _plain(scene.dynamics), "ik": _plain(scene.ik)}
+    objects = [{k: v for k, v in plain(o).items() if k not in _LOOK_ONLY} for o in scene.objects]
+    return {"timeline": plain(scene.timeline), "objects": objects, "dynamics": plain(scene.dynamics), "ik": plain(scene.ik)}
 
 
 def simulation_key(loaded: "LoadedScene", t_start: float, t_end: float) -> str:

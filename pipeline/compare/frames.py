@@ -2,8 +2,9 @@
 its reference another picture.
 
 A frame rendered by `motion render` carries `motion:` attributes (render/job.py `_header`):
-the frame's key (the look's parts, `look_parts`, and the digest of its own baked motion,
-`motion_hash`: what reruns compare, docs/reruns.md), the render settings as JSON
+the frame's identity (identity/record.py, docs/identity.md: the look's parts, `look_parts`,
+read by `stored_parts`, and the digest of its own baked motion, `motion_hash`: what reruns
+compare), the render settings as JSON
 (`render_settings`), the renderer's version, the Mitsuba variant, the seed and the samples
 per pixel. A seed, a variant (CPU or GPU), a thread count or a machine change only the
 noise, and the scene file's bytes (a comment, a name) not even that: none of them is noted.
@@ -24,6 +25,7 @@ import numpy as np
 
 from ..errors import FrameIOError
 from ..frame_output import META_PREFIX, check_data_window, read_header
+from ..identity.record import stored_parts
 
 # settings that change only the noise of a frame, never what it converges to
 NOISE_ONLY = frozenset({"seed", "seed_policy", "variant"})
@@ -86,26 +88,13 @@ def facts_from_header(path: Path, header: Mapping[str, Any]) -> FrameFacts:
     return FrameFacts(path=path, width=int(hi[0]) - int(lo[0]) + 1, height=int(hi[1]) - int(lo[1]) + 1,
                       scene=_str(meta.get("scene")), scene_digest=_str(meta.get("scene_hash")), renderer=_str(meta.get("renderer")),
                       variant=_str(meta.get("variant")), seed=_int(meta.get("seed")), spp=_int(meta.get("spp")), settings=settings,
-                      look_parts=_parts(meta.get("look_parts")), motion_hash=_str(meta.get("motion_hash")))
+                      look_parts=stored_parts(meta.get("look_parts")), motion_hash=_str(meta.get("motion_hash")))
 
 
 def _finite_float(text: str) -> float | None:
     """A JSON number as a float, or None when it is out of range (1e400)."""
     value = float(text)
     return value if math.isfinite(value) else None
-
-
-def _parts(raw: Any) -> dict[str, str] | None:
-    """The header's `look_parts` ({part: digest} as JSON), or None when absent or not that."""
-    if not isinstance(raw, (str, bytes)):
-        return None
-    try:
-        parts = json.loads(raw)
-    except (ValueError, RecursionError):
-        return None
-    if not isinstance(parts, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in parts.items()):
-        return None
-    return parts
 
 
 def find_frames(folder: str | Path, prefix: str | None = None) -> tuple[str, dict[int, Path]]:
@@ -141,7 +130,7 @@ def incomparable(new: Mapping[str, Any], ref: Mapping[str, Any]) -> list[str]:
 
 def part_name(part: str, names: Mapping[str, str] | None = None) -> str:
     """A look part's name for a note: `m1` -> 'material 2 of the scene (m1)', or with the
-    scene's `names` (render/look.py part_names) 'material iron (m1)'."""
+    scene's `names` (identity/look.py part_names) 'material iron (m1)'."""
     if names and part in names:
         return f"{names[part]} ({part})"
     if part in _PART_NAMES:

@@ -19,8 +19,8 @@ from collections.abc import Mapping
 from typing import Any, Callable
 
 from ..bake import BakedFrame
-from ..frame_output import is_complete
-from ..render.job import RenderJob, expected_meta
+from ..identity import complete_as
+from ..render.job import RenderJob
 from .claims import claim_path, is_stale, read_claim, release, remove_partials
 from .config import FarmConfig
 from .executor import Done, Executor, FrameWritten, Lost
@@ -127,7 +127,7 @@ class Scheduler:
         finished, released = [], []
         for f in sorted(self.machine.held):
             path = self.ctx.paths[f]
-            if self.ctx.resume and is_complete(path, expected_meta(self.job, self.inputs[f])):
+            if self.ctx.resume and complete_as(path, self.job.identity(self.inputs[f])):
                 finished.append(f)
                 continue
             cp = claim_path(path)
@@ -148,5 +148,5 @@ class Scheduler:
         stop are `rendered` (complete on disk, made from this job); the others are
         `not_rendered`, never `failed` (nothing went wrong with them). Returns both lists."""
         self._act(self.machine.interrupted())
-        on_disk = {f for f in self.machine.stopped() if is_complete(self.ctx.paths[f], expected_meta(self.job, self.inputs[f]))}
+        on_disk = {f for f in self.machine.stopped() if complete_as(self.ctx.paths[f], self.job.identity(self.inputs[f]))}
         return self.machine.settle_interrupted(on_disk)

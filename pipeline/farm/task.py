@@ -9,9 +9,10 @@ from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 from ..errors import DiskFaultError
-from ..frame_output import confined, is_complete
+from ..frame_output import confined
+from ..identity import complete_as
 from ..bake import BakedFrame
-from ..render.job import FrameResult, RenderJob, expected_meta, render_frames, worker_id
+from ..render.job import FrameResult, RenderJob, render_frames, worker_id
 from .claims import Claimant, claim_path, release, remove_partials, try_claim
 
 
@@ -63,7 +64,7 @@ def claim_frame(job: RenderJob, baked: BakedFrame, ctx: TaskContext, me: Claiman
         return False
     try:
         remove_partials(path)
-        if ctx.resume and is_complete(path, expected_meta(job, baked)):
+        if ctx.resume and complete_as(path, job.identity(baked)):
             out.already_done.append(baked.frame)
             release(path, ctx.run_id)
             return False

@@ -25,9 +25,11 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -75,10 +77,40 @@ print(json.dumps({"version": oidn.__version__, "oidn": oidn.oidn_version(), "dev
 """
 
 
-@functools.lru_cache(maxsize=1)
-def probe() -> dict[str, Any]:
-    """Import and run the binding in a subprocess (the farm's main process never loads
-    Dr.Jit's libraries): {version, oidn, device}, or {error}."""
+def _probe_entry() -> Path | None:
+    """Where the probe's answer for this binding is kept (cache.STORES["probes"]): keyed by
+    this Python, the files of the binding's package and of drjit's and mitsuba's, whose
+    libraries it loads (name, size, modification time: a reinstall or another build is
+    another key), and this machine (its name and architecture: a cache root shared by other
+    machines is not believed for this one). None when the binding is not installed."""
+    import importlib.util
+    import socket
+
+    from ..cache import STORES
+
+    listed: list[str] = []
+    for name in (MODULE, "drjit", "mitsuba"):
+        try:
+            spec = importlib.util.find_spec(name)
+        except (ImportError, ValueError):
+            spec = None
+        if spec is None or not spec.submodule_search_locations:
+            if name == MODULE:
+                return None
+            listed.append(f"{name}:absent")
+            continue
+        folder = Path(list(spec.submodule_search_locations)[0]).resolve()
+        try:
+            listed += sorted(f"{folder / e.name}:{e.stat().st_size}:{e.stat().st_mtime_ns}" for e in os.scandir(folder) if e.is_file())
+        except OSError:
+            return None
+    store = STORES["probes"]
+    key = store.key(os.path.realpath(sys.executable), *listed, socket.gethostname(), os.uname().machine)
+    return store.path(key, stem="oidn", suffix=".json")
+
+
+def _run_probe() -> dict[str, Any]:
+    """The probe itself, in a subprocess: {version, oidn, device}, or {error}."""
     try:
         proc = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True, timeout=120)
     except (OSError, subprocess.TimeoutExpired) as exc:
@@ -90,6 +122,28 @@ def probe() -> dict[str, Any]:
         return dict(json.loads(proc.stdout.strip().splitlines()[-1]))
     except (ValueError, IndexError):
         return {"error": f"unexpected probe output {proc.stdout[-200:]!r}"}
+
+
+@functools.lru_cache(maxsize=1)
+def probe() -> dict[str, Any]:
+    """Import and run the binding in a subprocess (the farm's main process never loads
+    Dr.Jit's libraries): {version, oidn, device}, or {error}. An answer that the binding
+    works is kept in the cache layer (`_probe_entry`) and read by the next process instead
+    of probing again; a failure is never kept (a fixed install is seen at once)."""
+    from ..cache import STORES
+
+    entry = _probe_entry()
+    data = STORES["probes"].read(entry, 4096) if entry is not None else None
+    try:
+        kept = json.loads(data) if data is not None else None
+    except ValueError:
+        kept = None
+    if isinstance(kept, dict) and set(kept) == {"version", "oidn", "device"} and all(isinstance(v, str) for v in kept.values()):
+        return kept
+    found = _run_probe()
+    if entry is not None and "error" not in found:
+        STORES["probes"].put(entry, json.dumps(found, sort_keys=True).encode(), best_effort=True, doing="keeping the denoiser probe's answer")
+    return found
 
 
 def check_available() -> dict[str, Any]:

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import getpass
-import hashlib
 import json
 import os
 import socket
@@ -19,21 +18,19 @@ import time
 from dataclasses import asdict, dataclass
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Mapping, Protocol, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Protocol, Sequence
 
 import numpy as np
 
-from ..bake import BakedFrame, Order, frame_digests
+from ..bake import BakedFrame
 from ..field_model import parity_of
 from ..frame_output import write_frame
-from ..scene.files import bytes_digest, content_named
+from ..identity import FrameIdentity, Order, frame_identity, header_attributes, render_settings, scene_hashes
 from ..scene.loader import LoadedScene, load_scene
 from ..timeline import frame_timecode
-from ..variant import device_of
-from .frame_renderer import FrameRenderer, frame_seed
 
-RENDERER_VERSION = "motion-render-1"
-
+if TYPE_CHECKING:  # the renderer (drjit, Mitsuba) is imported where a frame is rendered, not where a job is planned
+    from .frame_renderer import FrameRenderer
 
 @dataclass(frozen=True)
 class RenderJob:
@@ -51,7 +48,7 @@ class RenderJob:
     fields: str | None = None  # tff/bff: each frame is a field, only its rows are drawn
     files: str = ""  # JSON {name: digest} of the files the scene names (`scene.files.file_digests`), kept in each frame's header
     shipped: SceneSource | None = None  # ship mode: the parsed scene and its assets travel with the job
-    # a frame's key (docs/reruns.md): what it looks like apart from motion (render/look.py),
+    # a frame's identity (identity/): what it looks like apart from motion (identity/look.py),
     # and the order that makes its motion's digest independent of names
     look_hash: str = ""  # empty: the settings hash stands for it
     look_parts: str = ""  # JSON {part: digest}, kept in each frame's header
@@ -61,6 +58,11 @@ class RenderJob:
     def look(self) -> str:
         """The look half of a frame's key (the settings hash for a job made without one)."""
         return self.look_hash or self.settings_hash
+
+    def identity(self, baked: BakedFrame) -> FrameIdentity:
+        """The identity of the frame this job renders from `baked` (what `--resume` and a
+        shipped frame coming home are checked against)."""
+        return frame_identity(baked, self.look, self.order)
 
     @property
     def key(self) -> str:
@@ -103,25 +105,6 @@ class FrameResult:
         return asdict(self)
 
 
-def scene_hashes(loaded: LoadedScene) -> tuple[str, str]:
-    """(scene, settings) hashes: the scene file's bytes; the validated scene with every
-    override applied, each file it names standing for its contents (`content_named`), plus
-    the renderer's version."""
-    scene_hash = bytes_digest(loaded.path.read_bytes())[:16]
-    # output.deliver says what a full render assembles afterwards: not how a frame looks
-    canon = json.dumps(content_named(loaded).model_dump(mode="json", exclude={"output": {"deliver"}}), sort_keys=True)
-    settings_hash = hashlib.sha256(f"{RENDERER_VERSION}|{canon}".encode()).hexdigest()[:16]
-    return scene_hash, settings_hash
-
-
-def render_settings(scene: Any) -> dict[str, Any]:
-    """The settings a frame is rendered with (the scene's `render:` block as resolved from
-    flag, preset, scene and default, and how it is stored), kept in each frame's header so
-    a rerun can name the setting that makes an existing frame stale."""
-    out = scene.output
-    return {**scene.render.model_dump(mode="json"), "pixel_type": out.pixel_type, "compression": out.compression, "aovs": list(out.aovs)}
-
-
 def frame_path(job: RenderJob, loaded: LoadedScene, frame: int) -> Path:
     """Where frame `frame` of this job is written."""
     return Path(job.output_dir) / loaded.scene.output.frame_name(loaded.name, frame)
@@ -139,25 +122,6 @@ def scene_reference(scene_path: str | Path, frame_path: str | Path) -> str:
     if common == Path(common.anchor):
         return str(scene)
     return os.path.relpath(scene, folder).replace(os.sep, "/")
-
-
-def expected_meta(job: RenderJob, baked: BakedFrame) -> dict[str, Any]:
-    """The attributes a complete frame of this job carries (what --resume compares): the
-    frame and its key, the look (render/look.py) and the hash of this frame's own baked
-    motion (`fingerprint`, every animated value, objects and lights by their place in the
-    scene). Neither depends on names, keys outside the frame's shutter or comments."""
-    return frame_key(job, baked)[0]
-
-
-MAX_PARTS = 1024  # parts listed by digest in a header (about 30 bytes each); a larger scene keeps its hashes only
-
-
-def frame_key(job: RenderJob, baked: BakedFrame) -> tuple[dict[str, Any], dict[str, str]]:
-    """(`expected_meta`, {moving thing: digest}) of one frame, from one walk of its motion."""
-    motion_hash, parts = frame_digests(baked, job.order)
-    return {"frame": baked.frame, "look_hash": job.look, "motion_hash": motion_hash[:16]}, parts
-
-
 
 
 # --- the worker side ----------------------------------------------------------------------
@@ -179,6 +143,7 @@ def worker_id() -> str:
 def _renderer(job: RenderJob) -> tuple[FrameRenderer, LoadedScene, str]:
     """The worker's cached renderer for this job (built on first use, reused after)."""
     from .. import variant as variant_mod
+    from .frame_renderer import FrameRenderer
 
     # the key's settings hash reads every file the scene names by its bytes (`content_named`):
     # the same scene text with other textures (another shot's folder) is another key
@@ -266,15 +231,14 @@ def _denoise(drawn: _Drawn, scene: Any) -> _Drawn:
 
 
 def _header(job: RenderJob, baked: BakedFrame, loaded: LoadedScene, variant: str, drawn: _Drawn, out: Path) -> tuple[dict[str, Any], dict[str, Any]]:
-    """Step 3, header: motion's attributes (what `--resume` and stale-frame checks compare,
-    docs/architecture.md) and the standard ones (capDate, owner, comments)."""
+    """Step 3, header: the frame's identity (identity/record.py: what `--resume` and
+    stale-frame checks compare), how it was rendered, and the standard attributes (capDate,
+    owner, comments)."""
+    from .frame_renderer import frame_seed
+
     scene = loaded.scene
-    key, parts = frame_key(job, baked)
     meta = {
-        **key,
-        "settings_hash": job.settings_hash,
-        **({"look_parts": job.look_parts} if job.look_parts else {}),
-        **({"motion_parts": json.dumps(parts, sort_keys=True)} if len(parts) <= MAX_PARTS else {}),
+        **header_attributes(job.identity(baked), settings_hash=job.settings_hash, scene_hash=job.scene_hash, look_parts=job.look_parts, files=job.files),
         "time": float(baked.time),
         "shutter_open": float(baked.shutter[0]),
         "shutter_close": float(baked.shutter[1]),
@@ -283,12 +247,9 @@ def _header(job: RenderJob, baked: BakedFrame, loaded: LoadedScene, variant: str
         "seed_policy": scene.render.seed_policy,
         "motion_blur": scene.render.motion_blur,
         "variant": variant,
-        "scene_hash": job.scene_hash,
         "scene": scene_reference(loaded.path, out),
         "render_seconds": float(drawn.stats.render_s),
-        "renderer": RENDERER_VERSION,
         "render_settings": json.dumps(render_settings(scene), sort_keys=True),
-        **({"files": job.files} if job.files else {}),
         **drawn.denoise_meta,
         **({"field": drawn.parity, "fieldOrder": job.fields} if drawn.parity else {}),
     }
@@ -321,6 +282,8 @@ def _write(out: Path, baked: BakedFrame, scene: Any, drawn: _Drawn, meta: dict[s
 def _render_one(job: RenderJob, baked: BakedFrame, out: Path | None = None) -> FrameResult:
     """One frame through the worker's named steps: render, denoise, header, write (to
     `out`, the task's path for it, else `frame_path`)."""
+    from ..variant import device_of
+
     t_setup = time.perf_counter()
     try:
         renderer, loaded, variant = _renderer(job)  # a fresh one every frame without the cache

@@ -183,7 +183,7 @@ def process_frame(path: str, neighbours: list[tuple[int, str]]) -> dict[str, Any
 
 def _neighbour_state(path: Path, look: str) -> str | None:
     """`motion_hash` of a complete frame of this look (its key's half that is not motion:
-    render/look.py; a frame kept from a run of an edit that did not change it counts),
+    identity/look.py; a frame kept from a run of an edit that did not change it counts),
     None if absent or other."""
     from ..errors import FrameIOError
     from ..frame_output import META_PREFIX, read_header

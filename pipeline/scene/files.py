@@ -5,8 +5,8 @@
   textures) with its YAML location, kind and whether it deforms; `replace_at` sets the
   field at such a location; `renamed` gives the scene with some of its files named anew.
   What the asset checks open (scene/checks.py), what a shipped job carries
-  (farm/transfer/manifest.py), what a frame's settings hash and header record
-  (`content_named`, `file_digests`) all come from this one walk: a new kind of named
+  (farm/transfer/manifest.py), what a frame's identity reads (identity/inputs.py:
+  `content_named`, `file_digests`) all come from this one walk: a new kind of named
   file is one more `yield` here.
 - The digest: SHA-256 read in 1 MiB chunks (`ALGORITHM`, `CHUNK`). `file_digest` (kept per
   path, size and modification time: the key of every content-addressed cache), `bytes_digest`
@@ -21,7 +21,7 @@ import shutil
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Any, Callable, Iterator, NamedTuple, Protocol, Sequence
+from typing import IO, TYPE_CHECKING, Any, Callable, Iterator, NamedTuple, Sequence
 
 from .motion_schema import BlendShapes, JointSkin, MorphTargets
 from .schema import Mesh, Scene, Texture
@@ -196,54 +196,3 @@ def renamed(scene: Scene, new_name: Callable[[NamedFile], str | None]) -> Scene:
         if name is not None:
             scene = replace_at(scene, named.loc, name)
     return scene
-
-
-class Located(Protocol):
-    """A parsed scene and its folder (scene/loader.py's `LoadedScene`, which imports this
-    module's walk through the checks)."""
-
-    @property
-    def scene(self) -> Scene:
-        """The validated scene."""
-        ...
-
-    @property
-    def base_dir(self) -> Path:
-        """The folder its relative file names start from."""
-        ...
-
-
-def named_digests(scene: Scene, base_dir: Path) -> dict[str, str | None]:
-    """Each file the scene names (by its name in the scene) -> the digest of its bytes, or
-    None when it cannot be read; each file read once."""
-    out: dict[str, str | None] = {}
-    for named in named_files(scene):
-        if named.rel not in out:
-            out[named.rel] = readable_digests([Path(base_dir) / named.rel])[0]
-    return out
-
-
-def content_named(loaded: Located) -> Scene:
-    """The scene with every file it names (meshes, textures, environment maps, an import's
-    converted files) given as `sha256:<digest of its bytes>`: a frame's settings hash then
-    changes when a texture is edited under the same name (`--resume` replaces the frames,
-    a warm worker does not serve the old scene), and does not depend on where the file
-    lies (an import's converted meshes sit in each machine's own cache folder: a worker
-    under another user computed another hash and refused the job). A file that cannot be
-    read stands as `unreadable:<name>` (the asset checks report it before any task)."""
-    digests = named_digests(loaded.scene, loaded.base_dir)
-    return renamed(loaded.scene, lambda f: f"sha256:{digests[f.rel]}" if digests[f.rel] else f"unreadable:{f.rel}")
-
-
-def file_digests(loaded: Located) -> dict[str, str]:
-    """The files the scene names -> the first 16 hex digits of each one's digest, as kept
-    in a frame's header (`motion:files`) so that a rerun can name the file that changed.
-    An import's converted file is named `import:<its name>` (its path lies in this
-    machine's cache folder, which does not belong in a deliverable)."""
-    from .imports.converted import converted_file
-
-    out = {}
-    for rel, digest in named_digests(loaded.scene, loaded.base_dir).items():
-        path = loaded.base_dir / rel
-        out[f"import:{path.name}" if converted_file(path) else rel] = digest[:16] if digest else "unreadable"
-    return out

@@ -44,7 +44,7 @@ def scene_part_names(scene: str | Path | None) -> dict[str, str] | None:
     if not scene:
         return None
     from ..errors import MotionError
-    from ..render.look import part_names
+    from ..identity import part_names
     from ..scene.loader import load_scene
 
     try:

@@ -48,7 +48,8 @@ from ..farm.selection import format_frames, parse_frames
 from ..timeline import format_range
 from ..farm.report import write_report
 from ..write_policy import confined, disk_faults, publish, publish_path, staging
-from ..frame_output import disk_fault, frame_pixels_digest, inside
+from ..frame_output import disk_fault, inside
+from ..identity.record import frame_pixels_digest
 from ..limits import read_bounded
 from ..scene.files import file_digest
 from .request import RenderRequest
@@ -195,7 +196,7 @@ def check_deliver(req: RenderRequest, loaded: Any, plan: DeliverPlan, frames: li
 
 
 def frame_digests(paths: list[Path], known: Mapping[str, Any]) -> list[str]:
-    """The pixel digest of each frame (frame_output.frame_pixels_digest: from its header,
+    """The pixel digest of each frame (identity/record.py `frame_pixels_digest`: from its header,
     or decoded for a frame written without one). A file whose name, size and modification
     time match the manifest's record keeps its recorded digest (as git's index does), so
     an unchanged folder is not read again on every rerun."""

@@ -13,7 +13,6 @@ from ..farm.selection import parse_frames
 from ..presets import load_preset, overrides_from, spread
 from ..scene.loader import load_scene
 from ..field_model import check_field_order
-from ..telecine.interlace import field_range, field_rate, weave_fields
 from .render import run_render
 from .request import RenderRequest
 
@@ -22,6 +21,8 @@ def run_field_render(req: RenderRequest, fields: str, order: str) -> dict[str, A
     """`motion render --fields 60i`: render the fields of the scene's time span (or of the
     interlaced frames `req.frames_spec` names, or the preset's spread of them) into
     OUT/fields/ through the farm, then weave them into OUT (EXRs and a movie)."""
+    from ..telecine.interlace import field_range, field_rate, weave_fields
+
     rate = field_rate(fields)
     fo = check_field_order(order)
     for flag, value in (("--deliver", req.deliver), ("--shard", req.shard), ("--motion", req.motion_file)):

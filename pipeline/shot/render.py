@@ -32,15 +32,16 @@ from ..farm.scheduler import Scheduler
 from ..farm.task import TaskContext
 from ..limits import check_env_sizes
 from ..presets import Preset, load_preset, overrides_from, spread
-from ..render.job import MAX_PARTS, RENDERER_VERSION, RenderJob, frame_key, frame_path, render_settings, scene_hashes
-from ..scene.files import file_digests
+from ..identity import MAX_PARTS, CurrentKeys, FrameIdentity, file_digests, recorded_keys, scene_file_hash, settings_digest
+from ..identity.kept import KeptKeys, keep_keys, kept_keys
+from ..render.job import RenderJob, frame_path
 from ..scene.loader import LoadedScene, load_scene
 from .deliver import DeliverPlan, check_deliver, deliver_and_record, deliver_plan
 from .estimate import denoised_pixels, estimate, run_inline, samples_of
-from .identity import check_owner, record_owner
+from .folder_owner import check_owner, record_owner
 from .estimate import record as record_cost
 from .dry_run import check_only, plan, resolved_settings
-from .stale import CurrentKeys, FrameStates, folder_frames, frame_states, recorded_keys
+from .stale import FrameStates, folder_frames, frame_states
 from .request import RenderRequest
 
 
@@ -112,10 +113,12 @@ def output_folder(req: RenderRequest, loaded: LoadedScene) -> Path:
     return Path(req.output_dir or loaded.scene.output.directory or Path("out") / loaded.name).resolve()
 
 
-def make_job(req: RenderRequest, loaded: LoadedScene, overrides: dict[str, Any], out_dir: Path, frames: list[int]) -> tuple[RenderJob, int, int | None]:
-    """The job every worker runs (scene, settings and their hashes) and its size: local
-    worker processes and drjit threads per worker."""
-    scene_hash, settings_hash = scene_hashes(loaded)
+def make_job(req: RenderRequest, loaded: LoadedScene, overrides: dict[str, Any], out_dir: Path, frames: list[int]) -> tuple[RenderJob, int, int | None, KeptKeys]:
+    """The job every worker runs (scene, settings and their hashes, the look) and its size:
+    local worker processes and drjit threads per worker; with what the cache keeps of
+    its frames' identities (identity/kept.py: the look's parts come from there when kept)."""
+    digest = settings_digest(loaded)
+    kept = kept_keys(digest)
     if req.scheduler:
         workers = 1
     elif req.workers:
@@ -130,16 +133,20 @@ def make_job(req: RenderRequest, loaded: LoadedScene, overrides: dict[str, Any],
         from ..farm.local import threads_per_worker
 
         threads = req.threads or threads_per_worker(workers)
-    from ..bake import Order
-    from ..render.look import look_hash, look_parts
+    from ..identity import Order, look_hash, look_parts
 
-    parts = look_parts(loaded)
+    if kept.look_parts is not None:
+        parts = kept.look_parts
+    else:
+        from ..render.roles import sort_scene
+
+        parts = look_parts(loaded, sort_scene(loaded))
     job = RenderJob(
         scene_path=str(loaded.path),
         overrides=overrides,
         output_dir=str(out_dir),
-        scene_hash=scene_hash,
-        settings_hash=settings_hash,
+        scene_hash=scene_file_hash(loaded),
+        settings_hash=digest[:16],
         cache=req.cache,
         threads=threads,
         variant=loaded.scene.render.variant,
@@ -149,7 +156,7 @@ def make_job(req: RenderRequest, loaded: LoadedScene, overrides: dict[str, Any],
         look_parts=json.dumps(parts, sort_keys=True) if len(parts) <= MAX_PARTS else "",
         order=Order.of(loaded.scene),
     )
-    return job, workers, threads
+    return job, workers, threads, kept
 
 
 def preflight(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: Path, frames: list[int]) -> None:
@@ -250,26 +257,51 @@ def motion_inputs(req: RenderRequest, loaded: LoadedScene, sel: Selection) -> Se
     return inputs
 
 
-def complete_frames(req: RenderRequest, job: RenderJob, loaded: LoadedScene, out_dir: Path, frames: list[int], paths: dict[int, str], by_frame: Mapping[int, BakedFrame],
-                    recorded: Mapping[int, dict[str, Any]] | None = None, decode: bool = True) -> FrameStates:
-    """The frames on disk: those --resume keeps (complete and made from this scene, motion
-    and settings) and the stale ones this run replaces, each with the reason (shot/stale.py).
-    Existing frames with neither --resume nor --overwrite are a UsageError. `recorded`:
-    the keys the frames' headers record (stale.recorded_keys, no bake); `decode` as
+def complete_frames(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: Path, paths: dict[int, str], keys: Mapping[int, FrameIdentity],
+                    decode: bool = True) -> FrameStates:
+    """The frames on disk: those --resume keeps (complete and of this run's identity: its
+    look and their own motion) and the stale ones this run replaces, each with the reason
+    (shot/stale.py). `keys`: this run's identity of each frame on disk (from the bake, the
+    cache or the headers: a frame without one, which appeared since, is not counted).
+    Existing frames with neither --resume nor --overwrite are a UsageError; `decode` as
     stale.frame_states'."""
-    existing = [f for f in frames if os.path.exists(paths[f])]
+    existing = [f for f in paths if os.path.exists(paths[f])]
     if not req.resume and not req.overwrite and existing:
         raise UsageError(f"{out_dir}: frames {format_frames(existing)} exist; pass --resume to keep complete ones or --overwrite to re-render them")
-    from ..render.look import part_names
-
-    if recorded is not None:  # (a frame that appeared since its header was read is not counted complete)
-        existing = [f for f in existing if f in recorded]
-    keys = {f: (dict(recorded[f]), {}) for f in existing} if recorded is not None else {f: frame_key(job, by_frame[f]) for f in existing}
-    now = CurrentKeys(render_settings(loaded.scene), json.loads(job.files or "{}"), json.loads(job.look_parts or "{}"), {f: k[1] for f, k in keys.items()}, part_names(loaded))
-    states = frame_states(existing, paths, {f: k[0] for f, k in keys.items()}, now, decode)
     if req.overwrite:
         return FrameStates(complete=[], stale={f: "--overwrite" for f in existing})
+    from ..identity import part_names
+    from ..identity.kept import keep_whole, whole_frames
+
+    existing = [f for f in existing if f in keys]
+    now = CurrentKeys(loaded.scene, json.loads(job.files or "{}"), json.loads(job.look_parts or "{}"), part_names(loaded))
+    whole = whole_frames(out_dir) if decode and existing else None
+    states = frame_states(existing, paths, keys, now, decode, whole)
+    if whole is not None:
+        keep_whole(out_dir, whole)
     return states
+
+
+def known_keys(req: RenderRequest, s: RunSetup, paths: dict[int, str]) -> dict[int, FrameIdentity] | None:
+    """This run's identity of each frame on disk without a bake, or None when the run must
+    bake to know them: with --check, as the headers record them when every one says it was
+    made from this version (identity.recorded_keys); else as the cache keeps them for this
+    settings digest and code (identity/kept.py) when it keeps every one. Never with
+    --motion (a file's motion is not the scene's)."""
+    if req.motion_file:
+        return None
+    job = s.job
+    if req.check:
+        recorded = recorded_keys(paths, s.frames, job.settings_hash, job.look)
+        if recorded is not None:
+            return recorded
+    kept = s.kept
+    if kept is None or req.overwrite or kept.look_parts is None or json.dumps(kept.look_parts, sort_keys=True) != job.look_parts:
+        return None
+    existing = [f for f in s.frames if os.path.exists(paths[f])]
+    if not all(f in kept.frames for f in existing):
+        return None
+    return {f: kept.frames[f] for f in existing}
 
 
 INLINE_MAX_WORK_S = 1.5  # estimated seconds of warm frames under which a job renders in this process
@@ -395,7 +427,8 @@ def version_of(req: RenderRequest, job: RenderJob) -> str:
 class RunSetup:
     """What a run settles before the bake, every check passed: the farm settings, the
     scene with its preset, the frames, the output folder, the deliverables wanted, the job
-    and its executor's size, the scene file whose folder it takes over (if any), its id."""
+    and its executor's size, the scene file whose folder it takes over (if any), its id,
+    and the identities of its frames the cache keeps."""
 
     cfg: FarmConfig
     preset: Preset | None
@@ -408,6 +441,7 @@ class RunSetup:
     threads: int | None
     taken_from: Path | None
     run_id: str
+    kept: KeptKeys | None = None  # the frames' identities the cache keeps (identity/kept.py)
 
     @property
     def frames(self) -> list[int]:
@@ -458,7 +492,7 @@ def settle(req: RenderRequest, held: list[RunLock]) -> RunSetup:
     wanted = deliver_plan(req, loaded, sel.selected if not req.shard else frames)
     if wanted:  # every check that can fail, before the first task; a declared format the shot cannot make is left out
         wanted = check_deliver(req, loaded, wanted, frames, out_dir, shot_paths(loaded, out_dir, wanted).__getitem__)
-    job, workers, threads = make_job(req, loaded, overrides, out_dir, frames)
+    job, workers, threads, kept = make_job(req, loaded, overrides, out_dir, frames)
     preflight(req, loaded, job, out_dir, frames)
     taken_from = check_owner(out_dir, loaded.path, req.overwrite)  # another scene file's folder: refused, one line
     if req.scheduler and not req.check:
@@ -476,30 +510,37 @@ def settle(req: RenderRequest, held: list[RunLock]) -> RunSetup:
     run_id = new_run_id()
     if not req.check and not req.dry_run:
         held.append(take_run_lock(out_dir, Claimant.here(run_id), str(loaded.path), version_of(req, job)))
-    return RunSetup(cfg, preset, loaded, sel, out_dir, wanted, job, workers, threads, taken_from, run_id)
+    return RunSetup(cfg, preset, loaded, sel, out_dir, wanted, job, workers, threads, taken_from, run_id, kept)
 
 
 def bake_and_sort(req: RenderRequest, s: RunSetup) -> SortedFrames:
-    """Bake the motion once, then sort the frames: complete ones are kept, the others
-    render; frames in the folder outside the timeline are foreign (a warning)."""
-    loaded, out_dir, frames = s.loaded, s.out_dir, s.frames
-    t0 = time.perf_counter()
-    job = s.job
+    """Sort the frames (complete ones are kept, the others render) and bake the motion
+    once, unless every frame's identity is known without it and nothing renders; frames in
+    the folder outside the timeline are foreign (a warning)."""
+    loaded, out_dir, frames, job = s.loaded, s.out_dir, s.frames, s.job
     paths = {f: str(frame_path(job, loaded, f)) for f in frames}
-    # --check bakes nothing when every frame's header says it was made from this version (shot/stale.py)
-    recorded = recorded_keys(paths, frames, job.settings_hash, job.look, RENDERER_VERSION) if req.check and not req.motion_file else None
+    keys = known_keys(req, s, paths)
+    # --check --deliver: the deliverables decode every frame, so the check reads headers and chunk tables
+    decode = not (req.check and s.wanted and set(frames) <= set(s.wanted.frames))
+    states = complete_frames(req, loaded, job, out_dir, paths, keys, decode) if keys is not None else None
     from ..bake.keep import STORE as KEPT
     from ..motion import has_dynamics
 
     kept_before = KEPT.stats["hits"]
-    inputs = motion_inputs(req, loaded, s.sel) if recorded is None else []
-    simulation = None if recorded is not None or req.motion_file or not s.sel.selected or not has_dynamics(loaded) else ("kept" if KEPT.stats["hits"] > kept_before else "simulated")
+    must_bake = states is None or (not req.check and len(states.complete) < len(frames))
+    t0 = time.perf_counter()
+    inputs = motion_inputs(req, loaded, s.sel) if must_bake else []
     bake_s = time.perf_counter() - t0
+    simulation = None if not must_bake or req.motion_file or not s.sel.selected or not has_dynamics(loaded) else ("kept" if KEPT.stats["hits"] > kept_before else "simulated")
     by_frame = by_number(inputs)  # each frame made from the bake's arrays when a task needs it
-
-    # --check --deliver: the deliverables decode every frame, so the check reads headers and chunk tables
-    states = complete_frames(req, job, loaded, out_dir, frames, paths, by_frame, recorded,
-                             decode=not (req.check and s.wanted and set(frames) <= set(s.wanted.frames)))
+    if must_bake and not req.motion_file:
+        baked = {f: job.identity(by_frame[f]) for f in frames}
+        if s.kept is not None and job.look_parts:
+            keep_keys(s.kept, json.loads(job.look_parts), job.look, baked)
+        if states is None:
+            states = complete_frames(req, loaded, job, out_dir, paths, baked, decode)
+    elif states is None:  # --motion: each frame's identity from the file's motion
+        states = complete_frames(req, loaded, job, out_dir, paths, {f: job.identity(by_frame[f]) for f in frames}, decode)
     skipped = states.complete
     todo = [f for f in frames if f not in set(skipped)]
     foreign = sorted(folder_frames(out_dir, loaded).foreign)

@@ -47,7 +47,8 @@ def test_a_long_bake_holds_arrays_not_a_record_per_frame(tmp_path: Path) -> None
     frame alone gives (fingerprint), in order and by number."""
     import tracemalloc
 
-    from motion.pipeline.bake import by_number, fingerprint
+    from motion.pipeline.bake import by_number
+    from motion.pipeline.identity import fingerprint
 
     scene = tmp_path / "long.yaml"
     scene.write_text((ROOT / "tests" / "data" / "farm-tiny.yaml").read_text().replace("last: 47", "last: 4999"))
@@ -190,7 +191,7 @@ def test_fingerprint_changes_with_any_animated_value() -> None:
     from hypothesis import given, settings
     from hypothesis import strategies as st
 
-    from motion.pipeline.bake import fingerprint, leaves
+    from motion.pipeline.identity import fingerprint, leaves
 
     frame = _every_kind_frame()
     base = fingerprint([frame])
@@ -237,7 +238,7 @@ def test_fingerprint_changes_with_any_animated_value() -> None:
 def test_read_baked_returns_the_records_that_were_written(tmp_path: Path) -> None:
     """JSON and NPZ read back into BakedMotion; a rigid scene's frames fingerprint as the
     bake's (what `--resume --motion` relies on); NPZ brings vertices across the shutter."""
-    from motion.pipeline.bake import fingerprint
+    from motion.pipeline.identity import fingerprint
 
     baked = bake(load_scene(SCENES / "spinning-top.yaml"), [0, 5])
     for ext in ("json", "npz"):
@@ -271,7 +272,7 @@ def test_read_baked_refuses_a_broken_frame(tmp_path: Path) -> None:
 
 
 def test_farm_motion_file_takes_nonrigid_scenes_from_npz_only(tmp_path: Path) -> None:
-    from motion.pipeline.bake import fingerprint
+    from motion.pipeline.identity import fingerprint
     from motion.pipeline.errors import UsageError
     from motion.pipeline.farm.frame_inputs import file_inputs
 

@@ -11,7 +11,8 @@ import pytest
 import yaml
 
 from farm_util import TINY, frames_in, motion, report
-from motion.pipeline.bake import BakedFrame, bake, leaves, simulation_range
+from motion.pipeline.bake import BakedFrame, bake, simulation_range
+from motion.pipeline.identity import leaves
 from motion.pipeline.farm.frame_inputs import baked_inputs, simulation_for
 from motion.pipeline.frame_output import read_frame
 from motion.pipeline.scene import load_scene

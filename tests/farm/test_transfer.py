@@ -117,7 +117,8 @@ def test_a_shipped_job_renders_the_same_pixels_without_the_scene_folder(tmp_path
     from motion.pipeline.farm.transfer.shipment import BytesByHash, ShippedScene
     from motion.pipeline.frame_output import read_frame
     from motion.pipeline.render import job as job_mod
-    from motion.pipeline.render.job import RenderJob, render_frames, scene_hashes
+    from motion.pipeline.identity import scene_hashes
+    from motion.pipeline.render.job import RenderJob, render_frames
 
     monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "worker-cache"))
     path = _scene(tmp_path / "shot", "sub/tex.png")

@@ -63,7 +63,7 @@ def test_every_test_file_lives_in_a_concept_folder() -> None:
     every folder that holds tests is a concept of pipeline/ (tests/farm/ for pipeline/farm/),
     the command's layer (tests/cli/, mirroring the same concepts) or the project's own."""
     tests = Path(__file__).resolve().parents[1]
-    concepts = {"bake", "cache", "compare", "deliver", "dynamics", "farm", "motion", "output", "render", "scene", "shot", "telecine", "timeline", "examples", "project"}
+    concepts = {"bake", "cache", "compare", "deliver", "dynamics", "farm", "identity", "motion", "output", "render", "scene", "shot", "telecine", "timeline", "examples", "project"}
     flat = sorted(p.name for p in tests.glob("test_*.py"))
     assert not flat, f"test files flat in tests/: {flat}"
     for path in tests.rglob("test_*.py"):

@@ -9,14 +9,12 @@ import hashlib
 from pathlib import Path
 
 from motion.pipeline.scene import load_scene
+from motion.pipeline.identity.inputs import content_named, file_digests, named_digests
 from motion.pipeline.scene.files import (
     CHUNK,
     bytes_digest,
-    content_named,
     digests_recorded,
     file_digest,
-    file_digests,
-    named_digests,
     named_files,
     readable_digests,
     renamed,

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from motion.pipeline.bake.fingerprint import Order
+from motion.pipeline.identity import Order
 from motion.pipeline.motion.evaluate import evaluate
 from motion.pipeline.motion.pose import quat_rotate
 from motion.pipeline.scene import load_scene

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from farm_util import frames_in, motion
 from motion.pipeline.errors import MotionError
 from motion.pipeline.farm import claims
-from motion.pipeline.shot.identity import RECORD, check_owner, record_owner, recorded_scene
+from motion.pipeline.shot.folder_owner import RECORD, check_owner, record_owner, recorded_scene
 
 SCENE = """\
 timeline: {fps: 24, first: 0, last: 1}

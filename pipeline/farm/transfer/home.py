@@ -13,8 +13,8 @@ from typing import Callable, Sequence
 from ...bake import BakedFrame
 from ...errors import DiskFaultError
 from ...write_policy import confined, writing
-from ...frame_output import is_complete
-from ...render.job import FrameResult, RenderJob, expected_meta
+from ...identity import complete_as
+from ...render.job import FrameResult, RenderJob
 from ..claims import release
 from ..task import ChunkResult, TaskContext, claim_frame
 
@@ -43,7 +43,7 @@ def claim_home(job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext) -
 def run_chunk_away(run: Callable[[int, RenderJob, Sequence[BakedFrame], TaskContext], ChunkResult], chunk_id: int, job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext) -> ChunkResult:
     """A chunk on a worker that cannot see the output folder: `run` renders it into a
     temporary folder of the worker's own (the client holds the real claims), each finished
-    EXR is read back (`is_complete`: whole, and its header carries this job's hashes) and
+    EXR is read back (`complete_as`: whole, and its header carries the frame's identity) and
     its bytes go home in the result for the client to publish (`publish_home`). A disk
     fault here is this worker's own disk (its asset cache, its temporary folder): the frame
     fails with that one line and is retried on another worker; only the client's output
@@ -57,7 +57,7 @@ def run_chunk_away(run: Callable[[int, RenderJob, Sequence[BakedFrame], TaskCont
                 if r.disk_fault:
                     r.disk_fault, r.error = False, f"on worker {res.worker}: {r.error}"
                 continue
-            if not is_complete(r.path, expected_meta(job, by_frame[r.frame])):
+            if not complete_as(r.path, job.identity(by_frame[r.frame])):
                 r.ok, r.error = False, f"frame {r.frame}: the EXR written on worker {res.worker} did not read back whole; not sent"
                 continue
             res.frame_bytes[r.frame] = Path(r.path).read_bytes()

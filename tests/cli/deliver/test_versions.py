@@ -234,7 +234,8 @@ def test_a_frames_pixel_digest_is_its_pixels_not_its_header(tmp_path: Path) -> N
     before) is decoded to the same digest."""
     import OpenEXR
 
-    from motion.pipeline.frame_output import META_PREFIX, PIXELS_KEY, frame_pixels_digest, pixel_digest, read_header, write_frame
+    from motion.pipeline.frame_output import META_PREFIX, PIXELS_KEY, pixel_digest, read_header, write_frame
+    from motion.pipeline.identity.record import frame_pixels_digest
 
     rgba = np.random.default_rng(1).random((6, 8, 4)).astype(np.float32)
     normal = np.random.default_rng(2).random((6, 8, 3)).astype(np.float32)

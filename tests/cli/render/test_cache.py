@@ -96,7 +96,8 @@ render: {resolution: [32, 24], spp: 2, max_depth: 3, seed: 7, seed_policy: %s}
 def test_seed_policy(tmp_path: Path, policy: str) -> None:
     """Through the worker's task path (render_frames), as the farm renders."""
     from motion.pipeline.bake import evaluate_frames
-    from motion.pipeline.render.job import RenderJob, render_frames, scene_hashes
+    from motion.pipeline.identity import scene_hashes
+    from motion.pipeline.render.job import RenderJob, render_frames
 
     loaded = load(tmp_path, STILL % policy)
     job = RenderJob(str(loaded.path), {}, str(tmp_path / "out"), *scene_hashes(loaded))
@@ -147,7 +148,8 @@ def test_a_worker_refuses_a_scene_edited_after_the_job_started(tmp_path) -> None
 
     from farm_util import SCENE
     from motion.pipeline.bake import bake
-    from motion.pipeline.render.job import RenderJob, render_frames, scene_hashes
+    from motion.pipeline.identity import scene_hashes
+    from motion.pipeline.render.job import RenderJob, render_frames
     from motion.pipeline.scene import load_scene
 
     scene = tmp_path / "farm-tiny.yaml"
@@ -169,7 +171,8 @@ def test_the_task_path_is_where_the_frame_is_written(tmp_path: Path) -> None:
     from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.farm.claims import new_run_id
     from motion.pipeline.farm.task import TaskContext, run_chunk
-    from motion.pipeline.render.job import RenderJob, frame_path, scene_hashes
+    from motion.pipeline.identity import scene_hashes
+    from motion.pipeline.render.job import RenderJob, frame_path
 
     loaded = load(tmp_path, STILL % "fixed")
     out = tmp_path / "out"
@@ -194,7 +197,7 @@ def test_the_settings_hash_follows_file_contents_not_where_they_lie(tmp_path: Pa
     import subprocess
     import sys
 
-    probe = ("import sys; from motion.pipeline.scene import load_scene; from motion.pipeline.render.job import scene_hashes; "
+    probe = ("import sys; from motion.pipeline.scene import load_scene; from motion.pipeline.identity import scene_hashes; "
              "print(scene_hashes(load_scene(sys.argv[1], assets=False))[1])")
 
     def settings_hash(scene: Path, cache: Path) -> str:

@@ -83,7 +83,7 @@ def test_check_deliver_finds_a_frame_cut_short_without_decoding_it_whole(tmp_pat
 def test_reads_whole_decodes_no_more_than_the_last_chunk(tmp_path: Path) -> None:
     """reads_whole: a whole frame is; the same bytes cut anywhere from one byte to all but
     the header are not."""
-    from motion.pipeline.shot.stale import reads_whole
+    from motion.pipeline.identity.record import reads_whole
 
     out = tmp_path / "out"
     scene = _write(tmp_path / "keys.yaml", SHOT)

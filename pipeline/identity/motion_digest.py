@@ -17,7 +17,7 @@ from typing import Any, Iterator, Mapping, Sequence
 
 import numpy as np
 
-from .records import BakedFrame
+from ..bake.records import BakedFrame
 
 # SceneMotion's fields keyed by a name: an object's ("o") or a light's ("l")
 ENTITY_FIELDS = {"objects": "o", "vertices": "o", "particles": "o", "lights": "l", "light_scalars": "l"}

@@ -8,9 +8,10 @@ light counts by its place in the scene (`o3`, `m1`, `l0`), an object's material 
 material's place; the scene's and each thing's name, its motion block, parent and
 collider, the dynamics, IK, imports (counted by what they expand to), timeline and the
 output's naming and metadata are left out. Motion reaches the renderer only as the
-frame's baked motion, whose digest is the key's other half (bake/fingerprint.py); what
+frame's baked motion, whose digest is the key's other half (identity/motion_digest.py); what
 the motion blocks decide for the renderer as a whole (which objects it draws static,
-as movers or as slices: render/roles.py) is a part of the look.
+as movers or as slices: render/roles.py, given by the caller, which sits above this stage)
+is a part of the look.
 
 Every part has its own digest in a frame's header (`motion:look_parts`), so a rerun says
 which material, object or light changed.
@@ -22,11 +23,9 @@ import hashlib
 import json
 from typing import Any
 
-from ..bake import Order
 from ..scene.loader import LoadedScene
-from ..scene.files import content_named
-from .job import RENDERER_VERSION, render_settings
-from .roles import sort_scene
+from .inputs import RENDERER_VERSION, content_named, render_settings
+from .motion_digest import Order
 
 # fields of an object, light or camera (at any depth) that reach the renderer only as
 # baked motion or not at all
@@ -47,11 +46,12 @@ def _digest(value: Any) -> str:
     return hashlib.sha256(json.dumps(value, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def look_parts(loaded: LoadedScene) -> dict[str, str]:
+def look_parts(loaded: LoadedScene, roles: Any) -> dict[str, str]:
     """{part: digest} of everything of the scene that reaches the renderer other than
     motion: `renderer` (its version), `render` (the settings and how frames are stored),
-    `camera`, `m<i>` per material, `o<i>` per object, `l<i>` per light and `roles`; every
-    file named by its bytes (`content_named`), nothing by its name."""
+    `camera`, `m<i>` per material, `o<i>` per object, `l<i>` per light and `roles` (the
+    renderer's sorting of the scene, render/roles.py `sort_scene(loaded)`); every file
+    named by its bytes (`content_named`), nothing by its name."""
     scene = content_named(loaded)
     dump = scene.model_dump(mode="json")
     materials = {m["name"]: f"m{i}" for i, m in enumerate(dump["materials"])}
@@ -64,7 +64,6 @@ def look_parts(loaded: LoadedScene) -> dict[str, str]:
             seen["material"] = materials.get(o["material"], o["material"])
         parts[f"o{i}"] = seen
     parts.update({f"l{i}": _seen(light) for i, light in enumerate(dump["lights"])})
-    roles = sort_scene(loaded)
     parts["roles"] = {
         "static": [objects[n] for n in roles.static_names],
         "movers": [objects[n] for n in roles.mover_names],
