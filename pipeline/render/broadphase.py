@@ -145,6 +145,23 @@ def separate(proxies: np.ndarray, scale: float) -> np.ndarray:
     return out
 
 
+EMPTY_BOX = np.full((2, 3), FAR)  # a point far away: no ray within a scene's reach meets it
+
+
+def union_box(proxies: np.ndarray) -> np.ndarray:
+    """The box [2, 3] (min, max) holding every live proxy (each ellipsoid's centre plus or
+    minus its largest semi-axis), padded for float32; `EMPTY_BOX` when none is live. A ray
+    segment that misses it meets no proxy, and the kernel skips its walk."""
+    live = proxies[np.abs(proxies[:, 0]) < FAR / 2] if len(proxies) else proxies
+    if len(live) == 0:
+        return EMPTY_BOX.copy()
+    half = live[:, 3:6].max(axis=1)
+    lo = (live[:, :3] - half[:, None]).min(axis=0)
+    hi = (live[:, :3] + half[:, None]).max(axis=0)
+    pad = 1e-4 * float((hi - lo).max()) + 1e-6 * float(np.abs(np.concatenate([lo, hi])).max()) + 1e-6
+    return np.stack([lo - pad, hi + pad])
+
+
 def reach(proxies: np.ndarray) -> float:
     """How far behind a ray's origin its broadphase walk starts: more than any live proxy
     is across (twice its largest semi-axis), padded."""

@@ -37,6 +37,7 @@ import numpy as np
 from . import aovs as aov_table
 from . import film
 from .lights import LightChoice
+from .broadphase import EMPTY_BOX
 from .poses import FrameData, KernelPose, Movers
 from .world import NONE, World
 
@@ -151,6 +152,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
                 "particle_alive": (moving.get("particle_alive", np.zeros((0, n))), (c, n)),
                 "particle_template": (moving.get("particle_template", np.zeros(0)), (c,)),
                 "reach": (moving.get("reach", np.zeros(1)), (1,)),
+                "proxy_box": (moving.get("proxy_box", EMPTY_BOX), (2, 3)),
             }
         )
 

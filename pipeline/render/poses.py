@@ -40,6 +40,7 @@ from ..motion.pose import SLERP_LINEAR_BELOW
 FRAME_BLOCKS = (
     "mover_t", "mover_q", "camera_t", "camera_rel", "sensor_origin", "camera_q", "light_t", "light_q", "light_rgb",
     "template_offset", "template_box", "template_sphere", "particle_p", "particle_alive", "particle_template", "reach",
+    "proxy_box",
 )
 
 

@@ -23,7 +23,7 @@ from ..scene.lights import light_key
 from ..scene.loader import LoadedScene
 from ..variant import load_dict
 from .atlas import Atlas, copy_shape
-from .broadphase import Broadphase, particle_proxies, reach, separate, sphere_proxies, swept_spheres
+from .broadphase import EMPTY_BOX, Broadphase, particle_proxies, reach, separate, sphere_proxies, swept_spheres, union_box
 from .build import DEFAULT_MATERIAL, emitter_dict, material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
 from .instant import add_lights, add_shapes, light_record, rest_frame, sensor_record
@@ -56,6 +56,7 @@ class SceneCache:
         self._moving_changed = True  # the atlas or broadphase scene changed: tell the integrator
         self._holders: dict[str, Any] = {}  # emissive particle system -> its holder sphere's own scene
         self._reach = 1e-3  # how far behind a ray the broadphase walk starts (broadphase.reach)
+        self._proxy_box = EMPTY_BOX  # the box holding every live proxy (broadphase.union_box)
         self.sliced: SlicedGeometry | None = None
         self.owner: SbtOwner | None = None  # the SBT owner of every scene the kernel traces
 
@@ -312,6 +313,7 @@ class SceneCache:
         proxies = np.concatenate([sphere_proxies(swept_spheres(mt, mq, atlas.layout.sphere[:m])), particle_proxies(pp, pa, pr)])
         proxies = separate(proxies, self._walk_scale(fi, proxies))
         self._reach = reach(proxies)
+        self._proxy_box = union_box(proxies)
         scene_before = broad.scene
         broad.update(proxies)
         if scene_before is not None and broad.scene is not scene_before and self.owner is not None:
@@ -347,6 +349,7 @@ class SceneCache:
             "particle_alive": pa,
             "particle_template": pt,
             "reach": np.array([self._reach]),
+            "proxy_box": self._proxy_box,
         }
 
     def _walk_scale(self, fi: StackedFrame, proxies: np.ndarray) -> float:

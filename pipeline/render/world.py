@@ -201,6 +201,8 @@ class World:
         `visit` clears the lane."""
         reach = self.reach(movers)
         start = ray.o - ray.d * reach
+        # a lane whose segment misses the box of every proxy meets none: no walk
+        active = self._meets_proxies(movers, ray, active, maxt_of(state))
 
         def cond(t_b: Any, live: Any, *rest: Any) -> Any:
             return live
@@ -219,6 +221,19 @@ class World:
 
         out = dr.while_loop((mi.Float(0.0), mi.Bool(active), *state), cond, body, labels=("t_b", "live", *(f"s{i}" for i in range(len(state)))), label="broadphase")
         return tuple(out[2:])
+
+    def _meets_proxies(self, movers: Movers, ray: Any, active: Any, maxt: Any) -> Any:
+        """Whether the ray's segment [0, maxt] meets the box holding every live proxy
+        (`broadphase.union_box`, padded for float32): a conservative gate, since a segment
+        that misses it meets no proxy, so the walk it skips would have found nothing."""
+        lo = movers.data.vec("proxy_box", 3, mi.UInt32(0), True)
+        hi = movers.data.vec("proxy_box", 3, mi.UInt32(1), True)
+        d = ray.d
+        inv = dr.rcp(dr.select(dr.abs(d) < 1e-30, dr.select(d < 0, -1e-30, 1e-30), d))
+        ta, tb = (lo - ray.o) * inv, (hi - ray.o) * inv
+        t0 = dr.maximum(dr.max(dr.minimum(ta, tb)), 0.0)
+        t1 = dr.minimum(dr.min(dr.maximum(ta, tb)), maxt)
+        return active & (t0 <= t1)
 
     def reach(self, movers: Movers) -> Any:
         """How far behind a ray its broadphase walk starts (render/broadphase.py `reach`)."""
