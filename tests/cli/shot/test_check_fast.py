@@ -45,7 +45,10 @@ def _check(scene: Path, out: Path, monkeypatch: pytest.MonkeyPatch, *deliver: st
 def test_check_bakes_nothing_for_frames_of_this_version_and_names_another_versions(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Frames rendered from this scene: --check bakes nothing (before: the whole shot was
     simulated and baked again to compare each frame's motion). After a key moves, their
-    headers name another version: the check bakes, and names frames 4-7 and why."""
+    headers name another version: the check bakes, and names frames 4-7 and why. (A cache
+    root of its own: another test's render of the same edited shot keeps its identities,
+    and a check that finds them kept rightly bakes nothing.)"""
+    monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "cache"))
     out = tmp_path / "out"
     scene = _write(tmp_path / "keys.yaml", SHOT)
     assert motion("render", scene, "-o", out, *TINY).returncode == 0

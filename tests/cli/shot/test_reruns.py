@@ -181,7 +181,7 @@ def test_a_new_machine_estimates_compiling_every_kernel(tmp_path: Path) -> None:
     assert fresh["seconds"] > DEFAULT_COMPILE_EXTRA_S
     kernels = tmp_path / "warm-kernels"
     kernels.mkdir()
-    (kernels / "0123.llvm.v6.bin").write_bytes(bytes(100_000))  # what drjit leaves after compiling a render's kernels
+    (kernels / ("0123abcd" * 4 + ".llvm.v6.bin")).write_bytes(bytes(100_000))  # what drjit leaves after compiling a render's kernels
     cached = _dry_estimate(scene, tmp_path / "out", tmp_path / "cache", kernels)
     assert not cached["compiles_kernels"] and cached["cold_extra_s"] == DEFAULT_COLD_EXTRA_S, cached
 
