@@ -82,6 +82,10 @@ class ShapeSet:
     prev_lam: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     keys: list[np.ndarray] = field(default_factory=list)
     lams: list[np.ndarray] = field(default_factory=list)
+    # box-box contacts (island.py): per body pair, the contact points in b's frame and their
+    # accumulated impulses, last step's and this step's
+    pair_prev: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    pair_next: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
 
     def shaped(self) -> np.ndarray:
         """Bodies that collide with their true shape (not their bounding sphere)."""
@@ -96,6 +100,7 @@ class ShapeSet:
         else:
             self.prev_keys, self.prev_lam = np.zeros(0, np.int64), np.zeros((0, 3))
         self.keys, self.lams = [], []
+        self.pair_prev, self.pair_next = self.pair_next, {}
 
 
 def true_shape_collider(col: Collider) -> bool:
