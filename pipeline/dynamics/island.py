@@ -42,7 +42,7 @@ import numpy as np
 from ..geometry import BOX
 from ..motion.pose import quat_normalize, quat_to_matrix
 from .collisions import ContactBodies
-from .manifold import box_box
+from .manifold import manifolds
 from .shapes import Contacts, ShapeSet, _rotate, _tangents
 
 WARM_DISTANCE = 0.1  # of the smaller box's least half extent: a contact of last step this close is the same one
@@ -90,9 +90,10 @@ def pair_contacts(b: ContactBodies, shapes: ShapeSet, q1: np.ndarray, i: np.ndar
         return rows
     ii, jj = i[near], j[near]
     rot = quat_to_matrix(quat_normalize(q1[np.concatenate((ii, jj))]))
+    every = manifolds(b.x1[ii], rot[: near.size], shapes.half[ii], b.x1[jj], rot[near.size:], shapes.half[jj], margin)
     for k, (a, c) in enumerate(zip(ii.tolist(), jj.tolist())):
         ra, rc = rot[k], rot[near.size + k]
-        found = box_box(b.x1[a], ra, shapes.half[a], b.x1[c], rc, shapes.half[c], margin)
+        found = every[k]
         if found is None:
             continue
         n, pa, pc, sep = found

@@ -30,19 +30,21 @@ _PARALLEL = 1e-6  # |a_i x b_j| below this: the edge axis is skipped (a face axi
 
 
 def _separations(d: np.ndarray, ra: np.ndarray, ha: np.ndarray, rb: np.ndarray, hb: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """s(L) on A's face axes [3], B's [3], and the 9 edge axes [9] (-inf when skipped), and
-    the unit edge axes [9, 3]."""
-    c = ra.T @ rb  # c_ij = a_i . b_j
+    """For P pairs ([P, 3] centre offsets, [P, 3, 3] rotations, [P, 3] half extents): s(L) on
+    A's face axes and B's [P, 6], on the 9 edge axes [P, 9] (-inf when skipped), and the
+    unit edge axes [P, 9, 3]."""
+    c = np.einsum("pki,pkj->pij", ra, rb)  # c_ij = a_i . b_j
     abs_c = np.abs(c) + 1e-15
-    face_a = np.abs(ra.T @ d) - (ha + abs_c @ hb)
-    face_b = np.abs(rb.T @ d) - (hb + abs_c.T @ ha)
-    axes = np.cross(ra.T[:, None, :], rb.T[None, :, :]).reshape(9, 3)
-    norm = np.linalg.norm(axes, axis=1)
+    face_a = np.abs(np.einsum("pki,pk->pi", ra, d)) - (ha + np.einsum("pij,pj->pi", abs_c, hb))
+    face_b = np.abs(np.einsum("pkj,pk->pj", rb, d)) - (hb + np.einsum("pij,pi->pj", abs_c, ha))
+    a_ax, b_ax = np.swapaxes(ra, 1, 2), np.swapaxes(rb, 1, 2)  # rows: the axes
+    axes = np.cross(a_ax[:, :, None, :], b_ax[:, None, :, :]).reshape(-1, 9, 3)
+    norm = np.linalg.norm(axes, axis=2)
     ok = norm > _PARALLEL
-    axes = axes / np.where(ok, norm, 1.0)[:, None]
-    proj = np.abs(axes @ ra) @ ha + np.abs(axes @ rb) @ hb
-    edge = np.where(ok, np.abs(axes @ d) - proj, -np.inf)
-    return np.concatenate((face_a, face_b)), edge, axes
+    axes = axes / np.where(ok, norm, 1.0)[..., None]
+    proj = np.einsum("pek,pk->pe", np.abs(np.einsum("pej,pjk->pek", axes, ra)), ha) + np.einsum("pek,pk->pe", np.abs(np.einsum("pej,pjk->pek", axes, rb)), hb)
+    edge = np.where(ok, np.abs(np.einsum("pej,pj->pe", axes, d)) - proj, -np.inf)
+    return np.concatenate((face_a, face_b), axis=1), edge, axes
 
 
 def _clip(poly: np.ndarray, axis: np.ndarray, offset: float) -> np.ndarray:
@@ -87,7 +89,11 @@ def _face_contact(c_ref: np.ndarray, r_ref: np.ndarray, h_ref: np.ndarray, c_inc
     centre = c_inc + h_inc[j] * face_n
     eu, ev = h_inc[u] * r_inc[:, u], h_inc[v] * r_inc[:, v]
     poly = np.stack((centre + eu + ev, centre - eu + ev, centre - eu - ev, centre + eu - ev))
-    for side in ((axis + 1) % 3, (axis + 2) % 3):
+    sides = [(axis + 1) % 3, (axis + 2) % 3]
+    # corners within 1 nm of the reference face's sides are inside (an aligned stack's
+    # equal faces: no clipping, the 4 corners are the manifold)
+    inside = np.abs((poly - c_ref) @ r_ref[:, sides]) <= h_ref[sides] + 1e-9
+    for side in sides if not inside.all() else ():
         t = r_ref[:, side]
         off = t @ c_ref
         poly = _clip(poly, t, off + h_ref[side])
@@ -123,16 +129,25 @@ def _edge_contact(ca: np.ndarray, ra: np.ndarray, ha: np.ndarray, cb: np.ndarray
     return pa + s * ea, pb + t * eb
 
 
-def box_box(ca: np.ndarray, ra: np.ndarray, ha: np.ndarray, cb: np.ndarray, rb: np.ndarray, hb: np.ndarray,
-            margin: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-    """The contact manifold of boxes A and B (world centres, rotations, half extents), or None
-    when they are more than `margin` apart. Returns the unit normal from A to B, the contact
-    points on A [k, 3] and on B [k, 3] (k <= 4) and the separations (p_B - p_A) . n [k]
-    (< 0: penetrating)."""
+def manifolds(ca: np.ndarray, ra: np.ndarray, ha: np.ndarray, cb: np.ndarray, rb: np.ndarray, hb: np.ndarray,
+              margin: float) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None]:
+    """The contact manifolds of P box pairs A, B (world centres [P, 3], rotations [P, 3, 3],
+    half extents [P, 3]): per pair None when they are more than `margin` apart, else the unit
+    normal from A to B, the contact points on A [k, 3] and on B [k, 3] (k <= 4) and the
+    separations (p_B - p_A) . n [k] (< 0: penetrating)."""
     d = cb - ca
     faces, edges, axes = _separations(d, ra, ha, rb, hb)
-    if max(faces.max(), edges.max()) > margin:
-        return None
+    out: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None] = []
+    far = np.maximum(faces.max(axis=1), edges.max(axis=1)) > margin
+    for p in range(len(d)):
+        out.append(None if far[p] else _one(ca[p], ra[p], ha[p], cb[p], rb[p], hb[p], faces[p], edges[p], axes[p], margin))
+    return out
+
+
+def _one(ca: np.ndarray, ra: np.ndarray, ha: np.ndarray, cb: np.ndarray, rb: np.ndarray, hb: np.ndarray, faces: np.ndarray, edges: np.ndarray,
+         axes: np.ndarray, margin: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """One pair's manifold from its separations (see `manifolds`)."""
+    d = cb - ca
     tol = FACE_TOLERANCE * min(ha.min(), hb.min())
     fa, fb = int(np.argmax(faces[:3])), int(np.argmax(faces[3:]))
     best_face = faces[fa] if faces[fa] + tol >= faces[3 + fb] else faces[3 + fb]
