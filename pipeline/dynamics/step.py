@@ -205,11 +205,7 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
     if group.shapes is not None:
         group.shapes.begin_step()
     seen = None  # shaped bodies' end positions after their last contact pass
-    stacked = None  # box pairs: solved with the boxes' other contacts as one set (island.py)
-    if group.shapes is not None and pairs[0].size:
-        box = island.box_pairs(group.shapes.kind, shaped, pairs)
-        if box.any():
-            stacked, pairs = (pairs[0][box], pairs[1][box]), (pairs[0][~box], pairs[1][~box])
+    stacked, pairs = _box_pairs(group, shaped, pairs)
     for iteration in range(iterations):
         found = False
         fresh = iteration == 0  # the first pass's sweeps are still valid (nothing moved since)
@@ -219,9 +215,7 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
             done = _shaped_pass(group, bodies, s0.q, s1.q, check, stacked if iteration == 0 else None, ctx, v_rest, iterations)
             seen = s1.x[shaped_idx].copy()
             if done is not None:
-                found, fresh = True, False
-                contact[done[0]] = True
-                out = done[1]
+                found, fresh, contact[done[0]], out = True, False, True, done[1]
                 if out.shape[1]:
                     impacts.append(np.stack((ctx.t + out[3] * ctx.dt, out[0], out[1], out[2], *out[4:7]), axis=1))
         for ci, col in enumerate(group.colliders):
@@ -243,6 +237,17 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
         if not found:
             break
     return contact, impacts
+
+
+def _box_pairs(group: Group, shaped: np.ndarray, pairs: tuple[np.ndarray, np.ndarray]) -> tuple[tuple[np.ndarray, np.ndarray] | None, tuple[np.ndarray, np.ndarray]]:
+    """The body pairs split into box pairs (None: none), solved with the boxes' other
+    contacts as one set (island.py), and the rest (bounding spheres)."""
+    if group.shapes is None or pairs[0].size == 0:
+        return None, pairs
+    box = island.box_pairs(group.shapes.kind, shaped, pairs)
+    if not box.any():
+        return None, pairs
+    return (pairs[0][box], pairs[1][box]), (pairs[0][~box], pairs[1][~box])
 
 
 def _shaped_pass(group: Group, bodies: ContactBodies, q0: np.ndarray, q1: np.ndarray, check: np.ndarray,
