@@ -38,6 +38,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
 from ..geometry import BOX
 from ..motion.pose import quat_normalize, quat_to_matrix
@@ -171,7 +172,7 @@ def solve(b: ContactBodies, f: Flat, shapes: ShapeSet, q1: np.ndarray, h: float,
     lam = f.lam.reshape(-1).copy()
     if not _pgs(W, u0, target, f.mu, f.mu_s, lam, order, 1):
         lam = f.lam.reshape(-1).copy()
-        _normal_solve(W, u0, target, lam)
+        _direct_solve(W, u0, target, f.mu, lam)
         _pgs(W, u0, target, f.mu, f.mu_s, lam, order, sweeps)
     dV = np.einsum("kjl,kl->kj", minv, (lam @ J).reshape(-1, 6))
     b.v1[ids] += dV[:, :3]
@@ -223,26 +224,45 @@ def _jacobian(b: ContactBodies, f: Flat, ids: np.ndarray, la: np.ndarray, lb: np
     return J.reshape(3 * C, 6 * N), minv
 
 
-def _normal_solve(W: np.ndarray, u0: np.ndarray, target: np.ndarray, lam: np.ndarray) -> None:
-    """The normal impulses (in place in `lam`, friction held) that meet every target exactly,
-    W_nn lambda_n = target - u0_n - W_nt lambda_t, least squares of least norm (a face's 4
-    coplanar points are redundant: W_nn is singular), without the contacts that would pull
-    (at most 4 rounds of dropping them). The start of the iteration when the warm start is
-    far off (a stack's first steps): Gauss-Seidel alone carries a stack's weight down only
-    one level per sweep."""
-    rows = np.arange(0, len(lam), 3)
-    tang = np.setdiff1d(np.arange(len(lam)), rows)
-    rhs = target - u0[rows] - W[np.ix_(rows, tang)] @ lam[tang]
-    active = np.ones(rows.size, bool)
-    ln = np.zeros(rows.size)
+def _least_norm(W: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """x with W x = rhs for a symmetric positive semi-definite W, of least norm: the
+    Cholesky solve of (W + eps 1) x = rhs, eps = 1e-10 of the mean diagonal (the limit
+    eps -> 0 is the least-norm solution; it leaves W x off by eps |x|, which the sweeps
+    after it remove); a least-squares solve if that fails."""
+    eps = 1e-10 * max(float(np.trace(W)) / len(W), 1e-300)
+    try:
+        return cho_solve(cho_factor(W + eps * np.eye(len(W)), check_finite=False), rhs, check_finite=False)
+    except LinAlgError:
+        return np.linalg.lstsq(W, rhs, rcond=1e-10)[0]
+
+
+def _direct_solve(W: np.ndarray, u0: np.ndarray, target: np.ndarray, mu: np.ndarray, lam: np.ndarray) -> None:
+    """The impulses (in place in `lam`) that meet every contact's targets exactly, sticking:
+    W lambda = (target, 0, 0 per contact) - u0, least norm (a face's 4 coplanar points
+    are redundant: W is singular), without the contacts that would pull (at
+    most 4 rounds of dropping them), friction then clamped to the kinetic cone. The start of
+    the iteration when the warm start is off (a stack's first steps): Gauss-Seidel alone
+    carries a stack's weight down only one level per sweep, and converges slowly on the
+    redundant rows of a resting face."""
+    C = target.size
+    rhs = -u0.copy()
+    rhs[0::3] += target
+    active = np.ones(C, bool)
+    out = np.zeros(3 * C)
     for _ in range(4):
-        a = np.flatnonzero(active)
-        ln[:] = 0.0
-        ln[a] = np.linalg.lstsq(W[np.ix_(rows[a], rows[a])], rhs[a], rcond=1e-10)[0]
-        if (ln >= 0).all():
+        rows = np.flatnonzero(np.repeat(active, 3))
+        out[:] = 0.0
+        out[rows] = _least_norm(W[np.ix_(rows, rows)], rhs[rows])
+        pulls = active & (out[0::3] < 0)
+        if not pulls.any():
             break
-        active &= ln >= 0
-    lam[rows] = np.maximum(ln, 0.0)
+        active &= ~pulls
+    ln = np.maximum(out[0::3], 0.0)
+    lt = out.reshape(C, 3)[:, 1:]
+    size = np.linalg.norm(lt, axis=1)
+    scale = np.minimum(1.0, mu * ln / np.where(size > 0, size, 1.0))
+    lam[0::3] = ln
+    lam.reshape(C, 3)[:, 1:] = lt * scale[:, None]
 
 
 def _pgs(W: np.ndarray, u0: np.ndarray, target: np.ndarray, mu: np.ndarray, mu_s: np.ndarray, lam: np.ndarray, order: np.ndarray, sweeps: int) -> bool:
