@@ -38,6 +38,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
 from ..geometry import BOX
@@ -47,7 +49,11 @@ from .manifold import manifolds
 from .shapes import Contacts, ShapeSet, _rotate, _tangents
 
 WARM_DISTANCE = 0.1  # of the smaller box's least half extent: a contact of last step this close is the same one
+SLEEP_SPEED = 1e-3  # m/s, and SLEEP_SPEED / SLEEP_RADIUS rad/s: slower than this a body is calm
+SLEEP_RADIUS = 0.1  # m
+SLEEP_TIME = 0.5  # s: a set of touching boxes calm this long sleeps (held where it fell asleep)
 CONVERGED = 1e-9  # m/s: a sweep that changes no contact velocity by more is the last
+WARM_OFF = 1e-6  # m/s: a first sweep that changes a contact velocity by more: the warm start is off
 
 
 @dataclass
@@ -170,10 +176,11 @@ def solve(b: ContactBodies, f: Flat, shapes: ShapeSet, q1: np.ndarray, h: float,
     bounce = impact & (f.eps > 0) & (u0n * h + np.maximum(f.sep, 0.0) < 0)
     target = np.where(bounce | (impact & (f.sep <= 0)), -f.eps * np.where(impact, u0n, 0.0), target)
     lam = f.lam.reshape(-1).copy()
-    if not _pgs(W, u0, target, f.mu, f.mu_s, lam, order, 1):
+    if not _pgs(W, u0, target, f.mu, f.mu_s, lam, order, 1, WARM_OFF):
+        # the warm start is off (new contacts, a stack's first steps): start from the direct solve
         lam = f.lam.reshape(-1).copy()
         _direct_solve(W, u0, target, f.mu, lam)
-        _pgs(W, u0, target, f.mu, f.mu_s, lam, order, sweeps)
+    _pgs(W, u0, target, f.mu, f.mu_s, lam, order, sweeps, CONVERGED)
     dV = np.einsum("kjl,kl->kj", minv, (lam @ J).reshape(-1, 6))
     b.v1[ids] += dV[:, :3]
     if b.w1 is not None:
@@ -187,6 +194,7 @@ def solve(b: ContactBodies, f: Flat, shapes: ShapeSet, q1: np.ndarray, h: float,
     b.x1[ids] += lever_t[:, None] * dV[:, :3]
     q1[ids] = _rotate(q1[ids], lever_t[:, None] * dV[:, 3:])
     _lift(b, f, q1, ids, la, lb, order, up)
+    _sleep(b, shapes, q1, ids, la, lb, h)
     speed = np.where(impact, -u0n, 0.0)
     hits = np.flatnonzero(impact)
     if hits.size == 0:
@@ -252,6 +260,8 @@ def _direct_solve(W: np.ndarray, u0: np.ndarray, target: np.ndarray, mu: np.ndar
     for _ in range(4):
         rows = np.flatnonzero(np.repeat(active, 3))
         out[:] = 0.0
+        if rows.size == 0:
+            break
         out[rows] = _least_norm(W[np.ix_(rows, rows)], rhs[rows])
         pulls = active & (out[0::3] < 0)
         if not pulls.any():
@@ -265,10 +275,12 @@ def _direct_solve(W: np.ndarray, u0: np.ndarray, target: np.ndarray, mu: np.ndar
     lam.reshape(C, 3)[:, 1:] = lt * scale[:, None]
 
 
-def _pgs(W: np.ndarray, u0: np.ndarray, target: np.ndarray, mu: np.ndarray, mu_s: np.ndarray, lam: np.ndarray, order: np.ndarray, sweeps: int) -> bool:
+def _pgs(W: np.ndarray, u0: np.ndarray, target: np.ndarray, mu: np.ndarray, mu_s: np.ndarray, lam: np.ndarray, order: np.ndarray, sweeps: int,
+         tol: float) -> bool:
     """Projected Gauss-Seidel on the accumulated impulses `lam` [3C] (in place): normal rows
     clamped to push, friction pairs to the Coulomb disk (static mu_s, else kinetic mu).
-    Returns whether it converged within `sweeps` sweeps."""
+    Returns whether a sweep changed no contact velocity by more than `tol` (m/s) within
+    `sweeps` sweeps."""
     diag = np.diag(W).copy()
     inv_d = 1.0 / np.where(diag > 1e-300, diag, 1.0)
     for _ in range(sweeps):
@@ -285,7 +297,7 @@ def _pgs(W: np.ndarray, u0: np.ndarray, target: np.ndarray, mu: np.ndarray, mu_s
             cap = norm if norm <= mu_s[c] * ln else mu[c] * ln
             scale = cap / norm if norm > 0 else 0.0
             lam[k + 1], lam[k + 2] = t1 * scale, t2 * scale
-        if np.abs(W @ (lam - before)).max() <= CONVERGED:
+        if np.abs(W @ (lam - before)).max() <= tol:
             return True
     return False
 
@@ -302,6 +314,36 @@ def _store(shapes: ShapeSet, f: Flat, lam: np.ndarray) -> None:
     for code in np.unique(codes).tolist():
         sel = pair[codes == code]
         shapes.pair_next[(int(f.a[sel[0]]), int(f.b[sel[0]]))] = (f.local_b[sel], lam[sel])
+
+
+def _sleep(b: ContactBodies, shapes: ShapeSet, q1: np.ndarray, ids: np.ndarray, la: np.ndarray, lb: np.ndarray, h: float) -> None:
+    """Sleeping, as Box2D's and Bullet's islands: a body slower than SLEEP_SPEED (and turning
+    slower than SLEEP_SPEED / SLEEP_RADIUS) is calm; when every body of a connected set of
+    touching boxes has been calm for SLEEP_TIME, the set sleeps: each body is held at the
+    pose where it fell asleep, at rest (v = w = 0). Anything that speeds one of them up
+    (a hit, a push, a support taken away) wakes the set. It stops the slow lean that
+    rounding starts in a tall stack whose contacts are re-solved every step."""
+    w = b.w1[ids] if b.w1 is not None else np.zeros((ids.size, 3))
+    calm = (np.linalg.norm(b.v1[ids], axis=1) < SLEEP_SPEED) & (np.linalg.norm(w, axis=1) < SLEEP_SPEED / SLEEP_RADIUS)
+    clock = np.where(calm, shapes.calm[ids] + h, 0.0)
+    shapes.calm[ids] = clock
+    pair = la >= 0
+    graph = coo_matrix((np.ones(int(pair.sum())), (la[pair], lb[pair])), shape=(ids.size, ids.size))
+    _, label = connected_components(graph, directed=False)
+    low = np.full(label.max() + 1, np.inf)
+    np.minimum.at(low, label, clock)
+    asleep = low[label] >= SLEEP_TIME
+    falls = asleep & ~shapes.sleeping[ids]  # no rest pose kept yet for these
+    shapes.sleeping[ids] = asleep
+    if falls.any():
+        shapes.rest_x[ids[falls]] = b.x1[ids[falls]]
+        shapes.rest_q[ids[falls]] = q1[ids[falls]]
+    held = ids[asleep]
+    b.x1[held] = shapes.rest_x[held]
+    q1[held] = shapes.rest_q[held]
+    b.v1[held] = 0.0
+    if b.w1 is not None:
+        b.w1[held] = 0.0
 
 
 def _lift(b: ContactBodies, f: Flat, q1: np.ndarray, ids: np.ndarray, la: np.ndarray, lb: np.ndarray, order: np.ndarray, up: np.ndarray) -> None:

@@ -86,6 +86,15 @@ class ShapeSet:
     # accumulated impulses, last step's and this step's
     pair_prev: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     pair_next: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    # sleeping (island.py): how long each body has been calm (s), and the pose it sleeps at
+    calm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    rest_x: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    rest_q: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    sleeping: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+    def __post_init__(self) -> None:
+        n = len(self.kind)
+        self.calm, self.rest_x, self.rest_q, self.sleeping = np.zeros(n), np.zeros((n, 3)), np.zeros((n, 4)), np.zeros(n, bool)
 
     def shaped(self) -> np.ndarray:
         """Bodies that collide with their true shape (not their bounding sphere)."""
