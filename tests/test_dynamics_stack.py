@@ -162,3 +162,18 @@ def test_penalty_box_holds_on_an_incline_below_the_friction_angle(tmp_path):
     # of k_t = 2/7 k (30 um), plus what it slid before its springs took hold (20 um)
     stretch = MASS * G * math.sin(th) / (4 * 2 / 7 * k)
     assert stretch <= tr.x[-1, 0, 0] <= stretch + 1e-4
+
+
+def test_a_sleeping_stack_wakes_when_hit(tmp_path):
+    # three boxes fall asleep (calm for 0.5 s: held at rest); at 1 s a box released beside
+    # the top one at 3 m/s hits its side face: the set wakes and the top box is knocked
+    # along, the bottom one (held by the floor's friction) barely
+    heights = SIZE / 2 + np.arange(3) * SIZE
+    hit = box("hit", 2.5 * SIZE, x=-1.25 * SIZE, velocity=[3, 0, 0], start=1.0)
+    sim = run(tmp_path, stack(heights) + [hit], 1.4, {"integrator": "rk4", "step": 0.002}, name="wake")
+    tr = sim.bodies
+    before = tr.times < 1.0
+    assert np.linalg.norm(tr.x[before, :3] - tr.x[0, :3], axis=2).max() < 1e-6  # asleep and still
+    assert np.abs(tr.v[(tr.times > 0.6) & before, :3]).max() == 0.0  # held at rest
+    assert tr.x[-1, 2, 0] - tr.x[0, 2, 0] > 1e-3  # the top box was dragged
+    assert abs(tr.x[-1, 0, 0] - tr.x[0, 0, 0]) < 1e-3
