@@ -22,7 +22,10 @@ against static colliders otherwise). The stages, as Box2D's and Bullet's contact
    Warm start: a static contact by its key (body, point, collider); a box pair's contact
    by the nearest of the pair's contacts of last step (within WARM_DISTANCE, in b's
    frame). A resting stack converges in the first sweep; at most `sweeps` sweeps, ending
-   when a sweep changes no contact velocity by more than 1 nm/s.
+   when a sweep changes no contact velocity by more than 1 nm/s. When the warm start is off
+   (a first sweep changes a contact velocity by more than 1 um/s: new contacts, a stack's
+   first steps) the sweeps start from the direct solve of every row, sticking
+   (`_direct_solve`): Gauss-Seidel alone carries a stack's weight down one level per sweep.
 3. Positions, as shapes.py: each body moves the rest of the step with its changed
    velocity (half a step for a support, (1 - s) h after an impact at s). Then one pass
    over the contacts, bottom up (shock propagation, Guendelman et al. 2003): a contact's
@@ -31,6 +34,9 @@ against static colliders otherwise). The stages, as Box2D's and Bullet's contact
    below it; two bodies level with each other share it by inverse mass), along n. So a
    stack that sank by what gravity pulled in during the step is lifted back in one pass,
    every box by the same amount, and stays where it was.
+4. Sleeping (`_sleep`), as Box2D's and Bullet's islands: a connected set of touching boxes
+   whose bodies have all been calm (slower than SLEEP_SPEED) for SLEEP_TIME is held at rest
+   where it fell asleep, until one of them is sped up.
 """
 
 from __future__ import annotations
