@@ -53,6 +53,8 @@ from .forces import coulomb_friction, cross
 ROUND, BOX, CYLINDER = 0, 1, 2  # a body's solid for the others' points
 RIM_POINTS = 8  # samples per rim circle of a cylinder
 MESH_POINTS = 64  # convex-hull vertices of a mesh body at most (farthest-point subset)
+TANGENT_STIFFNESS = 2.0 / 7.0  # k_t / k of static friction's spring (as DEM's linear contacts)
+TANGENT_DAMPING = (2.0 / 7.0) ** 0.5  # c_t / c: the tangential spring keeps the normal one's damping ratio
 _Y = np.array([0.0, 1.0, 0.0])
 
 
@@ -228,6 +230,7 @@ class Contacts:
     mu: np.ndarray
     mu_s: np.ndarray
     surface: np.ndarray  # [N, 3] m/s: a moving collider's velocity at the point (else 0)
+    key: np.ndarray  # [N] int64: the contact's identity from step to step (point, what it touches)
 
 
 class PenaltySet:
@@ -266,6 +269,11 @@ class PenaltySet:
         self.pairs = (i[keep], j[keep])
         self.mass, self.inv_mass, self.inv_inertia, self.radius = mass, inv_mass, inv_inertia, radius
         self.friction, self.static_friction = friction, static_friction
+        self.slots = len(self.colliders) + n  # contact key = point * slots + (collider, or colliders + other body)
+        # static friction's springs: the tangential displacement xi [A, 3] (world) of each
+        # touching contact since it stuck, by contact key (sorted); advanced after every step
+        self.xi_keys = np.zeros(0, np.int64)
+        self.xi = np.zeros((0, 3))
 
     # --- contacts ---------------------------------------------------------------------------
 
@@ -278,7 +286,7 @@ class PenaltySet:
         owner = self.owner[live]
         rad = self.point_radius[live]
         pw = x[owner] if rot is None else x[owner] + np.einsum("pij,pj->pi", rot[owner], self.local[live])
-        for col in self.colliders:
+        for ci, col in enumerate(self.colliders):
             m = col.motion
             when = (m.now if t is None else t) if m is not None else 0.0
             if m is None:
@@ -294,7 +302,8 @@ class PenaltySet:
             point = pw[touch] - rad[touch, None] * n[touch]
             surface = np.zeros((o.size, 3)) if m is None else m.velocity(when, point)
             parts.append((o, np.full(o.size, -1), point, n[touch], depth[touch], self.k[o], self.c[o],
-                          np.sqrt(self.friction[o] * col.friction), np.sqrt(self.static_friction[o] * col.static_friction), surface))
+                          np.sqrt(self.friction[o] * col.friction), np.sqrt(self.static_friction[o] * col.static_friction), surface,
+                          live[touch].astype(np.int64) * self.slots + ci))
         i, j = self.pairs
         if i.size:
             gap = x[i] - x[j]
@@ -320,7 +329,7 @@ class PenaltySet:
             touch = depth > 0
             if touch.any():
                 a, b, n, depth = a[touch], b[touch], n[touch], depth[touch]
-                out.append(self._pair_rows(a, b, c1[touch] - self.round_radius[a, None] * n, n, depth))
+                out.append(self._pair_rows(a, b, c1[touch] - self.round_radius[a, None] * n, n, depth, self.start[a]))
         into_j = ~both & (round_i | ~round_j)  # points of i into the solid of j
         into_i = ~both & (round_j | ~round_i)
         owner = np.concatenate((i[into_j], j[into_i]))
@@ -354,15 +363,15 @@ class PenaltySet:
         touch = depth > 0
         if touch.any():
             n = n_local[touch] if rot is None else np.einsum("pij,pj->pi", rot[t[touch]], n_local[touch])
-            out.append(self._pair_rows(o[touch], t[touch], pw[touch] - rad[touch, None] * n, n, depth[touch]))
+            out.append(self._pair_rows(o[touch], t[touch], pw[touch] - rad[touch, None] * n, n, depth[touch], pt[touch]))
         return out
 
-    def _pair_rows(self, a: np.ndarray, b: np.ndarray, point: np.ndarray, n: np.ndarray, depth: np.ndarray) -> tuple[np.ndarray, ...]:
+    def _pair_rows(self, a: np.ndarray, b: np.ndarray, point: np.ndarray, n: np.ndarray, depth: np.ndarray, pt: np.ndarray) -> tuple[np.ndarray, ...]:
         # springs in series: 1/k = 1/k_a + 1/k_b (likewise c)
         k = _series(self.k[a], self.k[b])
         c = _series(self.c[a], self.c[b])
         return (a, b, point, n, depth, k, c, np.sqrt(self.friction[a] * self.friction[b]), np.sqrt(self.static_friction[a] * self.static_friction[b]),
-                np.zeros((len(a), 3)))
+                np.zeros((len(a), 3)), pt.astype(np.int64) * self.slots + len(self.colliders) + b)
 
     # --- forces -----------------------------------------------------------------------------
 
@@ -377,24 +386,10 @@ class PenaltySet:
         c = self.contacts(x, rot, moving, t)
         if c is None:
             return None
-        static = c.j < 0
-        jj = np.where(static, 0, c.j)
-        r_i = c.point - x[c.i]
-        r_j = c.point - x[jj]
-        u = v[c.i] - np.where(static[:, None], 0.0, v[jj]) - c.surface
-        if w is not None:
-            u = u + cross(w[c.i], r_i) - np.where(static[:, None], 0.0, cross(w[jj], r_j))
-        un = np.einsum("ij,ij->i", u, c.normal)
-        f_n = c.k * c.depth - c.c * un  # k delta + c d(delta)/dt, d(delta)/dt = -u.n
-        # friction: Coulomb from the pressing force, capped at what stops the slip in dt
-        u_t = u - un[:, None] * c.normal
-        slip, t_hat = _unit(u_t, np.zeros(3))
-        k_t = self._tangent_inverse_mass(c.i, r_i, t_hat, q) + np.where(static, 0.0, self._tangent_inverse_mass(jj, r_j, t_hat, q))
-        share = np.bincount(c.i, minlength=len(x)) + np.bincount(c.j[~static], minlength=len(x))
-        k_t = k_t * np.maximum(share[c.i], np.where(static, 0, share[jj]))
-        h = dt if dt > 0 else 1.0
-        f_t = coulomb_friction(slip, np.maximum(f_n, 0.0) * h, k_t, c.mu, c.mu_s) / h
-        f = f_n[:, None] * c.normal - f_t[:, None] * t_hat
+        static, jj, r_i, r_j, un, u_t = self._slip(c, x, v, w)
+        f_n = c.k * c.depth - self._damper(c, x, q, dt, c.normal, c.c, static, jj, r_i, r_j) * un  # k delta + c d(delta)/dt, d(delta)/dt = -u.n
+        f_t = self._friction(c, x, q, dt, f_n, u_t, static, jj, r_i, r_j)
+        f = f_n[:, None] * c.normal + f_t
         force = np.zeros_like(x)
         torque = np.zeros_like(x)
         np.add.at(force, c.i, f)
@@ -404,6 +399,85 @@ class PenaltySet:
             np.add.at(force, c.j[pj], -f[pj])
             np.add.at(torque, c.j[pj], cross(r_j[pj], -f[pj]))
         return force, torque
+
+    def _slip(self, c: Contacts, x: np.ndarray, v: np.ndarray, w: np.ndarray | None) -> tuple[np.ndarray, ...]:
+        """Per contact: static (bool), the other body (0 for a static one), the levers r_i, r_j,
+        and the relative velocity of the point u (body i against the other surface): its
+        normal part u.n and its tangential part u_t [N, 3]."""
+        static = c.j < 0
+        jj = np.where(static, 0, c.j)
+        r_i = c.point - x[c.i]
+        r_j = c.point - x[jj]
+        u = v[c.i] - np.where(static[:, None], 0.0, v[jj]) - c.surface
+        if w is not None:
+            u = u + cross(w[c.i], r_i) - np.where(static[:, None], 0.0, cross(w[jj], r_j))
+        un = np.einsum("ij,ij->i", u, c.normal)
+        return static, jj, r_i, r_j, un, u - un[:, None] * c.normal
+
+    def _springs(self, c: Contacts) -> np.ndarray:
+        """Each contact's static-friction displacement xi [N, 3] (0 for a new contact), turned
+        into the contact's tangent plane (its length kept)."""
+        xi = np.zeros((c.key.size, 3))
+        if self.xi_keys.size:
+            at = np.clip(np.searchsorted(self.xi_keys, c.key), 0, self.xi_keys.size - 1)
+            same = self.xi_keys[at] == c.key
+            xi[same] = self.xi[at[same]]
+        length = np.sqrt(np.einsum("ij,ij->i", xi, xi))
+        flat = xi - np.einsum("ij,ij->i", xi, c.normal)[:, None] * c.normal
+        flat_len = np.sqrt(np.einsum("ij,ij->i", flat, flat))
+        return flat * np.where(flat_len > 0, length / np.where(flat_len > 0, flat_len, 1.0), 0.0)[:, None]
+
+    def _damper(self, c: Contacts, x: np.ndarray, q: np.ndarray | None, dt: float, d: np.ndarray, coef: np.ndarray, static: np.ndarray,
+                jj: np.ndarray, r_i: np.ndarray, r_j: np.ndarray) -> np.ndarray:
+        """The damping coefficients `coef` [N] along directions d [N, 3], capped so that no
+        damper reverses the relative velocity along d within the step dt: c <= 1 / (dt K s),
+        K = the point's inverse effective mass along d (both bodies), s = the most contacts
+        of either body (they act together). Without it a stack of bodies, whose dampers add
+        up in series, is unstable under an explicit step (h c_total / m > 2)."""
+        k = self._tangent_inverse_mass(c.i, r_i, d, q) + np.where(static, 0.0, self._tangent_inverse_mass(jj, r_j, d, q))
+        share = np.bincount(c.i, minlength=len(x)) + np.bincount(c.j[~static], minlength=len(x))
+        k = k * np.maximum(share[c.i], np.where(static, 0, share[jj]))
+        h = dt if dt > 0 else 1.0
+        return np.minimum(coef, 1.0 / np.where(k > 0, k * h, 1e-300))
+
+    def _friction(self, c: Contacts, x: np.ndarray, q: np.ndarray | None, dt: float, f_n: np.ndarray, u_t: np.ndarray, static: np.ndarray,
+                  jj: np.ndarray, r_i: np.ndarray, r_j: np.ndarray) -> np.ndarray:
+        """Friction forces [N, 3] on body i (stick-slip, see the module docstring): the
+        tangential spring-damper -k_t xi - c_t u_t while it stays inside the static cone
+        mu_s f_n, else mu_k f_n along it. The damper is capped at what stops the slip within
+        dt (shared by the body's contacts), so it never reverses a slip within a step."""
+        press = np.maximum(f_n, 0.0)
+        _, t_hat = _unit(u_t, np.zeros(3))
+        damper = self._damper(c, x, q, dt, t_hat, TANGENT_DAMPING * c.c, static, jj, r_i, r_j)
+        trial = -(TANGENT_STIFFNESS * c.k)[:, None] * self._springs(c) - damper[:, None] * u_t
+        size = np.sqrt(np.einsum("ij,ij->i", trial, trial))
+        slides = size > c.mu_s * press
+        scale = np.where(slides, c.mu * press / np.where(size > 0, size, 1.0), 1.0)
+        return trial * scale[:, None]
+
+    def advance(self, x: np.ndarray, q: np.ndarray | None, v: np.ndarray, w: np.ndarray | None, moving: np.ndarray, dt: float,
+                t: float | None = None) -> None:
+        """After a step: each touching contact's static-friction spring moves with the slip
+        of the step, xi <- xi + u_t dt (turned into the contact's tangent plane), and a spring
+        stretched past the static cone (k_t |xi| > mu_s f_n) is reset to the kinetic one
+        (k_t |xi| = mu_k f_n: the contact slipped there). Contacts no longer touching are
+        forgotten."""
+        if not self.owner.size:
+            return
+        rot = None if (self.centred or q is None) else quat_to_matrix(quat_normalize(q))
+        c = self.contacts(x, rot, moving, t)
+        if c is None:
+            self.xi_keys, self.xi = np.zeros(0, np.int64), np.zeros((0, 3))
+            return
+        static, jj, r_i, r_j, un, u_t = self._slip(c, x, v, w)
+        xi = self._springs(c) + dt * u_t
+        k_t = TANGENT_STIFFNESS * c.k
+        press = np.maximum(c.k * c.depth - self._damper(c, x, q, dt, c.normal, c.c, static, jj, r_i, r_j) * un, 0.0)
+        length = np.sqrt(np.einsum("ij,ij->i", xi, xi))
+        over = k_t * length > c.mu_s * press
+        reset = np.where(over, c.mu * press / np.where(k_t * length > 0, k_t * length, 1.0), 1.0)
+        order = np.argsort(c.key)
+        self.xi_keys, self.xi = c.key[order], (xi * reset[:, None])[order]
 
     def _tangent_inverse_mass(self, b: np.ndarray, r: np.ndarray, t: np.ndarray, q: np.ndarray | None) -> np.ndarray:
         """1/m + (r x t) . I^-1 (r x t): the point's velocity change along t per unit impulse."""

@@ -82,6 +82,19 @@ class ShapeSet:
     prev_lam: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     keys: list[np.ndarray] = field(default_factory=list)
     lams: list[np.ndarray] = field(default_factory=list)
+    # box-box contacts (island.py): per body pair, the contact points in b's frame and their
+    # accumulated impulses, last step's and this step's
+    pair_prev: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    pair_next: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    # sleeping (island.py): how long each body has been calm (s), and the pose it sleeps at
+    calm: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    rest_x: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    rest_q: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    sleeping: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+    def __post_init__(self) -> None:
+        n = len(self.kind)
+        self.calm, self.rest_x, self.rest_q, self.sleeping = np.zeros(n), np.zeros((n, 3)), np.zeros((n, 4)), np.zeros(n, bool)
 
     def shaped(self) -> np.ndarray:
         """Bodies that collide with their true shape (not their bounding sphere)."""
@@ -96,6 +109,7 @@ class ShapeSet:
         else:
             self.prev_keys, self.prev_lam = np.zeros(0, np.int64), np.zeros((0, 3))
         self.keys, self.lams = [], []
+        self.pair_prev, self.pair_next = self.pair_next, {}
 
 
 def true_shape_collider(col: Collider) -> bool:

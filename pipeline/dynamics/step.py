@@ -4,7 +4,10 @@ Each step of a group runs, in order:
   activate   -> which bodies move this step (started, born and not dead, not pinned);
                 bodies that join bring their energy into the guard's budget
   integrate  -> the scene's integrator advances D(t, X) by dt (rk45 may take a smaller dt)
-  collide    -> swept contacts against colliders and between bodies, impulses (collisions.py)
+  collide    -> swept contacts against colliders and between bodies, impulses (collisions.py;
+                boxes on boxes: island.py)
+  constrain  -> joints (joints.py)
+  springs    -> penalty contacts' static-friction springs follow the step's slip (penalty.py)
   guard      -> finiteness and energy bound (guard.py)
   record     -> the state at t + dt (every step, or every k-th for big particle systems)
 When nothing in a body group can change its acceleration (uniform gravity only, nothing
@@ -30,6 +33,7 @@ from .collisions import Collider, ContactBodies, Hits, _sweep_spheres, resolve_p
 from .guard import Guard
 from ..motion.pose import quat_exp, quat_mul
 from .integrators import Integrator
+from . import island
 from .joints import JointSet, constrain
 from .penalty import handles
 from .rigid import inverse_inertia_world
@@ -201,18 +205,17 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
     if group.shapes is not None:
         group.shapes.begin_step()
     seen = None  # shaped bodies' end positions after their last contact pass
+    stacked, pairs = _box_pairs(group, shaped, pairs)
     for iteration in range(iterations):
         found = False
         fresh = iteration == 0  # the first pass's sweeps are still valid (nothing moved since)
-        if shaped_idx.size and group.colliders:
+        if shaped_idx.size and (group.colliders or stacked is not None):
             # after the first pass only bodies that something else moved can have new contacts
             check = shaped_idx if seen is None else shaped_idx[np.any(s1.x[shaped_idx] != seen, axis=1)]
-            cs = find_contacts(bodies, group.shapes, check, s0.q, s1.q, group.colliders) if check.size else None
+            done = _shaped_pass(group, bodies, s0.q, s1.q, check, stacked if iteration == 0 else None, ctx, v_rest, iterations)
             seen = s1.x[shaped_idx].copy()
-            if cs is not None:
-                found, fresh = True, False
-                contact[cs.body] = True
-                out = resolve_shaped(bodies, cs, group.shapes, s1.q, ctx.dt, v_rest, 4 * iterations)
+            if done is not None:
+                found, fresh, contact[done[0]], out = True, False, True, done[1]
                 if out.shape[1]:
                     impacts.append(np.stack((ctx.t + out[3] * ctx.dt, out[0], out[1], out[2], *out[4:7]), axis=1))
         for ci, col in enumerate(group.colliders):
@@ -236,6 +239,43 @@ def collide(group: Group, X0: np.ndarray, X1: np.ndarray, ctx: StepContext, iter
     return contact, impacts
 
 
+def _box_pairs(group: Group, shaped: np.ndarray, pairs: tuple[np.ndarray, np.ndarray]) -> tuple[tuple[np.ndarray, np.ndarray] | None, tuple[np.ndarray, np.ndarray]]:
+    """The body pairs split into box pairs (None: none), solved with the boxes' other
+    contacts as one set (island.py), and the rest (bounding spheres)."""
+    if group.shapes is None or pairs[0].size == 0:
+        return None, pairs
+    box = island.box_pairs(group.shapes.kind, shaped, pairs)
+    if not box.any():
+        return None, pairs
+    return (pairs[0][box], pairs[1][box]), (pairs[0][~box], pairs[1][~box])
+
+
+def _shaped_pass(group: Group, bodies: ContactBodies, q0: np.ndarray, q1: np.ndarray, check: np.ndarray,
+                 stacked: tuple[np.ndarray, np.ndarray] | None, ctx: StepContext, v_rest: float, iterations: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """One contact pass of the true-shape bodies `check`: their contacts with static colliders,
+    and with each other for the box pairs `stacked`. Boxes touching boxes are solved with all
+    these contacts as one set (island.py); otherwise each body alone (shapes.py). Returns the
+    bodies in contact and the impacts ([7, k], see resolve_shaped), or None."""
+    shapes = group.shapes
+    if shapes is None:
+        return None
+    cs = find_contacts(bodies, shapes, check, q0, q1, group.colliders) if check.size and group.colliders else None
+    if stacked is not None:
+        g = group.system.env.gravity
+        g_mag = float(np.linalg.norm(g))
+        rows = island.pair_contacts(bodies, shapes, q1, stacked[0], stacked[1], 2.0 * g_mag * ctx.dt**2 + 1e-6)
+        if rows:
+            if cs is not None:
+                rows.insert(0, island.static_rows(bodies, cs, shapes))
+            f = island.flatten(rows)
+            up = -g / g_mag if g_mag > 0 else np.array([0.0, 1.0, 0.0])
+            out = island.solve(bodies, f, shapes, q1, ctx.dt, v_rest, 4 * iterations, up)
+            return np.concatenate((f.b, f.a[f.a >= 0])), out
+    if cs is None:
+        return None
+    return cs.body, resolve_shaped(bodies, cs, shapes, q1, ctx.dt, v_rest, 4 * iterations)
+
+
 def hold_joints(group: Group, X1: np.ndarray, ctx: StepContext) -> None:
     """Stage constrain: the joints project the end-of-step state X1 (in place) back onto
     their constraints, positions then velocities (joints.py); held and pinned bodies are
@@ -245,6 +285,16 @@ def hold_joints(group: Group, X1: np.ndarray, ctx: StepContext) -> None:
     move = system.moving()
     p = system.props
     constrain(group.joints, s1.x, s1.q, s1.v, s1.w, np.where(move, p.inv_mass, 0.0), np.where(move[:, None], p.inv_inertia, 0.0), ctx.dt)
+
+
+def advance_springs(group: Group, X1: np.ndarray, ctx: StepContext) -> None:
+    """Stage springs: the penalty contacts' static-friction springs follow the step's slip
+    (penalty.PenaltySet.advance), at the end-of-step state X1."""
+    system = group.system
+    if system.penalty is None:
+        return
+    s1 = system.unpack(X1)
+    system.penalty.advance(s1.x, s1.q, s1.v, s1.w, system.moving(), ctx.dt, ctx.t_next)
 
 
 def guard_step(group: Group, guard: Guard, X1: np.ndarray, ctx: StepContext) -> tuple[np.ndarray, np.ndarray, float]:
@@ -577,6 +627,8 @@ def run_group(group: Group, integrator: Integrator, t0: float, t1: float, step: 
         contact, found = collide(group, X, X1, ctx, iterations, g_mag)
         if group.joints is not None:
             hold_joints(group, X1, ctx)
+        if system.penalty is not None:
+            advance_springs(group, X1, ctx)
         recorder.impacts.extend(found)
         pending |= contact
         energy = guard_step(group, guard, X1, ctx)
