@@ -283,7 +283,7 @@ class SlicedGeometry:
             return build_group(mi, name, "particles", capacity, np.zeros((0, 3)), bsdf, slices, radius=obj.radius, emitter=emitter, owner=self.owner)
         from ..motion.deform import bind_mesh
 
-        verts, faces = bind_mesh(self.loaded, obj)
+        verts, faces = bind_mesh(self.loaded, obj, getattr(obj.deform, "detail", 16))  # the motion stage's tessellation
         mesh, smooth = render_mesh(self.loaded, obj, len(verts), faces)
         return build_group(mi, name, "deform", len(mesh.index), np.asarray(mesh.faces, np.uint32), bsdf, slices, mesh=mesh, smooth=smooth, rest=verts, emitter=emitter, owner=self.owner)
 

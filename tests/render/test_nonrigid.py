@@ -69,3 +69,13 @@ def test_skinned_mesh_bends(tmp_path: Path) -> None:
     # fewer rows and reaches further across
     assert len(rows_b) < 0.8 * len(rows_s)
     assert np.where(b.any(axis=0))[0].size > 1.5 * np.where(s.any(axis=0))[0].size
+
+
+def test_a_skinned_primitive_renders_at_its_own_tessellation(tmp_path: Path) -> None:
+    """`detail` sets how finely a skinned primitive is tessellated for the motion stage; the
+    renderer's slices built the primitive at the default 16 whatever it said, and a scene
+    with another detail failed with an IndexError on its first frame."""
+    text = SKINNED.replace("      auto: true\n", "      auto: true\n      detail: 4\n")
+    assert "detail: 4" in text
+    (img,), _, _ = render(load(tmp_path, text), [24])
+    assert (img[..., 0] > img[..., 1] + 0.3).sum() > 50
