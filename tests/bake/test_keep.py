@@ -14,26 +14,13 @@ import numpy as np
 import pytest
 import yaml
 
-from _dynamics_scenes import ball, floor
+from _dynamics_scenes import dust_shot
 from _support import run_motion
 from farm_util import report
 
 KEPT = "kept from an earlier run"
 
-SHOT = {
-    "name": "keep",
-    "timeline": {"fps": 24, "first": 1001, "last": 1012},
-    "camera": {"position": [0, 1, 5], "look_at": [0, 0.5, 0], "fov": 40},
-    "lights": [{"type": "constant", "radiance": 0.8}],
-    "materials": [{"name": "red", "type": "diffuse", "color": [0.7, 0.1, 0.1]}],
-    "objects": [
-        {**floor(), "material": "red"},
-        {**ball("ball", 1.0, radius=0.2, mass=2.0), "material": "red"},
-        {"name": "dust", "shape": "particles", "radius": 0.02, "transform": {"translate": [0, 0.05, 0]},
-         "emitter": {"rate": 400, "start": 0.1, "stop": 0.2, "speed": 1.0, "spread": 30, "lifetime": 0.5, "seed": 3}},
-    ],
-    "render": {"resolution": [24, 16], "spp": 2, "max_depth": 2, "shutter_samples": 2},
-}
+SHOT = dust_shot("keep", 1012, 0.1, 0.2)
 
 
 def _write(path: Path, doc: dict, comment: str = "") -> Path:

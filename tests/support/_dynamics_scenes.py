@@ -29,6 +29,25 @@ def floor(name: str = "floor", size: float = 100.0, y: float = 0.0, **collider: 
     }
 
 
+def dust_shot(name: str, last: int, dust_start: float, dust_stop: float) -> dict[str, Any]:
+    """A small simulated shot from frame 1001: a ball dropped on a red floor and a burst of
+    dust particles emitted from `dust_start` to `dust_stop` (s), tiny render settings."""
+    return {
+        "name": name,
+        "timeline": {"fps": 24, "first": 1001, "last": last},
+        "camera": {"position": [0, 1, 5], "look_at": [0, 0.5, 0], "fov": 40},
+        "lights": [{"type": "constant", "radiance": 0.8}],
+        "materials": [{"name": "red", "type": "diffuse", "color": [0.7, 0.1, 0.1]}],
+        "objects": [
+            {**floor(), "material": "red"},
+            {**ball("ball", 1.0, radius=0.2, mass=2.0), "material": "red"},
+            {"name": "dust", "shape": "particles", "radius": 0.02, "transform": {"translate": [0, 0.05, 0]},
+             "emitter": {"rate": 400, "start": dust_start, "stop": dust_stop, "speed": 1.0, "spread": 30, "lifetime": 0.5, "seed": 3}},
+        ],
+        "render": {"resolution": [24, 16], "spp": 2, "max_depth": 2, "shutter_samples": 2},
+    }
+
+
 def write_scene(tmp_path: Path, objects: list[dict[str, Any]], dynamics: dict[str, Any] | None = None, name: str = "test", last: int = 24) -> Path:
     doc = {
         "name": name,
