@@ -577,6 +577,8 @@ def cut_chunks(req: RenderRequest, s: RunSetup, sort: SortedFrames) -> tuple[Run
     one worker and one chunk (the returned RunSetup says so)."""
     cfg, loaded, job, workers, threads, todo = s.cfg, s.loaded, s.job, s.workers, s.threads, sort.todo
     chunk_size = cfg.chunk_size or default_chunk_size(len(todo), workers if not req.scheduler else 2)
+    if not todo and not req.dry_run:  # nothing renders: nothing reads an estimate (the inline choice, the progress bar and the cost record read it for frames rendered)
+        return s, Chunking(chunk_size, make_chunks(todo, chunk_size), {}, False)
     cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), workers if not req.scheduler else 1, sort.bake_s, denoised_pixels(loaded.scene))
     inline = choose_inline(req, cost, todo)
     if inline:
