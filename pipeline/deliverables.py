@@ -14,8 +14,11 @@ This module sits low (beside the timeline) because the scene schema validates th
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Literal
+
+from .errors import UsageError
 
 Kind = Literal["movie", "fields", "sheet"]
 
@@ -85,3 +88,12 @@ register(DeliverFormat("review25", "movie", "H.264 .mp4 at 25 fps (PAL speed), f
 register(DeliverFormat("contact", "sheet", "contact sheet PNG", ".png"))
 
 NAMES: tuple[str, ...] = tuple(FORMATS)
+
+
+def parse_formats(text: str | Iterable[str]) -> tuple[str, ...]:
+    """'24p,60i' -> ('24p', '60i'); UsageError naming an unknown format."""
+    items = [t.strip() for t in (text.split(",") if isinstance(text, str) else text) if t.strip()]
+    unknown = [t for t in items if t not in FORMATS]
+    if unknown or not items:
+        raise UsageError(f"--deliver: unknown format {', '.join(unknown) or '(none)'}; choose from {', '.join(FORMATS)}")
+    return tuple(dict.fromkeys(items))

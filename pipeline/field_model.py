@@ -22,11 +22,12 @@ two fields into a frame is two slice assignments.
 
 from __future__ import annotations
 
-from typing import Literal
-
-import numpy as np
+from typing import TYPE_CHECKING, Literal
 
 from .errors import UsageError
+
+if TYPE_CHECKING:  # numpy is imported by the functions that make arrays (the parity helpers need none)
+    import numpy as np
 
 Parity = Literal["top", "bottom"]
 FieldOrder = Literal["tff", "bff"]
@@ -89,6 +90,8 @@ def weave(top: np.ndarray, bottom: np.ndarray, out: np.ndarray | None = None) ->
     if top.shape[1:] != bottom.shape[1:] or top.shape[0] - bottom.shape[0] not in (0, 1):
         raise ValueError(f"fields do not pair: top {top.shape}, bottom {bottom.shape}")
     if out is None:
+        import numpy as np
+
         out = np.empty((height,) + top.shape[1:], dtype=np.result_type(top, bottom))
     out[0::2] = top
     out[1::2] = bottom
@@ -104,6 +107,8 @@ def weave_frames(top_from: np.ndarray, bottom_from: np.ndarray, out: np.ndarray 
     if top_from.shape != bottom_from.shape:
         raise ValueError(f"frames differ in shape: {top_from.shape} vs {bottom_from.shape}")
     if out is None:
+        import numpy as np
+
         out = np.empty_like(top_from)
     out[0::2] = top_from[0::2]
     out[1::2] = bottom_from[1::2]

@@ -11,10 +11,7 @@ import os
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
-from typing import Any, Literal, Mapping
-
-import numpy as np
-import OpenEXR
+from typing import TYPE_CHECKING, Any, Literal, Mapping
 
 from .errors import DiskFaultError, FrameIOError
 from .write_policy import DISK_FAULT_ERRNOS, _UMASK, _unlink_quietly, confined, disk_fault, disk_fault_errno, lost_write, publish, write_atomic, writing  # noqa: F401  (the write policy, re-exported)
@@ -23,13 +20,20 @@ from .timeline import MAX_TIMECODE_FRAMES, timecode_fields, timecode_group
 PixelType = Literal["half", "float"]
 Compression = Literal["zip", "zips", "piz", "zstd", "none"]
 
-_COMPRESSION = {
-    "zip": OpenEXR.ZIP_COMPRESSION,
-    "zips": OpenEXR.ZIPS_COMPRESSION,
-    "piz": OpenEXR.PIZ_COMPRESSION,
-    "zstd": OpenEXR.ZSTD_COMPRESSION,
-    "none": OpenEXR.NO_COMPRESSION,
-}
+if TYPE_CHECKING:
+    import numpy as np
+
+# numpy and the OpenEXR bindings (which import numpy) are imported by the functions that
+# read or write pixels or headers: a rerun that renders nothing imports neither
+# (docs/reruns.md, "A rerun that renders nothing").
+
+
+def _compression(name: Compression) -> Any:
+    """OpenEXR's compression of a frame's `output.compression` name."""
+    import OpenEXR
+
+    return {"zip": OpenEXR.ZIP_COMPRESSION, "zips": OpenEXR.ZIPS_COMPRESSION, "piz": OpenEXR.PIZ_COMPRESSION,
+            "zstd": OpenEXR.ZSTD_COMPRESSION, "none": OpenEXR.NO_COMPRESSION}[name]
 
 # Layers holding colours (the denoiser's noisy beauty and albedo guide): channels are
 # named <layer>.R/G/B/A, not .X/Y/Z/W.
@@ -66,6 +70,70 @@ def read_meta(path: str | Path) -> dict[str, Any]:
     return motion_meta(read_header(path))
 
 
+_EXR_MAGIC = b"\x76\x2f\x31\x01"
+_PLAIN_FLAGS = 0x200  # of the version field's flags, only "single-part tiled" may be set (no long names, deep or multi-part)
+MAX_PLAIN_HEADER = 64 << 20  # bytes of header read without the bindings; a larger one is left to them
+
+
+def plain_meta(path: str | Path) -> dict[str, Any] | None:
+    """Our own attributes (as `read_meta`) read from the header's bytes without the OpenEXR
+    bindings (which import numpy): a single-part header whose `motion:` attributes are all
+    `string`, `int`, `float` or `double`, values as the bindings give them. None for
+    anything else (another layout, another attribute type, a header cut short or over
+    MAX_PLAIN_HEADER): the caller reads the file with `read_meta`. Only for a file already
+    known to read back whole (identity/record.py: WholeFrames), whose bytes the bindings
+    decoded."""
+    import struct
+
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(8)
+            if len(head) != 8 or head[:4] != _EXR_MAGIC or head[4] != 2 or int.from_bytes(head[5:8], "little") << 8 & ~_PLAIN_FLAGS:
+                return None
+            meta: dict[str, Any] = {}
+            read = 8
+            while True:
+                name = _cstring(fh)
+                if name is None or read > MAX_PLAIN_HEADER:
+                    return None
+                if not name:
+                    return meta
+                kind, size_bytes = _cstring(fh), fh.read(4)
+                if kind is None or len(size_bytes) != 4:
+                    return None
+                size = int.from_bytes(size_bytes, "little", signed=True)
+                read += len(name) + len(kind) + 6 + size
+                if size < 0 or read > MAX_PLAIN_HEADER:
+                    return None
+                value = fh.read(size)
+                if len(value) != size:
+                    return None
+                key = name.decode("utf-8", "surrogateescape")
+                if not key.startswith(META_PREFIX):
+                    continue
+                if kind == b"string":
+                    meta[key[len(META_PREFIX):]] = value.decode("utf-8")
+                elif (kind, size) in ((b"int", 4), (b"float", 4), (b"double", 8)):
+                    meta[key[len(META_PREFIX):]] = struct.unpack({b"int": "<i", b"float": "<f", b"double": "<d"}[kind], value)[0]
+                else:
+                    return None
+    except (OSError, UnicodeDecodeError):
+        return None
+
+
+def _cstring(fh: Any) -> bytes | None:
+    """The next NUL-terminated name of an EXR header (at most 255 bytes), None if none."""
+    out = bytearray()
+    while len(out) <= 255:
+        c = fh.read(1)
+        if not c:
+            return None
+        if c == b"\0":
+            return bytes(out)
+        out += c
+    return None
+
+
 def _timecode_attr(tc: str, fps: Fraction | None = None) -> Any:
     """'HH:MM:SS:FF' (or ';FF' for drop-frame), FF counted at the nominal rate of `fps`
     -> OpenEXR.TimeCode, as SMPTE ST 12-1 counts rates above 30 frames/s: the frame field
@@ -73,6 +141,8 @@ def _timecode_attr(tc: str, fps: Fraction | None = None) -> Any:
     field-phase (pair) flag is set on the odd frames, and where a group is larger than a
     pair (120 fps: 4) the frame's place in it (0 .. group-1) is in the user bits, which
     ST 12-1 cannot say otherwise (docs/telecine.md, "Timecode")."""
+    import OpenEXR
+
     drop = ";" in tc
     hh, mm, ss, ff = (int(x) for x in tc.replace(";", ":").split(":"))
     group = timecode_group(fps) if fps is not None else 1
@@ -115,6 +185,8 @@ def header_timecode(header: Mapping[str, Any]) -> str | None:
 
 
 def _header_value(value: Any) -> Any:
+    import numpy as np
+
     if isinstance(value, (bool, np.bool_)):
         return int(value)
     if isinstance(value, (np.integer,)):
@@ -152,6 +224,9 @@ def write_frame(
           (channels `<name>.X/Y/Z` or `<name>.R/G/B`... by C).
     standard: standard attributes (owner, comments, capDate ...) written as given.
     """
+    import numpy as np
+    import OpenEXR
+
     path = Path(path)
     rgba = np.asarray(rgba)
     if rgba.ndim != 3 or rgba.shape[2] not in (3, 4):
@@ -181,7 +256,7 @@ def write_frame(
                 channels[f"{name}.{suffixes[i]}"] = np.ascontiguousarray(layer[..., i], dtype=np.float32)
 
     header: dict[str, Any] = {
-        "compression": _COMPRESSION[compression],
+        "compression": _compression(compression),
         "type": OpenEXR.scanlineimage,
         "chromaticities": REC709_CHROMATICITIES,  # (a `standard` entry may replace it)
     }
@@ -203,6 +278,8 @@ def write_exr(path: str | Path, header: Mapping[str, Any], channels: Mapping[str
     and an atomic rename) and read back whole before it is published. The header gets the
     digest of the pixels written (`motion:pixels_sha256`, pixel_digest), replacing any
     copied from another frame."""
+    import OpenEXR
+
     header = {**header, META_PREFIX + PIXELS_KEY: pixel_digest(channels)}
     with writing(path, doing, verify=_reads_back) as tmp:
         OpenEXR.File(dict(header), dict(channels)).write(str(tmp))
@@ -216,6 +293,8 @@ PIXELS_KEY = "pixels_sha256"
 def _single_channels(channels: Mapping[str, np.ndarray]) -> list[tuple[str, np.ndarray]]:
     """Channels as OpenEXR stores them, one plane each, by name: an [H, W, C] entry is
     split as the binding writes it ('RGBA' -> R, G, B, A; 'noisy.RGBA' -> noisy.R ...)."""
+    import numpy as np
+
     out: list[tuple[str, np.ndarray]] = []
     for name, px in channels.items():
         px = np.asarray(px)
@@ -234,6 +313,8 @@ def pixel_digest(channels: Mapping[str, np.ndarray]) -> str:
     given to the writer and for the channels read back from the file (identity/record.py
     `frame_pixels_digest`),
     so it identifies the picture: a rerun that writes the same pixels writes the same digest."""
+    import numpy as np
+
     import hashlib
 
     h = hashlib.sha256()
@@ -248,6 +329,9 @@ def _reads_back(tmp: Path) -> bool:
     write (a full tmpfs gave a zero-byte file and no error), so a frame is published only
     once it decodes; one that does not is the disk losing our write (files.lost_write).
     An OSError reading it is raised (the write policy turns a disk's into a disk fault)."""
+    import numpy as np
+    import OpenEXR
+
     if os.stat(tmp).st_size == 0:
         return False
     try:
@@ -270,6 +354,8 @@ def inside(folder: str | Path, path: str | Path) -> bool:
 
 def read_header(path: str | Path) -> dict[str, Any]:
     """The header of an EXR, or FrameIOError if it is missing or not a readable EXR."""
+    import OpenEXR
+
     path = Path(path)
     if not path.is_file():
         raise FrameIOError(f"{path}: no such frame")
@@ -297,6 +383,9 @@ def check_data_window(path: Path, header: Mapping[str, Any]) -> None:
 
 def read_frame(path: str | Path) -> Frame:
     """Read a frame written by `write_frame` (or any RGB/RGBA EXR) back as float32."""
+    import numpy as np
+    import OpenEXR
+
     path = Path(path)
     if not path.is_file():
         raise FrameIOError(f"{path}: no such frame")
@@ -332,6 +421,9 @@ def is_complete(path: str | Path) -> bool:
     and every channel decoded (not converted: nothing is kept). A truncated or foreign file
     is not. Whether it is the frame a run wants is its identity's question (identity/
     record.py `complete_as`)."""
+    import numpy as np
+    import OpenEXR
+
     try:
         check_data_window(Path(path), read_header(path))  # before a pixel is allocated
         with OpenEXR.File(str(path)) as f:

@@ -14,12 +14,36 @@ with the rest of the frame's identity, in identity/motion_digest.py.
 
 from __future__ import annotations
 
+import importlib
+from typing import TYPE_CHECKING, Any
+
 from ..errors import BakeFileError, FrameNotBakedError
-from .checks import check_motion, motion_problems, pose_problem, scalar_problem
-from .baking import bake, evaluate_frames
-from .file_format import FORMAT, VERSION, read_baked, write_baked
-from .records import BakedFrame, BakedFrames, BakedMotion, by_number, summary
-from .timing import sample_seconds, simulate_for, simulation_range
+
+if TYPE_CHECKING:
+    from .baking import bake, evaluate_frames
+    from .checks import check_motion, motion_problems, pose_problem, scalar_problem
+    from .file_format import FORMAT, VERSION, read_baked, write_baked
+    from .records import BakedFrame, BakedFrames, BakedMotion, by_number, summary
+    from .timing import sample_seconds, simulate_for, simulation_range
+
+# each public name -> the module of this package that defines it, imported on first use: a
+# rerun that bakes nothing reads bake/keep.py without the bake's numeric modules
+_HOMES = {
+    **dict.fromkeys(("check_motion", "motion_problems", "pose_problem", "scalar_problem"), "checks"),
+    **dict.fromkeys(("bake", "evaluate_frames"), "baking"),
+    **dict.fromkeys(("FORMAT", "VERSION", "read_baked", "write_baked"), "file_format"),
+    **dict.fromkeys(("BakedFrame", "BakedFrames", "BakedMotion", "by_number", "summary"), "records"),
+    **dict.fromkeys(("sample_seconds", "simulate_for", "simulation_range"), "timing"),
+}
+
+
+def __getattr__(name: str) -> Any:
+    """A public name, from its module (imported now); AttributeError for any other."""
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__name__}.{home}"), name)
+
 
 __all__ = [
     "FORMAT",

@@ -25,15 +25,16 @@ import io
 import json
 import logging
 import os
+import sys
 import zipfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO, Callable
 
-import numpy as np
-
 from ..cache import STORES, Store, trusted
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from ..scene.loader import LoadedScene
 
 log = logging.getLogger("motion")
@@ -74,6 +75,8 @@ def code_version() -> str:
     of the numeric libraries' versions; read once a process."""
     global _code_version
     if _code_version is None:
+        import numpy as np
+
         from importlib.metadata import PackageNotFoundError, version
 
         from ..cache import code_digest
@@ -109,7 +112,8 @@ def plain(value: Any, depth: int = 0) -> Any:
         return [plain(v, depth + 1) for v in value]
     if isinstance(value, dict):
         return {str(k): plain(v, depth + 1) for k, v in value.items()}
-    if isinstance(value, np.ndarray):  # exact: a long array's repr elides its middle
+    np = sys.modules.get("numpy")  # no array can be here before numpy is imported (a rerun that bakes nothing)
+    if np is not None and isinstance(value, np.ndarray):  # exact: a long array's repr elides its middle
         data = np.ascontiguousarray(value)
         return {"array": [data.dtype.str, list(data.shape), hashlib.sha256(data.tobytes()).hexdigest()]}
     return {type(value).__name__: repr(value)}
@@ -146,6 +150,8 @@ def simulation_key(loaded: "LoadedScene", t_start: float, t_end: float) -> str:
 
 def _outline(value: Any, arrays: dict[str, np.ndarray]) -> Any:
     """`value` as JSON data, its arrays moved to `arrays` (named a0, a1, ...)."""
+    import numpy as np
+
     if isinstance(value, np.ndarray):
         name = f"a{len(arrays)}"
         arrays[name] = np.ascontiguousarray(value)
@@ -198,6 +204,8 @@ def _rebuild(node: Any, arrays: Any, depth: int = 0) -> Any:
 def encode(simulation: Any) -> bytes:
     """The simulation as one uncompressed .npz: its arrays and its outline (each member
     carries the zip format's CRC-32 of its bytes, checked as it is read back)."""
+    import numpy as np
+
     arrays: dict[str, np.ndarray] = {}
     outline = json.dumps({"format": FORMAT, "value": _outline(simulation, arrays)}, separators=(",", ":")).encode()
     buf = io.BytesIO()
@@ -208,6 +216,8 @@ def encode(simulation: Any) -> bytes:
 def _read_npy(member: BinaryIO, size: int) -> np.ndarray:
     """One .npy member, its header believed only as far as its own bytes go: a numeric dtype,
     and a shape whose bytes fit in the member's `size` (a forged shape allocates nothing)."""
+    import numpy as np
+
     fmt = np.lib.format
     version = fmt.read_magic(member)
     shape, fortran, dtype = (fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0)(member)
@@ -231,6 +241,8 @@ def decode(data: bytes | BinaryIO, limit: int) -> Any:
     """The simulation an entry (its bytes, or the open file) holds; DamagedEntry when it is
     not one (bounded: at most `limit` bytes once unpacked, stored members only, no pickles; a
     damaged byte fails its member's CRC-32 as it is read)."""
+    import numpy as np
+
     source = io.BytesIO(data) if isinstance(data, bytes) else data
     try:
         with zipfile.ZipFile(source) as z:
@@ -280,6 +292,8 @@ def decode(data: bytes | BinaryIO, limit: int) -> Any:
 def _samples(simulation: Any) -> None:
     """Sample every track the simulation holds at its ends (a kept entry must answer what a
     bake asks of it); raises what a malformed track raises."""
+    import numpy as np
+
     times = np.array([simulation.t_start, (simulation.t_start + simulation.t_end) / 2, simulation.t_end], dtype=np.float64)
     simulation.sample(times)
     for name in simulation.particle_systems:
@@ -299,6 +313,8 @@ def kept(loaded: "LoadedScene", t_start: float, t_end: float, simulate: Callable
     """The simulation of `loaded` over [t_start, t_end]: the kept one when there is one,
     else `simulate()`, kept for the next run (best effort: a full disk costs only the next
     run's simulation). Logs which."""
+    import numpy as np
+
     key = simulation_key(loaded, t_start, t_end)
     entry = STORE.path(key, stem="sim", suffix=".npz")
     st = trusted(entry)  # ours, a regular file (never a FIFO), in folders only we may write

@@ -12,11 +12,11 @@ from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, overload
 
-import numpy as np
-
 from ..errors import FrameNotBakedError
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from ..motion import SceneMotion
 
 

@@ -13,11 +13,12 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-from typing import Any, Iterator, Mapping, Sequence
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, Iterator, Mapping, Sequence
 
 from ..bake.records import BakedFrame
+
+if TYPE_CHECKING:  # numpy is imported where a frame's motion is walked, not where a kept identity is read
+    import numpy as np
 
 # SceneMotion's fields keyed by a name: an object's ("o") or a light's ("l")
 ENTITY_FIELDS = {"objects": "o", "vertices": "o", "particles": "o", "lights": "l", "light_scalars": "l"}
@@ -60,6 +61,8 @@ def leaves(value: Any, key: str = "", labels: Mapping[str, Mapping[str, str]] | 
     tuples of numbers and arrays are leaves; None is skipped. `labels`: field name ->
     {name: label}: a dict held in a field of that name is walked under the labels of its
     keys (a key without a label keeps its name)."""
+    import numpy as np
+
     if value is None:
         return
     if dataclasses.is_dataclass(value) and not isinstance(value, type):

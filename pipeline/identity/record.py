@@ -21,12 +21,9 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any, Mapping
 
-import numpy as np
-import OpenEXR
-
 from ..bake.records import BakedFrame
 from ..errors import FrameIOError
-from ..frame_output import META_PREFIX, PIXELS_KEY, check_data_window, is_complete, pixel_digest, read_header, read_meta
+from ..frame_output import META_PREFIX, PIXELS_KEY, check_data_window, is_complete, pixel_digest, plain_meta, read_header, read_meta
 from .inputs import RENDERER_VERSION, render_settings
 from .look import MOVING
 from .motion_digest import Order, frame_digests
@@ -94,6 +91,11 @@ class WholeFrames:
             return None
         return [st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns]
 
+    def unchanged(self, path: str | Path) -> bool:
+        """Whether the file at `path` is one known whole, unchanged since it decoded."""
+        before = self._signature(path)
+        return before is not None and self.known.get(Path(path).name) == before
+
     def is_whole(self, path: str | Path) -> bool:
         """Whether the EXR at `path` reads back whole: known so by its unchanged file, else
         decoded (frame_output.is_complete) and, when whole and unchanged meanwhile, noted."""
@@ -118,6 +120,9 @@ def frame_pixels_digest(path: str | Path) -> str:
     if isinstance(recorded, str) and len(recorded) == 64 and all(c in "0123456789abcdef" for c in recorded):
         return recorded
     check_data_window(path, header)  # before a pixel is allocated
+    import numpy as np
+    import OpenEXR
+
     try:
         with OpenEXR.File(str(path), separate_channels=True) as f:
             return pixel_digest({name: np.asarray(ch.pixels) for name, ch in f.channels().items()})
@@ -240,6 +245,8 @@ def reads_whole(path: str | Path) -> bool:
     (every chunk the offset table names starts inside the file) and the file's last
     scanline chunk decoded, so a copy cut short anywhere is found. A chunk damaged in
     the middle is found only by decoding it (is_complete)."""
+    import OpenEXR
+
     try:
         f = OpenEXR.InputFile(str(path))
     except Exception:  # the bindings raise their own error for any bad file
@@ -259,11 +266,14 @@ def why_stale(path: str, expect: FrameIdentity, now: CurrentKeys, decode: bool =
     `decode=False`: a frame that `reads_whole` (its chunks all there, the last one
     decoded) counts as whole; for a run whose deliverables decode every frame next and
     name one that does not (`--check --deliver`: each frame decoded once). `whole`: the
-    frames of its folder known whole (`WholeFrames`)."""
-    try:
-        meta = read_meta(path)
-    except FrameIOError:
-        return "do not read back as OpenEXR (incomplete or foreign)"
+    frames of its folder known whole (`WholeFrames`): the header of one of those, unchanged
+    since it decoded, is read without the OpenEXR bindings (frame_output.plain_meta)."""
+    meta = plain_meta(path) if whole is not None and whole.unchanged(path) else None
+    if meta is None:
+        try:
+            meta = read_meta(path)
+        except FrameIOError:
+            return "do not read back as OpenEXR (incomplete or foreign)"
     if meta.get("look_hash") != expect.look_hash:
         change = settings_change(meta.get("render_settings"), now.settings)
         if change:

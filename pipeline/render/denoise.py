@@ -30,12 +30,13 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any, Mapping, Sequence
-
-import numpy as np
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 from ..errors import RendererError
 from .aovs import layer
+
+if TYPE_CHECKING:  # numpy is imported where a frame is denoised, not where the denoiser is checked
+    import numpy as np
 
 PACKAGE = "mitsuba-oidn"  # the PyPI name
 MODULE = "mitsuba_oidn"  # its import name
@@ -232,6 +233,8 @@ class Denoiser:
 
     def __call__(self, color: np.ndarray, albedo: np.ndarray | None = None, normal: np.ndarray | None = None) -> np.ndarray:
         """Denoise linear RGB [H, W, 3] with optional guides of the same size; float32 out."""
+        import numpy as np
+
         color = np.ascontiguousarray(np.nan_to_num(color[..., :3], nan=0.0, posinf=0.0, neginf=0.0), dtype=np.float32)
         guides = []
         if albedo is not None:
@@ -250,6 +253,8 @@ class Denoiser:
 
     def _run(self, color: np.ndarray, guides: list[tuple[str, np.ndarray]]) -> np.ndarray:
         """One execution of the frame size's filter on the device."""
+        import numpy as np
+
         h, w = color.shape[:2]
         flt = self._filter((h, w, tuple(name for name, _ in guides)))
         # OIDN's own HDR auto-exposure sums over the image in parallel, in an order that
@@ -285,6 +290,8 @@ class Denoiser:
 def input_scale(color: np.ndarray) -> float:
     """HDR exposure for the denoiser: maps the image's log-average luminance to 0.18 (the
     photographic key OIDN's auto-exposure also aims at); 1 for a black image."""
+    import numpy as np
+
     lum = color[..., :3].astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722])
     lit = lum[lum > 1e-8]
     if lit.size == 0:
@@ -309,6 +316,8 @@ def denoise_frame(rgba: np.ndarray, aovs: Mapping[str, np.ndarray], color: np.nd
     layers, `albedo` and `N`, are used when present); color: what to denoise instead of
     rgba's RGB (the temporal mode's blend).
     Returns (denoised RGBA with the noisy alpha, layers + `noisy`, header attributes)."""
+    import numpy as np
+
     d = denoiser()
     albedo, normal = aovs.get(layer("albedo")), aovs.get(layer("normal"))
     t0 = time.perf_counter()

@@ -20,9 +20,7 @@ from fractions import Fraction
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Protocol, Sequence
 
-import numpy as np
-
-from ..bake import BakedFrame
+from ..bake.records import BakedFrame
 from ..field_model import parity_of
 from ..frame_output import write_frame
 from ..identity import FrameIdentity, Order, frame_identity, header_attributes, render_settings, scene_hashes
@@ -30,6 +28,8 @@ from ..scene.loader import LoadedScene, load_scene
 from ..timeline import frame_timecode
 
 if TYPE_CHECKING:  # the renderer (drjit, Mitsuba) is imported where a frame is rendered, not where a job is planned
+    import numpy as np
+
     from .frame_renderer import FrameRenderer
 
 @dataclass(frozen=True)

@@ -6,11 +6,31 @@ here, skip complete frames, run the chunks on the farm, write the report, then t
 pass and the deliverables. `dry_run.py` is `--dry-run` and `--check`, `deliver.py` the
 deliverables (checked before the first frame, assembled after the last), `fields.py`
 `--fields 60i` (the fields rendered as frames of a field timeline, then woven).
+
+Each name is imported from its module on first use, so that `motion render` loads only
+the modules its run takes (a rerun that renders nothing: docs/reruns.md).
 """
 
-from .fields import run_field_render
-from .dry_run import plan_text
-from .render import run_render
-from .request import DeliverView, RenderRequest
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from .dry_run import plan_text
+    from .fields import run_field_render
+    from .render import run_render
+    from .request import DeliverView, RenderRequest
+
+# each public name -> the module of this package that defines it
+_HOMES = {"run_field_render": "fields", "plan_text": "dry_run", "run_render": "render", "DeliverView": "request", "RenderRequest": "request"}
 
 __all__ = ["DeliverView", "RenderRequest", "plan_text", "run_field_render", "run_render"]
+
+
+def __getattr__(name: str) -> Any:
+    """A public name, from its module (imported now); AttributeError for any other."""
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__name__}.{home}"), name)

@@ -108,7 +108,7 @@ def deliver_plan(req: RenderRequest, loaded: Any, frames: list[int]) -> DeliverP
     the scene's `output.deliver` is what a full render of the shot makes, and a run that
     leaves the shot incomplete (a preset's spread of frames, a shard) makes what it can and
     says what it left out. `--deliver none` makes nothing."""
-    from ..telecine.deliver import parse_formats
+    from ..deliverables import parse_formats
 
     if req.deliver is not None and req.deliver.strip().lower() == "none":
         return DeliverPlan()

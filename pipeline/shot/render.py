@@ -16,9 +16,8 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 from collections.abc import Mapping, Sequence
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
-from ..bake import BakedFrame, by_number
 from ..errors import IncompleteJobError, UsageError
 from ..farm.claims import Claimant, RunLock, clear_stale, new_run_id, release_run_lock, take_run_lock
 from ..farm.config import FarmConfig, load_farm_config
@@ -43,6 +42,9 @@ from .estimate import record as record_cost
 from .dry_run import check_only, plan, resolved_settings
 from .stale import FrameStates, folder_frames, frame_states
 from .request import RenderRequest
+
+if TYPE_CHECKING:
+    from ..bake import BakedFrame
 
 
 @dataclass(frozen=True)
@@ -70,7 +72,7 @@ def check_request(req: RenderRequest) -> None:
     if explicit and req.shard:
         raise UsageError("--deliver needs every frame: assemble after all shards with --check --deliver (docs/ci-sharding.md)")
     if explicit:
-        from ..telecine.deliver import parse_formats
+        from ..deliverables import parse_formats
 
         parse_formats(req.deliver)  # type: ignore[arg-type]  # a wrong name fails now, not after the last frame
 
@@ -524,15 +526,21 @@ def bake_and_sort(req: RenderRequest, s: RunSetup) -> SortedFrames:
     decode = not (req.check and s.wanted and set(frames) <= set(s.wanted.frames))
     states = complete_frames(req, loaded, job, out_dir, paths, keys, decode) if keys is not None else None
     from ..bake.keep import STORE as KEPT
-    from ..motion import has_dynamics
 
     kept_before = KEPT.stats["hits"]
     must_bake = states is None or (not req.check and len(states.complete) < len(frames))
     t0 = time.perf_counter()
     inputs = motion_inputs(req, loaded, s.sel) if must_bake else []
     bake_s = time.perf_counter() - t0
-    simulation = None if not must_bake or req.motion_file or not s.sel.selected or not has_dynamics(loaded) else ("kept" if KEPT.stats["hits"] > kept_before else "simulated")
-    by_frame = by_number(inputs)  # each frame made from the bake's arrays when a task needs it
+    simulation: str | None = None
+    by_frame: Mapping[int, BakedFrame] = {}  # nothing baked: no frame renders (the motion and bake modules stay unimported)
+    if must_bake:
+        from ..bake import by_number
+        from ..motion import has_dynamics
+
+        if not req.motion_file and s.sel.selected and has_dynamics(loaded):
+            simulation = "kept" if KEPT.stats["hits"] > kept_before else "simulated"
+        by_frame = by_number(inputs)  # each frame made from the bake's arrays when a task needs it
     if must_bake and not req.motion_file:
         baked = {f: job.identity(by_frame[f]) for f in frames}
         if s.kept is not None and job.look_parts:
@@ -569,6 +577,8 @@ def cut_chunks(req: RenderRequest, s: RunSetup, sort: SortedFrames) -> tuple[Run
     one worker and one chunk (the returned RunSetup says so)."""
     cfg, loaded, job, workers, threads, todo = s.cfg, s.loaded, s.job, s.workers, s.threads, sort.todo
     chunk_size = cfg.chunk_size or default_chunk_size(len(todo), workers if not req.scheduler else 2)
+    if not todo and not req.dry_run:  # nothing renders: nothing reads an estimate (the inline choice, the progress bar and the cost record read it for frames rendered)
+        return s, Chunking(chunk_size, make_chunks(todo, chunk_size), {}, False)
     cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), workers if not req.scheduler else 1, sort.bake_s, denoised_pixels(loaded.scene))
     inline = choose_inline(req, cost, todo)
     if inline:

@@ -16,7 +16,7 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from ..deliverables import FORMATS, DeliverFormat
+from ..deliverables import FORMATS, DeliverFormat, parse_formats  # noqa: F401  (parse_formats: re-exported)
 from ..errors import UsageError
 from ..field_model import weave_frames
 from .cadence import film_rate, plan
@@ -28,15 +28,6 @@ from .sequence import Sequence, discover
 
 # Called as report(format name, step description) before each step.
 Report = Callable[[str, str], None]
-
-
-def parse_formats(text: str | Iterable[str]) -> tuple[str, ...]:
-    """'24p,60i' -> ('24p', '60i'); UsageError naming an unknown format."""
-    items = [t.strip() for t in (text.split(",") if isinstance(text, str) else text) if t.strip()]
-    unknown = [t for t in items if t not in FORMATS]
-    if unknown or not items:
-        raise UsageError(f"--deliver: unknown format {', '.join(unknown) or '(none)'}; choose from {', '.join(FORMATS)}")
-    return tuple(dict.fromkeys(items))
 
 
 @dataclass(frozen=True)
