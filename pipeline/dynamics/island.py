@@ -44,9 +44,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
 from ..geometry import BOX
 from ..motion.pose import quat_normalize, quat_to_matrix
@@ -243,6 +240,8 @@ def _least_norm(W: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     Cholesky solve of (W + eps 1) x = rhs, eps = 1e-10 of the mean diagonal (the limit
     eps -> 0 is the least-norm solution; it leaves W x off by eps |x|, which the sweeps
     after it remove); a least-squares solve if that fails."""
+    from scipy.linalg import LinAlgError, cho_factor, cho_solve  # here: scipy costs a process ~0.15 s to import, and only touching boxes need it
+
     eps = 1e-10 * max(float(np.trace(W)) / len(W), 1e-300)
     try:
         return cho_solve(cho_factor(W + eps * np.eye(len(W)), check_finite=False), rhs, check_finite=False)
@@ -333,6 +332,9 @@ def _sleep(b: ContactBodies, shapes: ShapeSet, q1: np.ndarray, ids: np.ndarray, 
     calm = (np.linalg.norm(b.v1[ids], axis=1) < SLEEP_SPEED) & (np.linalg.norm(w, axis=1) < SLEEP_SPEED / SLEEP_RADIUS)
     clock = np.where(calm, shapes.calm[ids] + h, 0.0)
     shapes.calm[ids] = clock
+    from scipy.sparse import coo_matrix  # here, as in _least_norm
+    from scipy.sparse.csgraph import connected_components
+
     pair = la >= 0
     graph = coo_matrix((np.ones(int(pair.sum())), (la[pair], lb[pair])), shape=(ids.size, ids.size))
     _, label = connected_components(graph, directed=False)

@@ -1,9 +1,9 @@
 """What each object and light of a scene is to the renderer, fixed for a job.
 
 An object is static (in the static set, built once, its BVH never rebuilt), a rigid mover
-(in the atlas, posed per path: render/world.py), a particle system (each particle a sphere
-on its baked path, in the same traversal) or a deforming mesh (time slices:
-render/slices.py). A light is static, moving (a
+(in the atlas, posed per path: render/world.py), a particle system (time slices, or with
+`PARTICLES_IN_TRAVERSAL` each particle a sphere on its baked path in the same traversal)
+or a deforming mesh (time slices: render/slices.py). A light is static, moving (a
 record that is `posed_per_path`: point, spot, directional; posed per path by the
 integrator) or animated in another way (an environment light: updated per frame).
 """
@@ -14,6 +14,15 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene.loader import LoadedScene
+
+
+# Particle systems render as time slices (render/slices.py), not in the one traversal: a
+# dense spray's proxies overlap by the hundreds along a ray (each particle's proxy holds
+# its whole streak, and sprays are born at one point), and the walk visits every entry
+# with two traces. cannonball-splash's splash frame (17,000 particles) took over 15
+# minutes at the example's settings against about a second with slices; a particle is
+# then drawn at the slice nearest each path's time (docs/rendering.md).
+PARTICLES_IN_TRAVERSAL = False
 
 
 def moving_objects(loaded: LoadedScene) -> set[str]:
@@ -89,7 +98,7 @@ def sort_scene(loaded: LoadedScene) -> Roles:
         static_names=static_names,
         mover_names=mover_names,
         slice_names=slice_names,
-        particle_names=tuple(o.name for o in objects if o.name in sliced and o.is_particles),
+        particle_names=tuple(o.name for o in objects if o.name in sliced and o.is_particles) if PARTICLES_IN_TRAVERSAL else (),
         moving_lights=[(i, light) for i, light in animated if light.posed_per_path],
         animated_lights=[(i, light) for i, light in animated if not light.posed_per_path],
     )

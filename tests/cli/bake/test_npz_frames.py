@@ -37,7 +37,7 @@ def test_an_npz_of_a_million_frames_renders_the_two_asked_for(tmp_path: Path) ->
 
 
 def test_an_npz_of_more_frames_than_any_timeline_is_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    from motion.pipeline.bake import files
+    from motion.pipeline.bake import file_format as files
     from motion.pipeline.errors import BakeFileError
 
     path, _ = _npz_of(tmp_path, 5)
