@@ -71,9 +71,8 @@ def translate_shape(mi: Any, shape: Any, offset: np.ndarray) -> None:
     """Move a built Mitsuba shape by `offset` (a mesh's vertices, another shape's to_world).
 
     The new values are computed on the host and written opaque: the shape's update kernel
-    is then the same for every template, compiled once. (Composed in drjit with the offset
-    as literals, each template's update was a kernel of its own: 30 ms of compiling per
-    mover on a first frame, 9 s of a 300-mover scene's 12.)"""
+    is then the same for every template, compiled once (with the offset as literals, each
+    template's update would be a kernel of its own: docs/rendering.md)."""
     import drjit as dr
 
     params = mi.traverse(shape)
@@ -90,10 +89,9 @@ def translate_shape(mi: Any, shape: Any, offset: np.ndarray) -> None:
 
 def settle() -> None:
     """Wait for the shapes' updates still queued on drjit's thread pool (`translate_shape`'s
-    parameter updates run as asynchronous kernels). Mitsuba's scene build read a moved
-    mesh before its update had run: with one drjit thread, a mover's triangles were
-    partly missing in about one frame in three, by the order kernels happened to run in
-    (docs/rendering.md, "One traversal for everything that moves")."""
+    parameter updates run as asynchronous kernels): Mitsuba's scene build reads a moved
+    mesh, and must not read it before its update has run, or a mover's triangles go
+    missing (docs/rendering.md, "One traversal for everything that moves")."""
     import drjit as dr
 
     dr.sync_thread()

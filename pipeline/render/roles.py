@@ -19,9 +19,8 @@ from ..scene.loader import LoadedScene
 # Particle systems render as time slices (render/slices.py), not in the one traversal: a
 # dense spray's proxies overlap by the hundreds along a ray (each particle's proxy holds
 # its whole streak, and sprays are born at one point), and the walk visits every entry
-# with two traces. cannonball-splash's splash frame (17,000 particles) took over 15
-# minutes at the example's settings against about a second with slices; a particle is
-# then drawn at the slice nearest each path's time (docs/rendering.md).
+# with two traces (docs/rendering.md measures it); a particle is then drawn at the slice
+# nearest each path's time.
 PARTICLES_IN_TRAVERSAL = False
 
 
