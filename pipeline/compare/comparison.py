@@ -311,6 +311,12 @@ def _in_pool(jobs: list[tuple[int, str, str]], workers: int, **options: Any) -> 
             process.terminate()
         for process in processes:
             process.join(timeout=5)
+        # the executor's manager thread closes its wake-up pipe as it sees the processes
+        # gone; left running, it raced the interpreter's exit hook, which writes to that
+        # pipe (a "Bad file descriptor" traceback at exit, now and then, on a busy host)
+        manager = getattr(pool, "_executor_manager_thread", None)
+        if manager is not None:
+            manager.join(timeout=5)
         raise
     pool.shutdown(wait=True)
     return outcomes
