@@ -137,6 +137,7 @@ print(json.dumps({"worst": worst}))
 """
 
 
+@pytest.mark.slow  # 24 fresh renderers in a process of its own (15-35 s): CI's second step
 def test_every_render_of_a_frame_is_the_same_with_one_drjit_thread(tmp_path: Path) -> None:
     """A keyed box crossing the frame, 8 frames each rendered by a fresh renderer three
     times in one process with one drjit thread: the same pixels every time."""
