@@ -47,6 +47,17 @@ def trace(kind: str, scene: mi.Scene, ray: Any, active: Any, preliminary: bool =
     return scene.ray_intersect(ray, mi.RayFlags.All, coherent=False, active=active)
 
 
+def segment_in_box(o: Any, d: Any, lo: Any, hi: Any, maxt: Any) -> tuple[Any, Any]:
+    """The part [t0, t1] of the ray segment o + t d, t in [0, maxt], inside the box
+    (lo, hi), by the slab test; empty where t0 > t1. A zero component of d becomes a huge
+    finite inverse, never inf * 0."""
+    inv = dr.rcp(dr.select(dr.abs(d) < 1e-30, dr.select(d < 0, -1e-30, 1e-30), d))
+    ta, tb = (lo - o) * inv, (hi - o) * inv
+    t0 = dr.maximum(dr.max(dr.minimum(ta, tb)), 0.0)
+    t1 = dr.minimum(dr.min(dr.maximum(ta, tb)), maxt)
+    return t0, t1
+
+
 class World:
     """The geometry of one job besides the static scene: the broadphase and atlas of
     movers and particles, the emissive movers' own scenes, and the slice groups."""
@@ -181,12 +192,7 @@ class World:
         local = pose.ray_to_rest(ray)
         o = local.o + offset
         d = local.d
-        # slab test of the ray's segment [0, maxt] against the cell's box (a zero component
-        # of d: a huge finite inverse, never inf * 0)
-        inv = dr.rcp(dr.select(dr.abs(d) < 1e-30, dr.select(d < 0, -1e-30, 1e-30), d))
-        ta, tb = (lo - o) * inv, (hi - o) * inv
-        t0 = dr.maximum(dr.max(dr.minimum(ta, tb)), 0.0)
-        t1 = dr.minimum(dr.min(dr.maximum(ta, tb)), maxt)
+        t0, t1 = segment_in_box(o, d, lo, hi, maxt)
         ok = near & (t0 <= t1)
         cell = mi.Ray3f(ray)
         cell.o = o + d * t0
@@ -228,11 +234,7 @@ class World:
         that misses it meets no proxy, so the walk it skips would have found nothing."""
         lo = movers.data.vec("proxy_box", 3, mi.UInt32(0), True)
         hi = movers.data.vec("proxy_box", 3, mi.UInt32(1), True)
-        d = ray.d
-        inv = dr.rcp(dr.select(dr.abs(d) < 1e-30, dr.select(d < 0, -1e-30, 1e-30), d))
-        ta, tb = (lo - ray.o) * inv, (hi - ray.o) * inv
-        t0 = dr.maximum(dr.max(dr.minimum(ta, tb)), 0.0)
-        t1 = dr.minimum(dr.min(dr.maximum(ta, tb)), maxt)
+        t0, t1 = segment_in_box(ray.o, ray.d, lo, hi, maxt)
         return active & (t0 <= t1)
 
     def reach(self, movers: Movers) -> Any:
