@@ -16,6 +16,7 @@ SIGTERM stops the pool's processes at once.
 from __future__ import annotations
 
 import os
+import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -305,21 +306,36 @@ def _in_pool(jobs: list[tuple[int, str, str]], workers: int, **options: Any) -> 
         futures = [pool.submit(compare_pair, n, a, b, **options) for n, a, b in jobs]
         outcomes = [f.result() for f in futures]
     except BaseException:
-        processes = list((getattr(pool, "_processes", None) or {}).values())  # the executor has no public way to end them
+        # the executor has no public way to end its processes, and its shutdown drops
+        # the references to them and to its manager thread: both are taken first
+        processes = list((getattr(pool, "_processes", None) or {}).values())
+        manager = getattr(pool, "_executor_manager_thread", None)
         pool.shutdown(wait=False, cancel_futures=True)
         for process in processes:
             process.terminate()
         for process in processes:
             process.join(timeout=5)
-        # the executor's manager thread closes its wake-up pipe as it sees the processes
-        # gone; left running, it raced the interpreter's exit hook, which writes to that
-        # pipe (a "Bad file descriptor" traceback at exit, now and then, on a busy host)
-        manager = getattr(pool, "_executor_manager_thread", None)
         if manager is not None:
-            manager.join(timeout=5)
+            _release_manager(manager)
         raise
     pool.shutdown(wait=True)
     return outcomes
+
+
+def _release_manager(manager: threading.Thread) -> None:
+    """Wait for a stopped pool's manager thread and take it off the interpreter's exit hook.
+
+    The manager thread closes its wake-up pipe once it sees the processes gone, while
+    concurrent.futures' exit hook writes to that pipe without the lock that guards the
+    close (CPython 3.11): a "Bad file descriptor" traceback at exit, now and then on a busy
+    host. The processes are ended, so the manager has nothing left to be woken for; with
+    its entry gone the hook cannot race it."""
+    from concurrent.futures import process as pool_internals
+
+    manager.join(timeout=5)
+    wakeups = getattr(pool_internals, "_threads_wakeups", None)
+    if wakeups is not None:
+        wakeups.pop(manager, None)
 
 
 def _has_prefix(folder: str | Path, prefix: str | None) -> bool:
