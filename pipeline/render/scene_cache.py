@@ -14,6 +14,8 @@ BVH build: render/broadphase.py), and the slices' vertices.
 
 from __future__ import annotations
 
+import weakref
+
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -107,6 +109,9 @@ class SceneCache:
             types.add("Ellipsoids")
         self.owner = SbtOwner(types)
         self.scene = self.owner.scene(d)
+        # the integrator holds the job's other scenes and their owner, which holds this
+        # scene, which holds the integrator from C++: a cycle the collector cannot break
+        weakref.finalize(self, self.scene.integrator().release)
         self._params = mi.traverse(self.scene)
         integrator = self.integrator
         integrator.set_sbt_owner(self.owner)

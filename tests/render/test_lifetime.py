@@ -1,0 +1,50 @@
+"""A finished job's renderer frees its scenes: nothing of it stays alive in the process, so
+a worker that renders job after job (a Dask worker, the test suite) traces and renders
+each as fast as its first."""
+
+from __future__ import annotations
+
+import gc
+from pathlib import Path
+
+import pytest
+
+from _render_support import load, render
+
+pytestmark = pytest.mark.render
+
+SCENE = """
+camera: {position: [0, 0.4, 4], look_at: [0, 0, 0], fov: 40}
+timeline: {fps: 24, first: 0, last: 1}
+render: {resolution: [16, 12], spp: 2, max_depth: 3}
+lights: [{type: constant, radiance: 0.5}, {type: point, position: [1, 2, 2], intensity: 5}]
+materials: [{name: white, type: diffuse, color: 0.8}, {name: metal, type: conductor}]
+objects:
+  - {name: ball, shape: sphere, radius: 0.5, material: white,
+     motion: {type: keyframes, time_unit: seconds, channels: {translate: {keys: [{time: 0, value: [-1, 0, 0]}, {time: 0.1, value: [1, 0, 0]}]}}}}
+  - {name: box, shape: cube, material: metal, size: [0.3, 0.3, 0.3]}
+"""
+
+
+def _live_jit_variables() -> int:
+    import drjit as dr
+
+    gc.collect()
+    return len(dr.whos(True).splitlines())
+
+
+def test_a_freed_renderer_leaves_no_jit_variable_alive(tmp_path: Path) -> None:
+    """Three jobs one after the other leave the process as the first left it. The scene
+    holds its integrator from C++ and the integrator held the job's other scenes and their
+    SBT owner, which holds the scene: a cycle Python's collector cannot see, which kept
+    some 420 JIT variables and every plugin of each job alive, and every later kernel
+    traced the leaked plugins' calls."""
+    loaded = load(tmp_path, SCENE)
+    _, _, renderer = render(loaded, [0, 1])
+    if not renderer.vectorized:
+        pytest.skip("the scalar fallback keeps no JIT state")
+    del renderer
+    after_one = _live_jit_variables()
+    for _ in range(3):
+        render(loaded, [0, 1])
+    assert _live_jit_variables() == after_one
