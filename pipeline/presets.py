@@ -13,21 +13,13 @@ import os
 from pathlib import Path
 from typing import Any
 
-from pydantic import Field, ValidationError
+from pydantic import ValidationError
 
 from .errors import Problem, SceneError, UsageError
+from .scene.compiled import validate
 from .scene.problems import problems_from_validation
+from .scene.schema import OutputSettings, Preset, RenderSettings
 from .scene.source import parse_yaml, read_yaml_file
-from .scene.types import Model
-
-
-class Preset(Model):
-    """A render preset (configs/NAME.yaml): render and output settings merged over the scene, and how many frames to spread over the timeline."""
-
-    description: str = ""
-    frame_count: int | None = Field(default=None, ge=1)
-    render: dict[str, Any] = {}
-    output: dict[str, Any] = {}
 
 
 def configs_dir() -> Path:
@@ -67,18 +59,16 @@ def load_preset(name: str) -> tuple[Preset, str]:
     problems: list[Problem] = []
     preset = None
     try:
-        preset = Preset.model_validate(data)
+        preset = validate(Preset, data)  # the kept validators (scene/compiled.py): no schema built per process
     except ValidationError as exc:
         problems += problems_from_validation(exc, data, source, Preset)
     # check the sections against the scene format now, so a bad preset fails on its own
     # file, with every problem at once
-    from .scene.schema import OutputSettings, RenderSettings
-
     for key, model in (("render", RenderSettings), ("output", OutputSettings)):
         section = data.get(key) if isinstance(data, dict) else None
         if isinstance(section, dict) and section:
             try:
-                model.model_validate(section)
+                validate(model, section)
             except ValidationError as exc:
                 for p in problems_from_validation(exc, section, source.sub((key,)), model):
                     problems.append(Problem(p.file, p.line, p.column, f"{key}.{p.yaml_path}", p.message))

@@ -13,13 +13,9 @@ and the drjit version, so later commands pay nothing.
 
 from __future__ import annotations
 
-import fnmatch
 import functools
-import glob
-import importlib.metadata
 import json
 import os
-import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -62,6 +58,8 @@ class VariantChoice:
 
 
 def _version(pkg: str) -> str:
+    import importlib.metadata  # (here: 30 ms with its email parser; `motion info` asks, a rerun does not)
+
     try:
         return importlib.metadata.version(pkg)
     except importlib.metadata.PackageNotFoundError:
@@ -73,6 +71,9 @@ def llvm_candidates() -> list[str | None]:
 
     None means "let drjit search on its own" (its default lookup), tried last.
     """
+    import fnmatch
+    import glob
+
     explicit = os.environ.get(ENV_LLVM)
     if explicit:
         return [explicit]
@@ -111,6 +112,23 @@ def llvm_candidates() -> list[str | None]:
     return [*found, None]
 
 
+def _installed(pkg: str) -> str:
+    """Which build of `pkg` is installed, located and not imported: its package file's
+    path, size and modification time (what Python checks before it reuses bytecode; an
+    upgrade rewrites it), or 'missing'. The version by importlib.metadata would cost its
+    email parser, 30 ms of a rerun that renders nothing."""
+    import importlib.util
+
+    spec = importlib.util.find_spec(pkg)
+    if spec is None or not spec.origin:
+        return "missing"
+    try:
+        st = os.stat(spec.origin)
+    except OSError:
+        return f"{spec.origin}:missing"
+    return f"{spec.origin}:{st.st_size}:{st.st_mtime_ns}"
+
+
 def _probe_key(variant: str, lib: str | None) -> str:
     ident = "default"
     if lib:
@@ -119,7 +137,7 @@ def _probe_key(variant: str, lib: str | None) -> str:
             ident = f"{os.path.realpath(lib)}:{st.st_size}:{int(st.st_mtime)}"
         except OSError:
             ident = f"{lib}:missing"
-    return f"{variant}|{ident}|drjit {_version('drjit')}|mitsuba {_version('mitsuba')}"
+    return f"{variant}|{ident}|drjit {_installed('drjit')}|mitsuba {_installed('mitsuba')}"
 
 
 def _probe_cache_file() -> Path:
@@ -142,6 +160,8 @@ def _store_probe(key: str, ok: bool) -> None:
 
 def probe(variant: str, lib: str | None = None, use_cache: bool = True) -> bool:
     """Does `variant` render a tiny scene in a fresh process with this libLLVM?"""
+    import subprocess
+
     if lib is not None and not os.path.exists(lib):
         return False
     key = _probe_key(variant, lib)
@@ -190,6 +210,7 @@ def gpu_devices(listing: str | None = None, env: Mapping[str, str] | None = None
 def _nvidia_smi_listing(path: str) -> str:
     """`nvidia-smi -L`'s output ('' when it is not on `path` or fails), once per process."""
     import shutil
+    import subprocess
 
     smi = shutil.which("nvidia-smi", path=path)
     if smi is None:
@@ -210,6 +231,8 @@ def device_of(variant: str) -> str:
 
 
 def _gpu_present() -> bool:
+    import glob
+
     if "CUDA_VISIBLE_DEVICES" in os.environ:  # the user's choice of GPUs: none means none
         return bool(gpu_devices())
     return any(os.path.exists(p) for p in ("/dev/nvidia0", "/dev/nvidiactl")) or bool(

@@ -165,7 +165,7 @@ def _load(entry: Path, cls: type[BaseModel] | None = None) -> SchemaValidator | 
 
 def _root_class(validator: SchemaValidator) -> type | None:
     """The record class a validator's core schema validates at its root (None when the root
-    is not a model record): pydantic-core pickles a validator as (schema, config), so the
+    is not a model record, or one of its validators wrapping one): pydantic-core pickles a validator as (schema, config), so the
     schema is at hand without building one."""
     try:
         schema = validator.__reduce__()[1][0]
@@ -176,7 +176,9 @@ def _root_class(validator: SchemaValidator) -> type | None:
             if kind == "model":
                 found = schema.get("cls")
                 return found if isinstance(found, type) else None
-            if kind == "definitions":
+            if kind in ("function-after", "function-before", "function-wrap"):  # a record's own model validator around it
+                schema = schema.get("schema")
+            elif kind == "definitions":
                 definitions = {d.get("ref"): d for d in schema.get("definitions", []) if isinstance(d, dict)}
                 schema = schema.get("schema")
                 if isinstance(schema, dict) and schema.get("type") == "definitions-ref":

@@ -10,7 +10,7 @@ evaluates their `motion` blocks.
 # process that loads a scene (docs/ci-sharding.md, "What validation keeps").
 
 from fractions import Fraction
-from typing import Annotated, ClassVar, Literal, Union
+from typing import Annotated, Any, ClassVar, Literal, Union
 
 from pydantic import Field, field_validator, model_validator
 
@@ -441,6 +441,17 @@ class Scene(Model):
     output: OutputSettings = OutputSettings.default()
 
 
+class Preset(Model):
+    """A render preset (configs/NAME.yaml, presets.py): render and output settings merged
+    over the scene, and how many frames to spread over the timeline. A record of the scene
+    stage, so its validator is kept between processes like the scene's (compiled.py)."""
+
+    description: str = ""
+    frame_count: int | None = Field(default=None, ge=1)
+    render: dict[str, Any] = {}
+    output: dict[str, Any] = {}
+
+
 __all__ = [
     "Camera",
     "Capsule",
@@ -457,6 +468,7 @@ __all__ = [
     "EnvmapLight",
     "FiniteFloat",
     "ImportSpec",
+    "Preset",
     "LIGHT_TYPES",
     "Light",
     "Material",
