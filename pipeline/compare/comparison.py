@@ -349,7 +349,9 @@ def _stops_held() -> Iterator[list[int]]:
     def note(signum: int, frame: Any) -> None:
         came.append(signum)
 
-    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    # a signal the process ignores (a SIGINT nohup or a background shell left ignored)
+    # stays ignored
+    previous = {s: h for s in (signal.SIGINT, signal.SIGTERM) if (h := signal.getsignal(s)) is not signal.SIG_IGN}
     try:
         for s in previous:
             signal.signal(s, note)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import threading
 import time
 from concurrent.futures import process as pool_internals
@@ -30,3 +31,27 @@ def test_a_failed_pool_is_taken_off_the_exit_hook(tmp_path: Path, monkeypatch: p
         comparison._in_pool([(0, missing, missing), (1, missing, missing)], 2, flip="all", alpha=0.05, keep_maps=False)
     assert set(pool_internals._threads_wakeups.keys()) <= hooked_before
     assert set(threading.enumerate()) <= threads_before
+
+
+def test_a_stop_while_a_pool_runs_is_noted_then_raised_on_the_way_out() -> None:
+    """A Ctrl-C is noted while the pool runs (the wait acts on it) and raised as
+    KeyboardInterrupt when the pool is left, with the handler put back."""
+    assert threading.current_thread() is threading.main_thread()  # (xdist runs tests there)
+    with pytest.raises(KeyboardInterrupt):
+        with comparison._stops_held() as stops:
+            signal.raise_signal(signal.SIGINT)
+            assert stops == [signal.SIGINT]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_an_ignored_sigint_stays_ignored() -> None:
+    """A SIGINT the process ignores (nohup, a background job of a shell) is not a stop: the
+    noted-then-raised stop of a pool, ignored on the way out, escaped as an error (exit 1
+    with a traceback in a test session that ignored SIGINT)."""
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        with comparison._stops_held() as stops:
+            signal.raise_signal(signal.SIGINT)
+        assert stops == [] and signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)

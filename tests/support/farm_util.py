@@ -28,7 +28,7 @@ def motion(*args: str, cwd: Path | None = None, timeout: float = 120) -> subproc
     return subprocess.run([MOTION, *map(str, args)], cwd=cwd, capture_output=True, text=True, timeout=timeout)
 
 
-def _as_from_a_terminal() -> None:
+def as_from_a_terminal() -> None:
     """In the child, before exec: SIGINT as a shell gives it (default action, unblocked).
     A process inherits an ignored disposition and a blocked mask across exec, and a test
     session that touched either (libraries, earlier tests) would make Ctrl-C tests lie."""
@@ -40,7 +40,7 @@ def _as_from_a_terminal() -> None:
 
 def start_motion(*args: str, cwd: Path | None = None) -> subprocess.Popen:
     return subprocess.Popen(
-        [MOTION, *map(str, args)], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_as_from_a_terminal
+        [MOTION, *map(str, args)], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=as_from_a_terminal
     )
 
 

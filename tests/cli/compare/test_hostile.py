@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from farm_util import MOTION, ROOT, motion
+from farm_util import MOTION, ROOT, as_from_a_terminal, motion
 from motion.pipeline.frame_output import write_frame
 
 W, H = 32, 18
@@ -203,8 +203,9 @@ def test_a_stop_ends_a_pool_of_workers_at_once(tmp_path: Path, how: int, code: i
     for frame in range(80):
         os.link(a, new / f"t.{frame:04d}.exr")
         os.link(b, ref / f"t.{frame:04d}.exr")
+    # SIGINT as a terminal gives it: one the test session ignores the command would too
     proc = subprocess.Popen([MOTION, "compare", str(new), str(ref), "--workers", "2", "--flip", "all"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+                            text=True, start_new_session=True, preexec_fn=as_from_a_terminal)
     try:
         time.sleep(4.0)  # the pool is at work
         assert proc.poll() is None, proc.communicate()
