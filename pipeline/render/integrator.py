@@ -75,9 +75,9 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         cycle would keep every scene and its JIT variables of a finished job alive; and
         every later kernel in the process traces the leaked plugins' calls (12 small
         renders made the next one 2.8x slower). render/scene_cache.py calls it when the
-        job's scene cache is freed."""
+        job's scene cache is freed. Plain references only: no drjit value is made here
+        (the per-frame array holds no scene, and a finaliser may run late)."""
         self.world = World()
-        self.frame_data = FrameData()
         self.lights = []
         self.choice = None
 

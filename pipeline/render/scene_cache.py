@@ -111,7 +111,9 @@ class SceneCache:
         self.scene = self.owner.scene(d)
         # the integrator holds the job's other scenes and their owner, which holds this
         # scene, which holds the integrator from C++: a cycle the collector cannot break
-        weakref.finalize(self, self.scene.integrator().release)
+        # (not at the interpreter's exit: the process's memory goes anyway, and Mitsuba's
+        # module may be half torn down by then)
+        weakref.finalize(self, self.scene.integrator().release).atexit = False
         self._params = mi.traverse(self.scene)
         integrator = self.integrator
         integrator.set_sbt_owner(self.owner)

@@ -37,11 +37,16 @@ def test_a_stop_while_a_pool_runs_is_noted_then_raised_on_the_way_out() -> None:
     """A Ctrl-C is noted while the pool runs (the wait acts on it) and raised as
     KeyboardInterrupt when the pool is left, with the handler put back."""
     assert threading.current_thread() is threading.main_thread()  # (xdist runs tests there)
-    with pytest.raises(KeyboardInterrupt):
-        with comparison._stops_held() as stops:
-            signal.raise_signal(signal.SIGINT)
-            assert stops == [signal.SIGINT]
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    # Ctrl-C as a terminal gives it (an xdist worker ignores SIGINT, and so would we)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with comparison._stops_held() as stops:
+                signal.raise_signal(signal.SIGINT)
+                assert stops == [signal.SIGINT]
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def test_an_ignored_sigint_stays_ignored() -> None:

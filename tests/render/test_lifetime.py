@@ -48,3 +48,23 @@ def test_a_freed_renderer_leaves_no_jit_variable_alive(tmp_path: Path) -> None:
     for _ in range(3):
         render(loaded, [0, 1])
     assert _live_jit_variables() == after_one
+
+
+def test_a_renderer_alive_at_exit_leaves_quietly(tmp_path: Path) -> None:
+    """A process that exits holding a renderer prints nothing: its scene cache's
+    finaliser, run by the interpreter's exit hook, made a drjit value while Mitsuba's
+    module was half torn down ("module has no attribute 'Float'" tracebacks after a test
+    session). The script plays the torn-down module: an exit hook of its own, which runs
+    before the finalisers' (registered first), takes `mi` from the render modules."""
+    import subprocess
+    import sys
+
+    (tmp_path / "scene.yaml").write_text(SCENE)
+    code = ("import sys; sys.path.insert(0, 'tests/support')\n"
+            "from pathlib import Path\n"
+            "from _render_support import load, render\n"
+            f"KEPT = render(load(Path({str(tmp_path)!r}), Path({str(tmp_path / 'scene.yaml')!r}).read_text(), 'again.yaml'), [0])\n"
+            "import atexit, motion.pipeline.render.integrator as I, motion.pipeline.render.poses as P\n"
+            "atexit.register(lambda: (setattr(I, 'mi', None), setattr(P, 'mi', None)))\n")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=Path(__file__).resolve().parents[2])
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-2000:]
