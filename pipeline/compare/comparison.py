@@ -335,10 +335,10 @@ def _stops_held() -> Iterator[list[int]]:
     on the way out the handlers are put back and a stop that came goes to its own
     (KeyboardInterrupt), from here. Raised wherever the main thread happened to be, the
     stop landed now in a process's hand-over to the forkserver (children that printed
-    tracebacks: the forkserver's EOFError, a semaphore already gone), now in a finalizer
-    that swallowed it ("Exception ignored"), and the compare went on to its last frame
-    (seen about once in 50 stops on a loaded host, past the test's 30 s). Outside the
-    main thread (no handlers there) nothing is noted."""
+    tracebacks: the forkserver's EOFError, a semaphore already gone), now nowhere: the
+    main thread slept on in its wait for a frame and the compare went on (about 1 stop in
+    40 on a loaded host, past the test's 30 s). Outside the main thread (no handlers
+    there) nothing is noted."""
     import signal
 
     came: list[int] = []

@@ -164,9 +164,10 @@ def _load(entry: Path, cls: type[BaseModel] | None = None) -> SchemaValidator | 
 
 
 def _root_class(validator: SchemaValidator) -> type | None:
-    """The record class a validator's core schema validates at its root (None when the root
-    is not a model record, or one of its validators wrapping one): pydantic-core pickles a validator as (schema, config), so the
-    schema is at hand without building one."""
+    """The record class a validator's core schema validates at its root, through the
+    record's own model validators wrapped around it (None when the root is not a model
+    record): pydantic-core pickles a validator as (schema, config), so the schema is at
+    hand without building one."""
     try:
         schema = validator.__reduce__()[1][0]
         for _ in range(8):  # definitions around a model, or a reference into them
