@@ -20,7 +20,7 @@ FOLDERS = {"pipeline": f"{PACKAGE}.pipeline", "cli": f"{PACKAGE}.cli"}
 
 # Stages, lowest first. A module belongs to the longest prefix listed here.
 STAGES: list[tuple[str, ...]] = [
-    ("motion.pipeline", "motion.pipeline.errors", "motion.pipeline.limits", "motion.pipeline.write_policy", "motion.pipeline.cache", "motion.pipeline.count_bar"),
+    ("motion.pipeline", "motion.pipeline.errors", "motion.pipeline.limits", "motion.pipeline.write_policy", "motion.pipeline.cache", "motion.pipeline.count_bar", "motion.pipeline.lazy"),
     ("motion.pipeline.timeline", "motion.pipeline.meshes", "motion.pipeline.images", "motion.pipeline.expr", "motion.pipeline.geometry", "motion.pipeline.field_model", "motion.pipeline.deliverables"),
     ("motion.pipeline.scene",),
     ("motion.pipeline.motion",),  # evaluation takes a simulation's records as arguments, never imports dynamics

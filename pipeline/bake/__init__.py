@@ -14,10 +14,10 @@ with the rest of the frame's identity, in identity/motion_digest.py.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from ..errors import BakeFileError, FrameNotBakedError
+from ..lazy import lazy_names
 
 if TYPE_CHECKING:
     from .baking import bake, evaluate_frames
@@ -36,14 +36,7 @@ _HOMES = {
     **dict.fromkeys(("sample_seconds", "simulate_for", "simulation_range"), "timing"),
 }
 
-
-def __getattr__(name: str) -> Any:
-    """A public name, from its module (imported now); AttributeError for any other."""
-    home = _HOMES.get(name)
-    if home is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module(f"{__name__}.{home}"), name)
-
+__getattr__ = lazy_names(__name__, _HOMES)
 
 __all__ = [
     "FORMAT",

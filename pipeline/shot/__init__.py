@@ -13,8 +13,9 @@ the modules its run takes (a rerun that renders nothing: docs/reruns.md).
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from ..lazy import lazy_names
 
 if TYPE_CHECKING:
     from .dry_run import plan_text
@@ -27,10 +28,4 @@ _HOMES = {"run_field_render": "fields", "plan_text": "dry_run", "run_render": "r
 
 __all__ = ["DeliverView", "RenderRequest", "plan_text", "run_field_render", "run_render"]
 
-
-def __getattr__(name: str) -> Any:
-    """A public name, from its module (imported now); AttributeError for any other."""
-    home = _HOMES.get(name)
-    if home is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module(f"{__name__}.{home}"), name)
+__getattr__ = lazy_names(__name__, _HOMES)
