@@ -189,6 +189,29 @@ def trusted(path: Path) -> os.stat_result | None:
     return st
 
 
+def file_stamp(path: str | Path) -> str:
+    """'path:size:mtime_ns' ('path:absent' when it cannot be read): what Python checks before
+    it reuses a module's bytecode, so a file that would run differently stamps differently."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return f"{path}:absent"
+    return f"{path}:{st.st_size}:{st.st_mtime_ns}"
+
+
+def package_file(name: str) -> Path | None:
+    """The file an installed package is imported from (its `__init__.py`), located and not
+    imported; None when it is not installed. Its `file_stamp` names the installed build
+    without importlib.metadata (whose email parser costs 30 ms of a process)."""
+    import importlib.util
+
+    try:
+        spec = importlib.util.find_spec(name)
+    except (ImportError, ValueError):
+        return None
+    return Path(spec.origin) if spec is not None and spec.origin else None
+
+
 def code_digest(files: Sequence[str]) -> str:
     """The SHA-256 of source files (named relative to pipeline/): the one code version a
     store's entries are stamped with."""

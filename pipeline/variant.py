@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, Mapping
 
-from .cache import cache_root
+from .cache import cache_root, file_stamp, package_file
 from .errors import RendererError
 from .write_policy import write_best_effort
 
@@ -112,23 +112,6 @@ def llvm_candidates() -> list[str | None]:
     return [*found, None]
 
 
-def _installed(pkg: str) -> str:
-    """Which build of `pkg` is installed, located and not imported: its package file's
-    path, size and modification time (what Python checks before it reuses bytecode; an
-    upgrade rewrites it), or 'missing'. The version by importlib.metadata would cost its
-    email parser, 30 ms of a rerun that renders nothing."""
-    import importlib.util
-
-    spec = importlib.util.find_spec(pkg)
-    if spec is None or not spec.origin:
-        return "missing"
-    try:
-        st = os.stat(spec.origin)
-    except OSError:
-        return f"{spec.origin}:missing"
-    return f"{spec.origin}:{st.st_size}:{st.st_mtime_ns}"
-
-
 def _probe_key(variant: str, lib: str | None) -> str:
     ident = "default"
     if lib:
@@ -137,7 +120,9 @@ def _probe_key(variant: str, lib: str | None) -> str:
             ident = f"{os.path.realpath(lib)}:{st.st_size}:{int(st.st_mtime)}"
         except OSError:
             ident = f"{lib}:missing"
-    return f"{variant}|{ident}|drjit {_installed('drjit')}|mitsuba {_installed('mitsuba')}"
+    # each package's installed build by its file's stamp (cache.package_file)
+    builds = [file_stamp(p) if (p := package_file(name)) is not None else f"{name}:missing" for name in ("drjit", "mitsuba")]
+    return f"{variant}|{ident}|drjit {builds[0]}|mitsuba {builds[1]}"
 
 
 def _probe_cache_file() -> Path:

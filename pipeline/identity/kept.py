@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from ..cache import STORES, Store
+from ..cache import STORES, Store, file_stamp, package_file
 from .record import FrameIdentity, WholeFrames
 
 log = logging.getLogger("motion")
@@ -48,25 +48,13 @@ def code_version() -> str:
     every file."""
     global _code_version
     if _code_version is None:
-        import importlib.util
-
         from ..bake.keep import CODE_FILES, CODE_FOLDERS
 
         source = Path(__file__).resolve().parents[1]
         files = sorted({p for folder in (*CODE_FOLDERS, *_CODE_FOLDERS) for p in (source / folder).glob("*.py")} |
                        {source / name for name in (*CODE_FILES, *_CODE_FILES)})
-        for name in _LIBRARIES:
-            spec = importlib.util.find_spec(name)
-            if spec is not None and spec.origin:
-                files.append(Path(spec.origin))
-        stamps = []
-        for path in files:
-            try:
-                st = path.stat()
-                stamps.append(f"{path}:{st.st_size}:{st.st_mtime_ns}")
-            except OSError:
-                stamps.append(f"{path}:absent")
-        _code_version = hashlib.sha256("\n".join(stamps).encode()).hexdigest()
+        files += [p for p in map(package_file, _LIBRARIES) if p is not None]
+        _code_version = hashlib.sha256("\n".join(map(file_stamp, files)).encode()).hexdigest()
     return _code_version
 
 

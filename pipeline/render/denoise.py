@@ -87,7 +87,7 @@ def _probe_entry() -> Path | None:
     import importlib.util
     import socket
 
-    from ..cache import STORES
+    from ..cache import STORES, file_stamp
 
     listed: list[str] = []
     for name in (MODULE, "drjit", "mitsuba"):
@@ -102,7 +102,7 @@ def _probe_entry() -> Path | None:
             continue
         folder = Path(list(spec.submodule_search_locations)[0]).resolve()
         try:
-            listed += sorted(f"{folder / e.name}:{e.stat().st_size}:{e.stat().st_mtime_ns}" for e in os.scandir(folder) if e.is_file())
+            listed += sorted(file_stamp(folder / e.name) for e in os.scandir(folder) if e.is_file())
         except OSError:
             return None
     store = STORES["probes"]
