@@ -8,6 +8,7 @@ imported only when a movie or a sheet is made.
 """
 
 from .convert import inverse_sequence, telecine_sequence
-from .deliver import FORMATS, deliver, parse_formats
+from ..deliverables import FORMATS, parse_formats
+from .deliver import deliver
 
 __all__ = ["FORMATS", "deliver", "inverse_sequence", "parse_formats", "telecine_sequence"]

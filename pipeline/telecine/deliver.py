@@ -16,7 +16,7 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from ..deliverables import FORMATS, DeliverFormat, parse_formats  # noqa: F401  (parse_formats: re-exported)
+from ..deliverables import FORMATS, DeliverFormat, parse_formats
 from ..errors import UsageError
 from ..field_model import weave_frames
 from .cadence import film_rate, plan
