@@ -66,6 +66,7 @@ def main() -> None:
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench-startup-"))
     env = dict(os.environ)
+    env.pop("PYTHONDONTWRITEBYTECODE", None)  # as an installed motion runs: from its modules' cached bytecode, not compiled every process
     jobs: dict[str, list[str]] = {
         "plain mitsuba: bouncing-balls 3 frames": [sys.executable, str(ROOT / "bench" / "plain" / "bouncing_balls_smoke.py"), str(tmp / "plain")],
     }

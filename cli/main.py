@@ -163,9 +163,10 @@ def _exit_now(code: int) -> None:
 # the collector's passes over them are wasted (docs/ci-sharding.md, "What validation keeps"). The
 # console script (`motion.cli.start`) turns it off before click is imported, `main` when it
 # is called otherwise. A command is looked up (LazyGroup.get_command) before it runs: every
-# command but those marked `start_up_only` (validate, whose work is one bounded scene load;
-# with several scenes it turns the collector on after the first) turns it back on there,
-# and `main` called with arguments leaves it as it found it.
+# command but those marked `start_up_only` turns it back on there: validate, whose work is
+# one bounded scene load (with several scenes it turns the collector on after the first),
+# and render, which turns it on once the pipeline's modules are imported, before any work.
+# `main` called with arguments leaves it as it found it.
 _gc_was_enabled = False
 
 

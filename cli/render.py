@@ -127,6 +127,9 @@ def render(
 
         if dry_run or as_json or compare_ref:
             raise click.UsageError("--fields does not combine with --dry-run, --json or --compare")
+        from motion.cli.main import restore_gc
+
+        restore_gc()
         run_field_render(request, fields, field_order)
         return
     result = _run(request, as_json)
@@ -138,6 +141,24 @@ def render(
         click.echo(json.dumps(summary(result) if "totals" in result else result, indent=2))
     if compare_ref is not None and not dry_run:
         _compare(result, compare_ref)
+    elif not dry_run and _left_nothing_running(request, result):
+        from motion.cli.main import nothing_to_finish
+
+        nothing_to_finish()  # a rerun that rendered and made nothing ends without teardown (cli/main.py)
+
+
+def _left_nothing_running(request: "RenderRequest", report: dict[str, Any]) -> bool:
+    """Whether a finished run started nothing that teardown would finish: no task ran (no
+    worker process, no Dask client), no deliverable was made (each was up to date), no
+    thread besides the main one, no child process."""
+    import sys
+    import threading
+
+    executor = report.get("executor") or {}
+    delivered = (report.get("deliverables") or {}).get("status") or {}
+    children = sys.modules.get("multiprocessing")
+    return (request.scheduler is None and executor.get("chunks") == 0 and all(v == "up to date" for v in delivered.values())
+            and threading.active_count() == 1 and not (children is not None and children.active_children()))
 
 
 def _render_overrides(spp: int | None, resolution: str | None, motion_blur: str | None, variant: str | None, denoise: bool | None, temporal: str | None) -> dict[str, Any]:
@@ -155,9 +176,11 @@ def _render_overrides(spp: int | None, resolution: str | None, motion_blur: str 
 def _run(request: "RenderRequest", as_json: bool) -> dict[str, Any]:
     """The render's report (or plan); a job with frames that failed everywhere prints its
     summary first with --json, then raises (exit 3)."""
+    from motion.cli.main import restore_gc
     from motion.pipeline.errors import IncompleteJobError
     from motion.pipeline.shot import run_render
 
+    restore_gc()  # the pipeline's modules imported with the collector off, as validate does (cli/main.py)
     try:
         return run_render(request)
     except IncompleteJobError as err:
@@ -190,4 +213,5 @@ def summary(report: dict) -> dict:
     return {k: report.get(k) for k in keys if k in report}
 
 
+render.start_up_only = True  # type: ignore[attr-defined]  # the collector comes back on in _run, once the pipeline is imported
 commands = [render]

@@ -212,6 +212,20 @@ def package_file(name: str) -> Path | None:
     return Path(spec.origin) if spec is not None and spec.origin else None
 
 
+def package_stamps(name: str) -> list[str]:
+    """The `file_stamp` of each file at the top of an installed package's folder (its
+    modules and the shared libraries beside them), located and not imported: what names
+    its installed build; ['NAME:absent'] when it is not installed."""
+    path = package_file(name)
+    if path is None:
+        return [f"{name}:absent"]
+    folder = path.resolve().parent
+    try:
+        return sorted(file_stamp(folder / e.name) for e in os.scandir(folder) if e.is_file())
+    except OSError:
+        return [f"{name}:unreadable"]
+
+
 def code_digest(files: Sequence[str]) -> str:
     """The SHA-256 of source files (named relative to pipeline/): the one code version a
     store's entries are stamped with."""
@@ -401,6 +415,7 @@ STORES: dict[str, Store] = {s.name: s for s in (
     Store("validators", "validation", "the scene format's validators (scene/compiled.py)", tag="validator-v2", cap_bytes=False, cap_files=64),
     Store("shipped", "shipped", "assets a shipped job carried to this worker (farm/transfer/store.py)"),
     Store("simulations", "simulations", "dynamics simulations kept for reruns whose dynamics inputs did not change (bake/keep.py)", tag="sim-v1", cap_files=64),
-    Store("probes", "probes", "the denoiser probe's answer, by the library's files and this machine (render/denoise.py)", tag="oidn-probe-v1", cap_files=64),
+    Store("probes", "probes", "the denoiser probe's answer, by the library's files and this machine (render/denoise.py), and the deliverables' "
+          "view transform's description, by its options and OpenColorIO's files (shot/deliver.py)", tag="probe-v2", cap_files=64),
     Store("frame-keys", "frame-keys", "each frame's identity and the look, kept for reruns that render nothing (identity/kept.py)", tag="keys-v1", cap_files=256),
 )}

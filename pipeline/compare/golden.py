@@ -20,6 +20,7 @@ from typing import Annotated, Any, Literal, Mapping
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from .. import VERSION
 from ..errors import FrameIOError, ReferenceMismatchError, UsageError
 from ..write_policy import write_atomic
 from ..frame_output import META_PREFIX, read_frame, write_exr
@@ -94,16 +95,6 @@ class Manifest:
         return {k: self.data.get(k) for k in ("scene_digest", "renderer", "resolution", "settings", "look_parts")}
 
 
-def motion_version() -> str:
-    """The installed motion's version."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("motion-farm")
-    except PackageNotFoundError:
-        return "unknown"
-
-
 def bless(new_dir: str | Path, golden_dir: str | Path, prefix: str | None = None, frames: list[int] | None = None) -> Manifest:
     """Make `golden_dir` the reference set of the frames in `new_dir` (`frames`: only
     these): each frame rewritten as half floats (RGBA, and the `noisy` layer when the frame
@@ -140,7 +131,7 @@ def bless(new_dir: str | Path, golden_dir: str | Path, prefix: str | None = None
         old = None  # a damaged manifest names nothing to remove
     data = {
         "format": FORMAT,
-        "motion_version": motion_version(),
+        "motion_version": VERSION,
         "blessed": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
         "prefix": name,
         "scene": scene,

@@ -84,27 +84,13 @@ def _probe_entry() -> Path | None:
     libraries it loads (name, size, modification time: a reinstall or another build is
     another key), and this machine (its name and architecture: a cache root shared by other
     machines is not believed for this one). None when the binding is not installed."""
-    import importlib.util
     import socket
 
-    from ..cache import STORES, file_stamp
+    from ..cache import STORES, package_stamps
 
-    listed: list[str] = []
-    for name in (MODULE, "drjit", "mitsuba"):
-        try:
-            spec = importlib.util.find_spec(name)
-        except (ImportError, ValueError):
-            spec = None
-        if spec is None or not spec.submodule_search_locations:
-            if name == MODULE:
-                return None
-            listed.append(f"{name}:absent")
-            continue
-        folder = Path(list(spec.submodule_search_locations)[0]).resolve()
-        try:
-            listed += sorted(file_stamp(folder / e.name) for e in os.scandir(folder) if e.is_file())
-        except OSError:
-            return None
+    listed = [stamp for name in (MODULE, "drjit", "mitsuba") for stamp in package_stamps(name)]
+    if listed[0] == f"{MODULE}:absent" or any(s.endswith(":unreadable") for s in listed):
+        return None
     store = STORES["probes"]
     key = store.key(os.path.realpath(sys.executable), *listed, socket.gethostname(), os.uname().machine)
     return store.path(key, stem="oidn", suffix=".json")

@@ -52,6 +52,7 @@ from ..frame_output import disk_fault, inside
 from ..identity.record import frame_pixels_digest
 from ..limits import read_bounded
 from ..scene.files import file_digest
+from ..cache import STORES, file_stamp, package_stamps
 from .request import RenderRequest
 
 MANIFEST = "manifest.json"
@@ -89,11 +90,49 @@ class DeliverPlan:
 
 
 def deliver_view(req: RenderRequest) -> Any:
-    """The deliverables' `ViewTransform` from the request's exposure and OCIO options."""
+    """The deliverables' `ViewTransform` from the request's exposure and OCIO options (its
+    description kept for the next run: view_description)."""
     from ..telecine.movie import ViewTransform
 
     view = req.deliver_view
-    return ViewTransform(view.exposure, view.ocio_config, view.ocio_display, view.ocio_view)
+    built = ViewTransform(view.exposure, view.ocio_config, view.ocio_display, view.ocio_view)
+    entry = _view_entry(req)
+    if entry is not None:
+        STORES["probes"].put(entry, built.description.encode(), best_effort=True, doing="keeping the view transform's description")
+    return built
+
+
+def _view_entry(req: RenderRequest) -> Path | None:
+    """Where the description of the request's view transform is kept (cache.STORES["probes"]):
+    keyed by the view's options, the config file they name (path, size, time), the installed
+    OpenColorIO's files and the code that describes it (telecine/movie.py). None for a config
+    that cannot be stamped (absent: building the view says why)."""
+    view = req.deliver_view
+    parts = [repr(float(view.exposure)), repr(view.ocio_config), repr(view.ocio_display), repr(view.ocio_view),
+             file_stamp(Path(__file__).resolve().parents[1] / "telecine" / "movie.py"), *package_stamps("PyOpenColorIO")]
+    config = view.ocio_config
+    if config is not None and not str(config).startswith("ocio://"):
+        stamp = file_stamp(os.path.realpath(config))
+        if stamp.endswith(":absent"):
+            return None
+        parts.append(stamp)
+    store = STORES["probes"]
+    return store.path(store.key(*parts), stem="view", suffix=".txt")
+
+
+def view_description(req: RenderRequest) -> str:
+    """The description of the request's view transform, which a deliverable's recipe
+    records: kept from the last run that built the same view (`_view_entry`), else the view
+    built now (OpenColorIO loaded and the config checked), so a rerun whose deliverables are
+    up to date loads neither OpenColorIO nor NumPy."""
+    entry = _view_entry(req)
+    data = STORES["probes"].read(entry, 4096) if entry is not None else None
+    if data:
+        try:
+            return data.decode()
+        except UnicodeDecodeError:
+            pass
+    return str(deliver_view(req).description)
 
 
 def shot_frames(loaded: Any) -> list[int]:
@@ -138,6 +177,19 @@ def deliver_plan(req: RenderRequest, loaded: Any, frames: list[int]) -> DeliverP
     return DeliverPlan(formats, {}, explicit, tuple(shot), part)
 
 
+NO_PYAV = "movies need PyAV (pip install av), which is not installed here"
+
+
+def _installed(module: str) -> bool:
+    """Whether `module` can be found (located, not imported)."""
+    import importlib.util
+
+    try:
+        return importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):
+        return False
+
+
 def check_deliver(req: RenderRequest, loaded: Any, plan: DeliverPlan, frames: list[int], out_dir: Path,
                   path_of: Callable[[int], Path]) -> DeliverPlan:
     """What `--deliver` would find wrong after the last frame, found before the first:
@@ -145,31 +197,25 @@ def check_deliver(req: RenderRequest, loaded: Any, plan: DeliverPlan, frames: li
     odd height, the movie encoders, a deliver folder that is a file or a link out of the
     output folder, and the frames a deliverable needs that neither are on disk nor are
     rendered by this run (`frames`). Returns the plan without the scene-declared formats
-    that cannot be made (each with why). Nothing is created here: a run that fails or
-    renders nothing leaves no empty deliver folder."""
-    from ..telecine.movie import CODECS
-
-    deliver_view(req)  # a bad OCIO config, display or view
+    that cannot be made (each with why). The view and the encoders are checked once per
+    config and install (view_description, check_encoders), so a rerun loads neither
+    OpenColorIO nor FFmpeg. Nothing is created here: a run that fails or renders nothing
+    leaves no empty deliver folder."""
+    view_description(req)  # a bad OCIO config, display or view (the view is built unless this one was built before)
     records = [FORMATS[f] for f in plan.formats]
     height = loaded.scene.render.resolution[1]
     interlaced = [r.name for r in records if r.interlaced]
     if interlaced and height % 2:
         raise UsageError(f"--deliver {','.join(interlaced)}: the render is {height} rows high; interlaced fields need an even height (--resolution)")
     movies = [r for r in records if r.codec is not None]
-    try:
-        import av
-    except ImportError:  # a dependency, but a farm node or a container may have been built without it
-        why = "movies need PyAV (pip install av), which is not installed here"
-        if movies and plan.explicit:
-            raise UsageError(f"--deliver {','.join(r.name for r in movies)}: {why}; install it, or ask only for the contact sheet (--deliver contact)") from None
+    if movies and not _installed("av"):  # a dependency, but a farm node or a container may have been built without it
+        why = NO_PYAV
+        if plan.explicit:
+            raise UsageError(f"--deliver {','.join(r.name for r in movies)}: {why}; install it, or ask only for the contact sheet (--deliver contact)")
         # the scene's own output.deliver: made without its movies, each said why
         plan = replace(plan, formats=tuple(f for f in plan.formats if FORMATS[f].codec is None), skipped={**plan.skipped, **{r.name: why for r in movies}})
-        records, movies = [r for r in records if r.codec is None], []
-    for r in movies:
-        try:
-            av.codec.Codec(CODECS[r.codec].encoder, "w")
-        except Exception:  # PyAV raises its own UnknownCodecError
-            raise UsageError(f"--deliver {r.name}: this build of PyAV/FFmpeg has no {CODECS[r.codec].encoder} encoder") from None
+        records = [r for r in records if r.codec is None]
+    check_encoders(req, plan)
     folder = out_dir / "deliver"
     if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
         raise UsageError(f"--deliver: {folder} is {'a link' if folder.is_symlink() else 'a file'}; deliverables are written only into a real folder inside the output folder")
@@ -190,6 +236,31 @@ def check_deliver(req: RenderRequest, loaded: Any, plan: DeliverPlan, frames: li
         raise UsageError(f"--deliver {','.join(blocked)}: a movie is made from a gapless run of frames, the whole shot: {why}{hint}")
     return replace(plan, formats=tuple(f for f in plan.formats if f not in blocked),
                    skipped={**plan.skipped, **{f: f"{why}: not a gapless run" for f in blocked}})
+
+
+def check_encoders(req: RenderRequest, plan: DeliverPlan) -> None:
+    """Each movie of the plan has its encoder in the installed PyAV/FFmpeg: probed once per
+    build of PyAV (its files' stamps, cache.STORES["probes"]), so a rerun does not load
+    FFmpeg to learn it again."""
+    movies = [FORMATS[f] for f in plan.formats if FORMATS[f].codec is not None]
+    if not movies:
+        return
+    store = STORES["probes"]
+    entry = store.path(store.key("encoders", *sorted({str(r.codec) for r in movies}), *package_stamps("av")), stem="encoders", suffix=".txt")
+    if store.read(entry, 64) == b"ok":
+        return
+    try:
+        import av
+    except ImportError:  # found but not loadable (a library of FFmpeg's missing)
+        raise UsageError(f"--deliver {','.join(r.name for r in movies)}: {NO_PYAV}; install it, or ask only for the contact sheet (--deliver contact)") from None
+    from ..telecine.movie import CODECS
+
+    for r in movies:
+        try:
+            av.codec.Codec(CODECS[r.codec].encoder, "w")
+        except Exception:  # PyAV raises its own UnknownCodecError
+            raise UsageError(f"--deliver {r.name}: this build of PyAV/FFmpeg has no {CODECS[r.codec].encoder} encoder") from None
+    store.put(entry, b"ok", best_effort=True, doing="keeping the movie encoders' probe")
 
 
 # --- what a deliverable was made from -------------------------------------------------------
@@ -295,14 +366,10 @@ def read_manifest(folder: Path, warn: Callable[[str], None] | None = None) -> di
 def recipe(fmt: str, view: Any) -> dict[str, Any]:
     """What a deliverable is made with besides its frames: the format's record, the view
     transform, the recipe's and motion's versions."""
-    try:
-        from importlib.metadata import version
+    from .. import VERSION
 
-        tool = version("motion-farm")
-    except Exception:  # not installed as a distribution (a source checkout on the path)
-        tool = "source"
-    return {"format": fmt, **FORMATS[fmt].recipe(), "view": getattr(view, "description", repr(view)),
-            "recipe_version": RECIPE_VERSION, "motion": tool}
+    return {"format": fmt, **FORMATS[fmt].recipe(), "view": getattr(view, "description", view),
+            "recipe_version": RECIPE_VERSION, "motion": VERSION}
 
 
 def _outputs_present(version: Mapping[str, Any], folder: Path) -> bool:
@@ -426,22 +493,62 @@ def _deliver_folder(out_dir: Path) -> Path:
     return folder
 
 
-def _shot_sequence(out_dir: Path, plan: DeliverPlan, frame_paths: Mapping[int, Path], prefix: str) -> tuple[Any, list[int]]:
-    """The validated sequence of the plan's frames on disk, and the frames it lacks (an
-    error for a format that needs every frame)."""
-    from ..telecine.sequence import sequence_of
-
+def _frames_there(out_dir: Path, plan: DeliverPlan, frame_paths: Mapping[int, Path]) -> tuple[dict[int, Path], list[int]]:
+    """The plan's frames on disk (number -> file) and the frames it lacks (an error for a
+    format that needs every frame)."""
     there = {n: Path(frame_paths[n]) for n in plan.frames if n in frame_paths and Path(frame_paths[n]).is_file()}
     lacking = [n for n in plan.frames if n not in there]
-    records = [FORMATS[f] for f in plan.formats]
-    if lacking and any(r.gapless for r in records):
+    if lacking and any(FORMATS[f].gapless for f in plan.formats):
         raise UsageError(f"--deliver: frames {format_frames(lacking)} of {format_frames(list(plan.frames))} are not in {out_dir}")
     if not there:
         raise UsageError(f"--deliver: none of frames {format_frames(list(plan.frames))} is in {out_dir}")
+    return there, lacking
+
+
+def _shot_sequence(out_dir: Path, plan: DeliverPlan, there: dict[int, Path], prefix: str) -> Any:
+    """The validated sequence of the frames `there`."""
+    from ..telecine.sequence import sequence_of
+
     try:
-        return sequence_of(there, prefix, directory=out_dir, require_even_height=any(r.interlaced for r in records)), lacking
+        return sequence_of(there, prefix, directory=out_dir, require_even_height=any(FORMATS[f].interlaced for f in plan.formats))
     except FrameIOError as exc:
         raise UsageError(f"--deliver: {exc}") from None
+
+
+def _as_recorded(req: RenderRequest, plan: DeliverPlan, folder: Path, manifest: Mapping[str, Any], there: Mapping[int, Path],
+                 lacking: list[int]) -> dict[str, str] | None:
+    """{format: its last version} when every deliverable of the plan is up to date without
+    opening a frame: its last version was made from exactly these files, each at the name,
+    size and modification time it records (as git's index trusts a file; its pixels, rate
+    and timecode are then those recorded), lacking the same frames, with this recipe (the
+    view's kept description), its outputs there. None when any is not (the frames are then
+    read: deliver_and_record)."""
+    current: dict[str, str] = {}
+    description: str | None = None
+    for fmt in plan.formats:
+        versions = (manifest["deliverables"].get(plan.key(fmt)) or {}).get("versions") or {}
+        last_name = max(versions, key=lambda v: int(v[1:]), default=None)
+        last = versions.get(last_name) if last_name else None
+        if last is None or last.get("lacks") != (format_frames(lacking) or None):
+            return None
+        files = last["frame_files"]
+        if set(files) != {str(n) for n in there}:
+            return None
+        for n, path in there.items():
+            rec, st = files[str(n)], path.stat()
+            if rec["name"] != path.name or rec["size"] != st.st_size or rec["mtime_ns"] != st.st_mtime_ns or not _digest(rec.get("pixels")):
+                return None
+        description = description if description is not None else view_description(req)
+        if last["recipe"] != recipe(fmt, description) or not _outputs_present(last, folder):
+            return None
+        current[fmt] = last_name  # type: ignore[assignment]
+    return current
+
+
+def _say_up_to_date(fmt: str, name: str, numbers: list[int], lacking: list[int], folder: Path, outputs: list[str], say: Callable[[str], None]) -> None:
+    """'  24p: up to date (v002, frames 1-48 unchanged): PATH'."""
+    lacks = f" (lacks frames {format_frames(lacking)})" if lacking else ""
+    say(f"  {fmt}: up to date ({name}, frames {format_frames(numbers)} unchanged{lacks}): " + ", ".join(str(folder / n) for n in outputs))
 
 
 @dataclass(frozen=True)
@@ -535,11 +642,29 @@ def _one_format(fmt: str, plan: DeliverPlan, made: _Made, folder: Path, prefix: 
     last = entry["versions"].get(last_name) if last_name else None
     if last is not None and _same_frames(last, made) and last["recipe"] == recipe(fmt, made.view) and _outputs_present(last, folder):
         names = [o["name"] for o in last["outputs"]]
-        say(f"  {fmt}: up to date ({last_name}, frames {format_frames(list(made.seq.numbers))} unchanged{made.lacks}): "
-            + ", ".join(str(folder / n) for n in names))
+        _say_up_to_date(fmt, last_name, list(made.seq.numbers), made.lacking, folder, names, say)  # type: ignore[arg-type]
         return "up to date", last_name, names  # type: ignore[return-value]
     name, names = _new_version(fmt, plan, made, folder, prefix, manifest, entry, last_name, say)
     return "made", name, names
+
+
+def _made_of(req: RenderRequest, plan: DeliverPlan, out_dir: Path, there: dict[int, Path], lacking: list[int], prefix: str,
+             manifest: Mapping[str, Any]) -> _Made:
+    """What this run's deliverables are made from: the frames read (headers, and the pixels
+    of a frame without a digest), their rate and first timecode, and the view."""
+    view = deliver_view(req)
+    seq = _shot_sequence(out_dir, plan, there, prefix)
+    known = {r["name"]: r for e in manifest["deliverables"].values() for v in e["versions"].values() for r in v["frame_files"].values()}
+    numbers = list(seq.numbers)
+    digests = frame_digests(list(seq.paths), known)
+    frame_files = {str(n): {"name": p.name, "size": p.stat().st_size, "mtime_ns": p.stat().st_mtime_ns, "pixels": d}
+                   for n, p, d in zip(numbers, seq.paths, digests)}
+    from ..telecine.movie import ViewedFrames, first_timecode
+
+    # what a deliverable takes from the frames besides their pixels: the rate and the first timecode
+    timing = {"fps": str(seq.fps) if seq.fps is not None else None, "timecode": first_timecode(seq)}
+    made_from = hashlib.sha256(json.dumps({"pixels": [[n, d] for n, d in zip(numbers, digests)], "timing": timing}).encode()).hexdigest()
+    return _Made(seq, frame_files, timing, made_from, lacking, view, ViewedFrames(seq, view))
 
 
 def deliver_and_record(req: RenderRequest, out_dir: Path, plan: DeliverPlan, frame_paths: Mapping[int, Path], prefix: str,
@@ -551,25 +676,25 @@ def deliver_and_record(req: RenderRequest, out_dir: Path, plan: DeliverPlan, fra
     deliver/manifest.json."""
     folder = _deliver_folder(out_dir)
     check_manifest_path(folder)
-    view = deliver_view(req)
-    seq, lacking = _shot_sequence(out_dir, plan, frame_paths, prefix)
+    there, lacking = _frames_there(out_dir, plan, frame_paths)
     manifest = read_manifest(folder)
-    known = {r["name"]: r for e in manifest["deliverables"].values() for v in e["versions"].values() for r in v["frame_files"].values()}
-    numbers = list(seq.numbers)
-    digests = frame_digests(list(seq.paths), known)
-    frame_files = {str(n): {"name": p.name, "size": p.stat().st_size, "mtime_ns": p.stat().st_mtime_ns, "pixels": d}
-                   for n, p, d in zip(numbers, seq.paths, digests)}
-    from ..telecine.movie import ViewedFrames, first_timecode
-
-    # what a deliverable takes from the frames besides their pixels: the rate and the first timecode
-    timing = {"fps": str(seq.fps) if seq.fps is not None else None, "timecode": first_timecode(seq)}
-    made_from = hashlib.sha256(json.dumps({"pixels": [[n, d] for n, d in zip(numbers, digests)], "timing": timing}).encode()).hexdigest()
-    made = _Made(seq, frame_files, timing, made_from, lacking, view, ViewedFrames(seq, view))
-    record: dict[str, Any] = {}
+    numbers = sorted(there)
     status: dict[str, str] = {}
     versions: dict[str, str] = {}
+    outputs: dict[str, list[str]] = {}
+    current = _as_recorded(req, plan, folder, manifest, there, lacking)
+    if current is not None:  # every one up to date, no frame opened
+        for fmt, name in current.items():
+            status[fmt], versions[fmt] = "up to date", name
+            outputs[fmt] = [o["name"] for o in manifest["deliverables"][plan.key(fmt)]["versions"][name]["outputs"]]
+            _say_up_to_date(fmt, name, numbers, lacking, folder, outputs[fmt], say)
+    else:
+        made = _made_of(req, plan, out_dir, there, lacking, prefix, manifest)
+        for fmt in plan.formats:
+            status[fmt], versions[fmt], outputs[fmt] = _one_format(fmt, plan, made, folder, prefix, manifest, say)
+    record: dict[str, Any] = {}
     for fmt in plan.formats:
-        status[fmt], versions[fmt], names = _one_format(fmt, plan, made, folder, prefix, manifest, say)
+        names = outputs[fmt]
         rates = {o.get("name"): o.get("rate") for o in manifest["deliverables"][plan.key(fmt)]["versions"][versions[fmt]]["outputs"]}
         for n in names:
             p = folder / n
