@@ -26,7 +26,6 @@ import json
 import logging
 import os
 import sys
-import zipfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, BinaryIO, Callable
 
@@ -245,6 +244,8 @@ def decode(data: bytes | BinaryIO, limit: int) -> Any:
 
     source = io.BytesIO(data) if isinstance(data, bytes) else data
     try:
+        import zipfile  # (here: a rerun that reads no kept simulation never loads it)
+
         with zipfile.ZipFile(source) as z:
             infos = z.infolist()
             if any(i.compress_type != zipfile.ZIP_STORED for i in infos) or sum(i.file_size for i in infos) > limit:

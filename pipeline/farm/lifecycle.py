@@ -28,20 +28,13 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Literal, Union, get_args
+from typing import Any, Callable, Union
 
 from ..render.job import FrameResult
 from ..timeline import format_range
 from .config import FarmConfig
+from .states import CHUNK_STATES, FINAL_CHUNK_STATES, FINAL_FRAME_STATES, FRAME_STATES, ChunkState, FrameState
 from .task import ChunkResult
-
-FrameState = Literal["queued", "running", "held", "stopped", "rendered", "skipped", "done_elsewhere", "failed", "not_rendered"]
-FRAME_STATES: tuple[FrameState, ...] = get_args(FrameState)
-FINAL_FRAME_STATES: tuple[FrameState, ...] = ("rendered", "skipped", "done_elsewhere", "failed", "not_rendered")  # the report totals each
-
-ChunkState = Literal["queued", "running", "done", "lost", "stopped", "failed"]
-CHUNK_STATES: tuple[ChunkState, ...] = get_args(ChunkState)
-FINAL_CHUNK_STATES: tuple[ChunkState, ...] = ("done", "lost", "stopped", "failed")
 
 
 class IllegalMove(RuntimeError):

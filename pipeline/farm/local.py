@@ -5,7 +5,7 @@ half-initialised) and each keeps its own first-frame cache in its process. Each 
 its own pipe, so the scheduler knows which chunk each one runs; a worker's death is seen
 through its process sentinel. drjit threads are divided among the workers
 (max(1, cores // N) each) so N workers never oversubscribe the cores. On a CUDA variant
-each worker gets one GPU in turn (CUDA_VISIBLE_DEVICES, `worker_devices`).
+each worker gets one GPU in turn (CUDA_VISIBLE_DEVICES, `sizing.worker_devices`).
 """
 
 from __future__ import annotations
@@ -24,25 +24,6 @@ from ..bake import BakedFrame
 from ..render.job import RenderJob
 from .executor import Done, Event, FrameWritten, Lost
 from .task import TaskContext, run_chunk
-
-
-def threads_per_worker(workers: int, cores: int | None = None) -> int:
-    """drjit threads for each of `workers` processes: max(1, cores // workers)."""
-    if cores is None:
-        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return max(1, cores // max(1, workers))
-
-
-def worker_devices(variant: str) -> list[str]:
-    """The GPUs local workers are spread over, one each in turn (CUDA_VISIBLE_DEVICES):
-    the devices this process may use (`variant.gpu_devices`) when `variant` renders on
-    CUDA here (requested, or `auto` with a working GPU); none otherwise."""
-    from ..variant import choose, gpu_devices
-
-    devices = gpu_devices()
-    if not devices or variant in ("llvm_ad_rgb", "scalar_rgb"):
-        return []
-    return devices if choose(variant).variant.startswith("cuda") else []
 
 
 def _on_term(signum: int, frame: Any) -> None:
@@ -112,7 +93,7 @@ class LocalExecutor:
     kind = "local"
 
     def __init__(self, workers: int, respawns: int | None = None, devices: Sequence[str] = ()) -> None:
-        """`devices`: GPUs to give the workers, one each in turn (`worker_devices`); a
+        """`devices`: GPUs to give the workers, one each in turn (`sizing.worker_devices`); a
         replacement takes its predecessor's."""
         if workers < 1:
             raise ValueError("workers must be at least 1")

@@ -9,7 +9,7 @@ import statistics
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from ..errors import DiskFaultError, MotionError, UsageError
 from ..frame_output import disk_fault, write_atomic
@@ -17,8 +17,10 @@ from ..render.job import RenderJob
 from ..scene.loader import LoadedScene
 from .config import FarmConfig
 from .selection import format_frames
-from .lifecycle import FINAL_FRAME_STATES
-from .scheduler import Scheduler
+from .states import FINAL_FRAME_STATES
+
+if TYPE_CHECKING:  # (a rerun that renders nothing writes its report without the scheduler's modules)
+    from .scheduler import Scheduler
 
 
 def _times_on_disk(job: RenderJob, loaded: LoadedScene, frame: int) -> dict[str, Any]:

@@ -1,7 +1,7 @@
 """Run a job's chunks on an executor: the local process pool (default) or a Dask cluster,
 driven by the scheduler until every chunk is done, failed everywhere, or Ctrl-C stops it
 cleanly. What to run (frames, baked inputs, the job) is the shot stage's
-(motion.pipeline.shot); this module only sizes and drives the executor.
+(motion.pipeline.shot), its size sizing.py's; this module drives the executor.
 
 drjit is imported in this process only for a small job that the shot stage runs inline
 (farm/inline.py); otherwise workers are spawned (or are Dask workers) and import it
@@ -12,33 +12,17 @@ from __future__ import annotations
 
 from pathlib import Path
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..bake import BakedFrame
 from ..errors import UsageError
 from ..render.job import RenderJob
 from .config import FarmConfig
 from .progress import Progress
-from .scheduler import Scheduler
-from .task import TaskContext
 
-MAX_DEFAULT_WORKERS = 8  # each worker keeps its own scene and kernels in memory
-MAX_WORKERS = 256  # local worker processes
-MAX_THREADS = 1024  # drjit threads per worker
-MAX_RETRIES = 100  # extra attempts per chunk
-
-
-def default_workers(frames: int, gpus: int = 0) -> int:
-    """All local cores by default: one worker per core (each gets cores // workers drjit
-    threads), no more than there are frames, at most MAX_DEFAULT_WORKERS (docs/farm.md
-    gives the measurement behind one worker per core). On a CUDA variant (`gpus`: the devices `local.worker_devices` found) one worker per
-    GPU instead: a worker's megakernel fills its GPU, and more workers per GPU only add
-    CUDA contexts, scenes and compiled kernels to its memory."""
-    from .local import threads_per_worker
-
-    units = gpus if gpus > 0 else threads_per_worker(1)
-    return max(1, min(units, frames, MAX_DEFAULT_WORKERS))
-
+if TYPE_CHECKING:  # (imported where a chunk runs: a run with none never loads the scheduler)
+    from .scheduler import Scheduler
+    from .task import TaskContext
 
 def run_chunks(
     chunk_list: list[list[int]],
@@ -62,6 +46,8 @@ def run_chunks(
     sched: Scheduler | None = None
     try:
         if chunk_list:
+            from .scheduler import Scheduler
+
             if scheduler:
                 from .address import scheduler_target
                 from .cluster import DaskExecutor
@@ -78,7 +64,8 @@ def run_chunks(
                 executor = InlineExecutor()
                 progress.note(f"  executor: inline (a small job: this process, no worker started) x {threads} threads")
             else:
-                from .local import LocalExecutor, worker_devices
+                from .local import LocalExecutor
+                from .sizing import worker_devices
 
                 executor = LocalExecutor(min(workers, len(chunk_list)), devices=worker_devices(job.variant))
                 gpus = f" on GPUs {', '.join(executor.devices)}" if executor.devices else ""

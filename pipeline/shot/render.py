@@ -26,8 +26,8 @@ from ..farm.selection import default_chunk_size, format_frames, parse_frames, pa
 from ..timeline import format_range
 from ..farm.progress import Progress
 from ..farm.report import build_report, check_writable, merge_previous, write_report, write_report_somewhere
-from ..farm.run import MAX_RETRIES, MAX_THREADS, MAX_WORKERS, default_workers, run_chunks
-from ..farm.scheduler import Scheduler
+from ..farm.run import run_chunks
+from ..farm.sizing import MAX_RETRIES, MAX_THREADS, MAX_WORKERS, default_workers, threads_per_worker, worker_devices
 from ..farm.task import TaskContext
 from ..limits import check_env_sizes
 from ..presets import Preset, load_preset, overrides_from, spread
@@ -45,6 +45,7 @@ from .request import RenderRequest
 
 if TYPE_CHECKING:
     from ..bake import BakedFrame
+    from ..farm.scheduler import Scheduler
 
 
 @dataclass(frozen=True)
@@ -126,14 +127,10 @@ def make_job(req: RenderRequest, loaded: LoadedScene, overrides: dict[str, Any],
     elif req.workers:
         workers = req.workers
     else:
-        from ..farm.local import worker_devices
-
         workers = default_workers(len(frames), len(worker_devices(loaded.scene.render.variant)))  # one per GPU on CUDA
     if req.scheduler:
         threads = req.threads  # None: each Dask worker uses its machine's cores
     else:
-        from ..farm.local import threads_per_worker
-
         threads = req.threads or threads_per_worker(workers)
     from ..identity import Order, look_hash, look_parts
 
@@ -582,8 +579,6 @@ def cut_chunks(req: RenderRequest, s: RunSetup, sort: SortedFrames) -> tuple[Run
     cost = estimate(loaded.name, job.settings_hash, samples_of(loaded.scene), len(todo), workers if not req.scheduler else 1, sort.bake_s, denoised_pixels(loaded.scene))
     inline = choose_inline(req, cost, todo)
     if inline:
-        from ..farm.local import threads_per_worker
-
         workers, threads = 1, req.threads or threads_per_worker(1)
         job = replace(job, threads=threads)
         chunk_size = max(1, len(todo))

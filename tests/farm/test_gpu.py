@@ -36,8 +36,7 @@ def test_no_nvidia_smi_means_no_gpu(tmp_path: Path, monkeypatch: pytest.MonkeyPa
 
 
 def test_workers_are_sized_by_gpus_on_cuda_and_by_cores_otherwise() -> None:
-    from motion.pipeline.farm.local import threads_per_worker
-    from motion.pipeline.farm.run import MAX_DEFAULT_WORKERS, default_workers
+    from motion.pipeline.farm.sizing import MAX_DEFAULT_WORKERS, default_workers, threads_per_worker
 
     cores = threads_per_worker(1)
     assert default_workers(100, gpus=1) == 1  # the 16-core H100 machine: one worker, not 8
@@ -48,7 +47,7 @@ def test_workers_are_sized_by_gpus_on_cuda_and_by_cores_otherwise() -> None:
 
 
 def test_a_cpu_variant_spreads_no_gpus(monkeypatch: pytest.MonkeyPatch) -> None:
-    from motion.pipeline.farm.local import worker_devices
+    from motion.pipeline.farm.sizing import worker_devices
 
     monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "0,1")
     assert worker_devices("llvm_ad_rgb") == [] and worker_devices("scalar_rgb") == []

@@ -212,9 +212,9 @@ def test_an_interrupt_settles_unfinished_frames_as_not_rendered(tmp_path: Path) 
 
 from motion.pipeline.farm import lifecycle  # noqa: E402
 from motion.pipeline.farm.lifecycle import (  # noqa: E402
-    CHUNK_STATES, CHUNK_TRANSITIONS, FINAL_CHUNK_STATES, FINAL_FRAME_STATES, FRAME_STATES, FRAME_TRANSITIONS,
-    Chunk, Cleanup, IllegalMove, Lifecycle, Notify, StopWorker, Submit,
+    CHUNK_TRANSITIONS, FRAME_TRANSITIONS, Chunk, Cleanup, IllegalMove, Lifecycle, Notify, StopWorker, Submit,
 )
+from motion.pipeline.farm.states import CHUNK_STATES, FINAL_CHUNK_STATES, FINAL_FRAME_STATES, FRAME_STATES  # noqa: E402
 
 
 def _reachable(start: str, moves: Sequence[tuple[str, str]]) -> set[str]:
