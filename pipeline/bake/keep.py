@@ -97,25 +97,34 @@ def plain(value: Any, depth: int = 0) -> Any:
 
     from pydantic import BaseModel
 
-    if depth > 64:
-        raise ValueError("the scene's records nest deeper than 64 levels")
-    if value is None or isinstance(value, (bool, int, str)):
-        return value
-    if isinstance(value, float):
-        return {"float": value.hex()}
-    if isinstance(value, Fraction):
-        return {"fraction": str(value)}
-    if isinstance(value, BaseModel):
-        return {"type": type(value).__name__, **{k: plain(getattr(value, k), depth + 1) for k in type(value).model_fields}}
-    if isinstance(value, (list, tuple)):
-        return [plain(v, depth + 1) for v in value]
-    if isinstance(value, dict):
-        return {str(k): plain(v, depth + 1) for k, v in value.items()}
     np = sys.modules.get("numpy")  # no array can be here before numpy is imported (a rerun that bakes nothing)
-    if np is not None and isinstance(value, np.ndarray):  # exact: a long array's repr elides its middle
-        data = np.ascontiguousarray(value)
-        return {"array": [data.dtype.str, list(data.shape), hashlib.sha256(data.tobytes()).hexdigest()]}
-    return {type(value).__name__: repr(value)}
+    fields: dict[type, tuple[str, ...]] = {}
+
+    def walk(value: Any, depth: int) -> Any:  # (the imports above made once, not at every node: a 2,000-object scene has 54,000)
+        if depth > 64:
+            raise ValueError("the scene's records nest deeper than 64 levels")
+        if value is None or isinstance(value, (bool, int, str)):
+            return value
+        if isinstance(value, float):
+            return {"float": value.hex()}
+        if isinstance(value, BaseModel):
+            cls = type(value)
+            names = fields.get(cls)
+            if names is None:
+                names = fields[cls] = tuple(cls.model_fields)
+            return {"type": cls.__name__, **{k: walk(getattr(value, k), depth + 1) for k in names}}
+        if isinstance(value, (list, tuple)):
+            return [walk(v, depth + 1) for v in value]
+        if isinstance(value, dict):
+            return {str(k): walk(v, depth + 1) for k, v in value.items()}
+        if isinstance(value, Fraction):
+            return {"fraction": str(value)}
+        if np is not None and isinstance(value, np.ndarray):  # exact: a long array's repr elides its middle
+            data = np.ascontiguousarray(value)
+            return {"array": [data.dtype.str, list(data.shape), hashlib.sha256(data.tobytes()).hexdigest()]}
+        return {type(value).__name__: repr(value)}
+
+    return walk(value, depth)
 
 
 def dynamics_inputs(loaded: "LoadedScene") -> dict[str, Any]:

@@ -137,7 +137,7 @@ class SceneCache:
 
     def _mover_dicts(self, name: str, stretch: np.ndarray) -> list[dict[str, Any]]:
         """A mover's shape dictionaries in its rest frame, its stretch [4, 4] baked in."""
-        obj = next(o for o in self.loaded.scene.objects if o.name == name)
+        obj = self.loaded.objects_by_name[name]
         return object_shapes(obj, self.loaded, stretch, self._materials)
 
     def _emitter_scenes(self, mover_dicts: list[list[dict[str, Any]]]) -> dict[int, Any]:
@@ -167,7 +167,7 @@ class SceneCache:
     def _holder_dicts(self, name: str) -> list[dict[str, Any]]:
         """A particle system's holder: one sphere of the particles' radius at the origin,
         wearing their material (and emitter); every particle is this sphere, moved."""
-        obj = next(o for o in self.loaded.scene.objects if o.name == name)
+        obj = self.loaded.objects_by_name[name]
         d: dict[str, Any] = {"type": "sphere", "radius": float(obj.radius)}
         d["bsdf"] = self._materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
         if obj.emission is not None:
@@ -179,13 +179,13 @@ class SceneCache:
         atlas = self.atlas
         if atlas is None:
             return
-        templates = [[load_dict(sd) for sd in md] for md in mover_dicts]
-        templates += [[load_dict(sd) for sd in self._holder_dicts(name)] for name in self.roles.particle_names]
+        holders = [self._holder_dicts(name) for name in self.roles.particle_names]
+        templates = [[load_dict(sd) for sd in md] for md in [*mover_dicts, *holders]]
         keys = [f"m{k}_{mitsuba_id(n)}" for k, n in enumerate(self.roles.mover_names)] + [f"p{k}_{mitsuba_id(n)}" for k, n in enumerate(self.roles.particle_names)]
         if templates:
             if atlas.scene is not None and self.owner is not None:
                 self.owner.forget([atlas.scene])  # the old atlas is no longer traced
-            atlas.build(templates, keys)
+            atlas.build(templates, keys, [*mover_dicts, *holders])
 
     # --- per frame (warm) ---------------------------------------------------------------
 

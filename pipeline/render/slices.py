@@ -272,7 +272,7 @@ class SlicedGeometry:
         from .build import DEFAULT_MATERIAL, emitter_dict
 
         mi = self._mi
-        obj = next(o for o in self.loaded.scene.objects if o.name == name)
+        obj = self.loaded.objects_by_name[name]
         material = materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
         bsdf = load_dict(material) if isinstance(material, dict) else material
         emitter = emitter_dict(obj.emission, self.loaded) if obj.emission is not None else None

@@ -9,6 +9,7 @@ YAML reading and source positions are `source.py`, pydantic errors -> problems
 from __future__ import annotations
 
 import dataclasses
+import functools
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,7 +23,7 @@ from . import compiled
 from .imports import expand_imports
 from .problems import problems_from_validation
 from .schema import Scene
-from .source import Loc, SourceMap, parse_yaml, read_yaml_file, yaml_path
+from .source import Loc, SourceMap, parse_kept, read_yaml_file, yaml_path
 
 __all__ = ["LoadedScene", "Loc", "deep_merge", "load_scene"]  # Loc: for type hints of the motion stage
 
@@ -42,6 +43,12 @@ class LoadedScene:
         frames): a stem the `name:` field would refuse keeps its letters, digits, '_', '-'
         and inner '.', and never starts with '.' (`.x.yaml` wrote hidden frames `.x.0000.exr`)."""
         return self.scene.name or safe_stem(self.path.stem)
+
+    @functools.cached_property
+    def objects_by_name(self) -> dict[str, Any]:
+        """The scene's objects by name, made once (the renderer looks every mover up: a scan
+        of the list each time cost 0.09 s of a 1,000-mover first frame)."""
+        return {o.name: o for o in self.scene.objects}
 
     @property
     def base_dir(self) -> Path:
@@ -63,7 +70,7 @@ def load_scene(path: str | Path, overrides: Mapping[str, Any] | None = None, ass
     path = Path(path)
     file = str(path)
     text = read_yaml_file(path, "scene file")
-    data, source = parse_yaml(text, file)
+    data, source = parse_kept(text, file)
     if data is None:
         raise SceneError([Problem(file, 1, 1, "", "the scene file is empty; expected a mapping with at least 'camera'")])
     if not isinstance(data, dict):
