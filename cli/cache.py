@@ -47,7 +47,7 @@ def cache_info() -> None:
 @click.option("--what", type=click.Choice(["all", "assets", "kernels", "validation", "shipped", "simulations"]), default="all", show_default=True)
 def cache_clear(what: str) -> None:
     """Delete cached files (they are rebuilt on demand): assets holds the converted assets,
-    imports and import records; validation the kept validators and asset passes; shipped
+    imports and import records; validation the kept validators, parsed scene files and asset passes; shipped
     what shipped jobs carried to this worker; simulations the kept dynamics simulations."""
     from motion.pipeline.cache import clear_kernels
     from motion.pipeline.render.assets import clear

@@ -57,8 +57,9 @@ _WARNED: set[str] = set()  # cache roots warned about in this process
 
 
 def validation_dir() -> Path:
-    """What validation keeps: the scene's compiled validator (scene/compiled.py) and the
-    assets whose bytes passed their checks (checked.py), under the cache root."""
+    """What validation keeps: the scene's compiled validator (scene/compiled.py), the scene
+    files parsed (source.py: parse_kept) and the assets whose bytes passed their checks
+    (checked.py), under the cache root."""
     return cache_root() / "validation"
 
 
@@ -413,7 +414,7 @@ STORES: dict[str, Store] = {s.name: s for s in (
     Store("passes", "validation/assets", "asset files whose bytes passed their checks (scene/checked.py)", tag="pass-v2",
           code=("images.py", "meshes.py", "limits.py"), cap_bytes=False, cap_files=1024, shards=True),
     Store("parsed", "validation/parsed", "scene files parsed from YAML, as JSON, by their bytes (scene/source.py: parse_kept)", tag="parsed-v1",
-          code=("scene/source.py",), cap_files=256, shards=True),
+          code=("scene/source.py",), cap_files=256),
     Store("validators", "validation", "the scene format's validators (scene/compiled.py)", tag="validator-v2", cap_bytes=False, cap_files=64),
     Store("shipped", "shipped", "assets a shipped job carried to this worker (farm/transfer/store.py)"),
     Store("simulations", "simulations", "dynamics simulations kept for reruns whose dynamics inputs did not change (bake/keep.py)", tag="sim-v1", cap_files=64),
