@@ -1,6 +1,6 @@
 """Motion blur that scales: N rigid movers against the same N objects standing still.
 
-    python bench/bench_movers.py [--counts 1,10,100,1000] [--particles 100000] [--frames 3] [--res 320x180] [--spp 16] [--json FILE]
+    python bench/bench_movers.py [--counts 1,10,100,1000] [--particles 100000] [--distinct] [--frames 3] [--res 320x180] [--spp 16] [--json FILE]
 
 The shot: N small spheres on a square grid under a constant light, each parented to an
 empty that turns (a turntable generator), so every sphere orbits its own centre with
@@ -32,8 +32,11 @@ from _common import cpu_model  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def shot(count: int, moving: bool, frames: int, res: tuple[int, int], spp: int, particles: int = 0) -> str:
-    """The scene YAML: `count` spheres on a grid, orbiting (moving) or still."""
+def shot(count: int, moving: bool, frames: int, res: tuple[int, int], spp: int, particles: int = 0, distinct: bool = False) -> str:
+    """The scene YAML: `count` spheres on a grid, orbiting (moving) or still; with
+    `distinct`, each sphere's radius differs a little from every other's (no two movers'
+    shapes are the same: each keeps a cell of the atlas of its own, as debris of unique
+    pieces does), else all share one radius (one cell, render/atlas.py)."""
     side = max(1, math.ceil(math.sqrt(count)))
     spacing = 8.0 / side
     radius = spacing * 0.3
@@ -51,7 +54,8 @@ def shot(count: int, moving: bool, frames: int, res: tuple[int, int], spp: int, 
         z = (k // side - (side - 1) / 2) * spacing
         motion = f", motion: {{type: procedural, generators: [{{type: turntable, axis: [0, 1, 0], rate: {720 + 7 * (k % 13)}}}]}}" if moving else ""
         lines.append(f"  - {{name: pivot{k}, shape: empty, transform: {{translate: [{x:.4f}, {radius:.4f}, {z:.4f}]}}{motion}}}")
-        lines.append(f"  - {{name: ball{k}, shape: sphere, radius: {radius * 0.6:.4f}, material: paint, parent: pivot{k}, transform: {{translate: [{radius * 0.5:.4f}, 0, 0]}}}}")
+        size = radius * (0.6 - 0.2 * k / max(1, count)) if distinct else radius * 0.6
+        lines.append(f"  - {{name: ball{k}, shape: sphere, radius: {size:.6f}, material: paint, parent: pivot{k}, transform: {{translate: [{radius * 0.5:.4f}, 0, 0]}}}}")
     lines.append(f"render: {{resolution: [{res[0]}, {res[1]}], spp: {spp}, max_depth: 4}}")
     return "\n".join(lines) + "\n"
 
@@ -72,13 +76,13 @@ def spray(count: int, blur: bool, frames: int, res: tuple[int, int], spp: int) -
     ]) + "\n"
 
 
-def run_case(folder: Path, count: int, moving: bool, frames: int, res: tuple[int, int], spp: int, particles: bool = False) -> dict[str, Any]:
+def run_case(folder: Path, count: int, moving: bool, frames: int, res: tuple[int, int], spp: int, particles: bool = False, distinct: bool = False) -> dict[str, Any]:
     """One `motion render` in a fresh process and cache root; the report's frame times and
     the process's peak memory."""
-    case = folder / f"{'spray' if particles else 'movers'}-{count}-{'moving' if moving else 'static'}"
+    case = folder / f"{'spray' if particles else 'movers'}-{count}-{'moving' if moving else 'static'}{'-distinct' if distinct else ''}"
     case.mkdir(parents=True, exist_ok=True)
     scene = case / "shot.yaml"
-    scene.write_text(spray(count, moving, frames, res, spp) if particles else shot(count, moving, frames, res, spp))
+    scene.write_text(spray(count, moving, frames, res, spp) if particles else shot(count, moving, frames, res, spp, distinct=distinct))
     env = {**os.environ, "MOTION_CACHE_DIR": str(case / "cache"), "MOTION_EXECUTOR": "local"}
     env.pop("DRJIT_CACHE_DIR", None)
     out = case / "out"
@@ -103,18 +107,20 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=3)
     ap.add_argument("--res", default="320x180")
     ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--distinct", action="store_true", help="every sphere of its own radius: no two movers share an atlas cell (debris of unique pieces)")
     ap.add_argument("--json", dest="json_out")
     args = ap.parse_args()
     res = tuple(int(v) for v in args.res.split("x"))
     counts = [int(c) for c in args.counts.split(",")]
-    print(f"# bench_movers: {res[0]}x{res[1]}, {args.spp} spp, {args.frames} frames, 1 worker; CPU: {cpu_model()}, {os.cpu_count()} cores")
+    print(f"# bench_movers: {res[0]}x{res[1]}, {args.spp} spp, {args.frames} frames, 1 worker, {'every sphere its own radius' if args.distinct else 'one radius'}; "
+          f"CPU: {cpu_model()}, {os.cpu_count()} cores")
     print("| N | first frame, moving | first frame, static | warm moving | warm static | warm moving / static |")
     print("|---|---|---|---|---|---|")
     results = []
     with tempfile.TemporaryDirectory(prefix="bench-movers-") as tmp:
         for n in counts:
-            moving = run_case(Path(tmp), n, True, args.frames, res, args.spp)  # type: ignore[arg-type]
-            still = run_case(Path(tmp), n, False, args.frames, res, args.spp)  # type: ignore[arg-type]
+            moving = run_case(Path(tmp), n, True, args.frames, res, args.spp, distinct=args.distinct)  # type: ignore[arg-type]
+            still = run_case(Path(tmp), n, False, args.frames, res, args.spp, distinct=args.distinct)  # type: ignore[arg-type]
             ratio = moving["warm"] / still["warm"]
             results.append({"n": n, "moving": moving, "static": still, "warm_ratio": ratio})
             print(f"| {n} | {moving['first']:.2f} s | {still['first']:.2f} s | {moving['warm']:.3f} s | {still['warm']:.3f} s | {ratio:.2f}x |", flush=True)

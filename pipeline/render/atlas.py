@@ -7,7 +7,8 @@ atlas. Each *template* (a mover, or a particle system's holder) sits in its own 
 3D grid, moved there by an offset; the cells' padded boxes never overlap. A ray mapped
 into a template's rest frame is moved by the template's offset and clipped to its box, so
 it can only meet that template's shapes: one trace site serves every mover, whatever
-their number.
+their number. Templates of the same shapes (the same kind, rest-frame placement and
+material) share one cell and one copy of the shapes; each keeps its own row of the layout.
 
 Scale (and a mover's other per-frame shape changes) is baked into the template's shapes;
 when a mover's scale changes the atlas is laid out and built again (rare: keyed scale).
@@ -15,6 +16,7 @@ when a mover's scale changes the atlas is laid out and built again (rare: keyed 
 
 from __future__ import annotations
 
+import collections
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
@@ -87,14 +89,13 @@ def translate_shape(mi: Any, shape: Any, offset: np.ndarray) -> None:
     params.update()
 
 
-def _placed_by_transform(d: dict[str, Any]) -> bool:
-    """Whether a shape dictionary is an analytic shape placed only by its to_world (a
-    sphere, a cube, a rectangle, a disk, a cylinder), so that it can be built again moved;
-    a mesh read from a file is not (read again, and its vertices carry its placement)."""
-    return d.get("type") in ANALYTIC and "to_world" in d and not isinstance(d["to_world"], (dict, str))
-
-
-ANALYTIC = frozenset({"sphere", "cube", "rectangle", "disk", "cylinder"})
+def analytic(dicts: Sequence[dict[str, Any]]) -> bool:
+    """Whether every shape dictionary of a template is an analytic shape placed only by its
+    to_world (a sphere, a cube, a rectangle, a disk, a cylinder: Mitsuba's unit shapes), so
+    that it can be bounded from the dictionary and built in the atlas already moved; a mesh
+    read from a file is not (its vertices carry its placement)."""
+    return bool(dicts) and all(d.get("type") in _UNIT_BOX or d.get("type") == "sphere" for d in dicts) and all(
+        hasattr(d.get("to_world"), "matrix") for d in dicts)
 
 
 def settle() -> None:
@@ -133,6 +134,62 @@ def bounds(shapes: Sequence[Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return lo, hi, np.array([*centre, reach * (1 + 1e-4) + 1e-5])
 
 
+# The box of each analytic shape in its own frame, before its to_world (Mitsuba's unit
+# shapes: the cube [-1, 1]^3, the rectangle and the disk in z = 0, the cylinder from z = 0
+# to 1 of radius 1); a sphere is bounded by its centre and radius instead.
+_UNIT_BOX = {"cube": ((-1, -1, -1), (1, 1, 1)), "rectangle": ((-1, -1, 0), (1, 1, 0)), "disk": ((-1, -1, 0), (1, 1, 0)), "cylinder": ((-1, -1, 0), (1, 1, 1))}
+
+
+def dict_bounds(dicts: Sequence[dict[str, Any]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`bounds` of analytic shapes from their dictionaries (`analytic`), none
+    built: a sphere's centre and its largest axis as radius, another shape's unit box's
+    corners through its to_world (its convex hull holds the shape). At 1,000 movers, building
+    each shape once only to bound it cost 0.1 s of the first frame."""
+    lows, highs, parts = [], [], []
+    for d in dicts:
+        m = np.array(d["to_world"].matrix, dtype=np.float64).reshape(4, 4)
+        if d["type"] == "sphere":
+            c, r = m[:3, 3], float(np.linalg.norm(m[:3, :3], axis=0).max())
+            lows.append(c - r)
+            highs.append(c + r)
+            parts.append(("sphere", c, r))
+        else:
+            lo, hi = _UNIT_BOX[d["type"]]
+            corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]) @ m.T
+            lows.append(corners[:, :3].min(axis=0))
+            highs.append(corners[:, :3].max(axis=0))
+            parts.append(("points", corners[:, :3], 0.0))
+    if not dicts:
+        return np.zeros(3), np.zeros(3), np.zeros(4)
+    lo, hi = np.min(lows, axis=0), np.max(highs, axis=0)
+    centre = (lo + hi) / 2
+    reach = max(float(np.linalg.norm(c - centre)) + r if kind == "sphere" else float(np.sqrt(((c - centre) ** 2).sum(axis=1).max())) for kind, c, r in parts)
+    return lo, hi, np.array([*centre, reach * (1 + 1e-4) + 1e-5])
+
+
+def _sharing_key(dicts: Sequence[dict[str, Any]]) -> tuple[Any, ...] | None:
+    """What makes two templates of analytic shapes the same in their rest frames: each
+    shape's kind, to_world and material (the very BSDF the job built); None for a template
+    that keeps a cell of its own (an emitter, a material given inline, anything else)."""
+    out = []
+    for d in dicts:
+        if set(d) != {"type", "to_world", "bsdf"} or isinstance(d["bsdf"], (dict, str)):
+            return None
+        out.append((d["type"], tuple(np.array(d["to_world"].matrix, dtype=np.float64).ravel()), id(d["bsdf"])))
+    return tuple(out)
+
+
+def _cells(templates: Sequence[Sequence[Any] | None], dicts: Sequence[Sequence[dict[str, Any]] | None] | None) -> list[int]:
+    """Each template's cell, named by the first template of the same shapes (itself when
+    it shares with none): templates given as dictionaries only (analytic) share."""
+    first: dict[tuple[Any, ...], int] = {}
+    out = []
+    for t, shapes in enumerate(templates):
+        key = _sharing_key(dicts[t]) if shapes is None and dicts is not None and dicts[t] is not None else None  # type: ignore[arg-type]
+        out.append(first.setdefault(key, t) if key is not None else t)
+    return out
+
+
 def shape_sphere(shape: Any, centre: np.ndarray) -> float:
     """The farthest any point of a built shape lies from `centre` (an upper bound): a
     mesh's farthest vertex, a sphere's own radius, otherwise its box's farthest corner."""
@@ -159,26 +216,41 @@ class Atlas:
         self._make_scene = make_scene
         self.scene: Any = None
         self.layout = lay_out(np.zeros((0, 2, 3)), np.zeros((0, 4)))
+        self.cell_of: list[int] = []  # each template's cell, named by its first template
+        self._sharing: collections.Counter[int] = collections.Counter()
 
-    def build(self, templates: Sequence[Sequence[Any]], keys: Sequence[str], dicts: Sequence[Sequence[dict[str, Any]] | None] | None = None) -> None:
-        """Lay out and build the atlas from each template's built shapes; `keys` name each
-        template's shapes in the scene dictionary. A template whose shape dictionaries are
-        given (`dicts`, analytic shapes placed by their to_world) goes into the scene as
-        those dictionaries with the cell's offset in front of their to_world, built with the
-        scene; any other is moved in place (`translate_shape`: a mesh's vertices). At 1,000
-        movers the in-place moves cost half a second of the first frame."""
+    def build(self, templates: Sequence[Sequence[Any] | None], keys: Sequence[str], dicts: Sequence[Sequence[dict[str, Any]] | None] | None = None) -> None:
+        """Lay out and build the atlas; `keys` name each template's shapes in the scene
+        dictionary. A template given as its shape dictionaries only (`dicts`, with None for
+        its built shapes: analytic shapes placed by their to_world, `analytic`) is bounded
+        from them and goes into the scene as those dictionaries with the cell's offset in
+        front of their to_world, built with the scene; any other is given built, bounded
+        from its shapes and moved in place (`translate_shape`: a mesh's vertices). At 1,000
+        movers, moving each shape in place cost half a second of the first frame.
+
+        Templates of the same shapes in their rest frames (`_sharing_key`: a crowd's agents,
+        debris of a few kinds, a grid of the same ball) share one cell and one copy of their
+        shapes: each keeps its own row of the layout (the kernel reads a proxy's template by
+        its own index), with the cell's offset and box."""
+        self.cell_of = _cells(templates, dicts)
+        cells = sorted(set(self.cell_of))
         boxes, spheres = [], []
-        for shapes in templates:
-            lo, hi, sphere = bounds(shapes)
+        for t in cells:
+            lo, hi, sphere = bounds(templates[t]) if templates[t] is not None else dict_bounds(dicts[t])  # type: ignore[arg-type, index]
             boxes.append((lo, hi))
             spheres.append(sphere)
-        self.layout = lay_out(np.asarray(boxes, dtype=float).reshape(-1, 2, 3), np.asarray(spheres, dtype=float).reshape(-1, 4))
+        laid = lay_out(np.asarray(boxes, dtype=float).reshape(-1, 2, 3), np.asarray(spheres, dtype=float).reshape(-1, 4))
+        place = {c: i for i, c in enumerate(cells)}
+        row = np.array([place[c] for c in self.cell_of], dtype=int)
+        self.layout = Layout(laid.offset[row], laid.box[row], laid.sphere[row], laid.centre[row], laid.cell)  # (copies: a template's row changes alone)
+        self._sharing = collections.Counter(self.cell_of)
         d: dict[str, Any] = {"type": "scene"}
         for t, (shapes, key) in enumerate(zip(templates, keys)):
-            placed = dicts[t] if dicts is not None and t < len(dicts) else None
-            if placed is not None and len(placed) == len(shapes) and all(_placed_by_transform(sd) for sd in placed):
+            if self.cell_of[t] != t:
+                continue  # its cell's shapes are another template's
+            if shapes is None:
                 moved = self._mi.ScalarTransform4f().translate([float(c) for c in self.layout.offset[t]])
-                for k, sd in enumerate(placed):
+                for k, sd in enumerate(dicts[t]):  # type: ignore[index]
                     d[f"{key}__{k}"] = {**sd, "to_world": moved @ sd["to_world"]}
                 continue
             for k, s in enumerate(shapes):
@@ -196,6 +268,8 @@ class Atlas:
         same scene and cell: written through its parameters, so the kernels are replayed.
         False where they do not fit the cell (the caller then builds the atlas again)."""
         layout = self.layout
+        if self._sharing.get(self.cell_of[template], 1) > 1:
+            return False  # its cell holds other templates' shapes too: it gets a cell of its own
         lo, hi, sphere = bounds(shapes)
         pad = PAD * layout.cell + 1e-5
         if np.any(hi - lo + 2 * pad > layout.cell / (1.0 + GAP)):

@@ -24,7 +24,7 @@ from ..motion.pose import quat_mul
 from ..scene.lights import light_key
 from ..scene.loader import LoadedScene
 from ..variant import load_dict
-from .atlas import Atlas, copy_shape
+from .atlas import Atlas, analytic, copy_shape
 from .broadphase import EMPTY_BOX, Broadphase, particle_proxies, reach, separate, sphere_proxies, swept_spheres, union_box
 from .build import DEFAULT_MATERIAL, emitter_dict, material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
@@ -180,12 +180,13 @@ class SceneCache:
         if atlas is None:
             return
         holders = [self._holder_dicts(name) for name in self.roles.particle_names]
-        templates = [[load_dict(sd) for sd in md] for md in [*mover_dicts, *holders]]
+        dicts = [*mover_dicts, *holders]
+        templates = [None if analytic(md) else [load_dict(sd) for sd in md] for md in dicts]  # (analytic ones: bounded and built in the atlas from their dictionaries)
         keys = [f"m{k}_{mitsuba_id(n)}" for k, n in enumerate(self.roles.mover_names)] + [f"p{k}_{mitsuba_id(n)}" for k, n in enumerate(self.roles.particle_names)]
         if templates:
             if atlas.scene is not None and self.owner is not None:
                 self.owner.forget([atlas.scene])  # the old atlas is no longer traced
-            atlas.build(templates, keys, [*mover_dicts, *holders])
+            atlas.build(templates, keys, dicts)
 
     # --- per frame (warm) ---------------------------------------------------------------
 
