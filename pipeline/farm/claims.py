@@ -30,7 +30,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import socket
 import threading
 import time
 import uuid
@@ -62,12 +61,18 @@ class Claimant:
     @classmethod
     def here(cls, run_id: str) -> "Claimant":
         """The claimant of this process (its host and pid) for run `run_id`."""
-        return cls(run_id=run_id, host=socket.gethostname(), pid=os.getpid())
+        return cls(run_id=run_id, host=_host(), pid=os.getpid())
+
+
+def _host() -> str:
+    """This machine's name, as `socket.gethostname()` gives it on POSIX (uname's node name),
+    without loading the socket module: a rerun that renders nothing takes its run lock."""
+    return os.uname().nodename
 
 
 def new_run_id() -> str:
     """A fresh id for one `motion render` invocation."""
-    return f"{socket.gethostname()}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    return f"{_host()}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
 
 
 def claim_path(frame_file: str | Path) -> Path:
@@ -124,7 +129,7 @@ def is_stale(path: Path, info: dict, stale_after_s: float) -> bool:
         return age > WRITE_GRACE_S or age < -WRITE_GRACE_S
     if not 1 <= info["pid"] <= MAX_PID:
         return True  # no process has that pid, on any host
-    if info.get("host") == socket.gethostname():
+    if info.get("host") == _host():
         if not _pid_alive(info["pid"]):
             return True
     limit = stale_after_s if math.isfinite(stale_after_s) and stale_after_s > 0 else MAX_STALE_AFTER_S
@@ -258,7 +263,7 @@ def _lock_live(path: Path, info: dict) -> bool:
         return -WRITE_GRACE_S <= age <= WRITE_GRACE_S  # being written, or garbage
     if not 1 <= info["pid"] <= MAX_PID:
         return False  # no process has that pid, on any host
-    if info.get("host") == socket.gethostname() and not _pid_alive(info["pid"]):
+    if info.get("host") == _host() and not _pid_alive(info["pid"]):
         return False
     return -MAX_CLOCK_SKEW_S <= age <= RUN_LOCK_STALE_S
 

@@ -4,8 +4,8 @@ attempts, errors), per worker (first-frame cost, frames, failures, exclusion), t
 from __future__ import annotations
 
 import json
+import math
 import os
-import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -116,7 +116,7 @@ def _worker_rows(sched: Scheduler | None) -> list[dict[str, Any]]:
                 "frames": w.frames,
                 "chunks": w.chunks,
                 "first_frame_s": w.first_frame_s,
-                "warm_render_mean_s": statistics.fmean(w.warm_render_s) if w.warm_render_s else None,
+                "warm_render_mean_s": math.fsum(w.warm_render_s) / len(w.warm_render_s) if w.warm_render_s else None,  # (statistics.fmean's sum)
                 "failures": w.failures,
                 "excluded": w.excluded,
                 "lost": w.lost,

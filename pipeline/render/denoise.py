@@ -26,14 +26,12 @@ from __future__ import annotations
 import functools
 import json
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 from ..errors import RendererError
-from .aovs import layer
 
 if TYPE_CHECKING:  # numpy is imported where a frame is denoised, not where the denoiser is checked
     import numpy as np
@@ -84,20 +82,20 @@ def _probe_entry() -> Path | None:
     libraries it loads (name, size, modification time: a reinstall or another build is
     another key), and this machine (its name and architecture: a cache root shared by other
     machines is not believed for this one). None when the binding is not installed."""
-    import socket
-
     from ..cache import STORES, package_stamps
 
     listed = [stamp for name in (MODULE, "drjit", "mitsuba") for stamp in package_stamps(name)]
     if listed[0] == f"{MODULE}:absent" or any(s.endswith(":unreadable") for s in listed):
         return None
     store = STORES["probes"]
-    key = store.key(os.path.realpath(sys.executable), *listed, socket.gethostname(), os.uname().machine)
+    key = store.key(os.path.realpath(sys.executable), *listed, os.uname().nodename, os.uname().machine)  # (the host's name, as socket gives it)
     return store.path(key, stem="oidn", suffix=".json")
 
 
 def _run_probe() -> dict[str, Any]:
     """The probe itself, in a subprocess: {version, oidn, device}, or {error}."""
+    import subprocess  # (here: a kept probe, which every rerun reads, needs no process)
+
     try:
         proc = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True, timeout=120)
     except (OSError, subprocess.TimeoutExpired) as exc:
@@ -303,6 +301,8 @@ def denoise_frame(rgba: np.ndarray, aovs: Mapping[str, np.ndarray], color: np.nd
     rgba's RGB (the temporal mode's blend).
     Returns (denoised RGBA with the noisy alpha, layers + `noisy`, header attributes)."""
     import numpy as np
+
+    from .aovs import layer  # (here: the main process checks the denoiser without the AOV table)
 
     d = denoiser()
     albedo, normal = aovs.get(layer("albedo")), aovs.get(layer("normal"))

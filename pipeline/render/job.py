@@ -13,7 +13,6 @@ import datetime as _dt
 import getpass
 import json
 import os
-import socket
 import time
 from dataclasses import asdict, dataclass
 from fractions import Fraction
@@ -137,7 +136,7 @@ def warm_key() -> str | None:
 
 def worker_id() -> str:
     """This worker process as host:pid."""
-    return f"{socket.gethostname()}:{os.getpid()}"
+    return f"{os.uname().nodename}:{os.getpid()}"  # (socket.gethostname's name, without the socket module)
 
 
 def _renderer(job: RenderJob) -> tuple[FrameRenderer, LoadedScene, str]:
