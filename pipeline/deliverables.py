@@ -20,6 +20,10 @@ from typing import Literal
 
 from .errors import UsageError
 
+# `--ocio none` (or one of these names): the deliverables' view is the plain sRGB curve, no
+# OCIO config (telecine/movie.py ViewTransform)
+PLAIN_VIEW = ("none", "plain", "srgb")
+
 Kind = Literal["movie", "fields", "sheet"]
 
 

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from ..deliverables import FORMATS
+from ..deliverables import FORMATS, PLAIN_VIEW
 from ..errors import FrameIOError, InputFileError, UsageError
 from ..farm.selection import format_frames, parse_frames
 from ..timeline import format_range
@@ -111,7 +111,7 @@ def _view_entry(req: RenderRequest) -> Path | None:
     parts = [repr(float(view.exposure)), repr(view.ocio_config), repr(view.ocio_display), repr(view.ocio_view),
              file_stamp(Path(__file__).resolve().parents[1] / "telecine" / "movie.py"), *package_stamps("PyOpenColorIO")]
     config = view.ocio_config
-    if config is not None and not str(config).startswith("ocio://"):
+    if config is not None and not str(config).startswith("ocio://") and str(config).strip().lower() not in PLAIN_VIEW:
         stamp = file_stamp(os.path.realpath(config))
         if stamp.endswith(":absent"):
             return None

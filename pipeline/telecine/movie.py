@@ -26,6 +26,7 @@ from typing import Callable, Iterable, Iterator, Mapping
 
 import numpy as np
 
+from ..deliverables import PLAIN_VIEW
 from ..errors import FrameIOError, UsageError
 from ..write_policy import writing
 from ..timeline import rate_label
@@ -101,7 +102,6 @@ def builtin_ocio_configs() -> list[str]:
 
 MAX_EXPOSURE_STOPS = 32  # x 4e9 either way: past that every pixel is black or white
 DEFAULT_VIEW_CONFIG = "ocio://cg-config-latest"  # its default view: ACES 2.0 - SDR 100 nits (Rec.709) on sRGB
-PLAIN_VIEW = ("none", "plain", "srgb")  # --ocio none: the untone-mapped sRGB curve
 
 
 class ViewTransform:

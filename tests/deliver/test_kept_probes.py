@@ -45,6 +45,9 @@ def test_a_kept_view_description_is_read_back_and_a_rewritten_config_is_built_ag
     # another exposure is another description, never the kept one of exposure 0
     brighter = RenderRequest(scene=tmp_path / "s.yaml", deliver_view=DeliverView(exposure=1.0, ocio_config="none"))
     assert view_description(brighter) == "linear -> sRGB, exposure +1 stops"
+    with monkeypatch.context() as m:  # `--ocio none` names no file: kept like any other view
+        m.setattr(movie, "ViewTransform", _unbuildable)
+        assert view_description(brighter) == "linear -> sRGB, exposure +1 stops"
 
 
 def test_a_config_that_cannot_be_used_is_refused_each_time(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
