@@ -342,7 +342,6 @@ def parse_yaml(text: str, file: str) -> tuple[Any, SourceMap]:
     return data, smap
 
 
-
 # --- a parse kept between processes ------------------------------------------------------
 
 MAX_KEPT_BYTES = 64 << 20  # a kept document's JSON (aliases can make it larger than its file)
