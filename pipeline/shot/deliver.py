@@ -90,16 +90,11 @@ class DeliverPlan:
 
 
 def deliver_view(req: RenderRequest) -> Any:
-    """The deliverables' `ViewTransform` from the request's exposure and OCIO options (its
-    description kept for the next run: view_description)."""
+    """The deliverables' `ViewTransform` from the request's exposure and OCIO options."""
     from ..telecine.movie import ViewTransform
 
     view = req.deliver_view
-    built = ViewTransform(view.exposure, view.ocio_config, view.ocio_display, view.ocio_view)
-    entry = _view_entry(req)
-    if entry is not None:
-        STORES["probes"].put(entry, built.description.encode(), best_effort=True, doing="keeping the view transform's description")
-    return built
+    return ViewTransform(view.exposure, view.ocio_config, view.ocio_display, view.ocio_view)
 
 
 def _view_entry(req: RenderRequest) -> Path | None:
@@ -124,7 +119,8 @@ def view_description(req: RenderRequest) -> str:
     """The description of the request's view transform, which a deliverable's recipe
     records: kept from the last run that built the same view (`_view_entry`), else the view
     built now (OpenColorIO loaded and the config checked), so a rerun whose deliverables are
-    up to date loads neither OpenColorIO nor NumPy."""
+    up to date loads neither OpenColorIO nor NumPy. check_deliver asks first in every run
+    that delivers, so the view it builds is the one kept."""
     entry = _view_entry(req)
     data = STORES["probes"].read(entry, 4096) if entry is not None else None
     if data:
@@ -132,7 +128,10 @@ def view_description(req: RenderRequest) -> str:
             return data.decode()
         except UnicodeDecodeError:
             pass
-    return str(deliver_view(req).description)
+    description = str(deliver_view(req).description)
+    if entry is not None:
+        STORES["probes"].put(entry, description.encode(), best_effort=True, doing="keeping the view transform's description")
+    return description
 
 
 def shot_frames(loaded: Any) -> list[int]:
@@ -372,6 +371,19 @@ def recipe(fmt: str, view: Any) -> dict[str, Any]:
             "recipe_version": RECIPE_VERSION, "motion": VERSION}
 
 
+def _last_version(entry: Mapping[str, Any]) -> tuple[str | None, dict[str, Any] | None]:
+    """A deliverable's manifest entry's last version: (its name, its record), or (None, None)."""
+    name = max(entry["versions"], key=lambda v: int(v[1:]), default=None)
+    return name, (entry["versions"][name] if name else None)
+
+
+def _kept_as_made(fmt: str, last: Mapping[str, Any], view: Any, folder: Path) -> bool:
+    """Whether version `last` of `fmt` was made with this recipe (`view`: the view transform
+    or its description) and its outputs are still there: with its frames unchanged, it is up
+    to date."""
+    return last["recipe"] == recipe(fmt, view) and _outputs_present(last, folder)
+
+
 def _outputs_present(version: Mapping[str, Any], folder: Path) -> bool:
     """Every output a version lists is still there, inside the deliver folder (a link out
     of it is not trusted), at its recorded size."""
@@ -526,9 +538,7 @@ def _as_recorded(req: RenderRequest, plan: DeliverPlan, folder: Path, manifest: 
     current: dict[str, str] = {}
     description: str | None = None
     for fmt in plan.formats:
-        versions = (manifest["deliverables"].get(plan.key(fmt)) or {}).get("versions") or {}
-        last_name = max(versions, key=lambda v: int(v[1:]), default=None)
-        last = versions.get(last_name) if last_name else None
+        last_name, last = _last_version(manifest["deliverables"].get(plan.key(fmt)) or {"versions": {}})
         if last is None or last.get("lacks") != (format_frames(lacking) or None):
             return None
         files = last["frame_files"]
@@ -539,7 +549,7 @@ def _as_recorded(req: RenderRequest, plan: DeliverPlan, folder: Path, manifest: 
             if rec["name"] != path.name or rec["size"] != st.st_size or rec["mtime_ns"] != st.st_mtime_ns or not _digest(rec.get("pixels")):
                 return None
         description = description if description is not None else view_description(req)
-        if last["recipe"] != recipe(fmt, description) or not _outputs_present(last, folder):
+        if not _kept_as_made(fmt, last, description, folder):
             return None
         current[fmt] = last_name  # type: ignore[assignment]
     return current
@@ -638,9 +648,8 @@ def _one_format(fmt: str, plan: DeliverPlan, made: _Made, folder: Path, prefix: 
     """The deliverable `fmt`: its last version when made from these pictures with this
     recipe and still there, else a new version; (status, version, output names)."""
     entry = manifest["deliverables"].get(plan.key(fmt)) or {"versions": {}}
-    last_name = max(entry["versions"], key=lambda v: int(v[1:]), default=None)
-    last = entry["versions"].get(last_name) if last_name else None
-    if last is not None and _same_frames(last, made) and last["recipe"] == recipe(fmt, made.view) and _outputs_present(last, folder):
+    last_name, last = _last_version(entry)
+    if last is not None and _same_frames(last, made) and _kept_as_made(fmt, last, made.view, folder):
         names = [o["name"] for o in last["outputs"]]
         _say_up_to_date(fmt, last_name, list(made.seq.numbers), made.lacking, folder, names, say)  # type: ignore[arg-type]
         return "up to date", last_name, names  # type: ignore[return-value]
