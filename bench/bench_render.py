@@ -165,29 +165,16 @@ def fpm_figures(folder: Path, preset_args: list[str], frames: int, label: str, s
 
 
 def static_twin(folder: Path, moving: Path, fi: object) -> Path:
-    """The same shot frozen at the frame's time: every object in the one static BVH
-    (movers at their frame pose, particles as one mesh), i.e. a render with no motion."""
+    """The same shot frozen at the frame's time: every rigid object in the one static BVH
+    (movers at their frame pose) and motion blur off (particles drawn at the frame's
+    time), i.e. a render with no motion."""
     import yaml
-
-    from motion.pipeline.render.slices import particle_mesh
 
     doc = yaml.safe_load(moving.read_text())
     objects = []
     for obj in doc["objects"]:
         obj = dict(obj)
         name = obj["name"]
-        if obj.get("shape") == "particles":
-            positions, alive = fi.at_frame.particles[name].positions, fi.at_frame.particles[name].alive
-            verts, faces = particle_mesh(positions[0], alive[0], obj["radius"], int(alive[0].sum()))
-            ply = folder / f"frozen-{name}.ply"
-            with open(ply, "wb") as f:
-                f.write(f"ply\nformat binary_little_endian 1.0\nelement vertex {len(verts)}\nproperty float x\nproperty float y\nproperty float z\n"
-                        f"element face {len(faces)}\nproperty list uchar int vertex_indices\nend_header\n".encode())
-                rec = np.zeros(len(faces), dtype=[("n", "u1"), ("i", "<i4", (3,))])
-                rec["n"], rec["i"] = 3, faces
-                f.write(verts.astype(np.float32).tobytes() + rec.tobytes())
-            objects.append({"name": name, "shape": "mesh", "file": ply.name, "material": obj["material"]})
-            continue
         if "motion" in obj:
             t = fi.at_frame.objects[name].translation[0]
             obj.pop("motion")

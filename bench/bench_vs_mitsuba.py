@@ -39,32 +39,13 @@ from bench_render import shot, terrain_ply  # noqa: E402
 PRESETS = {"ci-smoke": ((64, 36), 4, 3), "preview": ((320, 180), 16, 4), "final": ((1920, 1080), 256, 8)}
 
 
-def particle_twin(renderer: Any, fi: Any, mi: Any) -> dict[str, Any]:
-    """The particle systems frozen at the frame's time, as meshes for the static twin."""
-    from motion.pipeline.render.slices import particle_mesh
-
-    out: dict[str, Any] = {}
-    for group in renderer._groups:
-        if group.kind != "particles" or group.name not in fi.at_frame.particles:
-            continue
-        positions, alive = fi.at_frame.particles[group.name].positions, fi.at_frame.particles[group.name].alive
-        verts, faces = particle_mesh(positions[0], alive[0], group.radius, positions.shape[1])
-        mesh = mi.Mesh(group.name, len(verts), len(faces))
-        params = mi.traverse(mesh)
-        params["vertex_positions"] = mi.Float(np.asarray(verts, np.float32).ravel())
-        params["faces"] = mi.UInt32(np.asarray(faces, np.uint32).ravel())
-        params.update()
-        out[group.name] = mesh
-    return out
-
-
 def twin(renderer: Any, fi: Any, mi: Any) -> Any:
-    """Mitsuba's `path` on the frame's static twin (`_full_scene` records + particles)."""
+    """Mitsuba's `path` on the frame's static twin: the scalar fallback's records of the
+    frame's time (`_full_scene_dict`: movers at their frame pose, particles as exact spheres
+    in one `ellipsoids` shape)."""
     from motion.pipeline.render.stacked import stack_frame
 
-    d = renderer._full_scene_dict(stack_frame(fi), None)
-    d.update(particle_twin(renderer, fi, mi))
-    return mi.load_dict(d)
+    return mi.load_dict(renderer._full_scene_dict(stack_frame(fi), None))
 
 
 def breakdown(renderer: Any, fi: Any) -> dict[str, float]:

@@ -130,9 +130,14 @@ def separate(proxies: np.ndarray, scale: float) -> np.ndarray:
     out = np.array(proxies, dtype=float, copy=True)
     if len(out) < 2:
         return out
-    tol = 4e-7 * scale + 2e-7
-    gap = 4.0 * tol
-    cells = np.floor(out[:, :3] / (8.0 * tol)).astype(np.int64)
+    gap = 4.0 * (4e-7 * scale + 2e-7)  # more than the walk's step at any of its distances
+    # coincident: centres within a few float32 steps of their own size (not of the walk's
+    # scale: a spray's particles a centimetre apart are distinct, and grouped by the walk's
+    # scale a 20 km sea plane made one group of a whole spray and grew its proxies by metres)
+    live = np.abs(out[:, 0]) < FAR / 2
+    size = float(np.abs(out[live, :3]).max()) if live.any() else 1.0
+    near = 4e-7 * size + 2e-7
+    cells = np.floor(out[:, :3] / (8.0 * near)).astype(np.int64)
     order = np.lexsort((out[:, 3], cells[:, 2], cells[:, 1], cells[:, 0]))
     c = cells[order]
     same = np.concatenate([[False], np.all(c[1:] == c[:-1], axis=1)])

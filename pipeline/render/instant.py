@@ -14,8 +14,8 @@ import numpy as np
 
 from ..scene.lights import light_key
 from ..scene.loader import LoadedScene
-from .build import light_dict, mitsuba_id, object_shapes, sensor_dict, trs_matrix
-from .shutter_poses import pose_at
+from .build import DEFAULT_MATERIAL, emitter_dict, light_dict, mitsuba_id, object_shapes, sensor_dict, trs_matrix
+from .shutter_poses import particles_at, pose_at
 
 if TYPE_CHECKING:
     from .stacked import StackedFrame
@@ -34,6 +34,29 @@ def add_shapes(d: dict[str, Any], loaded: LoadedScene, objects: Iterable[Any], f
             m = trs_matrix(ot, oq) @ rest_frame(fi, obj.name)
         for k, shape in enumerate(object_shapes(obj, loaded, m, materials)):
             d[f"{mitsuba_id(obj.name)}__{k}"] = shape
+
+
+def add_particles(d: dict[str, Any], loaded: LoadedScene, fi: StackedFrame, materials: dict[str, Any], u: float | None = None) -> None:
+    """Each visible particle system's live particles at the frame's time (u None) or at
+    shutter fraction u, as spheres of its radius in one Mitsuba `ellipsoids` shape (the
+    spheres the traversal draws, render/world.py), added to the scene dictionary d."""
+    import mitsuba as mi
+
+    for obj in loaded.scene.objects:
+        if not (obj.visible and obj.is_particles) or obj.name not in fi.particles:
+            continue
+        positions, alive = fi.particles[obj.name]
+        p, a = particles_at(positions, alive, u)
+        live = np.asarray(p, dtype=np.float32)[np.asarray(a, dtype=bool)]
+        if len(live) == 0:
+            continue
+        data = np.zeros((len(live), 10), dtype=np.float32)  # centre, semi-axes, quaternion (x, y, z, w)
+        data[:, :3], data[:, 3:6], data[:, 9] = live, obj.radius, 1.0
+        shape: dict[str, Any] = {"type": "ellipsoids", "extent": 1.0, "data": mi.TensorXf(data)}
+        shape["bsdf"] = materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
+        if obj.emission is not None:
+            shape["emitter"] = emitter_dict(obj.emission, loaded)
+        d[f"{mitsuba_id(obj.name)}__particles"] = shape
 
 
 def light_record(loaded: LoadedScene, index: int, light: Any, fi: StackedFrame, u: float | None = None) -> dict[str, Any]:

@@ -1,9 +1,9 @@
 """What each object and light of a scene is to the renderer, fixed for a job.
 
 An object is static (in the static set, built once, its BVH never rebuilt), a rigid mover
-(in the atlas, posed per path: render/world.py), a particle system (time slices, or with
-`PARTICLES_IN_TRAVERSAL` each particle a sphere on its baked path in the same traversal)
-or a deforming mesh (time slices: render/slices.py). A light is static, moving (a
+(in the atlas, posed per path: render/world.py), a particle system (each particle a
+sphere on its baked path, in the same traversal as the rigid movers) or a deforming mesh
+(time slices: render/slices.py). A light is static, moving (a
 record that is `posed_per_path`: point, spot, directional; posed per path by the
 integrator) or animated in another way (an environment light: updated per frame).
 """
@@ -14,14 +14,6 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..scene.loader import LoadedScene
-
-
-# Particle systems render as time slices (render/slices.py), not in the one traversal: a
-# dense spray's proxies overlap by the hundreds along a ray (each particle's proxy holds
-# its whole streak, and sprays are born at one point), and the walk visits every entry
-# with two traces (docs/rendering.md measures it); a particle is then drawn at the slice
-# nearest each path's time.
-PARTICLES_IN_TRAVERSAL = False
 
 
 def moving_objects(loaded: LoadedScene) -> set[str]:
@@ -62,15 +54,10 @@ class Roles:
 
     static_names: list[str]
     mover_names: list[str]
-    slice_names: list[str]  # non-rigid geometry: particle systems and deforming meshes
+    slice_names: list[str]  # deforming meshes: time slices (render/slices.py)
     moving_lights: list[tuple[int, Any]]  # posed per path by the integrator
     animated_lights: list[tuple[int, Any]]  # other lights that change: updated per frame
-    particle_names: tuple[str, ...] = ()  # the particle systems among `slice_names`
-
-    @property
-    def deform_names(self) -> list[str]:
-        """The deforming meshes: the non-rigid objects that are not particle systems."""
-        return [n for n in self.slice_names if n not in self.particle_names]
+    particle_names: tuple[str, ...] = ()  # particle systems: in the traversal (render/world.py)
 
 
 def sort_scene(loaded: LoadedScene) -> Roles:
@@ -78,8 +65,8 @@ def sort_scene(loaded: LoadedScene) -> Roles:
     objects = loaded.scene.objects
     moving = moving_objects(loaded)
     # non-rigid geometry: particle systems and deforming meshes
-    slice_names = [o.name for o in objects if o.visible and o.is_nonrigid]
-    sliced = set(slice_names)
+    nonrigid = [o for o in objects if o.visible and o.is_nonrigid]
+    sliced = {o.name for o in nonrigid}
     static_names = [o.name for o in objects if o.name not in moving and o.name not in sliced]
     static = set(static_names)
     mover_names = [
@@ -96,8 +83,8 @@ def sort_scene(loaded: LoadedScene) -> Roles:
     return Roles(
         static_names=static_names,
         mover_names=mover_names,
-        slice_names=slice_names,
-        particle_names=tuple(o.name for o in objects if o.name in sliced and o.is_particles) if PARTICLES_IN_TRAVERSAL else (),
+        slice_names=[o.name for o in nonrigid if not o.is_particles],
+        particle_names=tuple(o.name for o in nonrigid if o.is_particles),
         moving_lights=[(i, light) for i, light in animated if light.posed_per_path],
         animated_lights=[(i, light) for i, light in animated if not light.posed_per_path],
     )

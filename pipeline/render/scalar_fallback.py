@@ -5,8 +5,9 @@ The motion_path integrator is vectorised drjit code and needs an LLVM or CUDA va
 Under a scalar variant the worker builds the scene at one instant instead (every object
 and light placed at the frame's time, or at one shutter fraction) and renders it with
 `path`; motion blur is then the sub-frame comparison mode (the mean of instants, see
-`frame_renderer.accumulate_subframes`). Particle systems and deforming meshes are the
-renderer's own geometry (render/slices.py) and are not drawn here. Nothing is kept
+`frame_renderer.accumulate_subframes`). Particles are drawn as Mitsuba `ellipsoids` at
+the instant; deforming meshes are the renderer's own geometry (render/slices.py) and are
+not drawn here. Nothing is kept
 between frames: this is the correctness fallback, not the fast path.
 """
 
@@ -17,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 from ..scene.loader import LoadedScene
 from ..variant import load_dict
 from .build import material_dict
-from .instant import add_lights, add_shapes, sensor_record
+from .instant import add_lights, add_particles, add_shapes, sensor_record
 
 if TYPE_CHECKING:
     from .stacked import StackedFrame
@@ -34,13 +35,14 @@ class ScalarFallback:
 
     def scene_dict(self, stacked: StackedFrame, u: float | None) -> dict[str, Any]:
         """The Mitsuba dictionary of the whole scene at the frame's time (u None) or at
-        shutter fraction u: rigid objects and lights, Mitsuba's `path` integrator."""
+        shutter fraction u: rigid objects, particles and lights, Mitsuba's `path` integrator."""
         loaded = self.loaded
         scene = loaded.scene
         materials = {m.name: material_dict(m, loaded) for m in scene.materials}
         d: dict[str, Any] = {"type": "scene", "integrator": {"type": "path", "max_depth": self.max_depth, "rr_depth": scene.render.rr_depth}}
         d["sensor"] = sensor_record(loaded, self.spp, stacked, u)
         add_shapes(d, loaded, scene.objects, stacked, materials, u)
+        add_particles(d, loaded, stacked, materials, u)
         add_lights(d, loaded, stacked, u)
         return d
 

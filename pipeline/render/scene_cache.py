@@ -101,7 +101,7 @@ class SceneCache:
         self._mover_stretch = {name: rest_frame(fi, name) for name in self.roles.mover_names}
         mover_dicts = [self._mover_dicts(name, self._mover_stretch[name]) for name in self.roles.mover_names]
         types = set().union(dict_types(d), *(dict_types({str(k): v for k, v in enumerate(md)}) for md in mover_dicts))
-        if self.roles.deform_names:
+        if self.roles.slice_names:
             types.add("Mesh")
         if self.roles.particle_names:
             types.add("Sphere")
@@ -130,7 +130,7 @@ class SceneCache:
         else:
             x_fov = float(np.asarray(self._params["sensor.x_fov"]).ravel()[0]) if "sensor.x_fov" in self._params else float(fi.fov[0])
             integrator.set_projection("perspective", (w / 2) / np.tan(np.radians(x_fov) / 2), w, h)
-        self.sliced = SlicedGeometry(mi, loaded, self.roles.deform_names, fi, materials, integrator.set_slices, self.owner)
+        self.sliced = SlicedGeometry(mi, loaded, self.roles.slice_names, fi, materials, integrator.set_slices, self.owner)
         # route the sensor pose through the same parameter update warm frames use, so the
         # first warm frame replays the cold frame's kernels instead of compiling new ones
         self.update(fi)

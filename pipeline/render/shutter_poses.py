@@ -42,19 +42,27 @@ def across_shutter(t: np.ndarray, q: np.ndarray, n: int, mode: str, u_fixed: flo
     return np.repeat(np.asarray(tt)[None], n, axis=0), np.repeat(np.asarray(qq)[None], n, axis=0)
 
 
+def particles_at(positions: np.ndarray, alive: np.ndarray, u: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """A particle system's centres [P, 3] and alive flags [P] at the frame's time (u None)
+    or at shutter fraction u, from its stacked track (positions [1+N, P, 3], alive
+    [1+N, P]): centres lerped between the samples around u, alive as at the nearer one
+    (the kernel's `Movers.particle`, for one instant)."""
+    if u is None:
+        return positions[0], alive[0]
+    n = len(positions) - 1
+    x = min(max(u, 0.0), 1.0) * (n - 1)
+    i = min(int(np.floor(x)), max(n - 2, 0))
+    f = x - i
+    p = (1 - f) * positions[1 + i] + f * positions[min(2 + i, n)]
+    return p, alive[1 + i] if f < 0.5 else alive[min(2 + i, n)]
+
+
 def particles_across_shutter(positions: np.ndarray, alive: np.ndarray, n: int, mode: str, u_fixed: float | None) -> tuple[np.ndarray, np.ndarray]:
     """The N samples of a particle system's stacked track (positions [1+N, P, 3], alive
     [1+N, P]) that the integrator gets, as [P, N, 3] and [P, N]: the baked ones, or N
     copies of one instant (the frame's time for `off`, shutter fraction `u_fixed` for one
-    sub-frame: centres lerped, alive as at the nearer sample)."""
-    if mode == "off":
-        p, a = positions[0], alive[0]
-    elif u_fixed is not None:
-        x = min(max(u_fixed, 0.0), 1.0) * (n - 1)
-        i = min(int(np.floor(x)), max(n - 2, 0))
-        f = x - i
-        p = (1 - f) * positions[1 + i] + f * positions[min(2 + i, n)]
-        a = alive[1 + i] if f < 0.5 else alive[min(2 + i, n)]
-    else:
+    sub-frame: `particles_at`)."""
+    if mode != "off" and u_fixed is None:
         return np.swapaxes(positions[1:], 0, 1), np.swapaxes(alive[1:], 0, 1)
+    p, a = particles_at(positions, alive, None if mode == "off" else u_fixed)
     return np.repeat(np.asarray(p)[:, None], n, axis=1), np.repeat(np.asarray(a)[:, None], n, axis=1)

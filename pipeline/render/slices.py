@@ -1,5 +1,5 @@
-"""Time-sliced geometry for what is not a rigid mover: deforming meshes (blend shapes,
-skinning) and particle systems.
+"""Time-sliced geometry for deforming meshes (blend shapes, skinning, flocks): what is
+neither a rigid mover nor a particle system (both are in the one traversal, world.py).
 
 Each such object gets S small scenes, one per baked shutter sample; a camera path with
 shutter fraction u sees slice round(u (S - 1)), so every sample still has its own time
@@ -7,9 +7,6 @@ shutter fraction u sees slice round(u (S - 1)), so every sample still has its ow
 these meshes' vertex buffers change (each slice's own small BVH is rebuilt; no kernel is
 recompiled while the vertex count stays within the slice's capacity). Cost: S masked
 intersections per ray and group, and S small BVH builds per frame (docs/rendering.md).
-
-Particles are octahedra (6 vertices, 8 triangles) of the system's radius; a dead or
-unborn particle collapses to a point, which no ray can hit.
 
 A deforming mesh is drawn from its render vertices (`meshes.RenderMesh`: one per distinct
 position/uv/normal corner of the file, as Mitsuba's own readers weld them), so it keeps
@@ -20,7 +17,7 @@ twin's normals to float rounding); with file normals, the file's are carried,
 vertex by vertex, by a local frame (the welded mean face normal and the edge to one
 neighbour) from rest to the slice (`slice_normals`: exact when nothing deforms and for
 any rigid turn; hard edges stay hard); `face_normals: true` stays faceted.
-An emissive object or particle system
+An emissive deforming mesh
 carries its area emitter on every slice: the integrator samples the slice of the path's
 time and weights it by MIS (world.py, integrator.py), as it does emissive movers.
 """
@@ -35,33 +32,13 @@ import numpy as np
 from ..meshes import RenderMesh, load_render_mesh, plain_render_mesh, vertex_normals
 from ..motion.pose import quat_rotate
 from ..scene.loader import LoadedScene
-from ..scene.schema import Mesh, Particles
+from ..scene.schema import Mesh
 from ..variant import load_dict
 from .build import mitsuba_id
 from .sbt import SbtOwner
 
 if TYPE_CHECKING:
     from .stacked import StackedFrame
-
-# unit octahedron: particles are a pixel or two wide at typical resolutions, where 8
-# triangles read as a sphere and keep the per-frame BVH builds small (an icosahedron's 20
-# made the 10k-particle frame ~1.8x slower)
-_OCTA_V = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], dtype=np.float64)
-_OCTA_F = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]], dtype=np.uint32)
-_NV = len(_OCTA_V)
-
-
-def particle_mesh(positions: np.ndarray, alive: np.ndarray, radius: float, capacity: int) -> tuple[np.ndarray, np.ndarray]:
-    """World-space vertices [capacity*6, 3] and faces [capacity*8, 3] for particles."""
-    n = min(len(positions), capacity)
-    centres = np.zeros((capacity, 3))
-    r = np.zeros(capacity)
-    centres[:n] = positions[:n]
-    r[:n] = np.where(alive[:n], radius, 0.0)
-    verts = centres[:, None, :] + r[:, None, None] * _OCTA_V[None, :, :]
-    faces = _OCTA_F[None, :, :] + (np.arange(capacity, dtype=np.uint32) * _NV)[:, None, None]
-    return verts.reshape(-1, 3), faces.reshape(-1, 3)
-
 
 class RestNormals(NamedTuple):
     """A deforming mesh's file normals at rest under one scale, as `slice_normals` carries
@@ -159,15 +136,13 @@ def _unit(v: np.ndarray) -> np.ndarray:
 
 @dataclass
 class SliceGroup:
-    """The S slice scenes of one deforming object or particle system."""
+    """The S slice scenes of one deforming object."""
 
     name: str
-    kind: str  # "particles" | "deform"
     scenes: list[Any]
     params: list[Any]
-    capacity: int  # particles (or render vertices for a deforming mesh)
+    capacity: int  # render vertices
     faces: np.ndarray
-    radius: float = 0.0
     key: str = field(default="")
     mesh: RenderMesh | None = None  # a deforming mesh's render vertices
     smooth: bool = False  # vertex normals: the file's carried (`slice_normals`), else `vertex_normals`
@@ -177,20 +152,16 @@ class SliceGroup:
     rest_cache: dict[tuple[float, ...], Any] = field(default_factory=dict)  # scale -> `rest_normals`
 
 
-def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bsdf: Any, slices: int, radius: float = 0.0,
-                mesh: RenderMesh | None = None, smooth: bool = False, rest: np.ndarray | None = None, emitter: dict[str, Any] | None = None,
-                owner: SbtOwner | None = None) -> SliceGroup:
-    """S scenes, each with one mesh of `count` vertices (or particle capacity); a deforming
-    mesh's texture coordinates are written once here, its positions and normals per frame.
+def build_group(mi: Any, name: str, count: int, faces: np.ndarray, bsdf: Any, slices: int, mesh: RenderMesh | None = None, smooth: bool = False,
+                rest: np.ndarray | None = None, emitter: dict[str, Any] | None = None, owner: SbtOwner | None = None) -> SliceGroup:
+    """S scenes, each with one mesh of `count` vertices; a deforming mesh's texture
+    coordinates are written once here, its positions and normals per frame.
     `owner`: the SBT owner the scenes are built against (render/sbt.py)."""
     key = mitsuba_id(name)
     scenes, params = [], []
     uvs = mesh.uvs if mesh is not None else None
     for _ in range(slices):
-        if kind == "particles":
-            verts, fcs = particle_mesh(np.zeros((0, 3)), np.zeros(0, bool), radius, count)
-        else:
-            verts, fcs = np.zeros((count, 3)), faces
+        verts, fcs = np.zeros((count, 3)), faces
         props = mi.Properties()
         props["bsdf"] = bsdf
         if emitter is not None:
@@ -205,7 +176,7 @@ def build_group(mi: Any, name: str, kind: str, count: int, faces: np.ndarray, bs
         scene = (owner.scene if owner is not None else load_dict)({"type": "scene", key: shape})
         scenes.append(scene)
         params.append(mi.traverse(scene))
-    return SliceGroup(name, kind, scenes, params, count, faces, radius, key, mesh, smooth, rest, emitter, emitter is not None)
+    return SliceGroup(name, scenes, params, count, faces, key, mesh, smooth, rest, emitter, emitter is not None)
 
 
 def update_group(mi: Any, group: SliceGroup, per_slice_vertices: list[np.ndarray], per_slice_normals: list[np.ndarray] | None = None) -> None:
@@ -277,56 +248,33 @@ class SlicedGeometry:
         bsdf = load_dict(material) if isinstance(material, dict) else material
         emitter = emitter_dict(obj.emission, self.loaded) if obj.emission is not None else None
         slices = slice_count(self.loaded, fi)
-        if isinstance(obj, Particles):
-            n = fi.particles[name][0].shape[1] if name in fi.particles else 0
-            capacity = max(64, 1 << int(np.ceil(np.log2(max(n, 1) * 1.5))))
-            return build_group(mi, name, "particles", capacity, np.zeros((0, 3)), bsdf, slices, radius=obj.radius, emitter=emitter, owner=self.owner)
         from ..motion.deform import bind_mesh
 
         verts, faces = bind_mesh(self.loaded, obj, getattr(obj.deform, "detail", 16))  # the motion stage's tessellation
         mesh, smooth = render_mesh(self.loaded, obj, len(verts), faces)
-        return build_group(mi, name, "deform", len(mesh.index), np.asarray(mesh.faces, np.uint32), bsdf, slices, mesh=mesh, smooth=smooth, rest=verts, emitter=emitter, owner=self.owner)
+        return build_group(mi, name, len(mesh.index), np.asarray(mesh.faces, np.uint32), bsdf, slices, mesh=mesh, smooth=smooth, rest=verts, emitter=emitter, owner=self.owner)
 
     def update(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> None:
-        """Each slice's geometry at its time (`slice_samples`): particles from their
-        baked positions, deforming meshes from their object-space vertices posed by the
-        object's own baked frame."""
+        """Each slice's geometry at its time (`slice_samples`): the object-space vertices
+        posed by the object's own baked frame."""
         n = fi.samples
         index = slice_samples(n, slice_count(self.loaded, fi), mode, u_fixed)
         for g in self.groups:
             per_slice, normals = [], []
-            if g.kind == "particles":
-                positions, alive = fi.particles.get(g.name, (np.zeros((n + 1, 0, 3)), np.zeros((n + 1, 0), bool)))
-                if positions.shape[1] > g.capacity:  # more particles than room: grow (one recompile)
-                    self._grow(g, positions.shape[1])
-                    return self.update(fi, mode, u_fixed)
-                for i in index:
-                    per_slice.append(particle_mesh(positions[i], alive[i], g.radius, g.capacity)[0])
-            else:
-                t, q, s = fi.objects[g.name]
-                local = fi.vertices[g.name]
-                mesh = g.mesh if g.mesh is not None else plain_render_mesh(g.capacity, g.faces)
-                stretch = fi.stretches.get(g.name)  # a symmetric stretch under a non-uniform parent scale
-                for i in index:
-                    scaled = local[i] @ stretch[i].T if stretch is not None else local[i] * s[i]
-                    world = np.asarray(quat_rotate(q[i], scaled[mesh.index]) + t[i], np.float32)
-                    per_slice.append(world)
-                    if g.smooth and g.rest is not None and mesh.normals is not None and stretch is None:
-                        key = tuple(float(c) for c in s[i])
-                        if key not in g.rest_cache:
-                            g.rest_cache.clear()
-                            g.rest_cache[key] = rest_normals(g.rest, mesh, s[i])
-                        normals.append(quat_rotate(q[i], slice_normals(scaled, g.rest_cache[key], mesh)))
-                    elif g.smooth:  # from the positions Mitsuba is given, as it would
-                        normals.append(vertex_normals(world, mesh.faces))
+            t, q, s = fi.objects[g.name]
+            local = fi.vertices[g.name]
+            mesh = g.mesh if g.mesh is not None else plain_render_mesh(g.capacity, g.faces)
+            stretch = fi.stretches.get(g.name)  # a symmetric stretch under a non-uniform parent scale
+            for i in index:
+                scaled = local[i] @ stretch[i].T if stretch is not None else local[i] * s[i]
+                world = np.asarray(quat_rotate(q[i], scaled[mesh.index]) + t[i], np.float32)
+                per_slice.append(world)
+                if g.smooth and g.rest is not None and mesh.normals is not None and stretch is None:
+                    key = tuple(float(c) for c in s[i])
+                    if key not in g.rest_cache:
+                        g.rest_cache.clear()
+                        g.rest_cache[key] = rest_normals(g.rest, mesh, s[i])
+                    normals.append(quat_rotate(q[i], slice_normals(scaled, g.rest_cache[key], mesh)))
+                elif g.smooth:  # from the positions Mitsuba is given, as it would
+                    normals.append(vertex_normals(world, mesh.faces))
             update_group(self._mi, g, per_slice, normals or None)
-
-    def _grow(self, group: SliceGroup, needed: int) -> None:
-        """Replace a particle group by one with room for `needed` particles (x1.5)."""
-        k = self.groups.index(group)
-        capacity = 1 << int(np.ceil(np.log2(needed * 1.5)))
-        bsdf = group.scenes[0].shapes()[0].bsdf()
-        self.groups[k] = build_group(self._mi, group.name, "particles", capacity, group.faces, bsdf, len(group.scenes), radius=group.radius, emitter=group.emitter, owner=self.owner)
-        if self.owner is not None:
-            self.owner.forget(group.scenes)
-        self._on_regroup([g.scenes for g in self.groups])

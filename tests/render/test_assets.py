@@ -143,14 +143,9 @@ def test_deforming_asset_agrees_with_mitsuba_path(tmp_path: Path, case: str) -> 
         _agree(image[..., :3], scene, case)
 
 
-def test_emissive_particles_agree_with_mitsuba_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """Emissive particles in the one traversal (`roles.PARTICLES_IN_TRAVERSAL`, off by
-    default) light the floor and glow: against the same spheres (at the baked positions)
-    as emissive spheres in Mitsuba's `path`. There particles are reached by BSDF sampling
-    only (render/world.py): the same image, with more noise than emitter sampling."""
-    from motion.pipeline.render import roles
-
-    monkeypatch.setattr(roles, "PARTICLES_IN_TRAVERSAL", True)
+def test_emissive_particles_agree_with_mitsuba_path(tmp_path: Path) -> None:
+    """Emissive particles (spheres in the one traversal) light the floor and glow: against
+    the same spheres (at the baked positions) as emissive spheres in Mitsuba's `path`."""
     activate()
     import mitsuba as mi
 

@@ -133,6 +133,23 @@ def test_coincident_proxies_are_made_apart() -> None:
     np.testing.assert_array_equal(out[3], sphere_proxies(spheres)[3])
 
 
+def test_distinct_proxies_stay_tight_whatever_the_walks_scale() -> None:
+    """A spray's particles a few millimetres apart are not coincident, however far the
+    walk reaches: with cannonball-splash's 20 km sea (a walk scale of 35 km) they were
+    grouped by that scale into one run and grown by up to 9 m each, and one frame of the
+    spray took minutes. Only centres within float steps of each other are made apart."""
+    from motion.pipeline.render.broadphase import separate, sphere_proxies
+
+    rng = np.random.default_rng(5)
+    centres = np.array([2.0, 0.05, -12.0]) + rng.uniform(-1.0, 1.0, size=(2000, 3))
+    spheres = np.concatenate([centres, np.full((2000, 1), 0.03)], axis=1)
+    spheres[1:4] = spheres[0]  # four at one point (born together): made apart
+    out = separate(sphere_proxies(spheres), scale=35_000.0)
+    np.testing.assert_array_equal(out[4:], sphere_proxies(spheres)[4:])
+    radii = np.sort(out[:4, 3])
+    assert np.all(np.diff(radii) > 2 * (2e-7 * 35_000.0 + 1e-7))
+
+
 def test_the_atlas_cells_never_overlap() -> None:
     from motion.pipeline.render.atlas import lay_out
 

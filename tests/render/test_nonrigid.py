@@ -34,7 +34,8 @@ def _orange(img: np.ndarray) -> int:
 
 def test_particle_system_renders_and_grows(tmp_path: Path) -> None:
     (early, late), stats, renderer = render(load(tmp_path, FOUNTAIN), [2, 10])
-    assert renderer.slice_names == ["fountain"] and not renderer.mover_names
+    # particles are neither time slices nor rigid movers: spheres in the one traversal
+    assert renderer.particle_names == ("fountain",) and not renderer.slice_names and not renderer.mover_names
     assert 0 < _orange(early) < _orange(late)  # more particles, higher up, later
     assert stats[1].kernels_compiled == 0
 

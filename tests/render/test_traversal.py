@@ -82,15 +82,11 @@ objects:
 """
 
 
-def test_a_fast_particle_streaks_like_a_rigid_sphere_with_the_same_motion(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_fast_particle_streaks_like_a_rigid_sphere_with_the_same_motion(tmp_path: Path) -> None:
     """A particle and a rigid sphere of the same radius, moving the same way (60 m/s across
     the frame, a 180-degree shutter, frame 1 at 1/24 s: the streak from x = -0.625 to
-    0.625): the same continuous streak within noise, no gaps, with particles in the one
-    traversal (`roles.PARTICLES_IN_TRAVERSAL`; off by default until dense sprays scale:
-    docs/rendering.md; the time slices show `time_slices` separate dots)."""
-    from motion.pipeline.render import roles
-
-    monkeypatch.setattr(roles, "PARTICLES_IN_TRAVERSAL", True)
+    0.625): the same continuous streak within noise, no gaps, at default settings (the
+    time slices particles were once drawn as left `time_slices` separate dots)."""
     rigid = PARTICLE + """  - {name: ball, shape: sphere, radius: 0.1, material: dark, motion: {type: procedural, generators: [{type: ballistic, x0: [-2.5, 0, 0], v0: [60, 0, 0], a: [0, 0, 0]}]}}
 """
     particle = PARTICLE + """  - {name: spray, shape: particles, radius: 0.1, material: dark, emitter: {rate: 1, start: 0, stop: 0.001, lifetime: 10, position: [-2.5, 0, 0], direction: [1, 0, 0], speed: 60, spread: 0}}
