@@ -69,18 +69,28 @@ def sphere_proxies(spheres: np.ndarray) -> np.ndarray:
     return out
 
 
-def particle_proxies(positions: np.ndarray, alive: np.ndarray, radius: np.ndarray) -> np.ndarray:
+def particle_proxies(positions: np.ndarray, alive: np.ndarray, radius: np.ndarray, also: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Ellipsoid records [C, 10] holding each particle across the shutter: positions
-    [C, N, 3] and alive [C, N] at the N samples, radius [C]."""
+    [C, N, 3] and alive [C, N] at the N samples in time order, radius [C]; `also`:
+    (positions [C, 3], alive [C]) at one more instant inside the shutter (the frame's
+    time), held too. The chord runs from the first to the last live sample in time: with
+    the frame's time (the shutter's middle, for a centred shutter) taken as an end, the
+    chord covered half the path and the proxies grew to spheres of the path's length
+    (cannonball-splash's spray: 2.3x across)."""
     count = len(positions)
     out = np.zeros((count, FLOATS))
     out[:, 9] = 1.0
     if count == 0:
         return out
+    n = alive.shape[1]
+    if also is not None:  # one more row, after the samples: an end only where no sample is live
+        positions = np.concatenate([positions, np.asarray(also[0], dtype=float)[:, None]], axis=1)
+        alive = np.concatenate([alive, np.asarray(also[1], dtype=bool)[:, None]], axis=1)
     live = alive.any(axis=1)
+    in_shutter = alive[:, :n].any(axis=1)
     # the path's ends: the first and last samples the particle is alive at
-    first = np.argmax(alive, axis=1)
-    last = alive.shape[1] - 1 - np.argmax(alive[:, ::-1], axis=1)
+    first = np.where(in_shutter, np.argmax(alive[:, :n], axis=1), n)
+    last = np.where(in_shutter, n - 1 - np.argmax(alive[:, n - 1::-1], axis=1), n)
     rows = np.arange(count)
     a, b = positions[rows, first], positions[rows, last]
     chord = b - a

@@ -318,7 +318,7 @@ class SceneCache:
                 pa[at:at + positions.shape[1]] = np.swapaxes(alive, 0, 1)
             pr[at:at + room] = atlas.layout.sphere[m + k, 3]
             at += room
-        proxies = np.concatenate([sphere_proxies(swept_spheres(mt, mq, atlas.layout.sphere[:m])), particle_proxies(pp, pa, pr)])
+        proxies = np.concatenate([sphere_proxies(swept_spheres(mt, mq, atlas.layout.sphere[:m])), particle_proxies(pp[:, 1:], pa[:, 1:], pr, (pp[:, 0], pa[:, 0]))])
         proxies = separate(proxies, self._walk_scale(fi, proxies))
         self._reach = reach(proxies)
         self._proxy_box = union_box(proxies)

@@ -133,6 +133,26 @@ def test_coincident_proxies_are_made_apart() -> None:
     np.testing.assert_array_equal(out[3], sphere_proxies(spheres)[3])
 
 
+def test_the_frames_time_in_the_shutters_middle_keeps_a_particles_proxy_along_its_path() -> None:
+    """The renderer bounds every baked row: the N shutter samples and the frame's time,
+    which a centred shutter puts in their middle. Taken as the chord's first end, the
+    chord covered half the path and the sample at the shutter's opening lay half a path
+    off it: the proxy became a sphere as wide as the path (cannonball-splash's spray,
+    2.3x across, and its splash frames 2.3x slower). The frame's time is held, not an end."""
+    from motion.pipeline.render.broadphase import particle_proxies
+
+    path = np.linspace([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], 9)[None]  # [1, N, 3]: 1 m along x
+    alive = np.ones((1, 9), bool)
+    middle = (path[:, 4], np.ones(1, bool))
+    (proxy,) = particle_proxies(path, alive, np.array([0.03]), middle)
+    np.testing.assert_allclose(proxy[:3], [0.5, 0.0, 0.0], atol=1e-9)
+    assert proxy[3] < np.sqrt(2.0) * (0.5 + 0.03) * 1.01  # along the path
+    assert proxy[4] < np.sqrt(2.0) * 0.03 * 1.01  # across it: the particle's own width
+    # a particle alive only at the frame's time is held there
+    (born,) = particle_proxies(path, np.zeros((1, 9), bool), np.array([0.03]), middle)
+    np.testing.assert_allclose(born[:3], path[0, 4], atol=1e-9)
+
+
 def test_distinct_proxies_stay_tight_whatever_the_walks_scale() -> None:
     """A spray's particles a few millimetres apart are not coincident, however far the
     walk reaches: with cannonball-splash's 20 km sea (a walk scale of 35 km) they were
