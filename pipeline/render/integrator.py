@@ -137,7 +137,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         (the moving lights of `set_lights`, in order); `moving`: the atlas's templates and
         the particles (`template_offset` [T, 3], `template_box` [T, 2, 3],
         `template_sphere` [T, 4], `particle_p` [C, N, 3], `particle_alive` [C, N],
-        `particle_template` [C], `reach` [1]; render/scene_cache.py). A shape other than
+        `particle_template` [C], `reach` [1], `proxy_box` [2, 3], `regions` [2]; render/scene_cache.py). A shape other than
         these is a `FrameDataError`."""
         m, n, nl = self.world.rigid, self.frame_data.n_samples, len(self.lights)
         c = self.world.particles
@@ -166,6 +166,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
                 "particle_template": (moving.get("particle_template", np.zeros(0)), (c,)),
                 "reach": (moving.get("reach", np.zeros(1)), (1,)),
                 "proxy_box": (moving.get("proxy_box", EMPTY_BOX), (2, 3)),
+                "regions": (moving.get("regions", np.array([1.0, 0.0])), (2,)),
             }
         )
 

@@ -37,10 +37,12 @@ from ..motion.pose import SLERP_LINEAR_BELOW
 #   particle_alive [C, N]                  1 where a particle is alive at a sample, else 0
 #   particle_template [C]                  the template (its system's holder) of each particle
 #   reach [1]                              how far behind a ray the broadphase walk starts
+#   proxy_box [2, 3]                       the box holding every live proxy (world space)
+#   regions [2]                            the shutter's parts B and their regions' spacing (render/broadphase.py)
 FRAME_BLOCKS = (
     "mover_t", "mover_q", "camera_t", "camera_rel", "sensor_origin", "camera_q", "light_t", "light_q", "light_rgb",
     "template_offset", "template_box", "template_sphere", "particle_p", "particle_alive", "particle_template", "reach",
-    "proxy_box",
+    "proxy_box", "regions",
 )
 
 
@@ -211,6 +213,7 @@ class Movers:
         self.rigid = rigid
         self.particles = particles
         self.active = active
+        self.u = u  # the path's shutter fraction
         self.segment = data.segment(u)
 
     def __len__(self) -> int:

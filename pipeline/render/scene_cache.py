@@ -25,7 +25,7 @@ from ..scene.lights import light_key
 from ..scene.loader import LoadedScene
 from ..variant import load_dict
 from .atlas import Atlas, analytic, copy_shape
-from .broadphase import EMPTY_BOX, Broadphase, particle_proxies, reach, separate, sphere_proxies, swept_spheres, union_box
+from .broadphase import EMPTY_BOX, Broadphase, in_regions, parts, particle_proxies, reach, separate, sphere_proxies, swept_spheres
 from .build import DEFAULT_MATERIAL, emitter_dict, material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
 from .instant import add_lights, add_shapes, light_record, rest_frame, sensor_record
@@ -59,6 +59,7 @@ class SceneCache:
         self._holders: dict[str, Any] = {}  # emissive particle system -> its holder sphere's own scene
         self._reach = 1e-3  # how far behind a ray the broadphase walk starts (broadphase.reach)
         self._proxy_box = EMPTY_BOX  # the box holding every live proxy (broadphase.union_box)
+        self._regions = np.array([1.0, 0.0])  # the shutter's parts and their regions' spacing (broadphase.in_regions)
         self.sliced: SlicedGeometry | None = None
         self.owner: SbtOwner | None = None  # the SBT owner of every scene the kernel traces
 
@@ -208,7 +209,6 @@ class SceneCache:
         if changed:
             params.update()
         changed += self._update_mover_scales(fi)
-        self._update_broadphase(fi)  # a scene update, before the render: its kernels are the update's
         return tuple(changed)
 
     def _update_lights(self, fi: StackedFrame) -> list[str]:
@@ -277,12 +277,17 @@ class SceneCache:
         else:  # the baked samples as they are: one stack, no per-mover work
             mt = np.array([fi.objects[name][0][1:] for name in names], dtype=float).reshape(len(names), n, 3)
             mq = np.array([fi.objects[name][1][1:] for name in names], dtype=float).reshape(len(names), n, 4)
+        self._grow_particles(fi)
+        particles = self._particles_frame(fi, mode, u_fixed)
+        # a scene update before the render (its kernels are the update's), from exactly the
+        # samples the kernel interpolates between
+        self._update_broadphase(fi, mt, mq, particles)
         ct, cq = fi.camera
         q_frame_inv = cq[0] * np.array([1, -1, -1, -1])
         cam_t, cam_q = across_shutter(ct, cq, n, mode, u_fixed)
         rel = quat_mul(cam_q, q_frame_inv[None, :])
         lt, lq, rgb = self._moving_light_frame(fi, mode, u_fixed)
-        moving = self._moving_frame(fi, mode, u_fixed)
+        moving = self._moving_frame(particles)
         self.integrator.set_frame(mt, mq, cam_t, rel, ct[0], cam_q, lt, lq, rgb, moving)
         if self.sliced is not None and self.sliced.groups:
             self.sliced.update(fi, mode, u_fixed)
@@ -292,36 +297,35 @@ class SceneCache:
         self._dr.eval()
         self._dr.sync_thread()
 
-    def _update_broadphase(self, fi: StackedFrame) -> None:
-        """The broadphase's proxies for one frame, from every baked row (the frame's time and
-        the N shutter samples: a bound for every blur mode and sub-frame), written as a
-        scene update before the render (one buffer, one BVH build), and the particles'
-        room (a system past its room grows by 1.5x: one recompile)."""
-        atlas, broad = self.atlas, self.broadphase
-        if atlas is None or broad is None or atlas.scene is None:
-            return
+    def _grow_particles(self, fi: StackedFrame) -> None:
+        """The particles' room: a system past its room grows by 1.5x (one recompile)."""
         counts = [_particle_count(fi, name) for name in self.roles.particle_names]
         if any(c > room for c, room in zip(counts, self._capacity)):
             self._capacity = [max(room, _room(c)) for c, room in zip(counts, self._capacity)]
+
+    def _update_broadphase(self, fi: StackedFrame, mt: np.ndarray, mq: np.ndarray, particles: dict[str, np.ndarray]) -> None:
+        """The broadphase's proxies for one frame, from the N samples the kernel
+        interpolates between (movers mt [M, N, 3], mq [M, N, 4]; `particles`:
+        `_particles_frame`): one proxy per thing and part of the shutter, each part in a
+        region of its own (broadphase.in_regions), written as a scene update before the
+        render (one buffer, one BVH build)."""
+        atlas, broad = self.atlas, self.broadphase
+        if atlas is None or broad is None or atlas.scene is None:
+            return
         total = int(sum(self._capacity))
-        names = self.roles.mover_names
-        m = len(names)
-        rows = fi.samples + 1
-        mt = np.array([fi.objects[name][0] for name in names], dtype=float).reshape(m, rows, 3)
-        mq = np.array([fi.objects[name][1] for name in names], dtype=float).reshape(m, rows, 4)
-        pp, pa, pr = np.zeros((total, rows, 3)), np.zeros((total, rows), bool), np.zeros(total)
-        at = 0
-        for k, (name, room) in enumerate(zip(self.roles.particle_names, self._capacity)):
-            if name in fi.particles:
-                positions, alive = fi.particles[name]
-                pp[at:at + positions.shape[1]] = np.swapaxes(positions, 0, 1)
-                pa[at:at + positions.shape[1]] = np.swapaxes(alive, 0, 1)
-            pr[at:at + room] = atlas.layout.sphere[m + k, 3]
-            at += room
-        proxies = np.concatenate([sphere_proxies(swept_spheres(mt, mq, atlas.layout.sphere[:m])), particle_proxies(pp[:, 1:], pa[:, 1:], pr, (pp[:, 0], pa[:, 0]))])
-        proxies = separate(proxies, self._walk_scale(fi, proxies))
+        m = len(self.roles.mover_names)
+        pp, pa, pt = particles["particle_p"], particles["particle_alive"] > 0.5, particles["particle_template"]
+        pr = atlas.layout.sphere[pt.astype(int), 3] if total else np.zeros(0)
+        spheres = atlas.layout.sphere[:m]
+        scale = self._walk_scale(fi, np.concatenate([sphere_proxies(swept_spheres(mt, mq, spheres)), particle_proxies(pp, pa, pr)]))
+        per_part = []
+        for i0, i1 in parts(fi.samples):
+            held = slice(i0, i1 + 1)
+            part = np.concatenate([sphere_proxies(swept_spheres(mt[:, held], mq[:, held], spheres)), particle_proxies(pp[:, held], pa[:, held], pr)])
+            per_part.append(separate(part, scale * (len(parts(fi.samples)) + 2)))  # the regions lie within (B + 2) walk scales
+        proxies, self._proxy_box, spacing = in_regions(per_part)
+        self._regions = np.array([float(len(per_part)), spacing])
         self._reach = reach(proxies)
-        self._proxy_box = union_box(proxies)
         scene_before = broad.scene
         broad.update(proxies)
         if scene_before is not None and broad.scene is not scene_before and self.owner is not None:
@@ -330,13 +334,10 @@ class SceneCache:
             self.integrator.set_moving(broad.scene, atlas.scene, m, total, self._emitters, self._particle_emitters())
             self._moving_changed = False
 
-    def _moving_frame(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> dict[str, np.ndarray]:
-        """The atlas's templates and the particles across the shutter for motion-blur `mode`
-        (the frame data's blocks; the broadphase was updated with the scene)."""
+    def _particles_frame(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> dict[str, np.ndarray]:
+        """The particles across the shutter for motion-blur `mode` (the frame data's
+        blocks): centres [C, N, 3], alive [C, N] and each one's template [C]."""
         n = fi.samples
-        atlas = self.atlas
-        if atlas is None or atlas.scene is None:
-            return {}
         total = int(sum(self._capacity))
         pp, pa = np.zeros((total, n, 3)), np.zeros((total, n))
         pt = np.zeros(total)
@@ -349,15 +350,22 @@ class SceneCache:
                 pp[at:at + len(p)], pa[at:at + len(p)] = p, a
             pt[at:at + room] = m + k
             at += room
+        return {"particle_p": pp, "particle_alive": pa, "particle_template": pt}
+
+    def _moving_frame(self, particles: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The atlas's templates, the particles (`_particles_frame`) and the broadphase's
+        walk values for the frame data (the broadphase was updated just before)."""
+        atlas = self.atlas
+        if atlas is None or atlas.scene is None:
+            return {}
         return {
             "template_offset": atlas.layout.offset,
             "template_box": atlas.layout.box,
             "template_sphere": atlas.layout.sphere,
-            "particle_p": pp,
-            "particle_alive": pa,
-            "particle_template": pt,
+            **particles,
             "reach": np.array([self._reach]),
             "proxy_box": self._proxy_box,
+            "regions": self._regions,
         }
 
     def _walk_scale(self, fi: StackedFrame, proxies: np.ndarray) -> float:

@@ -209,23 +209,34 @@ class World:
         start = ray.o - ray.d * reach
         # a lane whose segment misses the box of every proxy meets none: no walk
         active = self._meets_proxies(movers, ray, active, maxt_of(state))
+        # the lane walks its own part of the shutter's proxies, in that part's region
+        # (render/broadphase.py `in_regions`), only inside the box of every proxy, so that
+        # it never reaches another region
+        count = movers.data.scalar("regions", mi.UInt32(0), True)
+        spacing = movers.data.scalar("regions", mi.UInt32(1), True)
+        part = dr.minimum(mi.UInt32(dr.floor(dr.clip(movers.u, 0.0, 1.0) * count)), mi.UInt32(count) - 1)
+        shift = mi.Vector3f(mi.Float(part) * spacing, 0.0, 0.0)
+        first = part * (self.rigid + self.particles)
+        lo = movers.data.vec("proxy_box", 3, mi.UInt32(0), True)
+        hi = movers.data.vec("proxy_box", 3, mi.UInt32(1), True)
+        t_in, t_out = segment_in_box(start, ray.d, lo, hi, dr.inf)
 
         def cond(t_b: Any, live: Any, *rest: Any) -> Any:
             return live
 
         def body(t_b: Any, live: Any, *rest: Any) -> tuple[Any, ...]:
             probe = mi.Ray3f(ray)
-            probe.o = start + ray.d * t_b
-            probe.maxt = dr.maximum(reach + maxt_of(rest) - t_b, 0.0)
+            probe.o = start + shift + ray.d * t_b
+            probe.maxt = dr.maximum(dr.minimum(reach + maxt_of(rest), t_out) - t_b, 0.0)
             pb = trace("intersect", self.broadphase, probe, live, preliminary=True)
             found = live & pb.is_valid()
-            rest, live_after = visit(mi.UInt32(pb.prim_index), rest, found)
+            rest, live_after = visit(mi.UInt32(pb.prim_index) - first, rest, found)
             entered = t_b + pb.t
             # past this entry (never 0: an ellipsoid just entered is not entered again)
             t_b = dr.select(found, entered + dr.maximum(entered * 2e-7, 1e-7), t_b)
             return (t_b, found & live_after, *rest)
 
-        out = dr.while_loop((mi.Float(0.0), mi.Bool(active), *state), cond, body, labels=("t_b", "live", *(f"s{i}" for i in range(len(state)))), label="broadphase")
+        out = dr.while_loop((mi.Float(t_in), mi.Bool(active), *state), cond, body, labels=("t_b", "live", *(f"s{i}" for i in range(len(state)))), label="broadphase")
         return tuple(out[2:])
 
     def _meets_proxies(self, movers: Movers, ray: Any, active: Any, maxt: Any) -> Any:
