@@ -210,9 +210,9 @@ class FrameRenderer:
         # frame (render/engine_log.py)
         with watching() as engine, _collector_held(cold):
             if cold:
-                self.cache.build(stacked)
+                self.cache.build(stacked, mode)
             else:
-                updated = self.cache.update(stacked)
+                updated = self.cache.update(stacked, mode)
             seed = frame_seed(self.settings.seed, stacked.frame, self.settings.seed_policy)
             dr.kernel_history()  # clear
             setup_s = time.perf_counter() - t0

@@ -70,16 +70,16 @@ class SceneCache:
 
     # --- build (cold) -----------------------------------------------------------------
 
-    def build(self, fi: StackedFrame) -> None:
+    def build(self, fi: StackedFrame, mode: str = "stochastic") -> None:
         """Build everything that is kept across frames, from the first frame this worker
-        renders; on failure nothing half-built is kept."""
+        renders (in motion-blur `mode`); on failure nothing half-built is kept."""
         try:
-            self._build(fi)
+            self._build(fi, mode)
         except BaseException:
             self.scene = None  # never keep a half-built scene
             raise
 
-    def _build(self, fi: StackedFrame) -> None:
+    def _build(self, fi: StackedFrame, mode: str) -> None:
         mi = self._mi
         loaded = self.loaded
         scene = loaded.scene
@@ -134,7 +134,7 @@ class SceneCache:
         self.sliced = SlicedGeometry(mi, loaded, self.roles.slice_names, fi, materials, integrator.set_slices, self.owner)
         # route the sensor pose through the same parameter update warm frames use, so the
         # first warm frame replays the cold frame's kernels instead of compiling new ones
-        self.update(fi)
+        self.update(fi, mode)
 
     def _mover_dicts(self, name: str, stretch: np.ndarray) -> list[dict[str, Any]]:
         """A mover's shape dictionaries in its rest frame, its stretch [4, 4] baked in."""
@@ -191,10 +191,10 @@ class SceneCache:
 
     # --- per frame (warm) ---------------------------------------------------------------
 
-    def update(self, fi: StackedFrame) -> tuple[str, ...]:
-        """Per-frame parameter changes: the sensor, animated environment lights and mover
-        scales. Returns the keys changed; shapes of the static set never appear here, so
-        its BVH is never rebuilt."""
+    def update(self, fi: StackedFrame, mode: str = "stochastic") -> tuple[str, ...]:
+        """Per-frame parameter changes: the sensor, animated environment lights, mover
+        scales and the broadphase for motion-blur `mode`. Returns the keys changed; shapes
+        of the static set never appear here, so its BVH is never rebuilt."""
         params = self._params
         camera = self.loaded.scene.camera
         sensor = sensor_record(self.loaded, self.spp, fi)
@@ -209,6 +209,7 @@ class SceneCache:
         if changed:
             params.update()
         changed += self._update_mover_scales(fi)
+        self._update_broadphase(fi, mode)  # a scene update, before the render: its kernels are the update's
         return tuple(changed)
 
     def _update_lights(self, fi: StackedFrame) -> list[str]:
@@ -277,11 +278,7 @@ class SceneCache:
         else:  # the baked samples as they are: one stack, no per-mover work
             mt = np.array([fi.objects[name][0][1:] for name in names], dtype=float).reshape(len(names), n, 3)
             mq = np.array([fi.objects[name][1][1:] for name in names], dtype=float).reshape(len(names), n, 4)
-        self._grow_particles(fi)
         particles = self._particles_frame(fi, mode, u_fixed)
-        # a scene update before the render (its kernels are the update's), from exactly the
-        # samples the kernel interpolates between
-        self._update_broadphase(fi, mt, mq, particles)
         ct, cq = fi.camera
         q_frame_inv = cq[0] * np.array([1, -1, -1, -1])
         cam_t, cam_q = across_shutter(ct, cq, n, mode, u_fixed)
@@ -303,26 +300,52 @@ class SceneCache:
         if any(c > room for c, room in zip(counts, self._capacity)):
             self._capacity = [max(room, _room(c)) for c, room in zip(counts, self._capacity)]
 
-    def _update_broadphase(self, fi: StackedFrame, mt: np.ndarray, mq: np.ndarray, particles: dict[str, np.ndarray]) -> None:
-        """The broadphase's proxies for one frame, from the N samples the kernel
-        interpolates between (movers mt [M, N, 3], mq [M, N, 4]; `particles`:
-        `_particles_frame`): one proxy per thing and part of the shutter, each part in a
-        region of its own (broadphase.in_regions), written as a scene update before the
-        render (one buffer, one BVH build)."""
+    def _update_broadphase(self, fi: StackedFrame, mode: str) -> None:
+        """The broadphase's proxies for one frame in motion-blur `mode`, written as a scene
+        update before the render (one buffer, one BVH build). Stochastic blur: one proxy
+        per thing and part of the shutter, each part in a region of its own
+        (broadphase.parts, in_regions), from the shutter's samples, which the kernel
+        interpolates between. `off` and sub-frames (where a lane's pose is one instant,
+        not its own time's): every part holds every baked row (the frame's time and the
+        shutter's samples: every instant a sub-frame may ask for)."""
         atlas, broad = self.atlas, self.broadphase
         if atlas is None or broad is None or atlas.scene is None:
             return
+        self._grow_particles(fi)
         total = int(sum(self._capacity))
-        m = len(self.roles.mover_names)
-        pp, pa, pt = particles["particle_p"], particles["particle_alive"] > 0.5, particles["particle_template"]
-        pr = atlas.layout.sphere[pt.astype(int), 3] if total else np.zeros(0)
+        names = self.roles.mover_names
+        m = len(names)
+        rows = fi.samples + 1
+        mt = np.array([fi.objects[name][0] for name in names], dtype=float).reshape(m, rows, 3)
+        mq = np.array([fi.objects[name][1] for name in names], dtype=float).reshape(m, rows, 4)
+        pp, pa, pr = np.zeros((total, rows, 3)), np.zeros((total, rows), bool), np.zeros(total)
+        at = 0
+        for k, (name, room) in enumerate(zip(self.roles.particle_names, self._capacity)):
+            if name in fi.particles:
+                positions, alive = fi.particles[name]
+                pp[at:at + positions.shape[1]] = np.swapaxes(positions, 0, 1)
+                pa[at:at + positions.shape[1]] = np.swapaxes(alive, 0, 1)
+            pr[at:at + room] = atlas.layout.sphere[m + k, 3]
+            at += room
         spheres = atlas.layout.sphere[:m]
-        scale = self._walk_scale(fi, np.concatenate([sphere_proxies(swept_spheres(mt, mq, spheres)), particle_proxies(pp, pa, pr)]))
-        per_part = []
-        for i0, i1 in parts(fi.samples):
-            held = slice(i0, i1 + 1)
-            part = np.concatenate([sphere_proxies(swept_spheres(mt[:, held], mq[:, held], spheres)), particle_proxies(pp[:, held], pa[:, held], pr)])
-            per_part.append(separate(part, scale * (len(parts(fi.samples)) + 2)))  # the regions lie within (B + 2) walk scales
+
+        def proxies_over(held: slice, also: bool) -> np.ndarray:
+            """Every thing's proxy over the rows `held` (and the frame's time, row 0)."""
+            extra = (pp[:, 0], pa[:, 0]) if also else None
+            rigid = swept_spheres(np.concatenate([mt[:, :1], mt[:, held]], axis=1) if also else mt[:, held],
+                                  np.concatenate([mq[:, :1], mq[:, held]], axis=1) if also else mq[:, held], spheres)
+            return np.concatenate([sphere_proxies(rigid), particle_proxies(pp[:, held], pa[:, held], pr, extra)])
+
+        whole = proxies_over(slice(1, rows), True)
+        scale = self._walk_scale(fi, whole)
+        cuts = parts(fi.samples)
+        # the same count of proxies in every mode, so that a change of mode builds no new
+        # broadphase (nor compiles its kernels again): `whole` in every part where one
+        # instant is drawn
+        per_part = [proxies_over(slice(1 + i0, 2 + i1), False) for i0, i1 in cuts] if mode == "stochastic" and len(cuts) > 1 else [whole] * len(cuts)
+        # the regions lie within a few walk scales of the origin: coincident means within
+        # float steps there (broadphase.separate)
+        per_part = [separate(part, scale * (len(per_part) + 2)) for part in per_part]
         proxies, self._proxy_box, spacing = in_regions(per_part)
         self._regions = np.array([float(len(per_part)), spacing])
         self._reach = reach(proxies)
