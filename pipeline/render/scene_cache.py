@@ -25,7 +25,7 @@ from ..scene.lights import light_key
 from ..scene.loader import LoadedScene
 from ..variant import load_dict
 from .atlas import Atlas, analytic, copy_shape
-from .broadphase import EMPTY_BOX, Broadphase, in_regions, parts, particle_proxies, reach, separate, sphere_proxies, swept_spheres
+from .broadphase import EMPTY_BOX, Broadphase, far_proxies, in_regions, parts, worth_parts, particle_proxies, reach, separate, sphere_proxies, swept_spheres
 from .build import DEFAULT_MATERIAL, emitter_dict, material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
 from .instant import add_lights, add_shapes, light_record, rest_frame, sensor_record
@@ -339,15 +339,20 @@ class SceneCache:
         whole = proxies_over(slice(1, rows), True)
         scale = self._walk_scale(fi, whole)
         cuts = parts(fi.samples)
-        # the same count of proxies in every mode, so that a change of mode builds no new
-        # broadphase (nor compiles its kernels again): `whole` in every part where one
-        # instant is drawn
-        per_part = [proxies_over(slice(1 + i0, 2 + i1), False) for i0, i1 in cuts] if mode == "stochastic" and len(cuts) > 1 else [whole] * len(cuts)
+        # the same count of proxies in every mode and frame (B parts of P), so that no new
+        # broadphase is built (nor its kernels compiled again); where the lanes walk one
+        # part only (one instant drawn: `off`, a sub-frame; or parts that would not be
+        # smaller: `worth_parts`) the others are far away, out of every ray's reach
+        per_part = [proxies_over(slice(1 + i0, 2 + i1), False) for i0, i1 in cuts] if mode == "stochastic" and len(cuts) > 1 else []
+        walked = len(cuts) if per_part and worth_parts(whole, per_part) else 1
+        if walked == 1:
+            per_part = [whole]
         # the regions lie within a few walk scales of the origin: coincident means within
         # float steps there (broadphase.separate)
-        per_part = [separate(part, scale * (len(per_part) + 2)) for part in per_part]
+        per_part = [separate(part, scale * (len(cuts) + 2)) for part in per_part]
+        per_part += [far_proxies(len(whole))] * (len(cuts) - len(per_part))
         proxies, self._proxy_box, spacing = in_regions(per_part)
-        self._regions = np.array([float(len(per_part)), spacing])
+        self._regions = np.array([float(walked), spacing])
         self._reach = reach(proxies)
         scene_before = broad.scene
         broad.update(proxies)
