@@ -175,18 +175,16 @@ def in_regions(per_part: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, floa
     """Each part's proxies [P, 10] in its own region: part b moved by b * spacing along x,
     the spacing more than the box holding every live proxy is wide, so no two regions
     meet. (all records [B * P, 10], part-major; the box [2, 3] in world space; the spacing)."""
-    box = union_box(np.concatenate(per_part)) if per_part else EMPTY_BOX.copy()
-    live_box = bool(np.abs(box[0, 0]) < FAR / 2)
-    spacing = 1.25 * float(box[1, 0] - box[0, 0]) + 1e-3 if live_box else 0.0
-    moved = []
-    for b, records in enumerate(per_part):
-        records = np.array(records, dtype=float, copy=True)
-        live = np.abs(records[:, 0]) < FAR / 2
-        records[live, 0] += b * spacing
-        # padded for float32 at the moved position (a region far from the origin rounds coarser)
-        records[live, 3:6] += 1e-6 * b * spacing
-        moved.append(records)
-    return (np.concatenate(moved) if moved else np.zeros((0, FLOATS))), box, spacing
+    boxes = [union_box(p) for p in per_part]
+    live_boxes = [b for b in boxes if np.abs(b[0, 0]) < FAR / 2]
+    box = np.stack([np.min([b[0] for b in live_boxes], axis=0), np.max([b[1] for b in live_boxes], axis=0)]) if live_boxes else EMPTY_BOX.copy()
+    spacing = 1.25 * float(box[1, 0] - box[0, 0]) + 1e-3 if live_boxes else 0.0
+    out = np.concatenate(per_part) if per_part else np.zeros((0, FLOATS))
+    shift = np.repeat(np.arange(len(per_part)) * spacing, [len(p) for p in per_part])
+    shift[np.abs(out[:, 0]) >= FAR / 2] = 0.0  # empty proxies stay far away
+    out[:, 0] += shift
+    out[:, 3:6] += 1e-6 * shift[:, None]  # padded for float32 at the moved position (rounds coarser far from the origin)
+    return out, box, spacing
 
 
 def separate(proxies: np.ndarray, scale: float) -> np.ndarray:
