@@ -232,8 +232,12 @@ class World:
             found = live & pb.is_valid()
             rest, live_after = visit(mi.UInt32(pb.prim_index) - first, rest, found)
             entered = t_b + pb.t
-            # past this entry (never 0: an ellipsoid just entered is not entered again)
-            t_b = dr.select(found, entered + dr.maximum(entered * 2e-7, 1e-7), t_b)
+            # past this entry (never 0: an ellipsoid just entered is not entered again), by
+            # more than float32 rounds the walk's distance and the probe's coordinates (a
+            # part's region lies up to B spacings from the origin: a step under their
+            # rounding would leave the probe where it was, and the walk would crawl)
+            step = dr.maximum(dr.maximum(entered * 2e-7, dr.max(dr.abs(probe.o)) * 2.4e-7), 1e-7)
+            t_b = dr.select(found, entered + step, t_b)
             return (t_b, found & live_after, *rest)
 
         out = dr.while_loop((mi.Float(t_in), mi.Bool(active), *state), cond, body, labels=("t_b", "live", *(f"s{i}" for i in range(len(state)))), label="broadphase")
