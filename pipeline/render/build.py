@@ -182,6 +182,20 @@ def emitter_dict(emission: Any, loaded: LoadedScene) -> Dict:
 DEFAULT_MATERIAL: Dict = {"type": "diffuse", "reflectance": 0.5}
 
 
+def object_material(obj: Any, materials: dict[str, Any]) -> Any:
+    """The material an object wears: its named one of `materials`, else the default."""
+    return materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
+
+
+def dressed(d: Dict, obj: Any, loaded: LoadedScene, materials: dict[str, Any]) -> Dict:
+    """A shape dictionary `d` wearing its object's material and, if it glows, its area
+    emitter (every shape of an object, a particle system's holder and its particles)."""
+    d["bsdf"] = object_material(obj, materials)
+    if obj.emission is not None:
+        d["emitter"] = emitter_dict(obj.emission, loaded)
+    return d
+
+
 # --- shapes -------------------------------------------------------------------------------
 
 # Every shape's Mitsuba primitives come from its geometry entry (pipeline/geometry.py), in
@@ -208,10 +222,7 @@ def object_shapes(obj: Any, loaded: LoadedScene, world_from_object: np.ndarray, 
     for d, object_from_prim in shape_primitives(obj, loaded):
         d = dict(d)
         d["to_world"] = _xf(world_from_object @ object_from_prim)
-        d["bsdf"] = materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
-        if obj.emission is not None:
-            d["emitter"] = emitter_dict(obj.emission, loaded)
-        out.append(d)
+        out.append(dressed(d, obj, loaded, materials))
     return out
 
 

@@ -14,7 +14,8 @@ import numpy as np
 
 from ..scene.lights import light_key
 from ..scene.loader import LoadedScene
-from .build import DEFAULT_MATERIAL, emitter_dict, light_dict, mitsuba_id, object_shapes, sensor_dict, trs_matrix
+from .broadphase import sphere_proxies
+from .build import dressed, light_dict, mitsuba_id, object_shapes, sensor_dict, trs_matrix
 from .shutter_poses import particles_at, pose_at
 
 if TYPE_CHECKING:
@@ -47,16 +48,12 @@ def add_particles(d: dict[str, Any], loaded: LoadedScene, fi: StackedFrame, mate
             continue
         positions, alive = fi.particles[obj.name]
         p, a = particles_at(positions, alive, u)
-        live = np.asarray(p, dtype=np.float32)[np.asarray(a, dtype=bool)]
+        live = np.asarray(p, dtype=float)[np.asarray(a, dtype=bool)]
         if len(live) == 0:
             continue
-        data = np.zeros((len(live), 10), dtype=np.float32)  # centre, semi-axes, quaternion (x, y, z, w)
-        data[:, :3], data[:, 3:6], data[:, 9] = live, obj.radius, 1.0
-        shape: dict[str, Any] = {"type": "ellipsoids", "extent": 1.0, "data": mi.TensorXf(data)}
-        shape["bsdf"] = materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
-        if obj.emission is not None:
-            shape["emitter"] = emitter_dict(obj.emission, loaded)
-        d[f"{mitsuba_id(obj.name)}__particles"] = shape
+        spheres = np.concatenate([live, np.full((len(live), 1), float(obj.radius))], axis=1)
+        data = mi.TensorXf(np.ascontiguousarray(sphere_proxies(spheres), dtype=np.float32))  # the broadphase's record layout
+        d[f"{mitsuba_id(obj.name)}__particles"] = dressed({"type": "ellipsoids", "extent": 1.0, "data": data}, obj, loaded, materials)
 
 
 def light_record(loaded: LoadedScene, index: int, light: Any, fi: StackedFrame, u: float | None = None) -> dict[str, Any]:

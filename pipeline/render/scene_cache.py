@@ -26,7 +26,7 @@ from ..scene.loader import LoadedScene
 from ..variant import load_dict
 from .atlas import Atlas, analytic, copy_shape
 from .broadphase import EMPTY_BOX, Broadphase, far_proxies, in_regions, parts, worth_parts, particle_proxies, reach, separate, sphere_proxies, swept_spheres
-from .build import DEFAULT_MATERIAL, emitter_dict, material_dict, mitsuba_id, object_shapes, unit_light_dict
+from .build import dressed, material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
 from .instant import add_lights, add_shapes, light_record, rest_frame, sensor_record
 from .roles import Roles
@@ -169,11 +169,7 @@ class SceneCache:
         """A particle system's holder: one sphere of the particles' radius at the origin,
         wearing their material (and emitter); every particle is this sphere, moved."""
         obj = self.loaded.objects_by_name[name]
-        d: dict[str, Any] = {"type": "sphere", "radius": float(obj.radius)}
-        d["bsdf"] = self._materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
-        if obj.emission is not None:
-            d["emitter"] = emitter_dict(obj.emission, self.loaded)
-        return [d]
+        return [dressed({"type": "sphere", "radius": float(obj.radius)}, obj, self.loaded, self._materials)]
 
     def _build_atlas(self, mover_dicts: list[list[dict[str, Any]]]) -> None:
         """The atlas of every mover (at its current scale) and particle holder."""

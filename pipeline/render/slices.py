@@ -240,11 +240,11 @@ class SlicedGeometry:
         on_regroup([g.scenes for g in self.groups])
 
     def _build(self, name: str, fi: StackedFrame, materials: dict[str, Any]) -> SliceGroup:
-        from .build import DEFAULT_MATERIAL, emitter_dict
+        from .build import emitter_dict, object_material
 
         mi = self._mi
         obj = self.loaded.objects_by_name[name]
-        material = materials.get(obj.material, DEFAULT_MATERIAL) if obj.material else DEFAULT_MATERIAL
+        material = object_material(obj, materials)
         bsdf = load_dict(material) if isinstance(material, dict) else material
         emitter = emitter_dict(obj.emission, self.loaded) if obj.emission is not None else None
         slices = slice_count(self.loaded, fi)
