@@ -207,19 +207,22 @@ class World:
         `visit` clears the lane."""
         reach = self.reach(movers)
         start = ray.o - ray.d * reach
-        # a lane whose segment misses the box of every proxy meets none: no walk
-        active = self._meets_proxies(movers, ray, active, maxt_of(state))
+        # the part of the line from `start` inside the box holding every live proxy
+        # (`broadphase.union_box`, padded for float32)
+        lo = movers.data.vec("proxy_box", 3, mi.UInt32(0), True)
+        hi = movers.data.vec("proxy_box", 3, mi.UInt32(1), True)
+        t_in, t_out = segment_in_box(start, ray.d, lo, hi, dr.inf)
+        # a lane whose segment [0, maxt] (from its origin, `reach` past the start) misses
+        # that box meets no proxy: no walk (a conservative gate)
+        active = active & (dr.maximum(t_in, reach) <= dr.minimum(t_out, reach + maxt_of(state)))
         # the lane walks its own part of the shutter's proxies, in that part's region
-        # (render/broadphase.py `in_regions`), only inside the box of every proxy, so that
-        # it never reaches another region
+        # (render/broadphase.py `in_regions`), only inside the box, so that it never
+        # reaches another region
         count = movers.data.scalar("regions", mi.UInt32(0), True)
         spacing = movers.data.scalar("regions", mi.UInt32(1), True)
         part = dr.minimum(mi.UInt32(dr.floor(dr.clip(movers.u, 0.0, 1.0) * count)), mi.UInt32(count) - 1)
         shift = mi.Vector3f(mi.Float(part) * spacing, 0.0, 0.0)
         first = part * (self.rigid + self.particles)
-        lo = movers.data.vec("proxy_box", 3, mi.UInt32(0), True)
-        hi = movers.data.vec("proxy_box", 3, mi.UInt32(1), True)
-        t_in, t_out = segment_in_box(start, ray.d, lo, hi, dr.inf)
 
         def cond(t_b: Any, live: Any, *rest: Any) -> Any:
             return live
@@ -242,15 +245,6 @@ class World:
 
         out = dr.while_loop((mi.Float(t_in), mi.Bool(active), *state), cond, body, labels=("t_b", "live", *(f"s{i}" for i in range(len(state)))), label="broadphase")
         return tuple(out[2:])
-
-    def _meets_proxies(self, movers: Movers, ray: Any, active: Any, maxt: Any) -> Any:
-        """Whether the ray's segment [0, maxt] meets the box holding every live proxy
-        (`broadphase.union_box`, padded for float32): a conservative gate, since a segment
-        that misses it meets no proxy, so the walk it skips would have found nothing."""
-        lo = movers.data.vec("proxy_box", 3, mi.UInt32(0), True)
-        hi = movers.data.vec("proxy_box", 3, mi.UInt32(1), True)
-        t0, t1 = segment_in_box(ray.o, ray.d, lo, hi, maxt)
-        return active & (t0 <= t1)
 
     def reach(self, movers: Movers) -> Any:
         """How far behind a ray its broadphase walk starts (render/broadphase.py `reach`)."""
