@@ -164,7 +164,7 @@ def fpm_figures(folder: Path, preset_args: list[str], frames: int, label: str, s
     return {"frames": frames, "cached_fpm": 60 * frames / cached, "naive_fpm": 60 * frames / naive, "ratio": naive / cached}
 
 
-def static_twin(folder: Path, moving: Path, fi: object) -> Path:
+def static_twin(moving: Path, fi: object) -> Path:
     """The same shot frozen at the frame's time: every rigid object in the one static BVH
     (movers at their frame pose) and motion blur off (particles drawn at the frame's
     time), i.e. a render with no motion."""
@@ -213,7 +213,7 @@ def blur_cost(folder: Path, frames: int) -> dict[str, object]:
     for label, movers, particles in (("1 mover", 1, 0), ("4 movers", 4, 0), ("16 movers", 16, 0), ("10k particles", 0, 10000)):
         moving = shot(folder, movers=movers, particles=particles)
         t_blur, fi0 = _warm_time(moving, list(range(40, 41 + frames)))
-        t_static, _ = _warm_time(static_twin(folder, moving, fi0), list(range(40, 41 + frames)))
+        t_static, _ = _warm_time(static_twin(moving, fi0), list(range(40, 41 + frames)))
         out[label] = {"static_s": t_static, "stochastic_s": t_blur, "ratio": t_blur / t_static}
     return out
 

@@ -1,4 +1,4 @@
-"""Non-rigid geometry renders through time slices: particle systems and skinned meshes."""
+"""Non-rigid geometry: particle systems (spheres in the one traversal) and skinned meshes (time slices)."""
 
 from __future__ import annotations
 
@@ -8,35 +8,15 @@ import numpy as np
 import pytest
 
 from _render_support import load, render
-from _scenes import ARM_BONES
+from _scenes import ARM_BONES, FOUNTAIN, orange_pixels
 
 pytestmark = pytest.mark.render
-
-FOUNTAIN = """
-timeline: {fps: 24, first: 0, last: 12}
-camera: {position: [0, 1.5, 6], look_at: [0, 1.2, 0], fov: 45}
-lights: [{type: constant, radiance: 0.5}]
-materials: [{name: spark, type: diffuse, color: [0.9, 0.5, 0.0]}]
-objects:
-  - name: fountain
-    shape: particles
-    radius: 0.04
-    material: spark
-    emitter: {rate: 1500, lifetime: 2.0, position: [0, 0.1, 0], direction: [0, 1, 0], speed: 5, spread: 20, seed: 3}
-render: {resolution: [64, 48], spp: 4, max_depth: 2, shutter_samples: 5}
-"""
-
-
-def _orange(img: np.ndarray) -> int:
-    r, g, b = img[..., 0], img[..., 1], img[..., 2]
-    return int(((r > g + 0.05) & (g > b + 0.05)).sum())
-
 
 def test_particle_system_renders_and_grows(tmp_path: Path) -> None:
     (early, late), stats, renderer = render(load(tmp_path, FOUNTAIN), [2, 10])
     # particles are neither time slices nor rigid movers: spheres in the one traversal
     assert renderer.particle_names == ("fountain",) and not renderer.slice_names and not renderer.mover_names
-    assert 0 < _orange(early) < _orange(late)  # more particles, higher up, later
+    assert 0 < orange_pixels(early) < orange_pixels(late)  # more particles, higher up, later
     assert stats[1].kernels_compiled == 0
 
 

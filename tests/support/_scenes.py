@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 BASE = """\
 timeline: {fps: 24, first: 0, last: 2}
 camera: {position: [0, 1, 5], look_at: [0, 0, 0]}
@@ -13,6 +15,29 @@ objects:
 """
 
 TWO_FRAMES = BASE.replace("last: 2", "last: 1")  # two frames
+
+
+# A fountain of orange sparks rising over a grey sky, denser and higher as it runs: the
+# particle tests count its orange pixels (`orange_pixels`)
+FOUNTAIN = """
+timeline: {fps: 24, first: 0, last: 12}
+camera: {position: [0, 1.5, 6], look_at: [0, 1.2, 0], fov: 45}
+lights: [{type: constant, radiance: 0.5}]
+materials: [{name: spark, type: diffuse, color: [0.9, 0.5, 0.0]}]
+objects:
+  - name: fountain
+    shape: particles
+    radius: 0.04
+    material: spark
+    emitter: {rate: 1500, lifetime: 2.0, position: [0, 0.1, 0], direction: [0, 1, 0], speed: 5, spread: 20, seed: 3}
+render: {resolution: [64, 48], spp: 4, max_depth: 2, shutter_samples: 5}
+"""
+
+
+def orange_pixels(img: Any) -> int:
+    """How many pixels of an RGB(A) image [H, W, >=3] are orange (red over green over blue)."""
+    r, g, b = img[..., 0], img[..., 1], img[..., 2]
+    return int(((r > g + 0.05) & (g > b + 0.05)).sum())
 
 
 # The two-bone arm a skinning deformer bends: `upper` from y=-1 to 0, `lower` from 0 to 1,

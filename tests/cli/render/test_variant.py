@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from motion.pipeline.frame_output import read_frame
+from _scenes import FOUNTAIN, orange_pixels
 from _support import SCENES, run_motion
 
 
@@ -49,31 +50,15 @@ def test_working_llvm_is_found_by_default() -> None:
     assert choice.variant in ("llvm_ad_rgb", "cuda_ad_rgb"), choice
 
 
-_FOUNTAIN = """\
-timeline: {fps: 24, first: 0, last: 10}
-camera: {position: [0, 1.5, -5], look_at: [0, 1.2, 0], fov: 45}
-lights: [{type: constant, radiance: 1.0}]
-materials: [{name: spark, type: diffuse, color: [1.0, 0.45, 0.05]}]
-objects:
-  - name: fountain
-    shape: particles
-    radius: 0.04
-    material: spark
-    emitter: {rate: 1500, lifetime: 2.0, position: [0, 0.1, 0], direction: [0, 1, 0], speed: 5, spread: 20, seed: 3}
-render: {resolution: [64, 48], spp: 4, max_depth: 2, shutter_samples: 5}
-"""
-
-
 def test_scalar_fallback_draws_particles(tmp_path: Path) -> None:
     """Under `scalar_rgb` (Mitsuba's `path`, one instant) particles are spheres too, as the
     vectorised renderer draws them (they were left out, and a particle shot rendered empty)."""
     scene = tmp_path / "fountain.yaml"
-    scene.write_text(_FOUNTAIN)
+    scene.write_text(FOUNTAIN)
     out = tmp_path / "out"
     proc = run_motion("render", str(scene), "--frames", "10", "--variant", "scalar_rgb", "--no-denoise", "-o", str(out), "--deliver", "none",
                       env={"MOTION_CACHE_DIR": str(tmp_path / "cache"), "CUDA_VISIBLE_DEVICES": ""})
     assert proc.returncode == 0, proc.stderr
     frame = read_frame(out / "fountain.0010.exr")
     assert frame.meta["variant"] == "scalar_rgb"
-    r, g, b = frame.rgba[..., 0], frame.rgba[..., 1], frame.rgba[..., 2]
-    assert int(((r > g + 0.05) & (g > b + 0.05)).sum()) > 20  # orange sparks on the grey sky
+    assert orange_pixels(frame.rgba) > 20  # orange sparks on the grey sky
