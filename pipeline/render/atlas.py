@@ -286,3 +286,31 @@ class Atlas:
         layout.box[template] = (lo + offset - pad, hi + offset + pad)
         layout.sphere[template] = sphere
         return True
+
+    def reshape(self, template: int, positions: np.ndarray, normals: np.ndarray | None) -> bool:
+        """Write new vertices (a deforming mesh's residual, render/slices.py) into template
+        `template`'s one mesh, recentred in its cell, with its box and bounding sphere;
+        written through the scene's parameters (the kernels are replayed), built by
+        `commit`. False where they do not fit the cell (the caller builds the atlas again)."""
+        layout = self.layout
+        if len(positions) == 0:
+            return True
+        lo, hi = positions.min(axis=0), positions.max(axis=0)
+        pad = PAD * layout.cell + 1e-5
+        if np.any(hi - lo + 2 * pad > layout.cell / (1.0 + GAP)):
+            return False
+        offset = layout.centre[template] - (lo + hi) / 2
+        prefix = f"{self.keys[template]}__0"
+        self._params[f"{prefix}.vertex_positions"] = self._mi.Float(np.asarray(positions + offset, np.float32).ravel())
+        if normals is not None and f"{prefix}.vertex_normals" in self._params:
+            self._params[f"{prefix}.vertex_normals"] = self._mi.Float(np.asarray(normals, np.float32).ravel())
+        centre = (lo + hi) / 2
+        radius = float(np.sqrt(((positions - centre) ** 2).sum(axis=1).max()))
+        layout.offset[template] = offset
+        layout.box[template] = (lo + offset - pad, hi + offset + pad)
+        layout.sphere[template] = (*centre, radius * (1 + 1e-4) + 1e-5)
+        return True
+
+    def commit(self) -> None:
+        """Build what `reshape` wrote (one parameter update: the atlas's BVH is rebuilt)."""
+        self._params.update()

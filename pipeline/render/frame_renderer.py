@@ -120,6 +120,7 @@ class FrameRenderer:
         roles = sort_scene(loaded)
         self.static_names, self.mover_names, self.slice_names = roles.static_names, roles.mover_names, roles.slice_names
         self.particle_names = roles.particle_names
+        self.deforming_names = roles.deforming_names
         self.moving_lights = roles.moving_lights
         self.cache = SceneCache(mi, dr, loaded, roles, self.spp, self.max_depth)
         self.fallback = ScalarFallback(mi, loaded, self.spp, self.max_depth)

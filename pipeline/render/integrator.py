@@ -135,7 +135,8 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         rotation is relative to the sensor's (C(u) C(frame)^-1); sensor_origin: [3];
         light_*: [L, N, 3|4] world_from_light across the shutter and light_color [L, 3]
         (the moving lights of `set_lights`, in order); `moving`: the atlas's templates and
-        the particles (`template_offset` [T, 3], `template_box` [T, 2, 3],
+        the particles (`mover_template` [M, 2] (first template, count; default: mover k
+        draws template k), `template_offset` [T, 3], `template_box` [T, 2, 3],
         `template_sphere` [T, 4], `particle_p` [C, N, 3], `particle_alive` [C, N],
         `particle_template` [C], `reach` [1], `proxy_box` [2, 3], `regions` [2]; render/scene_cache.py). A shape other than
         these is a `FrameDataError`."""
@@ -151,6 +152,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             {
                 "mover_t": (mover_translation, (m, n, 3)),
                 "mover_q": (mover_rotation, (m, n, 4)),
+                "mover_template": (moving.get("mover_template", np.stack([np.arange(m), np.ones(m)], axis=1)), (m, 2)),
                 "camera_t": (camera_translation, (n, 3)),
                 "camera_rel": (camera_rotation_rel, (n, 4)),
                 "sensor_origin": (sensor_origin, (3,)),

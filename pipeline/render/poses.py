@@ -25,6 +25,7 @@ from ..motion.pose import SLERP_LINEAR_BELOW
 
 # The blocks of the per-frame data array, in order (see `FrameData.set`):
 #   mover_t [M, N, 3], mover_q [M, N, 4]   movers' world_from_object across the shutter
+#   mover_template [M, 2]                  each mover's first template and their count S (`Movers.template_of`)
 #   camera_t [N, 3], camera_rel [N, 4]     camera translation, rotation C(u) C(frame)^-1
 #   sensor_origin [3]                      the sensor's position at the frame time
 #   camera_q [N, 4]                        camera rotation across the shutter
@@ -40,7 +41,7 @@ from ..motion.pose import SLERP_LINEAR_BELOW
 #   proxy_box [2, 3]                       the box holding every live proxy (world space)
 #   regions [2]                            the shutter's parts B and their regions' spacing (render/broadphase.py)
 FRAME_BLOCKS = (
-    "mover_t", "mover_q", "camera_t", "camera_rel", "sensor_origin", "camera_q", "light_t", "light_q", "light_rgb",
+    "mover_t", "mover_q", "mover_template", "camera_t", "camera_rel", "sensor_origin", "camera_q", "light_t", "light_q", "light_rgb",
     "template_offset", "template_box", "template_sphere", "particle_p", "particle_alive", "particle_template", "reach",
     "proxy_box", "regions",
 )
@@ -244,12 +245,25 @@ class Movers:
         alive = both | dr.select(f < 0.5, a0, a1)
         return centre, alive
 
+    def template_of(self, k: Any, active: Any) -> Any:
+        """The template rigid mover k draws at the path's time: its own (S = 1), or for a
+        deforming mesh one of its S residual templates (render/slices.py), the two around
+        u chosen with probabilities by their distance to it, by a hash of u (the same for
+        every query of one path: its scene at its time is one scene)."""
+        first = mi.UInt32(self.data.scalar("mover_template", k * 2, active))
+        count = self.data.scalar("mover_template", k * 2 + 1, active)
+        x = dr.clip(self.u, 0.0, 1.0) * dr.maximum(count - 1.0, 0.0)
+        below = dr.floor(x)
+        dither = mi.sample_tea_float32(dr.reinterpret_array(mi.UInt32, mi.Float(self.u)), mi.UInt32(0x9E3779B9), 4)
+        pick = dr.minimum(below + dr.select(dither < x - below, 1.0, 0.0), dr.maximum(count - 1.0, 0.0))
+        return first + mi.UInt32(pick)
+
     def proxy(self, k: Any, active: Any) -> tuple[KernelPose, Any, Any]:
         """Proxy k's pose at the path's time (world_from_rest), its template and whether
         it exists then (a particle alive)."""
         rigid = k < self.rigid
         if self.particles == 0:
-            return self.pose(dr.select(rigid, k, 0)), k, mi.Bool(active)
+            return self.pose(dr.select(rigid, k, 0)), self.template_of(k, active), mi.Bool(active)
         if self.rigid == 0:
             j = k - self.rigid
             centre, alive = self.particle(j, active)
@@ -258,7 +272,7 @@ class Movers:
         mover = self.pose(dr.select(rigid, k, 0))
         j = dr.select(rigid, 0, k - self.rigid)
         centre, alive = self.particle(j, active & ~rigid)
-        template = dr.select(rigid, k, mi.UInt32(self.data.scalar("particle_template", j, active & ~rigid)))
+        template = dr.select(rigid, self.template_of(dr.select(rigid, k, 0), active & rigid), mi.UInt32(self.data.scalar("particle_template", j, active & ~rigid)))
         pose = KernelPose(dr.select(rigid, mover.t, centre), dr.select(rigid, mover.q, mi.Vector4f(1.0, 0.0, 0.0, 0.0)))
         return pose, template, active & (rigid | alive)
 

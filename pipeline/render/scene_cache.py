@@ -32,7 +32,7 @@ from .instant import add_lights, add_shapes, light_record, rest_frame, sensor_re
 from .roles import Roles
 from .sbt import SbtOwner, dict_types
 from .shutter_poses import across_shutter, particles_across_shutter
-from .slices import SlicedGeometry
+from .slices import DeformingMeshes, SlicedGeometry
 
 if TYPE_CHECKING:
     from .stacked import StackedFrame
@@ -60,7 +60,8 @@ class SceneCache:
         self._reach = 1e-3  # how far behind a ray the broadphase walk starts (broadphase.reach)
         self._proxy_box = EMPTY_BOX  # the box holding every live proxy (broadphase.union_box)
         self._regions = np.array([1.0, 0.0])  # the shutter's parts and their regions' spacing (broadphase.in_regions)
-        self.sliced: SlicedGeometry | None = None
+        self.sliced: SlicedGeometry | None = None  # emissive deforming meshes
+        self.deforming: DeformingMeshes | None = None  # the others: movers of the atlas (render/slices.py)
         self.owner: SbtOwner | None = None  # the SBT owner of every scene the kernel traces
 
     @property
@@ -102,11 +103,11 @@ class SceneCache:
         self._mover_stretch = {name: rest_frame(fi, name) for name in self.roles.mover_names}
         mover_dicts = [self._mover_dicts(name, self._mover_stretch[name]) for name in self.roles.mover_names]
         types = set().union(dict_types(d), *(dict_types({str(k): v for k, v in enumerate(md)}) for md in mover_dicts))
-        if self.roles.slice_names:
+        if self.roles.slice_names or self.roles.deforming_names:
             types.add("Mesh")
         if self.roles.particle_names:
             types.add("Sphere")
-        if self.roles.mover_names or self.roles.particle_names:
+        if self.roles.mover_names or self.roles.particle_names or self.roles.deforming_names:
             types.add("Ellipsoids")
         self.owner = SbtOwner(types)
         self.scene = self.owner.scene(d)
@@ -123,6 +124,9 @@ class SceneCache:
         self.atlas = Atlas(mi, self.owner.scene)
         self.broadphase = Broadphase(mi, self.owner.scene)
         self._capacity = [_room(_particle_count(fi, name)) for name in self.roles.particle_names]
+        if self.roles.deforming_names:
+            self.deforming = DeformingMeshes(mi, loaded, list(self.roles.deforming_names), fi, materials)
+            self.deforming.draw(fi, mode, None)
         self._build_atlas(mover_dicts)
         integrator.set_lights([load_dict(unit_light_dict(light, loaded)) for _, light in self.roles.moving_lights])
         w, h = settings.resolution
@@ -172,14 +176,20 @@ class SceneCache:
         return [dressed({"type": "sphere", "radius": float(obj.radius)}, obj, self.loaded, self._materials)]
 
     def _build_atlas(self, mover_dicts: list[list[dict[str, Any]]]) -> None:
-        """The atlas of every mover (at its current scale) and particle holder."""
+        """The atlas of every mover (at its current scale), particle holder and deforming
+        mesh's templates (at what they show now), in that order."""
         atlas = self.atlas
         if atlas is None:
             return
         holders = [self._holder_dicts(name) for name in self.roles.particle_names]
-        dicts = [*mover_dicts, *holders]
-        templates = [None if analytic(md) else [load_dict(sd) for sd in md] for md in dicts]  # (analytic ones: bounded and built in the atlas from their dictionaries)
+        dicts: list[list[dict[str, Any]] | None] = [*mover_dicts, *holders]
+        templates: list[list[Any] | None] = [None if analytic(md) else [load_dict(sd) for sd in md] for md in dicts]  # type: ignore[arg-type]  # (analytic ones: bounded and built in the atlas from their dictionaries)
         keys = [f"m{k}_{mitsuba_id(n)}" for k, n in enumerate(self.roles.mover_names)] + [f"p{k}_{mitsuba_id(n)}" for k, n in enumerate(self.roles.particle_names)]
+        if self.deforming is not None:
+            shapes = self.deforming.shapes()
+            templates += shapes
+            dicts += [None] * len(shapes)
+            keys += [f"d{k}_{s}_{mitsuba_id(g.name)}" for k, g in enumerate(self.deforming.meshes) for s in range(self.deforming.templates_of(g))]
         if templates:
             if atlas.scene is not None and self.owner is not None:
                 self.owner.forget([atlas.scene])  # the old atlas is no longer traced
@@ -274,6 +284,10 @@ class SceneCache:
         else:  # the baked samples as they are: one stack, no per-mover work
             mt = np.array([fi.objects[name][0][1:] for name in names], dtype=float).reshape(len(names), n, 3)
             mq = np.array([fi.objects[name][1][1:] for name in names], dtype=float).reshape(len(names), n, 4)
+        if self.deforming is not None:
+            self._draw_deforming(fi, mode, u_fixed)
+            dt, dq = self.deforming.tracks(mode, u_fixed, n)
+            mt, mq = np.concatenate([mt, dt]), np.concatenate([mq, dq])
         particles = self._particles_frame(fi, mode, u_fixed)
         ct, cq = fi.camera
         q_frame_inv = cq[0] * np.array([1, -1, -1, -1])
@@ -289,6 +303,28 @@ class SceneCache:
         # is done on one frame and not yet on another, and differs between them
         self._dr.eval()
         self._dr.sync_thread()
+
+    def _draw_deforming(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> None:
+        """The deforming meshes' templates at what they show for this instant, written into
+        the atlas in place (one BVH build), or the atlas built again where one outgrew its
+        cell."""
+        atlas, deforming = self.atlas, self.deforming
+        if atlas is None or deforming is None or atlas.scene is None:
+            return
+        deforming.draw(fi, mode, u_fixed)
+        first = self._deforming_first()
+        changing = deforming.changing()
+        if not changing:
+            return  # (a flock's template never changes)
+        if all([atlas.reshape(first + k, p, nrm) for k, p, nrm in changing]):
+            atlas.commit()
+            return
+        self._build_atlas([self._mover_dicts(name, self._mover_stretch[name]) for name in self.roles.mover_names])
+        self._set_moving()
+
+    def _deforming_first(self) -> int:
+        """The atlas index of the first deforming mesh's first template."""
+        return len(self.roles.mover_names) + len(self.roles.particle_names)
 
     def _grow_particles(self, fi: StackedFrame) -> None:
         """The particles' room: a system past its room grows by 1.5x (one recompile)."""
@@ -314,6 +350,11 @@ class SceneCache:
         rows = fi.samples + 1
         mt = np.array([fi.objects[name][0] for name in names], dtype=float).reshape(m, rows, 3)
         mq = np.array([fi.objects[name][1] for name in names], dtype=float).reshape(m, rows, 4)
+        spheres = atlas.layout.sphere[:m]
+        if self.deforming is not None:  # movers too, on their fitted tracks, each held with every template it may draw
+            self.deforming.fit(fi)
+            dt, dq, ds = self.deforming.whole_tracks()
+            mt, mq, spheres = np.concatenate([mt, dt]), np.concatenate([mq, dq]), np.concatenate([spheres, ds])
         pp, pa, pr = np.zeros((total, rows, 3)), np.zeros((total, rows), bool), np.zeros(total)
         at = 0
         for k, (name, room) in enumerate(zip(self.roles.particle_names, self._capacity)):
@@ -323,7 +364,6 @@ class SceneCache:
                 pa[at:at + positions.shape[1]] = np.swapaxes(alive, 0, 1)
             pr[at:at + room] = atlas.layout.sphere[m + k, 3]
             at += room
-        spheres = atlas.layout.sphere[:m]
 
         def proxies_over(held: slice, also: bool, some: np.ndarray | None = None) -> np.ndarray:
             """Every thing's proxy over the rows `held` (and the frame's time, row 0); `some`:
@@ -362,8 +402,16 @@ class SceneCache:
         if scene_before is not None and broad.scene is not scene_before and self.owner is not None:
             self.owner.forget([scene_before])
         if broad.scene is not scene_before or self._moving_changed or self.integrator.world.particles != total:
-            self.integrator.set_moving(broad.scene, atlas.scene, m, total, self._emitters, self._particle_emitters())
-            self._moving_changed = False
+            self._set_moving()
+
+    def _set_moving(self) -> None:
+        """Give the integrator the broadphase and atlas scenes and what they hold."""
+        atlas, broad = self.atlas, self.broadphase
+        if atlas is None or broad is None:
+            return
+        rigid = len(self.roles.mover_names) + (self.deforming.movers if self.deforming is not None else 0)
+        self.integrator.set_moving(broad.scene, atlas.scene, rigid, int(sum(self._capacity)), self._emitters, self._particle_emitters())
+        self._moving_changed = False
 
     def _particles_frame(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> dict[str, np.ndarray]:
         """The particles across the shutter for motion-blur `mode` (the frame data's
@@ -389,7 +437,14 @@ class SceneCache:
         atlas = self.atlas
         if atlas is None or atlas.scene is None:
             return {}
+        m = len(self.roles.mover_names)
+        first = np.arange(m, dtype=float)
+        count = np.ones(m)
+        templates = np.stack([first, count], axis=1)
+        if self.deforming is not None:
+            templates = np.concatenate([templates, self.deforming.mover_templates(self._deforming_first())])
         return {
+            "mover_template": templates,
             "template_offset": atlas.layout.offset,
             "template_box": atlas.layout.box,
             "template_sphere": atlas.layout.sphere,

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any, Callable, NamedTuple
 import numpy as np
 
 from ..meshes import RenderMesh, load_render_mesh, plain_render_mesh, vertex_normals
-from ..motion.pose import quat_rotate
+from ..motion.pose import matrix_to_quat, quat_mul, quat_rotate
 from ..scene.loader import LoadedScene
 from ..scene.schema import Mesh
 from ..variant import load_dict
@@ -278,3 +278,233 @@ class SlicedGeometry:
                 elif g.smooth:  # from the positions Mitsuba is given, as it would
                     normals.append(vertex_normals(world, mesh.faces))
             update_group(self._mi, g, per_slice, normals or None)
+
+
+# --- deforming meshes in the one traversal ----------------------------------------------
+#
+# A deforming mesh that emits no light is not time-sliced in the kernel: it is a mover of
+# the broadphase like any rigid one (render/world.py), posed at each lane's own time by its
+# *fitted rigid track*, and drawing one of S residual templates in the atlas.
+# Per baked sample i the object-space vertices Y_i are fitted by a rigid motion of the
+# frame's own vertices X = Y_0 (`rigid_fit`: least squares, Kabsch); the track is the
+# object's own pose composed with that motion, and the residual W_i = R_i^T (Y_i - T_i) is
+# what the motion leaves. A mesh that moves rigidly (its object, or a bone that carries it
+# whole) has W_i = X at every sample: its blur is its rigid twin's, continuous and exact.
+# What the fit cannot carry (a bend, a wave) is the residual: S templates at the samples of
+# `slice_samples`, and a lane at u draws the two around u with probabilities by their
+# distance (a dither, render/poses.py `Movers.template_of`): a crossfade, never a gap.
+#
+# A flock is instanced: each agent is a mover of its own, its track fitted to the agent
+# mesh (exact: agents are rigid copies of it), and every agent draws the one template of
+# the agent mesh, which never changes (nothing is written per frame).
+
+
+def rigid_fit(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rigid motions (R [K, 3, 3], T [K, 3]) taking points x [V, 3] closest to each of
+    y [K, V, 3] in least squares (Kabsch: the SVD of the cross-covariance, its reflection
+    removed): y_k ~ x R_k^T + T_k. Exact (to rounding) where y_k is a rigid motion of x."""
+    cx = x.mean(axis=0)
+    cy = y.mean(axis=1)
+    h = np.einsum("vi,kvj->kij", x - cx, y - cy[:, None])
+    u, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(np.swapaxes(vt, 1, 2) @ np.swapaxes(u, 1, 2)))
+    d = np.where(d == 0, 1.0, d)  # a reflection would turn the mesh inside out
+    fix = np.broadcast_to(np.eye(3), h.shape).copy()
+    fix[:, 2, 2] = d
+    r = np.swapaxes(vt, 1, 2) @ fix @ np.swapaxes(u, 1, 2)
+    return r, cy - np.einsum("kij,j->ki", r, cx)
+
+
+@dataclass
+class DeformingMesh:
+    """One deforming mesh drawn in the atlas: its render vertices, material and, for the
+    frame last fitted, its movers' fitted tracks, its residual vertices and what its
+    templates show. `pieces`: its movers (a flock's agents; else 1)."""
+
+    name: str
+    mesh: RenderMesh
+    smooth: bool
+    rest: np.ndarray  # the bind mesh's file vertices [V, 3] (a flock: one agent's)
+    bsdf: Any
+    pieces: int = 1
+    rest_cache: dict[tuple[float, ...], Any] = field(default_factory=dict)  # scale -> `rest_normals`
+    track: tuple[np.ndarray, np.ndarray] = (np.zeros((0, 0, 3)), np.zeros((0, 0, 4)))  # world_from_template [pieces, 1+N, 3], [pieces, 1+N, 4]
+    residual: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3)))  # W [1+N, V, 3] (file vertices)
+    turn: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))  # the fit's R [1+N, 3, 3]
+    sphere: np.ndarray = field(default_factory=lambda: np.zeros(4))  # holds every template it may draw (centre, radius)
+    scaled: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3)))  # Y [1+N, V, 3]: object space, scaled
+    scale: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # the object's scale [1+N, 3]
+    stretched: bool = False  # under a non-uniform parent scale (a full stretch, not `scale`)
+    drawn: list[tuple[np.ndarray, np.ndarray | None]] = field(default_factory=list)  # per template: render positions, normals
+
+    @property
+    def instanced(self) -> bool:
+        """A flock: its agents draw one template, the agent mesh."""
+        return self.pieces > 1
+
+
+def deformed_mesh(mi: Any, key: str, bsdf: Any, mesh: RenderMesh, positions: np.ndarray, normals: np.ndarray | None) -> Any:
+    """A built Mitsuba mesh of a deforming mesh's render vertices at `positions` [R, 3]
+    (its normals written with them where it is smooth: `update_group`), with its uvs."""
+    props = mi.Properties()
+    props["bsdf"] = bsdf
+    shape = mi.Mesh(key, len(positions), len(mesh.faces), props, normals is not None, mesh.uvs is not None)
+    p = mi.traverse(shape)
+    p["vertex_positions"] = mi.Float(np.asarray(positions, np.float32).ravel())
+    p["faces"] = mi.UInt32(np.asarray(mesh.faces, np.uint32).ravel())
+    if normals is not None:
+        p["vertex_normals"] = mi.Float(np.asarray(normals, np.float32).ravel())
+    if mesh.uvs is not None:
+        p["vertex_texcoords"] = mi.Float(np.asarray(mesh.uvs, np.float32).ravel())
+    p.update()
+    return shape
+
+
+def _sphere(points: np.ndarray) -> np.ndarray:
+    """A sphere (centre, radius) holding `points` [P, 3]: their box's centre, the farthest."""
+    if len(points) == 0:
+        return np.zeros(4)
+    centre = (points.min(axis=0) + points.max(axis=0)) / 2
+    return np.array([*centre, float(np.sqrt(((points - centre) ** 2).sum(axis=1).max())) * (1 + 1e-4) + 1e-5])
+
+
+class DeformingMeshes:
+    """The deforming meshes of one job drawn in the atlas (see above): their movers, each
+    on a fitted track, and their templates (S per mesh, one per flock). `fit` once per
+    frame, `draw` per instant drawn (a frame, or each sub-frame)."""
+
+    def __init__(self, mi: Any, loaded: LoadedScene, names: list[str], fi: StackedFrame, materials: dict[str, Any]) -> None:
+        from ..motion.deform import bind_mesh
+        from ..motion.instances import agent_mesh
+        from .build import object_material
+
+        self._mi = mi
+        self.loaded = loaded
+        self.slices = slice_count(loaded, fi)  # S (the job's N is fixed)
+        self.meshes: list[DeformingMesh] = []
+        for name in names:
+            obj = loaded.objects_by_name[name]
+            material = object_material(obj, materials)
+            bsdf = load_dict(material) if isinstance(material, dict) else material
+            if obj.is_flock:
+                agent, faces = agent_mesh(loaded, obj)
+                self.meshes.append(DeformingMesh(name, plain_render_mesh(len(agent), faces), False, agent, bsdf, pieces=int(obj.deform.count)))
+                continue
+            verts, faces = bind_mesh(loaded, obj, getattr(obj.deform, "detail", 16))  # the motion stage's tessellation
+            mesh, smooth = render_mesh(loaded, obj, len(verts), faces)
+            self.meshes.append(DeformingMesh(name, mesh, smooth, verts, bsdf))
+        self._fitted: StackedFrame | None = None
+
+    @property
+    def movers(self) -> int:
+        """The movers of every mesh (a flock's agents each)."""
+        return sum(g.pieces for g in self.meshes)
+
+    def templates_of(self, g: DeformingMesh) -> int:
+        """How many templates mesh g draws: S, or a flock's one."""
+        return 1 if g.instanced else self.slices
+
+    def mover_templates(self, first: int) -> np.ndarray:
+        """Each mover's (first template, count) [movers, 2], the templates numbered from
+        `first` in mesh order (the frame data's `mover_template`)."""
+        rows, at = [], first
+        for g in self.meshes:
+            count = self.templates_of(g)
+            rows += [(at, count)] * g.pieces
+            at += count
+        return np.array(rows, dtype=float).reshape(-1, 2)
+
+    def fit(self, fi: StackedFrame) -> None:
+        """Each mesh's fitted tracks, residual and bounding sphere for frame `fi` (once per
+        frame: a second call with the same frame does nothing)."""
+        if self._fitted is fi:
+            return
+        for g in self.meshes:
+            t, q, s = (np.asarray(a, dtype=float) for a in fi.objects[g.name])
+            local = np.asarray(fi.vertices[g.name], dtype=float)
+            stretch = fi.stretches.get(g.name)  # a symmetric stretch under a non-uniform parent scale
+            scaled = np.einsum("rvj,rij->rvi", local, stretch) if stretch is not None else local * s[:, None, :]
+            rows = len(scaled)
+            if g.instanced:  # each agent fitted to the agent mesh, every row
+                r, shift = rigid_fit(g.rest, scaled.reshape(rows * g.pieces, len(g.rest), 3))
+                r, shift = r.reshape(rows, g.pieces, 3, 3), shift.reshape(rows, g.pieces, 3)
+                tt = t[:, None] + quat_rotate(q[:, None], shift)
+                qq = quat_mul(np.broadcast_to(q[:, None], (rows, g.pieces, 4)), matrix_to_quat(r))
+                g.track = (np.swapaxes(tt, 0, 1), np.swapaxes(qq, 0, 1))
+                g.sphere = _sphere(g.rest)
+                continue
+            r, shift = rigid_fit(scaled[0], scaled[1:])
+            r = np.concatenate([np.eye(3)[None], r])
+            shift = np.concatenate([np.zeros((1, 3)), shift])
+            g.turn = r
+            g.residual = np.einsum("rvi,rij->rvj", scaled - shift[:, None], r)  # R^T (Y - T), row by row
+            g.residual[0] = scaled[0]
+            g.track = ((t + quat_rotate(q, shift))[None], quat_mul(q, matrix_to_quat(r))[None])
+            g.sphere = _sphere(g.residual.reshape(-1, 3))
+            g.scaled, g.scale, g.stretched = scaled, s, stretch is not None
+        self._fitted = fi
+
+    def draw(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> None:
+        """What each mesh's S templates show for motion-blur `mode` (`slice_samples`): the
+        residual at those rows, as render vertices, with their normals; a flock's one
+        template, the agent mesh, once."""
+        self.fit(fi)
+        rows = slice_samples(fi.samples, self.slices, mode, u_fixed)
+        for g in self.meshes:
+            if g.instanced:
+                g.drawn = g.drawn or [(g.rest[g.mesh.index], None)]
+                continue
+            drawn = []
+            for i in rows:
+                positions = g.residual[i][g.mesh.index]
+                normals = None
+                if g.smooth and g.mesh.normals is not None and not g.stretched:
+                    scale = g.scale[i]
+                    key = tuple(float(c) for c in scale)
+                    if key not in g.rest_cache:
+                        g.rest_cache.clear()
+                        g.rest_cache[key] = rest_normals(g.rest, g.mesh, scale)
+                    normals = slice_normals(g.scaled[i], g.rest_cache[key], g.mesh) @ g.turn[i]
+                elif g.smooth:  # from the positions Mitsuba is given, as it would
+                    normals = vertex_normals(positions, g.mesh.faces)
+                drawn.append((positions, normals))
+            g.drawn = drawn
+
+    def changing(self) -> list[tuple[int, np.ndarray, np.ndarray | None]]:
+        """The templates whose vertices change per instant (not a flock's): (template
+        number from the first deforming one, render positions, normals)."""
+        out, at = [], 0
+        for g in self.meshes:
+            if not g.instanced:
+                out += [(at + s, p, n) for s, (p, n) in enumerate(g.drawn)]
+            at += self.templates_of(g)
+        return out
+
+    def tracks(self, mode: str, u_fixed: float | None, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Every mover's fitted track for the frame data ([movers, N, 3], [movers, N, 4]:
+        the baked samples, or one instant: `shutter_poses.across_shutter`)."""
+        from .shutter_poses import across_shutter
+
+        t = np.concatenate([g.track[0] for g in self.meshes]) if self.meshes else np.zeros((0, n + 1, 3))
+        q = np.concatenate([g.track[1] for g in self.meshes]) if self.meshes else np.zeros((0, n + 1, 4))
+        if mode != "off" and u_fixed is None:  # the baked samples as they are
+            return t[:, 1:], q[:, 1:]
+        if mode == "off":
+            return np.repeat(t[:, :1], n, axis=1), np.repeat(q[:, :1], n, axis=1)
+        poses = [across_shutter(a, b, n, mode, u_fixed) for a, b in zip(t, q)]  # one sub-frame (a comparison mode)
+        return np.array([p[0] for p in poses]).reshape(-1, n, 3), np.array([p[1] for p in poses]).reshape(-1, n, 4)
+
+    def whole_tracks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every mover's track over all 1 + N rows ([movers, 1+N, 3], [movers, 1+N, 4]) and
+        the sphere holding what it draws [movers, 4], for the broadphase."""
+        if not self.meshes:
+            return np.zeros((0, 1, 3)), np.zeros((0, 1, 4)), np.zeros((0, 4))
+        return (np.concatenate([g.track[0] for g in self.meshes]), np.concatenate([g.track[1] for g in self.meshes]),
+                np.concatenate([np.repeat(g.sphere[None], g.pieces, axis=0) for g in self.meshes]))
+
+    def shapes(self) -> list[list[Any]]:
+        """Each template's built mesh (per mesh, its templates in order), at what it shows
+        now: for building the atlas."""
+        from .build import mitsuba_id
+
+        return [[deformed_mesh(self._mi, f"{mitsuba_id(g.name)}_{s}", g.bsdf, g.mesh, p, n)] for g in self.meshes for s, (p, n) in enumerate(g.drawn)]

@@ -135,7 +135,8 @@ def test_deforming_asset_agrees_with_mitsuba_path(tmp_path: Path, case: str) -> 
     text = light_scene_yaml(lights, objects, resolution=RES, spp=SPP, last=1).replace("materials:\n", "materials:\n" + MATERIALS)
     loaded = load(tmp_path, text)
     images, stats, renderer = render(loaded, [0, 1])
-    assert renderer.slice_names == ["ball"]
+    # an emissive one in time slices, the others in the one traversal
+    assert [*renderer.slice_names, *renderer.deforming_names] == ["ball"]
     assert [s.cold for s in stats] == [True, False]
     emitters, shapes = reference(tmp_path)
     scene = reference_scene(mi, emitters, shapes, resolution=RES, spp=SPP)
@@ -458,11 +459,29 @@ def test_deforming_slice_normals_are_mitsubas_own(tmp_path: Path, normals: bool)
     _, _, renderer = render(load(tmp_path, text.replace("materials:\n", "materials:\n" + MATERIALS)), [0, 1])
     static = mi.traverse(mi.load_dict({"type": "obj", "filename": str(tmp_path / "ball.obj"), "to_world": mi.ScalarTransform4f().translate(CENTRE)}))
     want_p, want_n = (np.array(static[k]).reshape(-1, 3) for k in ("vertex_positions", "vertex_normals"))
-    (group,) = renderer.cache.sliced.groups
-    for scene in group.scenes:
-        got = mi.traverse(scene.shapes()[0])
-        np.testing.assert_allclose(np.array(got["vertex_positions"]).reshape(-1, 3), want_p, atol=1e-6)
-        np.testing.assert_allclose(np.array(got["vertex_normals"]).reshape(-1, 3), want_n, atol=1e-6)
+    for positions, got_n in _templates(mi, renderer):
+        np.testing.assert_allclose(positions, want_p, atol=1e-5)
+        np.testing.assert_allclose(got_n, want_n, atol=1e-6)
+
+
+def _templates(mi: Any, renderer: Any) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The one deforming mesh's templates as the atlas holds them, moved to world space by
+    its fitted track (the mesh stands still: every row of the track is the same pose):
+    (positions, normals) per template."""
+    from motion.pipeline.motion.pose import quat_rotate
+
+    cache = renderer.cache
+    (g,) = cache.deforming.meshes
+    params = mi.traverse(cache.atlas.scene)
+    first = cache._deforming_first()
+    t, q = g.track[0][0, 0], g.track[1][0, 0]  # its one mover, at the frame's time
+    out = []
+    for s in range(cache.deforming.slices):
+        key = cache.atlas.keys[first + s]
+        rest = np.array(params[f"{key}__0.vertex_positions"], dtype=float).reshape(-1, 3) - cache.atlas.layout.offset[first + s]
+        normals = np.array(params[f"{key}__0.vertex_normals"], dtype=float).reshape(-1, 3)
+        out.append((quat_rotate(q, rest) + t, quat_rotate(q, normals)))
+    return out
 
 
 def test_vertex_normals_are_mitsubas(tmp_path: Path) -> None:
@@ -532,15 +551,14 @@ def test_deforming_slice_normals_do_not_depend_on_the_thread_count(tmp_path: Pat
     loaded = load(tmp_path, text.replace("materials:\n", "materials:\n" + MATERIALS).replace("motion_blur: off}", "motion_blur: off, time_slices: 1}"))
     _, _, renderer = render(loaded, [0])
     (fi,) = (stack_frame(f) for f in evaluate_frames(loaded, [0]))
-    sliced = renderer.cache.sliced
+    cache = renderer.cache
     threads = dr.thread_count()
     seen = []
     try:
         for count in (1, 2, 4, 8) * 3:  # each a warm frame's update
             dr.set_thread_count(count)
-            sliced.update(fi, "stochastic", None)
-            (scene,) = sliced.groups[0].scenes
-            seen.append(np.array(mi.traverse(scene.shapes()[0])["vertex_normals"]))
+            cache._draw_deforming(fi, "stochastic", None)
+            seen.append(np.array(mi.traverse(cache.atlas.scene)[f"{cache.atlas.keys[cache._deforming_first()]}__0.vertex_normals"]))
     finally:
         dr.set_thread_count(threads)
     for normals in seen[1:]:
