@@ -60,3 +60,46 @@ def test_a_skinned_primitive_renders_at_its_own_tessellation(tmp_path: Path) -> 
     assert "detail: 4" in text
     (img,), _, _ = render(load(tmp_path, text), [24])
     assert (img[..., 0] > img[..., 1] + 0.3).sum() > 50
+
+
+FLOCK = """
+timeline: {fps: 24, first: 0, last: 4}
+camera: {position: [0, 2, 8], look_at: [0, 1.5, 0], fov: 50, shutter: {angle: 180}}
+lights: [{type: constant, radiance: 1.0}]
+materials: [{name: dart, type: diffuse, color: [0.9, 0.2, 0.1]}]
+objects:
+  - name: darts
+    shape: cube
+    size: [0.3, 0.2, 0.6]
+    material: dart
+    deform: {type: flock, count: 24, seed: 3, spawn_center: [-1, 1.5, 0], spawn_size: [1, 0.5, 1], speed: 2, goal: [2, 1.5, 0],
+             bounds: {min: [-4, 0.5, -2], max: [4, 3, 2]}}
+render: {resolution: [64, 48], spp: 4, max_depth: 2}
+"""
+
+
+def test_a_flock_is_one_mover_per_agent_sharing_one_template(tmp_path: Path) -> None:
+    """A flock's agents are instances of one agent mesh, each with its own rigid motion
+    (fitted to the agent mesh: exact, agents are rigid copies of it): 24 movers of the one
+    traversal, one template in the atlas, no recompilation on a warm frame. Before, the
+    flock was one flattened mesh drawn as `time_slices` frozen copies."""
+    (first, later), stats, renderer = render(load(tmp_path, FLOCK), [1, 4])
+    cache = renderer.cache
+    assert renderer.deforming_names == ("darts",) and cache.deforming.movers == 24
+    assert cache.integrator.world.rigid == 24 and len(cache.atlas.keys) == 1
+    (g,) = cache.deforming.meshes
+    # every agent's fitted track puts the agent mesh on the agent's baked vertices
+    from motion.pipeline.bake import evaluate_frames
+    from motion.pipeline.motion.pose import quat_rotate
+    from motion.pipeline.render.stacked import stack_frame
+
+    fi = stack_frame(evaluate_frames(load(tmp_path, FLOCK, "again.yaml"), [4])[0])
+    cache.deforming.fit(fi)
+    t, q, s = fi.objects["darts"]
+    world = quat_rotate(q[:, None], fi.vertices["darts"] * s[:, None, :]) + t[:, None]  # [1+N, 24 x V, 3]
+    tt, qq = g.track
+    posed = quat_rotate(qq[:, :, None], g.rest[None, None]) + tt[:, :, None]  # [24, 1+N, V, 3]
+    np.testing.assert_allclose(np.swapaxes(posed, 0, 1).reshape(world.shape), world, atol=1e-9)
+    red = lambda img: (img[..., 0] > img[..., 1] + 0.3).sum()  # noqa: E731
+    assert red(first) > 20 and red(later) > 20
+    assert stats[1].kernels_compiled == 0
