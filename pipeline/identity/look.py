@@ -67,7 +67,7 @@ def look_parts(loaded: LoadedScene, roles: Any) -> dict[str, str]:
     parts["roles"] = {
         "static": [objects[n] for n in roles.static_names],
         "movers": [objects[n] for n in roles.mover_names],
-        "slices": [objects[n] for n in roles.slice_names + list(roles.deforming_names)],
+        "slices": [objects[n] for n in roles.deforming_names],
         "moving_lights": [i for i, _ in roles.moving_lights],
         "animated_lights": [i for i, _ in roles.animated_lights],
     }

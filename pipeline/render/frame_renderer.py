@@ -118,7 +118,7 @@ class FrameRenderer:
         # The scalar fallback renders with Mitsuba's own `path`, movers placed per sub-frame.
         self.vectorized = not mi.variant().startswith("scalar")
         roles = sort_scene(loaded)
-        self.static_names, self.mover_names, self.slice_names = roles.static_names, roles.mover_names, roles.slice_names
+        self.static_names, self.mover_names = roles.static_names, roles.mover_names
         self.particle_names = roles.particle_names
         self.deforming_names = roles.deforming_names
         self.moving_lights = roles.moving_lights
@@ -137,11 +137,6 @@ class FrameRenderer:
     def _scene(self) -> Any:
         """The cached motion_path scene (None before the cold frame)."""
         return self.cache.scene
-
-    @property
-    def _groups(self) -> list[Any]:
-        """The cached time-slice groups."""
-        return self.cache.sliced.groups if self.cache.sliced is not None else []
 
     def _full_scene(self, stacked: StackedFrame, u: float | None) -> Any:
         """The whole scene at one instant with Mitsuba's `path` (the scalar fallback's)."""

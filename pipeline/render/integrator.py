@@ -16,8 +16,9 @@ Mitsuba 3 has no animated shapes, so motion is ours (docs/rendering.md):
 * Shadow rays and every bounce of a path reuse the path's u: one path, one time.
 * The camera's motion inside the shutter moves primary rays by C(u) C(frame)^-1.
 * Lights that move (point, spot, directional: `set_lights`) are Mitsuba's own emitters
-  queried in their rest frame at the path's time u, like movers; emitters on movers are
-  sampled in the mover's rest frame too, and combined with BSDF sampling by MIS.
+  queried in their rest frame at the path's time u, like movers; the emitters on things
+  that move (movers, particles, deforming meshes) are one sampler over the atlas
+  (`lights.MovingEmitters`), combined with BSDF sampling by MIS.
 * The static scene's emitters are chosen by estimated contribution at each vertex, and a
   constant environment is reached by BSDF sampling only (`lights.py`).
 * Per-frame data (poses) are one opaque drjit array of a fixed size, so a new frame
@@ -36,7 +37,7 @@ import numpy as np
 
 from . import aovs as aov_table
 from . import film
-from .lights import LightChoice
+from .lights import LightChoice, MovingEmitters
 from .broadphase import EMPTY_BOX
 from .poses import FrameData, KernelPose, Movers
 from .world import NONE, World
@@ -85,12 +86,11 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         """The number of baked samples across the shutter (fixed for a job)."""
         self.frame_data.n_samples = max(2, int(n_samples))
 
-    def set_moving(self, broadphase: Any, atlas: Any, rigid: int, particles: int, emitters: dict[int, Any], particle_emitters: Sequence[tuple[int, int, Any]] = ()) -> None:
-        """Everything that moves rigidly or as particles (render/world.py): the broadphase
-        and atlas scenes, how many rigid movers and particles they hold, the emissive
-        movers' rest-frame scenes and the emissive particle systems' ranges and holder
-        scenes (for emitter sampling)."""
-        self.world.set_moving(broadphase, atlas, rigid, particles, emitters, particle_emitters)
+    def set_moving(self, broadphase: Any, atlas: Any, rigid: int, particles: int, emitters: MovingEmitters | None = None) -> None:
+        """Everything that moves (render/world.py): the broadphase and atlas scenes, how
+        many rigid movers (deforming meshes' movers included) and particles they hold, and
+        the sampler of the emitters on them (lights.py)."""
+        self.world.set_moving(broadphase, atlas, rigid, particles, emitters)
 
     def set_sbt_owner(self, owner: Any) -> None:
         """The SBT owner every traced scene of the job was built against (render/sbt.py)."""
@@ -112,11 +112,6 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         """Camera projection for the motion AOV: perspective scale = (W/2) / tan(xfov/2),
         orthographic scale = W / ortho_width (pixels per metre). Fixed for a job."""
         self._projection = (kind, float(scale), width / 2.0, height / 2.0)
-
-    def set_slices(self, groups: Sequence[Sequence[mi.Scene]]) -> None:
-        """Time-sliced geometry (render/slices.py): for each deforming object, one
-        world-space scene per baked shutter sample."""
-        self.world.set_slices(groups)
 
     def set_frame(
         self,
@@ -183,13 +178,13 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         ctx: Any,
         movers: Movers,
         light_poses: list[KernelPose],
-        k_slice: Any,
         active: Any,
     ) -> Any:
-        """Direct light at si from the moving lights and the emitters on movers, each posed
-        at the path's time: the reference point goes into the light's (or mover's) rest
-        frame, Mitsuba's own emitter samples a direction there, and it comes back to world
-        space; the shadow ray is tested against every scene at the same time."""
+        """Direct light at si from the moving lights and the emitters on things that move,
+        each posed at the path's time: the reference point goes into the light's rest
+        frame (or the emitter's atlas cell), Mitsuba's own emitter samples a direction there,
+        and it comes back to world space; the shadow ray is tested against every scene at
+        the same time."""
         L = mi.Spectrum(0.0)
         # delta lights (point, spot, directional): one deterministic sample each, no MIS
         for index, (at_infinity, emitter) in enumerate(self.lights):
@@ -198,45 +193,22 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             d = pose.vector_to_world(ds.d)
             shadow = si.spawn_ray(d) if at_infinity else si.spawn_ray_to(pose.point_to_world(ds.p))
             ok = active & (ds.pdf != 0.0)
-            ok &= ~self.world.occluded(scene, shadow, movers, ok, k_slice)
+            ok &= ~self.world.occluded(scene, shadow, movers, ok)
             rgb = self.frame_data.vec("light_rgb", 3, mi.UInt32(index), ok)
             value = bsdf.eval(ctx, si, si.to_local(d), ok)
             L += dr.select(ok, value * weight * mi.Spectrum(rgb.x, rgb.y, rgb.z), 0.0)
-        # area emitters on movers: sampled in the mover's rest frame, MIS against BSDF sampling
-        for k in self.world.emissive:
-            pose = movers.pose(k)
-            ds, weight = self.world.emitters[k].sample_emitter_direction(pose.interaction_to_rest(si), sampler.next_2d(), False, active)
-            d = pose.vector_to_world(ds.d)
+        # the emitters on things that move (movers, particles, deforming meshes): one
+        # sample of one of them, whatever their number (lights.py `MovingEmitters`), MIS
+        # against BSDF sampling
+        emitters = self.world.emitters
+        if emitters is not None:
+            ds, weight = emitters.sample(movers, si, sampler.next_1d(), sampler.next_2d(), active)
             ok = active & (ds.pdf != 0.0)
-            ok &= ~self.world.occluded(scene, si.spawn_ray_to(pose.point_to_world(ds.p)), movers, ok, k_slice)
-            value, bsdf_pdf = bsdf.eval_pdf(ctx, si, si.to_local(d), ok)
+            ok &= ~self.world.occluded(scene, si.spawn_ray_to(ds.p), movers, ok)
+            value, bsdf_pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), ok)
             mis = dr.select(ds.delta, 1.0, _mis(ds.pdf, bsdf_pdf))
             L += dr.select(ok, mis * value * weight, 0.0)
-        # emissive particle systems: one particle of each, sampled at the path's time
-        for g in range(len(self.world.particle_emitters)):
-            ds, weight = self.world.sample_particle_emitter(g, movers, si, sampler.next_1d(), sampler.next_2d(), active)
-            ok = active & (ds.pdf != 0.0)
-            ok &= ~self.world.occluded(scene, si.spawn_ray_to(ds.p), movers, ok, k_slice)
-            value, bsdf_pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), ok)
-            L += dr.select(ok, _mis(ds.pdf, bsdf_pdf) * value * weight, 0.0)
-        # area emitters on deforming meshes: the slice at the path's time
-        for g in self.world.emissive_slices:
-            ds, weight = self.world.sample_slice_emitter(g, si, sampler.next_2d(), k_slice, active)
-            ok = active & (ds.pdf != 0.0)
-            ok &= ~self.world.occluded(scene, si.spawn_ray_to(ds.p), movers, ok, k_slice)
-            value, bsdf_pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), ok)
-            L += dr.select(ok, _mis(ds.pdf, bsdf_pdf) * value * weight, 0.0)
         return L
-
-    def _mover_emitter_pdf(self, ds: Any, ref: Any, hit_mover: Any, movers: Movers, pdf: Any, active: Any) -> Any:
-        """The solid-angle pdf with which `_moving_light_terms` would have sampled the
-        emitter that a BSDF-sampled ray hit on a mover (in the mover's rest frame)."""
-        for k in self.world.emissive:
-            pose = movers.pose(k)
-            mine = active & (hit_mover == k)
-            local = pose.direction_sample_to_rest(ds)
-            pdf = dr.select(mine, self.world.emitters[k].pdf_emitter_direction(pose.interaction_to_rest(ref), local, mine), pdf)
-        return pdf
 
     def _choice(self, scene: mi.Scene) -> LightChoice:
         """The light selection of `scene`'s emitters, made once per scene."""
@@ -325,21 +297,21 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         return aov
 
     def _emission_hit(
-        self, scene: mi.Scene, si: Any, prev_si: Any, prev_bsdf_pdf: Any, prev_bsdf_delta: Any, on_mover: Any, hit_mover: Any, choice: LightChoice, movers: Movers, k_slice: Any, depth: Any
+        self, scene: mi.Scene, si: Any, prev_si: Any, prev_bsdf_pdf: Any, prev_bsdf_delta: Any, on_mover: Any, hit_mover: Any, choice: LightChoice, movers: Movers, depth: Any
     ) -> tuple[Any, Any]:
         """The direction sample of the emitter a BSDF-sampled segment reached, and its MIS
         weight against emitter sampling of the same emitter: the static scene's (chosen by
-        `choice`), the emissive mover's in its rest frame, or the slice's at the path's time.
-        1 on the first segment."""
+        `choice`), or one on something that moves (`MovingEmitters.pdf`, in its atlas cell
+        at the path's time). 1 on the first segment."""
         ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
         em_pdf = dr.select(~prev_bsdf_delta & ~on_mover, choice.pdf(prev_si, ds, ~prev_bsdf_delta & ~on_mover), 0.0)
-        em_pdf = self._mover_emitter_pdf(ds, prev_si, hit_mover, movers, em_pdf, ~prev_bsdf_delta & on_mover)
-        em_pdf = self.world.particle_emitter_pdf(ds, prev_si, hit_mover, movers, em_pdf, ~prev_bsdf_delta & on_mover)
-        em_pdf = self.world.slice_emitter_pdf(ds, prev_si, hit_mover, k_slice, em_pdf, ~prev_bsdf_delta & on_mover)
+        if self.world.emitters is not None:  # on something that moves: the moving emitters' sampler
+            mine = ~prev_bsdf_delta & on_mover & (hit_mover != NONE) & (ds.emitter != None)  # noqa: E711
+            em_pdf = dr.select(mine, self.world.emitters.pdf(movers, prev_si, ds, hit_mover, mine), em_pdf)
         return ds, dr.select(depth == 0, 1.0, _mis(prev_bsdf_pdf, em_pdf))
 
     def _static_light_term(
-        self, scene: mi.Scene, sampler: mi.Sampler, si: Any, bsdf: Any, bsdf_ctx: Any, choice: LightChoice, movers: Movers, k_slice: Any, beta: Any, active_next: Any
+        self, scene: mi.Scene, sampler: mi.Sampler, si: Any, bsdf: Any, bsdf_ctx: Any, choice: LightChoice, movers: Movers, beta: Any, active_next: Any
     ) -> Any:
         """Emitter sampling of the static scene's lights (chosen by contribution: lights.py),
         the shadow ray tested across all scenes at the path's time, MIS against BSDF
@@ -348,7 +320,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         ds_em, em_weight = choice.sample(scene, si, sampler.next_1d(), sampler.next_2d(), active_em)
         active_em &= ds_em.pdf != 0.0
         shadow = si.spawn_ray_to(ds_em.p)
-        occluded = self.world.occluded(scene, shadow, movers, active_em, k_slice)
+        occluded = self.world.occluded(scene, shadow, movers, active_em)
         active_em &= ~occluded
         wo = si.to_local(ds_em.d)
         bsdf_val, bsdf_pdf = bsdf.eval_pdf(bsdf_ctx, si, wo, active_em)
@@ -376,7 +348,6 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
 
         movers = Movers(data, self.world.rigid, self.world.particles, u, active)
         light_poses = data.poses("light_t", "light_q", len(self.lights), u, active)
-        k_slice = self.world.slice_of(u)
         choice = self._choice(scene)
         has_choice = len(choice) > 0  # a Python bool: @dr.syntax keeps it a plain `if`
         bsdf_ctx = mi.BSDFContext()
@@ -393,13 +364,13 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         want_aovs = len(aov) > 0  # a Python bool: @dr.syntax keeps it a plain `if`
 
         while dr.hint(active, max_iterations=self.max_depth, label="motion_path"):
-            si, on_mover, hit_mover = self.world.intersect(scene, ray, movers, active, k_slice)
+            si, on_mover, hit_mover = self.world.intersect(scene, ray, movers, active)
             valid |= active & si.is_valid() & (depth == 0)
             if want_aovs:
                 aov = self._first_hit_aovs(aov, scene, si, ray, data, ci, cf, hit_mover, movers, depth, active)
             # emission reached by BSDF sampling, MIS-weighted against emitter sampling of the
             # same emitter
-            ds, mis_bsdf = self._emission_hit(scene, si, prev_si, prev_bsdf_pdf, prev_bsdf_delta, on_mover, hit_mover, choice, movers, k_slice, depth)
+            ds, mis_bsdf = self._emission_hit(scene, si, prev_si, prev_bsdf_pdf, prev_bsdf_delta, on_mover, hit_mover, choice, movers, depth)
             L += beta * mis_bsdf * ds.emitter.eval(si, active & (prev_bsdf_pdf > 0))
 
             active_next = active & si.is_valid() & (depth + 1 < self.max_depth)
@@ -408,10 +379,10 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             # emitter sampling (static lights, chosen by contribution: lights.py), shadow
             # test across all scenes at time u
             if has_choice:
-                L += self._static_light_term(scene, sampler, si, bsdf, bsdf_ctx, choice, movers, k_slice, beta, active_next)
+                L += self._static_light_term(scene, sampler, si, bsdf, bsdf_ctx, choice, movers, beta, active_next)
             # moving lights and emitters on movers, each at this path's time u
             lit = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-            L += beta * self._moving_light_terms(scene, sampler, si, bsdf, bsdf_ctx, movers, light_poses, k_slice, lit)
+            L += beta * self._moving_light_terms(scene, sampler, si, bsdf, bsdf_ctx, movers, light_poses, lit)
 
             # BSDF sampling: the next segment of the path
             bs, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(), active_next)

@@ -142,3 +142,98 @@ class LightChoice:
             prob = dr.select(ds.emitter == mi.EmitterPtr(emitter), p, prob)
         direction_pdf = ds.emitter.pdf_direction(si, ds, active & (prob > 0))
         return dr.select(prob > 0, direction_pdf * prob, 0.0)
+
+
+NONE = 0xFFFFFFFF  # no emitter (a template slot without one)
+
+
+class MovingEmitters:
+    """The emitters on everything that moves, in one sampler: emissive rigid movers,
+    emissive particle systems and emissive deforming meshes (a flock's agents each) all
+    wear their emitters on their templates in the atlas (render/atlas.py), so one code
+    path samples any of them, whatever their number (docs/rendering.md, "Light sampling").
+
+    An *entry* is an emissive shape of a mover, or an emissive particle system: (its first
+    proxy, its room: 1, or the system's particle slots; the shape's slot in its template).
+    A vertex picks one entry uniformly and, in a particle system, one slot uniformly (a
+    dead particle gives nothing), poses that proxy at the path's time (`Movers.proxy`: a
+    deforming mesh's template by the same dither as its hit), and samples its template's
+    emitter in the template's atlas cell: pmf 1 / (entries x room)."""
+
+    def __init__(self, atlas: Any, entries: list[tuple[int, int, int]], template_emitter: np.ndarray, template_room: np.ndarray) -> None:
+        self.count = len(entries)
+        table = np.asarray(entries, dtype=np.uint32).reshape(-1, 3)
+        self.base, self.room, self.slot = (mi.UInt32(table[:, c]) for c in range(3))
+        self.width = int(template_emitter.shape[1]) if template_emitter.ndim == 2 and template_emitter.shape[1] else 1
+        self.emitter_of = mi.UInt32(np.asarray(template_emitter, dtype=np.uint32).ravel())
+        self.template_room = mi.Float(np.asarray(template_room, dtype=np.float32))
+        self.emitters = atlas.emitters_dr()
+        for value in (self.base, self.room, self.slot, self.emitter_of, self.template_room):
+            dr.make_opaque(value)
+
+    def __len__(self) -> int:
+        return self.count
+
+    def sample(self, movers: Any, si: Any, u: Any, sample2: Any, active: Any) -> tuple[Any, Any]:
+        """One emitter sample at si from the moving emitters: u (1D) picks the entry and the
+        particle slot, sample2 (2D) the point. Returns (DirectionSample3f in world space with
+        the pmf folded into its pdf, weight = radiance / pdf); no visibility test."""
+        x = u * self.count
+        e = dr.minimum(mi.UInt32(x), self.count - 1)
+        base = dr.gather(mi.UInt32, self.base, e, active)
+        room = dr.gather(mi.UInt32, self.room, e, active)
+        slot = dr.gather(mi.UInt32, self.slot, e, active)
+        j = dr.minimum(mi.UInt32((x - mi.Float(e)) * mi.Float(room)), room - 1)
+        pose, template, exists = movers.proxy(base + j, active)
+        index = dr.gather(mi.UInt32, self.emitter_of, template * self.width + slot, active & exists)
+        ok = active & exists & (index != NONE)
+        emitter = dr.gather(mi.EmitterPtr, self.emitters, index, ok)
+        offset = movers.template_box(template, ok)[0]
+        ref = pose.interaction_to_rest(si)
+        ref.p = ref.p + offset
+        ds, weight = emitter.sample_direction(ref, sample2, ok)
+        ds.p = pose.point_to_world(ds.p - offset)
+        ds.n = pose.vector_to_world(ds.n)
+        ds.d = pose.vector_to_world(ds.d)
+        pmf = dr.rcp(mi.Float(self.count) * mi.Float(room))
+        ds.pdf = ds.pdf * pmf
+        ok &= ds.pdf > 0
+        return ds, dr.select(ok, weight / pmf, 0.0)
+
+    def pdf(self, movers: Any, ref: Any, ds: Any, hit: Any, active: Any) -> Any:
+        """The solid-angle pdf with which `sample` at ref would have produced the point of
+        ds, a BSDF-sampled hit on proxy `hit` whose shape emits (ds from that hit, in world
+        space)."""
+        pose, template, _ = movers.proxy(dr.select(active, hit, 0), active)
+        offset = movers.template_box(template, active)[0]
+        local = pose.direction_sample_to_rest(ds)
+        local.p = local.p + offset
+        at = pose.interaction_to_rest(ref)
+        at.p = at.p + offset
+        room = dr.gather(mi.Float, self.template_room, template, active)
+        return dr.select(active, ds.emitter.pdf_direction(at, local, active) / (mi.Float(self.count) * room), 0.0)
+
+
+def moving_emitter_tables(atlas_keys: list[str], emitter_shapes: list[str], movers: list[int], particle_systems: list[tuple[int, int, int]],
+                          templates: int) -> tuple[list[tuple[int, int, int]], np.ndarray, np.ndarray]:
+    """The tables of `MovingEmitters` from the atlas: `atlas_keys` name each template's
+    shapes (`<key>__<k>`), `emitter_shapes` the shape of each of the atlas's emitters in
+    order; `movers`: each rigid proxy's first template (movers, then deforming meshes'
+    movers); `particle_systems`: each system's (first proxy, room, holder template).
+    Returns (entries, template_emitter [T, J], template_room [T])."""
+    by_key = {key: t for t, key in enumerate(atlas_keys)}
+    slots: dict[int, list[int]] = {}
+    for index, shape in enumerate(emitter_shapes):
+        key = shape.rsplit("__", 1)[0]
+        if key in by_key:
+            slots.setdefault(by_key[key], []).append(index)
+    width = max((len(v) for v in slots.values()), default=1)
+    table = np.full((templates, width), NONE, dtype=np.uint32)
+    for t, indices in slots.items():
+        table[t, :len(indices)] = indices
+    room = np.ones(templates)
+    entries = [(k, 1, j) for k, first in enumerate(movers) for j in range(len(slots.get(first, [])))]
+    for first_proxy, count, holder in particle_systems:
+        room[holder] = count
+        entries += [(first_proxy, count, j) for j in range(len(slots.get(holder, [])))]
+    return entries, table, room

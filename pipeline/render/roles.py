@@ -3,8 +3,8 @@
 An object is static (in the static set, built once, its BVH never rebuilt), a rigid mover
 (in the atlas, posed per path: render/world.py), a particle system (each particle a
 sphere on its baked path, in the same traversal as the rigid movers) or a deforming mesh
-(a mover of the same traversal on its fitted rigid track, drawing residual templates; an
-emissive one in time slices: render/slices.py). A light is static, moving (a
+(a mover of the same traversal on its fitted rigid track, drawing residual templates:
+render/slices.py). A light is static, moving (a
 record that is `posed_per_path`: point, spot, directional; posed per path by the
 integrator) or animated in another way (an environment light: updated per frame).
 """
@@ -55,11 +55,10 @@ class Roles:
 
     static_names: list[str]
     mover_names: list[str]
-    slice_names: list[str]  # emissive deforming meshes: time slices (render/slices.py)
     moving_lights: list[tuple[int, Any]]  # posed per path by the integrator
     animated_lights: list[tuple[int, Any]]  # other lights that change: updated per frame
     particle_names: tuple[str, ...] = ()  # particle systems: in the traversal (render/world.py)
-    deforming_names: tuple[str, ...] = ()  # other deforming meshes: in the traversal (render/slices.py `DeformingMeshes`)
+    deforming_names: tuple[str, ...] = ()  # deforming meshes: in the traversal (render/slices.py `DeformingMeshes`)
 
 
 def sort_scene(loaded: LoadedScene) -> Roles:
@@ -85,8 +84,7 @@ def sort_scene(loaded: LoadedScene) -> Roles:
     return Roles(
         static_names=static_names,
         mover_names=mover_names,
-        slice_names=[o.name for o in nonrigid if not o.is_particles and o.emission is not None],
-        deforming_names=tuple(o.name for o in nonrigid if not o.is_particles and o.emission is None),
+        deforming_names=tuple(o.name for o in nonrigid if not o.is_particles),
         particle_names=tuple(o.name for o in nonrigid if o.is_particles),
         moving_lights=[(i, light) for i, light in animated if light.posed_per_path],
         animated_lights=[(i, light) for i, light in animated if not light.posed_per_path],

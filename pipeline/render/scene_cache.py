@@ -3,13 +3,13 @@ on the cold frame, and the little that changes per warm frame.
 
 Cold (`SceneCache.build`): the static set and its BVH (through the shared disk cache of
 converted assets), the atlas of the rigid movers' rest-frame shapes and the particle
-systems' holder spheres (render/atlas.py), the moving lights' unit emitters, the
-time-sliced deforming meshes, and the integrator's job state. Warm (`update`, then
+systems' holder spheres and the deforming meshes' templates (render/atlas.py), the
+moving lights' unit emitters, and the integrator's job state. Warm (`update`, then
 `set_frame`): the sensor's pose and field of view (a parameter update that rebuilds no
 BVH), animated environment lights' parameters, the atlas again where a mover's scale
 changed, the per-frame poses of movers, particles, camera and moving lights (one opaque
 array read by the integrator: no recompilation), the broadphase's proxies (one buffer, one
-BVH build: render/broadphase.py), and the slices' vertices.
+BVH build: render/broadphase.py), and the deforming meshes' templates (render/slices.py).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from ..motion.pose import quat_mul
 from ..scene.lights import light_key
 from ..scene.loader import LoadedScene
 from ..variant import load_dict
-from .atlas import Atlas, analytic, copy_shape
+from .atlas import Atlas, analytic
 from .broadphase import EMPTY_BOX, Broadphase, far_proxies, in_regions, parts, worth_parts, particle_proxies, reach, separate, sphere_proxies, swept_spheres
 from .build import dressed, material_dict, mitsuba_id, object_shapes, unit_light_dict
 from .denoise import integrator_aovs
@@ -32,7 +32,8 @@ from .instant import add_lights, add_shapes, light_record, rest_frame, sensor_re
 from .roles import Roles
 from .sbt import SbtOwner, dict_types
 from .shutter_poses import across_shutter, particles_across_shutter
-from .slices import DeformingMeshes, SlicedGeometry
+from .lights import MovingEmitters, moving_emitter_tables
+from .slices import DeformingMeshes
 
 if TYPE_CHECKING:
     from .stacked import StackedFrame
@@ -53,15 +54,12 @@ class SceneCache:
         self._materials: dict[str, Any] = {}
         self.atlas: Atlas | None = None
         self.broadphase: Broadphase | None = None
-        self._emitters: dict[int, Any] = {}  # emissive mover -> its rest-frame scene
         self._capacity: list[int] = []  # particles' room per system (grows by 1.5x: one recompile)
         self._moving_changed = True  # the atlas or broadphase scene changed: tell the integrator
-        self._holders: dict[str, Any] = {}  # emissive particle system -> its holder sphere's own scene
         self._reach = 1e-3  # how far behind a ray the broadphase walk starts (broadphase.reach)
         self._proxy_box = EMPTY_BOX  # the box holding every live proxy (broadphase.union_box)
         self._regions = np.array([1.0, 0.0])  # the shutter's parts and their regions' spacing (broadphase.in_regions)
-        self.sliced: SlicedGeometry | None = None  # emissive deforming meshes
-        self.deforming: DeformingMeshes | None = None  # the others: movers of the atlas (render/slices.py)
+        self.deforming: DeformingMeshes | None = None  # deforming meshes: movers of the atlas (render/slices.py)
         self.owner: SbtOwner | None = None  # the SBT owner of every scene the kernel traces
 
     @property
@@ -103,7 +101,7 @@ class SceneCache:
         self._mover_stretch = {name: rest_frame(fi, name) for name in self.roles.mover_names}
         mover_dicts = [self._mover_dicts(name, self._mover_stretch[name]) for name in self.roles.mover_names]
         types = set().union(dict_types(d), *(dict_types({str(k): v for k, v in enumerate(md)}) for md in mover_dicts))
-        if self.roles.slice_names or self.roles.deforming_names:
+        if self.roles.deforming_names:
             types.add("Mesh")
         if self.roles.particle_names:
             types.add("Sphere")
@@ -120,7 +118,6 @@ class SceneCache:
         integrator = self.integrator
         integrator.set_sbt_owner(self.owner)
         integrator.set_samples(fi.samples)
-        self._emitters = self._emitter_scenes(mover_dicts)
         self.atlas = Atlas(mi, self.owner.scene)
         self.broadphase = Broadphase(mi, self.owner.scene)
         self._capacity = [_room(_particle_count(fi, name)) for name in self.roles.particle_names]
@@ -135,7 +132,6 @@ class SceneCache:
         else:
             x_fov = float(np.asarray(self._params["sensor.x_fov"]).ravel()[0]) if "sensor.x_fov" in self._params else float(fi.fov[0])
             integrator.set_projection("perspective", (w / 2) / np.tan(np.radians(x_fov) / 2), w, h)
-        self.sliced = SlicedGeometry(mi, loaded, self.roles.slice_names, fi, materials, integrator.set_slices, self.owner)
         # route the sensor pose through the same parameter update warm frames use, so the
         # first warm frame replays the cold frame's kernels instead of compiling new ones
         self.update(fi, mode)
@@ -144,30 +140,6 @@ class SceneCache:
         """A mover's shape dictionaries in its rest frame, its stretch [4, 4] baked in."""
         obj = self.loaded.objects_by_name[name]
         return object_shapes(obj, self.loaded, stretch, self._materials)
-
-    def _emitter_scenes(self, mover_dicts: list[list[dict[str, Any]]]) -> dict[int, Any]:
-        """The emissive movers' own rest-frame scenes (emitter sampling in the kernel)."""
-        owner = self.owner
-        if owner is None:
-            return {}
-        return {
-            k: owner.scene({"type": "scene", **{f"{mitsuba_id(name)}__{j}": sd for j, sd in enumerate(md)}})
-            for k, (name, md) in enumerate(zip(self.roles.mover_names, mover_dicts))
-            if any("emitter" in sd for sd in md)
-        }
-
-    def _particle_emitters(self) -> list[tuple[int, int, Any]]:
-        """Each emissive particle system's (first particle, room, holder scene), its holder
-        sphere built once per job at the origin (emitter sampling in the kernel)."""
-        out, first = [], 0
-        for k, (name, room) in enumerate(zip(self.roles.particle_names, self._capacity)):
-            holder = self._holders.get(name)
-            if holder is None and self.owner is not None and any("emitter" in d for d in self._holder_dicts(name)):
-                holder = self._holders[name] = self.owner.scene({"type": "scene", "holder": self._holder_dicts(name)[0]})
-            if holder is not None:
-                out.append((first, room, holder))
-            first += room
-        return out
 
     def _holder_dicts(self, name: str) -> list[dict[str, Any]]:
         """A particle system's holder: one sphere of the particles' radius at the origin,
@@ -262,12 +234,6 @@ class SceneCache:
         if not fits:
             self._build_atlas(mover_dicts)
             self._moving_changed = True
-        for k, name in enumerate(names):  # an emissive mover's own scene follows, in place
-            if k in self._emitters and name in changed:
-                params = self._mi.traverse(self._emitters[k])
-                for j, sd in enumerate(mover_dicts[k]):
-                    copy_shape(self._mi, params, f"{mitsuba_id(name)}__{j}", load_dict(sd))
-                params.update()
         return [f"mover:{mitsuba_id(name)} (atlas)" for name in changed]
 
     def set_frame(self, fi: StackedFrame, mode: str, u_fixed: float | None = None) -> None:
@@ -296,8 +262,6 @@ class SceneCache:
         lt, lq, rgb = self._moving_light_frame(fi, mode, u_fixed)
         moving = self._moving_frame(particles)
         self.integrator.set_frame(mt, mq, cam_t, rel, ct[0], cam_q, lt, lq, rgb, moving)
-        if self.sliced is not None and self.sliced.groups:
-            self.sliced.update(fi, mode, u_fixed)
         # every update above evaluated and finished now (the broadphase's BVH build runs on
         # drjit's thread pool): left pending, the render's kernel is traced against work that
         # is done on one frame and not yet on another, and differs between them
@@ -409,8 +373,15 @@ class SceneCache:
         atlas, broad = self.atlas, self.broadphase
         if atlas is None or broad is None:
             return
-        rigid = len(self.roles.mover_names) + (self.deforming.movers if self.deforming is not None else 0)
-        self.integrator.set_moving(broad.scene, atlas.scene, rigid, int(sum(self._capacity)), self._emitters, self._particle_emitters())
+        m = len(self.roles.mover_names)
+        firsts = list(range(m)) + ([int(f) for f in self.deforming.mover_templates(self._deforming_first())[:, 0]] if self.deforming is not None else [])
+        systems, at = [], len(firsts)
+        for k, room in enumerate(self._capacity):  # each system: (first proxy, room, holder template)
+            systems.append((at, room, m + k))
+            at += room
+        entries, table, room = moving_emitter_tables(atlas.keys, [e.get_shape().id() for e in atlas.scene.emitters()], firsts, systems, len(atlas.layout.offset))
+        emitters = MovingEmitters(atlas.scene, entries, table, room) if entries else None
+        self.integrator.set_moving(broad.scene, atlas.scene, len(firsts), int(sum(self._capacity)), emitters)
         self._moving_changed = False
 
     def _particles_frame(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> dict[str, np.ndarray]:

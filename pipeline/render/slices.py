@@ -1,31 +1,39 @@
-"""Time-sliced geometry for deforming meshes (blend shapes, skinning, flocks): what is
-neither a rigid mover nor a particle system (both are in the one traversal, world.py).
+"""Deforming meshes (blend shapes, skinning, flocks) in the one traversal (world.py).
 
-Each such object gets S small scenes, one per baked shutter sample; a camera path with
-shutter fraction u sees slice round(u (S - 1)), so every sample still has its own time
-(quantised to the S baked instants) and the static BVH is never touched. Per frame only
-these meshes' vertex buffers change (each slice's own small BVH is rebuilt; no kernel is
-recompiled while the vertex count stays within the slice's capacity). Cost: S masked
-intersections per ray and group, and S small BVH builds per frame (docs/rendering.md).
+A deforming mesh is a mover of the broadphase like any rigid one, posed at each lane's own
+time by its *fitted rigid track*, and drawing one of S residual templates in the atlas
+(`DeformingMeshes`). Per baked sample i the object-space vertices Y_i are fitted by a rigid
+motion of the frame's own vertices X = Y_0 (`rigid_fit`: least squares, Kabsch); the track
+is the object's own pose composed with that motion, and the residual W_i = R_i^T (Y_i - T_i)
+is what the motion leaves. A mesh that moves rigidly (its object, or a bone that carries it
+whole) has W_i = X at every sample: its blur is its rigid twin's, continuous and exact.
+What the fit cannot carry (a bend, a wave) is the residual: S = `render.time_slices`
+templates at the samples of `slice_samples`, and a lane at u draws the two around u with
+probabilities by their distance (a dither, render/poses.py `Movers.template_of`): a
+crossfade, never a gap. Per instant drawn only these templates' vertices are written into
+the atlas (one BVH build); the trace sites stay the same whatever their number.
+
+A flock is instanced: each agent is a mover of its own, its track fitted to the agent mesh
+(exact: agents are rigid copies of it), and every agent draws the one template of the agent
+mesh, which never changes.
 
 A deforming mesh is drawn from its render vertices (`meshes.RenderMesh`: one per distinct
 position/uv/normal corner of the file, as Mitsuba's own readers weld them), so it keeps
 its texture coordinates; deformed positions map onto them through `index`. Its vertex
 normals are the engine's: without file normals `vertex_normals` (Mitsuba's own scheme,
-from each slice's world-space positions, so a deforming mesh at rest has its static
-twin's normals to float rounding); with file normals, the file's are carried,
-vertex by vertex, by a local frame (the welded mean face normal and the edge to one
-neighbour) from rest to the slice (`slice_normals`: exact when nothing deforms and for
-any rigid turn; hard edges stay hard); `face_normals: true` stays faceted.
-An emissive deforming mesh
-carries its area emitter on every slice: the integrator samples the slice of the path's
-time and weights it by MIS (world.py, integrator.py), as it does emissive movers.
+from each template's positions, so a deforming mesh at rest has its static twin's normals
+to float rounding); with file normals, the file's are carried, vertex by vertex, by a
+local frame (the welded mean face normal and the edge to one neighbour) from rest to the
+sample (`slice_normals`: exact when nothing deforms and for any rigid turn; hard edges
+stay hard), then turned into the template's frame; `face_normals: true` stays faceted.
+An emissive deforming mesh wears its area emitter on every template: the sampler of the
+emitters on things that move samples it in its atlas cell (render/lights.py).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -34,8 +42,6 @@ from ..motion.pose import matrix_to_quat, quat_mul, quat_rotate
 from ..scene.loader import LoadedScene
 from ..scene.schema import Mesh
 from ..variant import load_dict
-from .build import mitsuba_id
-from .sbt import SbtOwner
 
 if TYPE_CHECKING:
     from .stacked import StackedFrame
@@ -134,64 +140,6 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.where(norm > 0, norm, 1.0)
 
 
-@dataclass
-class SliceGroup:
-    """The S slice scenes of one deforming object."""
-
-    name: str
-    scenes: list[Any]
-    params: list[Any]
-    capacity: int  # render vertices
-    faces: np.ndarray
-    key: str = field(default="")
-    mesh: RenderMesh | None = None  # a deforming mesh's render vertices
-    smooth: bool = False  # vertex normals: the file's carried (`slice_normals`), else `vertex_normals`
-    rest: np.ndarray | None = None  # the bind mesh's file vertices [V, 3]
-    emitter: dict[str, Any] | None = None  # the area emitter every slice carries
-    emissive: bool = False
-    rest_cache: dict[tuple[float, ...], Any] = field(default_factory=dict)  # scale -> `rest_normals`
-
-
-def build_group(mi: Any, name: str, count: int, faces: np.ndarray, bsdf: Any, slices: int, mesh: RenderMesh | None = None, smooth: bool = False,
-                rest: np.ndarray | None = None, emitter: dict[str, Any] | None = None, owner: SbtOwner | None = None) -> SliceGroup:
-    """S scenes, each with one mesh of `count` vertices; a deforming mesh's texture
-    coordinates are written once here, its positions and normals per frame.
-    `owner`: the SBT owner the scenes are built against (render/sbt.py)."""
-    key = mitsuba_id(name)
-    scenes, params = [], []
-    uvs = mesh.uvs if mesh is not None else None
-    for _ in range(slices):
-        verts, fcs = np.zeros((count, 3)), faces
-        props = mi.Properties()
-        props["bsdf"] = bsdf
-        if emitter is not None:
-            props["emitter"] = load_dict(emitter)
-        shape = mi.Mesh(key, len(verts), len(fcs), props, smooth, uvs is not None)
-        p = mi.traverse(shape)
-        p["vertex_positions"] = mi.Float(np.asarray(verts, np.float32).ravel())
-        p["faces"] = mi.UInt32(np.asarray(fcs, np.uint32).ravel())
-        if uvs is not None:
-            p["vertex_texcoords"] = mi.Float(np.asarray(uvs, np.float32).ravel())
-        p.update()
-        scene = (owner.scene if owner is not None else load_dict)({"type": "scene", key: shape})
-        scenes.append(scene)
-        params.append(mi.traverse(scene))
-    return SliceGroup(name, scenes, params, count, faces, key, mesh, smooth, rest, emitter, emitter is not None)
-
-
-def update_group(mi: Any, group: SliceGroup, per_slice_vertices: list[np.ndarray], per_slice_normals: list[np.ndarray] | None = None) -> None:
-    """Write each slice's world-space vertices (rebuilds that slice's small BVH) and, for a
-    smooth mesh, its world-space normals: the file's carried (`slice_normals`) or the
-    engine's (`vertex_normals`). Mitsuba keeps normals written with the positions (given
-    positions alone, `Mesh.parameters_changed` would recompute them itself, by an atomic
-    scatter-add whose last bits vary between runs)."""
-    for k, (params, verts) in enumerate(zip(group.params, per_slice_vertices)):
-        params[f"{group.key}.vertex_positions"] = mi.Float(np.asarray(verts, np.float32).ravel())
-        if per_slice_normals is not None:
-            params[f"{group.key}.vertex_normals"] = mi.Float(np.asarray(per_slice_normals[k], np.float32).ravel())
-        params.update()
-
-
 def render_mesh(loaded: LoadedScene, obj: Any, count: int, faces: np.ndarray) -> tuple[RenderMesh, bool]:
     """The render vertices of a deforming object whose bind mesh has `count` vertices and
     `faces`, and whether it is drawn smooth: a mesh file's own corners (uvs, normals;
@@ -225,80 +173,6 @@ def slice_samples(n: int, count: int, mode: str, u_fixed: float | None) -> list[
     return [1 + int(round(s * (n - 1) / (count - 1))) for s in range(count)]
 
 
-class SlicedGeometry:
-    """The time-sliced groups of one job (one per name, in order): built on the cold
-    frame, their vertices rewritten per frame. `on_regroup` gets every group's scenes
-    whenever the set of scenes changes (the integrator's `set_slices`)."""
-
-    def __init__(self, mi: Any, loaded: LoadedScene, names: list[str], fi: StackedFrame, materials: dict[str, Any], on_regroup: Callable[[list[list[Any]]], None],
-                 owner: SbtOwner | None = None) -> None:
-        self._mi = mi
-        self.loaded = loaded
-        self.owner = owner  # every slice scene is built against it (render/sbt.py)
-        self._on_regroup = on_regroup
-        self.groups = [self._build(name, fi, materials) for name in names]
-        on_regroup([g.scenes for g in self.groups])
-
-    def _build(self, name: str, fi: StackedFrame, materials: dict[str, Any]) -> SliceGroup:
-        from .build import emitter_dict, object_material
-
-        mi = self._mi
-        obj = self.loaded.objects_by_name[name]
-        material = object_material(obj, materials)
-        bsdf = load_dict(material) if isinstance(material, dict) else material
-        emitter = emitter_dict(obj.emission, self.loaded) if obj.emission is not None else None
-        slices = slice_count(self.loaded, fi)
-        from ..motion.deform import bind_mesh
-
-        verts, faces = bind_mesh(self.loaded, obj, getattr(obj.deform, "detail", 16))  # the motion stage's tessellation
-        mesh, smooth = render_mesh(self.loaded, obj, len(verts), faces)
-        return build_group(mi, name, len(mesh.index), np.asarray(mesh.faces, np.uint32), bsdf, slices, mesh=mesh, smooth=smooth, rest=verts, emitter=emitter, owner=self.owner)
-
-    def update(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> None:
-        """Each slice's geometry at its time (`slice_samples`): the object-space vertices
-        posed by the object's own baked frame."""
-        n = fi.samples
-        index = slice_samples(n, slice_count(self.loaded, fi), mode, u_fixed)
-        for g in self.groups:
-            per_slice, normals = [], []
-            t, q, s = fi.objects[g.name]
-            local = fi.vertices[g.name]
-            mesh = g.mesh if g.mesh is not None else plain_render_mesh(g.capacity, g.faces)
-            stretch = fi.stretches.get(g.name)  # a symmetric stretch under a non-uniform parent scale
-            for i in index:
-                scaled = local[i] @ stretch[i].T if stretch is not None else local[i] * s[i]
-                world = np.asarray(quat_rotate(q[i], scaled[mesh.index]) + t[i], np.float32)
-                per_slice.append(world)
-                if g.smooth and g.rest is not None and mesh.normals is not None and stretch is None:
-                    key = tuple(float(c) for c in s[i])
-                    if key not in g.rest_cache:
-                        g.rest_cache.clear()
-                        g.rest_cache[key] = rest_normals(g.rest, mesh, s[i])
-                    normals.append(quat_rotate(q[i], slice_normals(scaled, g.rest_cache[key], mesh)))
-                elif g.smooth:  # from the positions Mitsuba is given, as it would
-                    normals.append(vertex_normals(world, mesh.faces))
-            update_group(self._mi, g, per_slice, normals or None)
-
-
-# --- deforming meshes in the one traversal ----------------------------------------------
-#
-# A deforming mesh that emits no light is not time-sliced in the kernel: it is a mover of
-# the broadphase like any rigid one (render/world.py), posed at each lane's own time by its
-# *fitted rigid track*, and drawing one of S residual templates in the atlas.
-# Per baked sample i the object-space vertices Y_i are fitted by a rigid motion of the
-# frame's own vertices X = Y_0 (`rigid_fit`: least squares, Kabsch); the track is the
-# object's own pose composed with that motion, and the residual W_i = R_i^T (Y_i - T_i) is
-# what the motion leaves. A mesh that moves rigidly (its object, or a bone that carries it
-# whole) has W_i = X at every sample: its blur is its rigid twin's, continuous and exact.
-# What the fit cannot carry (a bend, a wave) is the residual: S templates at the samples of
-# `slice_samples`, and a lane at u draws the two around u with probabilities by their
-# distance (a dither, render/poses.py `Movers.template_of`): a crossfade, never a gap.
-#
-# A flock is instanced: each agent is a mover of its own, its track fitted to the agent
-# mesh (exact: agents are rigid copies of it), and every agent draws the one template of
-# the agent mesh, which never changes (nothing is written per frame).
-
-
 def rigid_fit(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The rigid motions (R [K, 3, 3], T [K, 3]) taking points x [V, 3] closest to each of
     y [K, V, 3] in least squares (Kabsch: the SVD of the cross-covariance, its reflection
@@ -327,6 +201,7 @@ class DeformingMesh:
     rest: np.ndarray  # the bind mesh's file vertices [V, 3] (a flock: one agent's)
     bsdf: Any
     pieces: int = 1
+    emitter: dict[str, Any] | None = None  # the area emitter every template wears
     rest_cache: dict[tuple[float, ...], Any] = field(default_factory=dict)  # scale -> `rest_normals`
     track: tuple[np.ndarray, np.ndarray] = (np.zeros((0, 0, 3)), np.zeros((0, 0, 4)))  # world_from_template [pieces, 1+N, 3], [pieces, 1+N, 4]
     residual: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3)))  # W [1+N, V, 3] (file vertices)
@@ -343,11 +218,14 @@ class DeformingMesh:
         return self.pieces > 1
 
 
-def deformed_mesh(mi: Any, key: str, bsdf: Any, mesh: RenderMesh, positions: np.ndarray, normals: np.ndarray | None) -> Any:
+def deformed_mesh(mi: Any, key: str, bsdf: Any, mesh: RenderMesh, positions: np.ndarray, normals: np.ndarray | None, emitter: dict[str, Any] | None = None) -> Any:
     """A built Mitsuba mesh of a deforming mesh's render vertices at `positions` [R, 3]
-    (its normals written with them where it is smooth: `update_group`), with its uvs."""
+    (its normals written with them where it is smooth: `update_group`), with its uvs and
+    its area emitter, if any."""
     props = mi.Properties()
     props["bsdf"] = bsdf
+    if emitter is not None:
+        props["emitter"] = load_dict(emitter)
     shape = mi.Mesh(key, len(positions), len(mesh.faces), props, normals is not None, mesh.uvs is not None)
     p = mi.traverse(shape)
     p["vertex_positions"] = mi.Float(np.asarray(positions, np.float32).ravel())
@@ -376,7 +254,7 @@ class DeformingMeshes:
     def __init__(self, mi: Any, loaded: LoadedScene, names: list[str], fi: StackedFrame, materials: dict[str, Any]) -> None:
         from ..motion.deform import bind_mesh
         from ..motion.instances import agent_mesh
-        from .build import object_material
+        from .build import emitter_dict, object_material
 
         self._mi = mi
         self.loaded = loaded
@@ -386,13 +264,14 @@ class DeformingMeshes:
             obj = loaded.objects_by_name[name]
             material = object_material(obj, materials)
             bsdf = load_dict(material) if isinstance(material, dict) else material
+            emitter = emitter_dict(obj.emission, loaded) if obj.emission is not None else None
             if obj.is_flock:
                 agent, faces = agent_mesh(loaded, obj)
-                self.meshes.append(DeformingMesh(name, plain_render_mesh(len(agent), faces), False, agent, bsdf, pieces=int(obj.deform.count)))
+                self.meshes.append(DeformingMesh(name, plain_render_mesh(len(agent), faces), False, agent, bsdf, pieces=int(obj.deform.count), emitter=emitter))
                 continue
             verts, faces = bind_mesh(loaded, obj, getattr(obj.deform, "detail", 16))  # the motion stage's tessellation
             mesh, smooth = render_mesh(loaded, obj, len(verts), faces)
-            self.meshes.append(DeformingMesh(name, mesh, smooth, verts, bsdf))
+            self.meshes.append(DeformingMesh(name, mesh, smooth, verts, bsdf, emitter=emitter))
         self._fitted: StackedFrame | None = None
 
     @property
@@ -507,4 +386,4 @@ class DeformingMeshes:
         now: for building the atlas."""
         from .build import mitsuba_id
 
-        return [[deformed_mesh(self._mi, f"{mitsuba_id(g.name)}_{s}", g.bsdf, g.mesh, p, n)] for g in self.meshes for s, (p, n) in enumerate(g.drawn)]
+        return [[deformed_mesh(self._mi, f"{mitsuba_id(g.name)}_{s}", g.bsdf, g.mesh, p, n, g.emitter)] for g in self.meshes for s, (p, n) in enumerate(g.drawn)]

@@ -1,19 +1,18 @@
 """The scene a path meets at its own time, for the `motion_path` integrator: the static
-set (one `mi.Scene`, its BVH never rebuilt), everything that moves rigidly or as particles
-(one broadphase and one atlas, walked in ONE symbolic loop), and the time-sliced deforming
-meshes (render/slices.py: one scene per baked sample, a path sees the slice nearest its
-time).
+set (one `mi.Scene`, its BVH never rebuilt) and everything that moves, rigidly, as
+particles or deforming (one broadphase and one atlas, walked in ONE symbolic loop).
 
 `intersect` finds the nearest hit over all of them and returns it in world space;
-`occluded` answers a shadow ray against the same set at the same time. Rigid movers and
-particles cost the kernel the same trace sites whatever their number
+`occluded` answers a shadow ray against the same set at the same time. Rigid movers,
+particles and deforming meshes cost the kernel the same trace sites whatever their number
 (docs/rendering.md, "One traversal for everything that moves"):
 
 1. the broadphase (render/broadphase.py): one ellipsoid per mover or particle holding it
    across the shutter, in the engine's own BVH; the walk visits the ellipsoids a ray
    enters, in order, from `reach` behind its origin up to the nearest hit found so far;
 2. for each one entered, the exact test at the lane's own time: the proxy's pose at u
-   (a mover's slerped pose, a particle's lerped centre), its posed bounding sphere, then
+   (a mover's slerped pose, a particle's lerped centre; a deforming mesh's template by
+   `Movers.template_of`), its posed bounding sphere, then
    the ray in the template's rest frame, moved to its cell of the atlas
    (render/atlas.py), clipped to the cell's box, and traced there.
 
@@ -28,6 +27,7 @@ from typing import Any, Sequence
 import drjit as dr
 import mitsuba as mi
 
+from .lights import MovingEmitters
 from .poses import Movers, may_hit
 from .sbt import SbtOwner, check_shared
 
@@ -60,24 +60,16 @@ def segment_in_box(o: Any, d: Any, lo: Any, hi: Any, maxt: Any) -> tuple[Any, An
 
 class World:
     """The geometry of one job besides the static scene: the broadphase and atlas of
-    movers and particles, the emissive movers' own scenes, and the slice groups."""
+    everything that moves, and the sampler of the emitters on it (render/lights.py)."""
 
     def __init__(self) -> None:
         self.broadphase: mi.Scene | None = None  # render/broadphase.py
         self.atlas: mi.Scene | None = None  # render/atlas.py
-        self.rigid = 0  # rigid movers (proxies 0 .. rigid - 1)
+        self.rigid = 0  # rigid movers, deforming meshes' movers included (proxies 0 .. rigid - 1)
         self.particles = 0  # particle capacity (proxies rigid .. rigid + particles - 1)
-        self.emitters: dict[int, mi.Scene] = {}  # emissive mover -> its rest-frame scene (emitter sampling)
-        self.particle_emitters: list[tuple[int, int, mi.Scene]] = []  # emissive particle systems: (first particle, room, holder scene)
-        self.slices: list[list[mi.Scene]] = []  # per deforming object: one scene per shutter sample
-        self.emissive_slices: list[int] = []  # indices of slice groups that carry area emitters
+        self.emitters: MovingEmitters | None = None  # the emitters on things that move (lights.py)
         self.owner: SbtOwner | None = None  # the SBT owner of every scene traced (render/sbt.py)
         self._checked: tuple[int, ...] | None = None  # the set of scenes `check_shared` last passed
-
-    @property
-    def emissive(self) -> list[int]:
-        """Indices of the rigid movers that carry area emitters."""
-        return sorted(self.emitters)
 
     @property
     def moving(self) -> bool:
@@ -85,11 +77,8 @@ class World:
         return self.rigid + self.particles > 0 and self.broadphase is not None and self.atlas is not None
 
     def traced(self, scene: mi.Scene) -> list[mi.Scene]:
-        """Every scene one kernel traces: the static `scene`, the broadphase and atlas, the
-        emissive movers' scenes, every slice."""
-        moving = [self.broadphase, self.atlas] if self.moving else []
-        holders = [h for _, _, h in self.particle_emitters]
-        return [scene, *moving, *(self.emitters[k] for k in self.emissive), *holders, *(s for group in self.slices for s in group)]  # type: ignore[list-item]
+        """Every scene one kernel traces: the static `scene`, the broadphase and atlas."""
+        return [scene, *([self.broadphase, self.atlas] if self.moving else [])]  # type: ignore[list-item]
 
     def set_owner(self, owner: SbtOwner | None) -> None:
         """The SBT owner every traced scene was built against (render/sbt.py)."""
@@ -106,79 +95,14 @@ class World:
             check_shared(traced, self.owner)
             self._checked = key
 
-    def set_moving(self, broadphase: mi.Scene | None, atlas: mi.Scene | None, rigid: int, particles: int, emitters: dict[int, mi.Scene],
-                   particle_emitters: Sequence[tuple[int, int, mi.Scene]] = ()) -> None:
-        """The broadphase and atlas scenes, the counts of rigid movers and particles they
-        hold, the emissive movers' rest-frame scenes, and for each emissive particle system
-        its particles' range (first, room) and its holder sphere's own scene."""
+    def set_moving(self, broadphase: mi.Scene | None, atlas: mi.Scene | None, rigid: int, particles: int, emitters: MovingEmitters | None = None) -> None:
+        """The broadphase and atlas scenes, the counts of rigid movers (deforming meshes'
+        movers included) and particles they hold, and the sampler of the emitters on
+        them (None where nothing that moves emits)."""
         self.broadphase, self.atlas = broadphase, atlas
         self.rigid, self.particles = rigid, particles
-        self.emitters = dict(emitters)
-        self.particle_emitters = list(particle_emitters)
+        self.emitters = emitters if emitters is not None and len(emitters) else None
         self._checked = None
-
-    def sample_particle_emitter(self, system: int, movers: Movers, si: Any, sample1: Any, sample2: Any, active: Any) -> tuple[Any, Any]:
-        """An emitter sample of emissive particle system `system` at the path's time: one of
-        its particle slots chosen uniformly (a slot dead at that time gives nothing), a
-        point of that sphere sampled by solid angle from si (its holder's own sampling, the
-        sphere moved to the particle's centre). (DirectionSample3f in world space with the
-        slot's choice in its pdf, weight)."""
-        first, room, holder = self.particle_emitters[system]
-        slot = dr.minimum(mi.UInt32(sample1 * room), room - 1)
-        centre, alive = movers.particle(slot + first, active)
-        ok = active & alive
-        ref = mi.Interaction3f(si.t, si.time, si.wavelengths, si.p - centre, si.n)
-        ds, weight = holder.sample_emitter_direction(ref, sample2, False, ok)
-        ds.p = ds.p + centre
-        ds.pdf = ds.pdf / room
-        return ds, dr.select(ok, weight * room, 0.0)
-
-    def particle_emitter_pdf(self, ds: Any, ref: Any, hit: Any, movers: Movers, pdf: Any, active: Any) -> Any:
-        """The solid-angle pdf with which `sample_particle_emitter` would have chosen the
-        point a BSDF-sampled ray hit on an emissive particle (`pdf` elsewhere)."""
-        for first, room, holder in self.particle_emitters:
-            base = self.rigid + first
-            mine = active & (hit >= base) & (hit < base + room)
-            centre, _ = movers.particle(dr.select(mine, hit - self.rigid, 0), mine)
-            local_ref = mi.Interaction3f(ref.t, ref.time, ref.wavelengths, ref.p - centre, ref.n)
-            local = mi.DirectionSample3f(ds.p - centre, ds.n, ds.uv, ds.time, ds.pdf, ds.delta, ds.d, ds.dist, ds.emitter)
-            pdf = dr.select(mine, holder.pdf_emitter_direction(local_ref, local, mine) / room, pdf)
-        return pdf
-
-    def set_slices(self, groups: Sequence[Sequence[mi.Scene]]) -> None:
-        """For each deforming object, one world-space scene per slice."""
-        self.slices = [list(g) for g in groups]
-        self._checked = None
-        self.emissive_slices = [k for k, g in enumerate(self.slices) if g and len(g[0].emitters()) > 0]
-
-    def slice_hit(self, group: int) -> int:
-        """The `hit` value of a hit on slice group `group`: below `NONE`, above any proxy."""
-        return NONE - 1 - group
-
-    def sample_slice_emitter(self, group: int, si: Any, sample: Any, k: Any, active: Any) -> tuple[Any, Any]:
-        """An emitter direction sample from the emissive slice group `group` at the path's
-        slice k (slices are in world space): (DirectionSample3f, weight)."""
-        ds, weight = dr.zeros(mi.DirectionSample3f), mi.Spectrum(0.0)
-        for s, slice_scene in enumerate(self.slices[group]):
-            mine = active & (k == s)
-            ds_s, w_s = slice_scene.sample_emitter_direction(si, sample, False, mine)
-            ds, weight = dr.select(mine, ds_s, ds), dr.select(mine, w_s, weight)
-        return ds, weight
-
-    def slice_emitter_pdf(self, ds: Any, ref: Any, hit: Any, k: Any, pdf: Any, active: Any) -> Any:
-        """The solid-angle pdf with which `sample_slice_emitter` would have chosen the
-        emitter a BSDF-sampled ray hit on an emissive slice group (`pdf` elsewhere)."""
-        for group in self.emissive_slices:
-            for s, slice_scene in enumerate(self.slices[group]):
-                mine = active & (hit == self.slice_hit(group)) & (k == s)
-                pdf = dr.select(mine, slice_scene.pdf_emitter_direction(ref, ds, mine), pdf)
-        return pdf
-
-    def slice_of(self, u: Any) -> Any:
-        """The time slice a path at shutter fraction u sees: the nearest of S slices
-        (all groups have the same S)."""
-        count = len(self.slices[0]) if self.slices else 1
-        return mi.UInt32(dr.round(dr.clip(u, 0.0, 1.0) * (count - 1)))
 
     # --- the traversal of everything that moves --------------------------------------------
 
@@ -269,23 +193,13 @@ class World:
 
     # --- the queries --------------------------------------------------------------------------
 
-    def intersect(self, scene: mi.Scene, ray: mi.Ray3f, movers: Movers, active: Any, k: Any) -> tuple[Any, Any, Any]:
+    def intersect(self, scene: mi.Scene, ray: mi.Ray3f, movers: Movers, active: Any) -> tuple[Any, Any, Any]:
         """Nearest hit over all scenes, in world space; whether it is on something that
-        moves or a slice; and what it is (`hit`): a proxy index (a rigid mover below
-        `movers.rigid`, a particle above), `slice_hit(g)` for an emissive slice group, NONE
-        otherwise. `movers`: the movers at the path's time; k: its slice."""
+        moves; and which proxy (`hit`: a rigid mover below `movers.rigid`, a particle
+        above; NONE for the static scene). `movers`: the movers at the path's time."""
         si = trace("intersect", scene, ray, active)
         on_mover = mi.Bool(False)
         hit = mi.UInt32(NONE)
-        for g, group in enumerate(self.slices):
-            for s, slice_scene in enumerate(group):
-                mine = active & (k == s)
-                si_s = trace("intersect", slice_scene, ray, mine)
-                closer = mine & si_s.is_valid() & (si_s.t < si.t)
-                si = dr.select(closer, si_s, si)
-                on_mover |= closer
-                if g in self.emissive_slices:
-                    hit = dr.select(closer, mi.UInt32(self.slice_hit(g)), hit)
         if not self.moving:
             return si, on_mover, hit
         nearest = dr.select(si.is_valid(), si.t, dr.inf)
@@ -309,12 +223,9 @@ class World:
         si = dr.if_stmt((si,), won, surface, lambda si: si, label="moving_surface")
         return si, on_mover | won, dr.select(won, proxy, hit)
 
-    def occluded(self, scene: mi.Scene, ray: mi.Ray3f, movers: Movers, active: Any, k: Any) -> Any:
+    def occluded(self, scene: mi.Scene, ray: mi.Ray3f, movers: Movers, active: Any) -> Any:
         """Whether a shadow ray is blocked by any scene at the path's time."""
         hit = trace("occluded", scene, ray, active)
-        for group in self.slices:
-            for s, slice_scene in enumerate(group):
-                hit |= trace("occluded", slice_scene, ray, active & ~hit & (k == s))
         if not self.moving:
             return hit
 

@@ -15,7 +15,7 @@ pytestmark = pytest.mark.render
 def test_particle_system_renders_and_grows(tmp_path: Path) -> None:
     (early, late), stats, renderer = render(load(tmp_path, FOUNTAIN), [2, 10])
     # particles are neither time slices nor rigid movers: spheres in the one traversal
-    assert renderer.particle_names == ("fountain",) and not renderer.slice_names and not renderer.mover_names
+    assert renderer.particle_names == ("fountain",) and not renderer.deforming_names and not renderer.mover_names
     assert 0 < orange_pixels(early) < orange_pixels(late)  # more particles, higher up, later
     assert stats[1].kernels_compiled == 0
 
@@ -41,7 +41,7 @@ render: {resolution: [64, 64], spp: 4, max_depth: 2, shutter_samples: 3, motion_
 
 def test_skinned_mesh_bends(tmp_path: Path) -> None:
     (straight, bent), _, renderer = render(load(tmp_path, SKINNED), [0, 24])
-    assert renderer.deforming_names == ("arm",) and not renderer.slice_names  # in the traversal
+    assert renderer.deforming_names == ("arm",)  # in the traversal
     red = lambda img: (img[..., 0] > img[..., 1] + 0.3)  # noqa: E731
     s, b = red(straight), red(bent)
     assert s.sum() > 50 and b.sum() > 50
