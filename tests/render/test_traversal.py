@@ -63,6 +63,19 @@ def test_the_kernels_trace_sites_do_not_grow_with_movers_or_time_samples(tmp_pat
     assert all(c == SITES for c in counts.values()), {k: len(v) for k, v in counts.items()}
 
 
+def test_the_trace_sites_do_not_grow_with_emissive_movers(tmp_path: Path) -> None:
+    """The emitters on things that move are one sampler over the atlas (lights.py
+    `MovingEmitters`): with 1, 10 and 40 glowing movers the kernel has one more shadow ray
+    than without, whatever their number. Before, each emissive mover was a strategy of its
+    own with its own `occluded` (and a rest-frame scene of its own to sample)."""
+    counts = {}
+    for n in (1, 10, 40):
+        folder = tmp_path / str(n)
+        folder.mkdir()
+        counts[n] = _traces(folder, _movers_scene(n, 9).replace("radius: 0.08,", "radius: 0.08, emission: {radiance: 2.0},"))
+    assert all(c == [*SITES, "occluded", "intersect", "occluded"] for c in counts.values()), {k: len(v) for k, v in counts.items()}
+
+
 @pytest.mark.slow
 def test_the_trace_sites_are_the_same_for_a_thousand_movers(tmp_path: Path) -> None:
     counts = _counts(tmp_path, [(100, 9), (1000, 9)])
