@@ -37,7 +37,7 @@ import numpy as np
 
 from . import aovs as aov_table
 from . import film
-from .lights import LightChoice, MovingEmitters
+from .lights import LightChoice, MovingEmitters, Posed
 from .broadphase import EMPTY_BOX
 from .poses import FrameData, KernelPose, Movers
 from .world import NONE, World
@@ -102,6 +102,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         poses and colours come per frame (`set_frame`). One at infinity (directional) casts
         its shadow ray along the sampled direction, the others to the sampled point."""
         self.lights = [(mi.has_flag(e.flags(), mi.EmitterFlags.Infinite), e) for e in lights]
+        self.choice = None  # the selection holds them: made again
 
     def set_rows(self, rows: tuple[int, int]) -> None:
         """The image rows the next renders draw (offset, step): (0, 1) every row, (0, 2) the
@@ -169,52 +170,35 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
 
     # --- lights at the path's time ---------------------------------------------------------
 
-    def _moving_light_terms(
-        self,
-        scene: mi.Scene,
-        sampler: mi.Sampler,
-        si: Any,
-        bsdf: Any,
-        ctx: Any,
-        movers: Movers,
-        light_poses: list[KernelPose],
-        active: Any,
-    ) -> Any:
-        """Direct light at si from the moving lights and the emitters on things that move,
-        each posed at the path's time: the reference point goes into the light's rest
-        frame (or the emitter's atlas cell), Mitsuba's own emitter samples a direction there,
-        and it comes back to world space; the shadow ray is tested against every scene at
-        the same time."""
-        L = mi.Spectrum(0.0)
-        # delta lights (point, spot, directional): one deterministic sample each, no MIS
-        for index, (at_infinity, emitter) in enumerate(self.lights):
-            pose = light_poses[index]
-            ds, weight = emitter.sample_direction(pose.interaction_to_rest(si), mi.Point2f(0.5), active)
-            d = pose.vector_to_world(ds.d)
-            shadow = si.spawn_ray(d) if at_infinity else si.spawn_ray_to(pose.point_to_world(ds.p))
-            ok = active & (ds.pdf != 0.0)
-            ok &= ~self.world.occluded(scene, shadow, movers, ok)
-            rgb = self.frame_data.vec("light_rgb", 3, mi.UInt32(index), ok)
-            value = bsdf.eval(ctx, si, si.to_local(d), ok)
-            L += dr.select(ok, value * weight * mi.Spectrum(rgb.x, rgb.y, rgb.z), 0.0)
-        # the emitters on things that move (movers, particles, deforming meshes): one
-        # sample of one of them, whatever their number (lights.py `MovingEmitters`), MIS
-        # against BSDF sampling
+    def _moving_emitter_term(self, scene: mi.Scene, sampler: mi.Sampler, si: Any, bsdf: Any, ctx: Any, movers: Movers, active: Any) -> Any:
+        """Direct light at si from the emitters on things that move (movers, particles,
+        deforming meshes): one sample of one of them, whatever their number, in its atlas
+        cell at the path's time (lights.py `MovingEmitters`), the shadow ray tested against
+        every scene at the same time, MIS against BSDF sampling."""
         emitters = self.world.emitters
-        if emitters is not None:
-            ds, weight = emitters.sample(movers, si, sampler.next_1d(), sampler.next_2d(), active)
-            ok = active & (ds.pdf != 0.0)
-            ok &= ~self.world.occluded(scene, si.spawn_ray_to(ds.p), movers, ok)
-            value, bsdf_pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), ok)
-            mis = dr.select(ds.delta, 1.0, _mis(ds.pdf, bsdf_pdf))
-            L += dr.select(ok, mis * value * weight, 0.0)
-        return L
+        if emitters is None:
+            return mi.Spectrum(0.0)
+        ds, weight = emitters.sample(movers, si, sampler.next_1d(), sampler.next_2d(), active)
+        ok = active & (ds.pdf != 0.0)
+        ok &= ~self.world.occluded(scene, si.spawn_ray_to(ds.p), movers, ok)
+        value, bsdf_pdf = bsdf.eval_pdf(ctx, si, si.to_local(ds.d), ok)
+        mis = dr.select(ds.delta, 1.0, _mis(ds.pdf, bsdf_pdf))
+        return dr.select(ok, mis * value * weight, 0.0)
 
     def _choice(self, scene: mi.Scene) -> LightChoice:
-        """The light selection of `scene`'s emitters, made once per scene."""
+        """The light selection among `scene`'s emitters and the moving lights, made once
+        per scene (and again when the moving lights are set)."""
         if self.choice is None or self.choice.scene_id != id(scene):
-            self.choice = LightChoice(scene)
+            self.choice = LightChoice(scene, self.lights)
         return self.choice
+
+    def _posed(self, light_poses: list[KernelPose], active: Any) -> Posed:
+        """The moving lights at the path's time: poses and colours (`lights.Posed`)."""
+        colours = []
+        for index in range(len(self.lights)):
+            rgb = self.frame_data.vec("light_rgb", 3, mi.UInt32(index), active)
+            colours.append(mi.Spectrum(rgb.x, rgb.y, rgb.z))
+        return Posed(light_poses, colours)
 
     # --- AOVs of the first hit (the table: aovs.py) ----------------------------------------
 
@@ -297,29 +281,31 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         return aov
 
     def _emission_hit(
-        self, scene: mi.Scene, si: Any, prev_si: Any, prev_bsdf_pdf: Any, prev_bsdf_delta: Any, on_mover: Any, hit_mover: Any, choice: LightChoice, movers: Movers, depth: Any
+        self, scene: mi.Scene, si: Any, prev_si: Any, prev_bsdf_pdf: Any, prev_bsdf_delta: Any, on_mover: Any, hit_mover: Any, choice: LightChoice, posed: Posed, movers: Movers, depth: Any
     ) -> tuple[Any, Any]:
         """The direction sample of the emitter a BSDF-sampled segment reached, and its MIS
         weight against emitter sampling of the same emitter: the static scene's (chosen by
         `choice`), or one on something that moves (`MovingEmitters.pdf`, in its atlas cell
         at the path's time). 1 on the first segment."""
         ds = mi.DirectionSample3f(scene, si=si, ref=prev_si)
-        em_pdf = dr.select(~prev_bsdf_delta & ~on_mover, choice.pdf(prev_si, ds, ~prev_bsdf_delta & ~on_mover), 0.0)
+        em_pdf = dr.select(~prev_bsdf_delta & ~on_mover, choice.pdf(prev_si, ds, posed, ~prev_bsdf_delta & ~on_mover), 0.0)
         if self.world.emitters is not None:  # on something that moves: the moving emitters' sampler
             mine = ~prev_bsdf_delta & on_mover & (hit_mover != NONE) & (ds.emitter != None)  # noqa: E711
             em_pdf = dr.select(mine, self.world.emitters.pdf(movers, prev_si, ds, hit_mover, mine), em_pdf)
         return ds, dr.select(depth == 0, 1.0, _mis(prev_bsdf_pdf, em_pdf))
 
-    def _static_light_term(
-        self, scene: mi.Scene, sampler: mi.Sampler, si: Any, bsdf: Any, bsdf_ctx: Any, choice: LightChoice, movers: Movers, beta: Any, active_next: Any
+    def _light_term(
+        self, scene: mi.Scene, sampler: mi.Sampler, si: Any, bsdf: Any, bsdf_ctx: Any, choice: LightChoice, posed: Posed, movers: Movers, beta: Any, active_next: Any
     ) -> Any:
-        """Emitter sampling of the static scene's lights (chosen by contribution: lights.py),
-        the shadow ray tested across all scenes at the path's time, MIS against BSDF
-        sampling; weighted by the path throughput `beta`."""
+        """Emitter sampling of the static scene's lights and the moving lights (one chosen
+        by contribution: lights.py), the shadow ray tested across all scenes at the path's
+        time, MIS against BSDF sampling (a delta light: none); weighted by the path
+        throughput `beta`."""
         active_em = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-        ds_em, em_weight = choice.sample(scene, si, sampler.next_1d(), sampler.next_2d(), active_em)
+        ds_em, em_weight, at_infinity = choice.sample(scene, si, posed, sampler.next_1d(), sampler.next_2d(), active_em)
         active_em &= ds_em.pdf != 0.0
-        shadow = si.spawn_ray_to(ds_em.p)
+        # a moving light at infinity (directional): along its direction, unbounded
+        shadow = dr.select(at_infinity, si.spawn_ray(ds_em.d), si.spawn_ray_to(ds_em.p))
         occluded = self.world.occluded(scene, shadow, movers, active_em)
         active_em &= ~occluded
         wo = si.to_local(ds_em.d)
@@ -349,6 +335,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         movers = Movers(data, self.world.rigid, self.world.particles, u, active)
         light_poses = data.poses("light_t", "light_q", len(self.lights), u, active)
         choice = self._choice(scene)
+        posed = self._posed(light_poses, active)
         has_choice = len(choice) > 0  # a Python bool: @dr.syntax keeps it a plain `if`
         bsdf_ctx = mi.BSDFContext()
         L = mi.Spectrum(0.0)
@@ -370,19 +357,19 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
                 aov = self._first_hit_aovs(aov, scene, si, ray, data, ci, cf, hit_mover, movers, depth, active)
             # emission reached by BSDF sampling, MIS-weighted against emitter sampling of the
             # same emitter
-            ds, mis_bsdf = self._emission_hit(scene, si, prev_si, prev_bsdf_pdf, prev_bsdf_delta, on_mover, hit_mover, choice, movers, depth)
+            ds, mis_bsdf = self._emission_hit(scene, si, prev_si, prev_bsdf_pdf, prev_bsdf_delta, on_mover, hit_mover, choice, posed, movers, depth)
             L += beta * mis_bsdf * ds.emitter.eval(si, active & (prev_bsdf_pdf > 0))
 
             active_next = active & si.is_valid() & (depth + 1 < self.max_depth)
             bsdf = si.bsdf(ray)
 
-            # emitter sampling (static lights, chosen by contribution: lights.py), shadow
-            # test across all scenes at time u
+            # emitter sampling (static and moving lights, one chosen by contribution:
+            # lights.py), shadow test across all scenes at time u
             if has_choice:
-                L += self._static_light_term(scene, sampler, si, bsdf, bsdf_ctx, choice, movers, beta, active_next)
-            # moving lights and emitters on movers, each at this path's time u
+                L += self._light_term(scene, sampler, si, bsdf, bsdf_ctx, choice, posed, movers, beta, active_next)
+            # the emitters on things that move, one of them at this path's time u
             lit = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-            L += beta * self._moving_light_terms(scene, sampler, si, bsdf, bsdf_ctx, movers, light_poses, lit)
+            L += beta * self._moving_emitter_term(scene, sampler, si, bsdf, bsdf_ctx, movers, lit)
 
             # BSDF sampling: the next segment of the path
             bs, bsdf_weight = bsdf.sample(bsdf_ctx, si, sampler.next_1d(), sampler.next_2d(), active_next)

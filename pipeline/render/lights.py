@@ -27,7 +27,7 @@ MIS weight at an emitter hit recomputes it at the previous vertex (`pdf`).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import drjit as dr
 import mitsuba as mi
@@ -62,13 +62,24 @@ def _env_stats(emitter: Any) -> tuple[float, float]:
     return float(np.mean(lum)) / 4.0, peak
 
 
-class LightChoice:
-    """The light-sampled emitters of one static scene and their selection at a vertex."""
+class Posed(NamedTuple):
+    """The moving lights at a path's time: each one's world_from_light (`poses.KernelPose`)
+    and colour (mi.Spectrum), in the order of `LightChoice.moving`."""
 
-    def __init__(self, scene: mi.Scene) -> None:
+    poses: list[Any]
+    colours: list[Any]
+
+
+class LightChoice:
+    """The light-sampled emitters of one job and their selection at a vertex: the static
+    scene's emitters and the moving lights (delta emitters built in their own frame, posed
+    at the path's time: `Posed`), one candidate each, chosen by estimated contribution."""
+
+    def __init__(self, scene: mi.Scene, moving: list[tuple[bool, Any]] | None = None) -> None:
         # the scene's id, not the scene: the integrator (which keeps this) is the scene's
         # own, and a reference back would be a cycle through C++ that keeps scenes alive
         self.scene_id = id(scene)
+        self.moving = list(moving or [])  # (at infinity, emitter in its rest frame)
         emitters = list(scene.emitters())
         # a constant or smooth environment is reached by BSDF sampling only
         chosen = []
@@ -86,11 +97,12 @@ class LightChoice:
         self.env_irradiance = [irr for _, _, _, irr in chosen]
 
     def __len__(self) -> int:
-        return len(self.emitters)
+        return len(self.emitters) + len(self.moving)
 
-    def _probabilities(self, si: Any, active: Any) -> list[Any]:
-        """Each candidate's selection probability at si (summing to 1)."""
-        k = len(self.emitters)
+    def _probabilities(self, si: Any, posed: Posed, active: Any) -> list[Any]:
+        """Each candidate's selection probability at si (summing to 1): the static
+        emitters', then the moving lights'."""
+        k = len(self)
         if k == 1:
             return [mi.Float(1.0)]
         n = si.sh_frame.n * dr.select(si.wi.z < 0, -1.0, 1.0)  # the side the path came from
@@ -102,6 +114,10 @@ class LightChoice:
             ds, weight = emitter.sample_direction(si, mi.Point2f(0.5), active)
             cos = dr.maximum(dr.dot(ds.d, n), 0.0)
             estimates.append(dr.select(ds.pdf > 0, mi.luminance(weight) * cos, 0.0))
+        for (_, emitter), pose, colour in zip(self.moving, posed.poses, posed.colours):
+            ds, weight = emitter.sample_direction(pose.interaction_to_rest(si), mi.Point2f(0.5), active)
+            cos = dr.maximum(dr.dot(pose.vector_to_world(ds.d), n), 0.0)
+            estimates.append(dr.select(ds.pdf > 0, mi.luminance(weight * colour) * cos, 0.0))
         total = estimates[0]
         for e in estimates[1:]:
             total = total + e
@@ -110,12 +126,13 @@ class LightChoice:
         uniform = dr.select(total > 0, share, 1.0 / k)
         return [dr.detach(uniform + e * scale) for e in estimates]
 
-    def sample(self, scene: mi.Scene, si: Any, u: Any, sample2: Any, active: Any) -> tuple[Any, Any]:
+    def sample(self, scene: mi.Scene, si: Any, posed: Posed, u: Any, sample2: Any, active: Any) -> tuple[Any, Any, Any]:
         """One emitter sample at si: u (1D) picks the emitter, sample2 (2D) the point on it.
         Returns Mitsuba's (DirectionSample3f, weight = radiance / pdf) with the selection
         folded into both, as `Scene.sample_emitter_direction` returns them (no visibility
-        test)."""
-        probs = self._probabilities(si, active)
+        test), and whether the light is a moving one at infinity (its shadow ray goes
+        along the direction, unbounded)."""
+        probs = self._probabilities(si, posed, active)
         index = mi.UInt32(0)
         prob = mi.Float(probs[0])
         cdf = mi.Float(0.0)
@@ -124,19 +141,31 @@ class LightChoice:
             past = u >= cdf
             index = dr.select(past, i + 1, index)
             prob = dr.select(past, probs[i + 1], prob)
-        table = mi.UInt32(self.scene_index)
-        emitter = dr.gather(mi.EmitterPtr, scene.emitters_dr(), dr.gather(mi.UInt32, table, index, active), active)
-        ds, weight = emitter.sample_direction(si, sample2, active)
+        count = len(self.emitters)
+        ds, weight = dr.zeros(mi.DirectionSample3f), mi.Spectrum(0.0)
+        if count:
+            static = active & (index < count)
+            table = mi.UInt32(self.scene_index)
+            emitter = dr.gather(mi.EmitterPtr, scene.emitters_dr(), dr.gather(mi.UInt32, table, dr.minimum(index, count - 1), static), static)
+            ds, weight = emitter.sample_direction(si, sample2, static)
+        at_infinity = mi.Bool(False)
+        for j, ((infinite, emitter), pose, colour) in enumerate(zip(self.moving, posed.poses, posed.colours)):
+            mine = active & (index == count + j)
+            ds_j, w_j = emitter.sample_direction(pose.interaction_to_rest(si), sample2, mine)
+            ds_j.p, ds_j.n, ds_j.d = pose.point_to_world(ds_j.p), pose.vector_to_world(ds_j.n), pose.vector_to_world(ds_j.d)
+            ds, weight = dr.select(mine, ds_j, ds), dr.select(mine, w_j * colour, weight)
+            at_infinity |= mine & infinite
         ds.pdf *= prob
         weight *= dr.select(prob > 0, dr.rcp(prob), 0.0)
-        return ds, weight
+        return ds, weight, at_infinity
 
-    def pdf(self, si: Any, ds: Any, active: Any) -> Any:
+    def pdf(self, si: Any, ds: Any, posed: Posed, active: Any) -> Any:
         """The solid-angle pdf with which `sample` at si produces the emitter point of ds
-        (0 for an emitter that is not light-sampled: a constant environment)."""
+        (0 for an emitter that is not light-sampled: a constant environment; a moving light
+        is a delta light, never reached)."""
         if not self.emitters:
             return mi.Float(0.0)
-        probs = self._probabilities(si, active)
+        probs = self._probabilities(si, posed, active)
         prob = mi.Float(0.0)
         for emitter, p in zip(self.emitters, probs):
             prob = dr.select(ds.emitter == mi.EmitterPtr(emitter), p, prob)

@@ -76,6 +76,22 @@ def test_the_trace_sites_do_not_grow_with_emissive_movers(tmp_path: Path) -> Non
     assert all(c == [*SITES, "occluded", "intersect", "occluded"] for c in counts.values()), {k: len(v) for k, v in counts.items()}
 
 
+def test_the_trace_sites_do_not_grow_with_moving_lights(tmp_path: Path) -> None:
+    """Moving lights are candidates of the one light choice with the static scene's
+    emitters (lights.py `LightChoice`): one shadow ray for 1 or 6 of them, as for the
+    static point light. Before, each moving light had a shadow ray of its own."""
+    counts = {}
+    for n in (1, 6):
+        folder = tmp_path / str(n)
+        folder.mkdir()
+        flying = ", ".join(
+            f"{{type: point, position: [{k * 0.5 - 1:.1f}, 4, 0], intensity: 5, motion: {{type: procedural, generators: [{{type: ballistic, v0: [1, 0, 0], a: [0, 0, 0]}}]}}}}"
+            for k in range(n))
+        text = _movers_scene(4, 9).replace("{type: point, position: [0, 5, 0], intensity: 10}]", f"{flying}]")
+        counts[n] = _traces(folder, text)
+    assert all(c == SITES for c in counts.values()), {k: len(v) for k, v in counts.items()}
+
+
 @pytest.mark.slow
 def test_the_trace_sites_are_the_same_for_a_thousand_movers(tmp_path: Path) -> None:
     counts = _counts(tmp_path, [(100, 9), (1000, 9)])
