@@ -65,7 +65,7 @@ def _pixel_world(fov_deg: float, distance: float, width: int) -> float:
 def _renderer(scene_path: Path, overrides: dict[str, Any] | None = None) -> tuple[Any, list[Any]]:
     from motion.pipeline import variant
     from motion.pipeline.bake import evaluate_frames
-    from motion.pipeline.render.frame_renderer import FrameRenderer
+    from motion.pipeline.render.worker.frame_renderer import FrameRenderer
     from motion.pipeline.scene import load_scene
 
     variant.activate("auto", quiet=True)

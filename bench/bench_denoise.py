@@ -47,7 +47,7 @@ class Shot:
     """A scene rendered in this process through the real pipeline (bake -> FrameRenderer)."""
 
     def __init__(self, path: Path, **render: Any) -> None:
-        from motion.pipeline.render.frame_renderer import FrameRenderer
+        from motion.pipeline.render.worker.frame_renderer import FrameRenderer
         from motion.pipeline.bake import evaluate_frames
         from motion.pipeline.scene import load_scene
 
@@ -73,7 +73,7 @@ def rel_mse(img: np.ndarray, ref: np.ndarray) -> float:
 
 
 def denoise(rgba: np.ndarray, aovs: dict[str, np.ndarray], color: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-    from motion.pipeline.render.denoise import denoise_frame
+    from motion.pipeline.render.output.denoise import denoise_frame
 
     t0 = time.perf_counter()
     out, _, _ = denoise_frame(rgba, aovs, color=color)
@@ -147,7 +147,7 @@ def oidn_alone(images: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]]) -> d
     import drjit as dr
     import mitsuba_oidn as oidn
 
-    from motion.pipeline.render.aovs import layer
+    from motion.pipeline.render.kernel.aovs import layer
 
     device = oidn.Device(oidn.DeviceType.CPU)
     out: dict[str, float] = {}
@@ -180,7 +180,7 @@ def flicker(path: Path, label: str, n: int, ref_spp: int, res: tuple[int, int]) 
     change: reprojected by the reference's motion vectors (zero for a static camera's static
     set, the camera's motion for a trucking camera), the same albedo and normal there, and
     the reference's colour within 5%."""
-    from motion.pipeline.render.temporal import RADIUS, blend, warp
+    from motion.pipeline.render.output.temporal import RADIUS, blend, warp
 
     look = {**PREVIEW, "resolution": res}
     frames = list(range(n + 4))  # the temporal mode's neighbours on each side (radius 1 or 2)
@@ -243,7 +243,7 @@ def ghosting(folder: Path) -> dict[str, Any]:
     temporal, from 16 and from 256 spp."""
     from test_render_blur import _profile, _slide_scene, _trapezoid
 
-    from motion.pipeline.render.temporal import blend
+    from motion.pipeline.render.output.temporal import blend
 
     path = folder / "slide.yaml"
     # 64 rows instead of the test's 4: OIDN needs an image, not a strip, to work on

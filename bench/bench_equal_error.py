@@ -106,7 +106,7 @@ def ours(path: Path, spps: list[int], ref_spp: int, denoise: bool) -> dict[str, 
     """Our warm frame at each count: seconds (best of 2), relMSE, and denoised figures."""
     from motion.pipeline import variant
     from motion.pipeline.bake import evaluate_frames
-    from motion.pipeline.render.frame_renderer import FrameRenderer
+    from motion.pipeline.render.worker.frame_renderer import FrameRenderer
     from motion.pipeline.scene import load_scene
 
     variant.activate("auto", quiet=True)
@@ -124,7 +124,7 @@ def ours(path: Path, spps: list[int], ref_spp: int, denoise: bool) -> dict[str, 
     reference, ref_aovs, _ = renderer.render_layers(fi)
     renderer.settings = settings
     if denoise:
-        from motion.pipeline.render.denoise import denoise_frame
+        from motion.pipeline.render.output.denoise import denoise_frame
 
         denoise_frame(reference, ref_aovs)  # a worker's first denoise makes OIDN's filter: warm, as the frame is
     rows = []
@@ -137,7 +137,7 @@ def ours(path: Path, spps: list[int], ref_spp: int, denoise: bool) -> dict[str, 
             best = min(best, stats.render_s)
         row = {"spp": spp, "seconds": best, "rel_mse": rel_mse(image, reference)}
         if denoise:
-            from motion.pipeline.render.denoise import denoise_frame
+            from motion.pipeline.render.output.denoise import denoise_frame
 
             t0 = time.perf_counter()
             clean, _, _ = denoise_frame(image, aovs)

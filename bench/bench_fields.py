@@ -25,7 +25,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 def main(resolution: tuple[int, int] = (320, 180), spp: int = 16, frames: int = 6) -> None:
     variant.activate("auto", quiet=True)
-    from motion.pipeline.render.frame_renderer import FrameRenderer
+    from motion.pipeline.render.worker.frame_renderer import FrameRenderer
     from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.scene import load_scene
 

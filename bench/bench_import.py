@@ -105,7 +105,7 @@ def main() -> None:
         tmp = Path(tmp_name)
         os.environ["MOTION_CACHE_DIR"] = str(tmp / "cache")
         from motion.pipeline.motion.evaluate import evaluate
-        from motion.pipeline.render.assets import mesh_file
+        from motion.pipeline.render.translate.assets import mesh_file
         from motion.pipeline.scene.loader import load_scene
         from motion.pipeline.variant import activate
 

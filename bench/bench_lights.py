@@ -62,7 +62,7 @@ def load(folder: Path, text: str, name: str) -> Any:
 def warm_frames(loaded: Any, frames: list[int]) -> tuple[list[np.ndarray], list[float]]:
     """Frames rendered by one worker-style renderer: images and render seconds (the first
     frame, cold, is rendered and dropped)."""
-    from motion.pipeline.render.frame_renderer import FrameRenderer
+    from motion.pipeline.render.worker.frame_renderer import FrameRenderer
     from motion.pipeline.bake import evaluate_frames
 
     gc.collect()
@@ -159,8 +159,8 @@ def examples(spp: int) -> list[dict[str, Any]]:
     """Each example at a third of its shot, ours vs `path` on the same records."""
     import mitsuba as mi
 
-    from motion.pipeline.render.frame_renderer import FrameRenderer
-    from motion.pipeline.render.stacked import stack_frame
+    from motion.pipeline.render.worker.frame_renderer import FrameRenderer
+    from motion.pipeline.render.poses.stacked import stack_frame
     from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.scene import load_scene
 

@@ -36,7 +36,7 @@ def shot(count: int, moving: bool, frames: int, res: tuple[int, int], spp: int, 
     """The scene YAML: `count` spheres on a grid, orbiting (moving) or still; with
     `distinct`, each sphere's radius differs a little from every other's (no two movers'
     shapes are the same: each keeps a cell of the atlas of its own, as debris of unique
-    pieces does), else all share one radius (one cell, render/atlas.py)."""
+    pieces does), else all share one radius (one cell, render/kernel/atlas.py)."""
     side = max(1, math.ceil(math.sqrt(count)))
     spacing = 8.0 / side
     radius = spacing * 0.3

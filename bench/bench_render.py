@@ -93,7 +93,7 @@ def cache_figures(folder: Path, frames: int) -> dict[str, float]:
     """1. cold vs warm vs pure kernel, in this process."""
     import mitsuba as mi
 
-    from motion.pipeline.render.frame_renderer import FrameRenderer
+    from motion.pipeline.render.worker.frame_renderer import FrameRenderer
     from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.scene import load_scene
 
@@ -122,7 +122,7 @@ import json, sys, time
 t0 = time.perf_counter()
 from motion.pipeline import variant
 variant.activate("auto", quiet=True)
-from motion.pipeline.render.frame_renderer import FrameRenderer
+from motion.pipeline.render.worker.frame_renderer import FrameRenderer
 from motion.pipeline.bake import evaluate_frames
 from motion.pipeline.scene import load_scene
 loaded = load_scene(sys.argv[1])
@@ -190,7 +190,7 @@ def static_twin(moving: Path, fi: object) -> Path:
 def _warm_time(path: Path, frames: list[int]) -> tuple[float, object]:
     import gc
 
-    from motion.pipeline.render.frame_renderer import FrameRenderer
+    from motion.pipeline.render.worker.frame_renderer import FrameRenderer
     from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.scene import load_scene
 
@@ -223,7 +223,7 @@ def blur_error(folder: Path) -> dict[str, float]:
     sys.path.insert(0, str(REPO / "tests"))
     import test_render_blur as T
 
-    from motion.pipeline.render.frame_renderer import FrameRenderer
+    from motion.pipeline.render.worker.frame_renderer import FrameRenderer
     from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.scene import load_scene
 
@@ -255,7 +255,7 @@ _MEMORY_PROBE = """
 import json, sys, psutil
 from motion.pipeline import variant
 variant.activate("auto", quiet=True)
-from motion.pipeline.render.frame_renderer import FrameRenderer
+from motion.pipeline.render.worker.frame_renderer import FrameRenderer
 from motion.pipeline.bake import evaluate_frames
 from motion.pipeline.scene import load_scene
 loaded = load_scene(sys.argv[1])

@@ -43,7 +43,7 @@ def twin(renderer: Any, fi: Any, mi: Any) -> Any:
     """Mitsuba's `path` on the frame's static twin: the scalar fallback's records of the
     frame's time (`_full_scene_dict`: movers at their frame pose, particles as exact spheres
     in one `ellipsoids` shape)."""
-    from motion.pipeline.render.stacked import stack_frame
+    from motion.pipeline.render.poses.stacked import stack_frame
 
     return mi.load_dict(renderer._full_scene_dict(stack_frame(fi), None))
 
@@ -64,7 +64,7 @@ def case(folder: Path, preset: str, movers: int, particles: int, frames: int, bl
     import drjit as dr
     import mitsuba as mi
 
-    from motion.pipeline.render.frame_renderer import FrameRenderer
+    from motion.pipeline.render.worker.frame_renderer import FrameRenderer
     from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.scene import load_scene
 

@@ -11,7 +11,7 @@ import click
 
 def _folders() -> dict[str, Path]:
     from motion.pipeline.cache import STORES, kernels_dir, validation_dir
-    from motion.pipeline.render.assets import assets_dir
+    from motion.pipeline.render.translate.assets import assets_dir
 
     return {"assets": assets_dir(), "kernels": kernels_dir(), "validation": validation_dir(), "shipped": STORES["shipped"].dir(),
             "simulations": STORES["simulations"].dir()}
@@ -50,7 +50,7 @@ def cache_clear(what: str) -> None:
     imports and import records; validation the kept validators, parsed scene files and asset passes; shipped
     what shipped jobs carried to this worker; simulations the kept dynamics simulations."""
     from motion.pipeline.cache import clear_kernels
-    from motion.pipeline.render.assets import clear
+    from motion.pipeline.render.translate.assets import clear
 
     for name, folder in _folders().items():
         if what in ("all", name):

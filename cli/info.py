@@ -14,7 +14,7 @@ def info(as_json: bool) -> None:
     """Show the renderer variant motion will use, its LLVM library, threads, caches, versions."""
     from motion.pipeline.variant import info as gather
 
-    from motion.pipeline.render.denoise import PACKAGE, describe, probe
+    from motion.pipeline.render.output.denoise import PACKAGE, describe, probe
 
     data = gather()
     found = probe()  # runs the library in a subprocess: a broken install shows here

@@ -408,7 +408,7 @@ def hold_to_cap(folder: Path, cap_bytes: int | None, cap_files: int | None = Non
 # Every cache motion keeps under the root; `motion cache info` lists them. A new cache is one
 # entry here and its use through the Store's methods.
 STORES: dict[str, Store] = {s.name: s for s in (
-    Store("assets", "assets", "meshes and roughness textures converted for Mitsuba (render/assets.py)", tag="ply-v2"),
+    Store("assets", "assets", "meshes and roughness textures converted for Mitsuba (render/translate/assets.py)", tag="ply-v2"),
     Store("imports", "assets/imports", "meshes, textures and skins converted from glTF and USD imports (scene/imports/converted.py)", tag="import-v2"),
     Store("import-records", "assets/imports/records", "the records of glTF and USD imports (scene/imports/memo.py)", tag="records-v3", cap_files=4096),
     Store("passes", "validation/assets", "asset files whose bytes passed their checks (scene/checked.py)", tag="pass-v2",
@@ -418,7 +418,7 @@ STORES: dict[str, Store] = {s.name: s for s in (
     Store("validators", "validation", "the scene format's validators (scene/compiled.py)", tag="validator-v2", cap_bytes=False, cap_files=64),
     Store("shipped", "shipped", "assets a shipped job carried to this worker (farm/transfer/store.py)"),
     Store("simulations", "simulations", "dynamics simulations kept for reruns whose dynamics inputs did not change (bake/keep.py)", tag="sim-v1", cap_files=64),
-    Store("probes", "probes", "the denoiser probe's answer, by the library's files and this machine (render/denoise.py), and the deliverables' "
+    Store("probes", "probes", "the denoiser probe's answer, by the library's files and this machine (render/output/denoise.py), and the deliverables' "
           "view transform's description, by its options and OpenColorIO's files (shot/deliver.py)", tag="probe-v2", cap_files=64),
     Store("frame-keys", "frame-keys", "each frame's identity and the look, kept for reruns that render nothing (identity/kept.py)", tag="keys-v1", cap_files=256),
 )}

@@ -101,10 +101,10 @@ def _read_bounded(path: str | Path, limit: int, what: str) -> bytes:
 # Environment variables that size a worker's work (the README's table):
 # name -> (default, most accepted or None)
 ENV_SIZES: dict[str, tuple[int, int | None]] = {
-    # samples one render pass traces at once (render/film.py): about 80 bytes a lane, so
+    # samples one render pass traces at once (render/kernel/film.py): about 80 bytes a lane, so
     # 2^28 is ~21 GB a pass, and lane indices are 32-bit
     "MOTION_MAX_LANES": (1 << 23, 1 << 28),
-    # bytes of converted assets kept on disk (render/assets.py)
+    # bytes of converted assets kept on disk (render/translate/assets.py)
     "MOTION_ASSET_CACHE_CAP": (2 * 1024**3, None),
     # MB of viewed frames a run's deliverables share (telecine/movie.py ViewedFrames): 72
     # frames of 480x270 take 56 MB
@@ -237,7 +237,7 @@ def read_json_record(path: str | Path, what: str, expect: type | tuple[type, ...
 # What one render worker's address space holds, measured on a worker rendering one pass
 # (VmPeak, scalar_rgb, 1 spp): 1.00 GB at 2048x2048 (4.2M lanes), 1.41 GB at 2900x2900
 # (8.4M lanes): about 100 bytes a lane over a base of 600 MB. A frame of more pixels than
-# $MOTION_MAX_LANES renders in bands of rows (render/film.py `bands`), each within the budget.
+# $MOTION_MAX_LANES renders in bands of rows (render/kernel/film.py `bands`), each within the budget.
 PASS_BYTES_PER_LANE = 100
 WORKER_BASE_BYTES = 600 * 1024**2
 # the whole frame besides the band's pass: the film's interleaved RGBA, its readback and the
@@ -246,7 +246,7 @@ FRAME_BYTES_PER_PIXEL = 48
 
 
 def pass_lanes(width: int, height: int, spp: int) -> int:
-    """Sample lanes in one render pass of a `width` x `height` frame at `spp` (render/film.py:
+    """Sample lanes in one render pass of a `width` x `height` frame at `spp` (render/kernel/film.py:
     a band of rows at most $MOTION_MAX_LANES pixels, or one row, and as many samples per
     pixel as the budget allows, at least one)."""
     budget = env_size("MOTION_MAX_LANES")

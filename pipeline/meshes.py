@@ -417,7 +417,7 @@ def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
     unit normals of the faces around it weighted by the face's angle at that corner
     (Thuermer & Wuethrich 1998), normalised; a face without area adds nothing and a vertex
     left with nothing gets (1, 0, 0), as Mitsuba's. Equal to Mitsuba's to float rounding
-    (tests/render/test_assets.py); the asset cache writes them into a static mesh without file normals (render/assets.py) and the slices of a deforming one (render/slices.py); summed in face order (np.bincount), so the bits never
+    (tests/render/test_assets.py); the asset cache writes them into a static mesh without file normals (render/translate/assets.py) and the slices of a deforming one (render/translate/deforming.py); summed in face order (np.bincount), so the bits never
     depend on the thread count - Mitsuba's own, an atomic scatter-add across drjit's
     threads, differs from run to run in the last bit on a 65k-triangle mesh."""
     p = np.asarray(positions, np.float32)

@@ -27,7 +27,12 @@ STAGES: list[tuple[str, ...]] = [
     ("motion.pipeline.dynamics",),  # simulates on top of motion's poses and keyframes
     ("motion.pipeline.bake",),
     ("motion.pipeline.variant", "motion.pipeline.presets", "motion.pipeline.frame_output", "motion.pipeline.identity"),  # identity reads frame headers; the renderer gives it its sorting of the scene
-    ("motion.pipeline.render",),
+    # the renderer's rooms (docs/rendering.md), each importing only the rooms before it
+    ("motion.pipeline.render", "motion.pipeline.render.poses"),  # poses over time: host and kernel
+    ("motion.pipeline.render.kernel",),  # the traced kernel: integrator, traversal, lights, film
+    ("motion.pipeline.render.translate",),  # scene records to Mitsuba: roles, shapes, assets, deforming templates
+    ("motion.pipeline.render.output",),  # denoising and the temporal pass
+    ("motion.pipeline.render.worker",),  # the job loop and the first-frame cache
     ("motion.pipeline.telecine", "motion.pipeline.compare"),  # compare reads frames, makes its report images through telecine's view
     ("motion.pipeline.farm",),
     ("motion.pipeline.shot",),

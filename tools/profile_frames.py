@@ -53,7 +53,7 @@ def main() -> int:
 
     chosen = variant.activate(args.variant, quiet=True).variant
     from motion.pipeline.bake import evaluate_frames
-    from motion.pipeline.render.frame_renderer import FrameRenderer
+    from motion.pipeline.render.worker.frame_renderer import FrameRenderer
     from motion.pipeline.scene import load_scene
 
     width, height = (int(v) for v in args.resolution.lower().split("x"))

@@ -1,7 +1,7 @@
 """What a frame's EXR header says about how it was made, and what of it makes a frame and
 its reference another picture.
 
-A frame rendered by `motion render` carries `motion:` attributes (render/job.py `_header`):
+A frame rendered by `motion render` carries `motion:` attributes (render/worker/job.py `_header`):
 the frame's identity (identity/record.py, docs/identity.md: the look's parts, `look_parts`,
 read by `stored_parts`, and the digest of its own baked motion, `motion_hash`: what reruns
 compare), the render settings as JSON

@@ -31,7 +31,7 @@ MANIFEST = "manifest.json"
 FORMAT = "motion-golden/1"
 # the header attributes OpenEXR derives from the channels it is given
 _STRUCTURAL = ("channels", "dataWindow", "displayWindow")
-NOISY_LAYER = "noisy"  # render/denoise.py NOISY_LAYER: the undenoised beauty of a denoised frame
+NOISY_LAYER = "noisy"  # render/output/denoise.py NOISY_LAYER: the undenoised beauty of a denoised frame
 MAX_MANIFEST_BYTES = 64 << 20  # about 150 bytes a frame: far above any shot's manifest
 _FRAME_NUMBER = Annotated[int, Field(ge=-(2**63), lt=2**63)]
 _FILE_NAME = re.compile(r"^[^/\\\x00]+\.exr$", re.IGNORECASE)

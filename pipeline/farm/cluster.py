@@ -27,7 +27,7 @@ from typing import Any, Sequence
 
 from ..errors import UsageError
 from ..bake import BakedFrame
-from ..render.job import RenderJob
+from ..render.worker.job import RenderJob
 from .executor import Done, Event, FrameWritten, Lost
 from .claims import release
 from .task import ChunkResult, TaskContext, run_chunk

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import Protocol, Sequence, Union
 
 from ..bake import BakedFrame
-from ..render.job import RenderJob
+from ..render.worker.job import RenderJob
 from .task import ChunkResult, TaskContext
 
 

@@ -20,7 +20,7 @@ import socket
 from typing import Sequence
 
 from ..bake import BakedFrame
-from ..render.job import RenderJob
+from ..render.worker.job import RenderJob
 from .executor import Done, Event, FrameWritten, Lost
 from .task import TaskContext, run_chunk
 

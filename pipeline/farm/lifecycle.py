@@ -30,7 +30,7 @@ from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Callable, Union
 
-from ..render.job import FrameResult
+from ..render.worker.job import FrameResult
 from ..timeline import format_range
 from .config import FarmConfig
 from .states import CHUNK_STATES, FINAL_CHUNK_STATES, FINAL_FRAME_STATES, FRAME_STATES, ChunkState, FrameState

@@ -21,7 +21,7 @@ from contextlib import contextmanager
 from typing import Any, Iterator, Sequence
 
 from ..bake import BakedFrame
-from ..render.job import RenderJob
+from ..render.worker.job import RenderJob
 from .executor import Done, Event, FrameWritten, Lost
 from .task import TaskContext, run_chunk
 

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 from ..errors import DiskFaultError, MotionError, UsageError
 from ..frame_output import disk_fault, write_atomic
-from ..render.job import RenderJob
+from ..render.worker.job import RenderJob
 from ..scene.loader import LoadedScene
 from .config import FarmConfig
 from .selection import format_frames
@@ -26,7 +26,7 @@ if TYPE_CHECKING:  # (a rerun that renders nothing writes its report without the
 def _times_on_disk(job: RenderJob, loaded: LoadedScene, frame: int) -> dict[str, Any]:
     """A finished frame's path and render seconds from its own header (frame_output.read_meta)."""
     from ..frame_output import read_meta
-    from ..render.job import frame_path
+    from ..render.worker.job import frame_path
 
     path = frame_path(job, loaded, frame)
     try:

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..bake import BakedFrame
 from ..errors import UsageError
-from ..render.job import RenderJob
+from ..render.worker.job import RenderJob
 from .config import FarmConfig
 from .progress import Progress
 

@@ -20,7 +20,7 @@ from typing import Any, Callable
 
 from ..bake import BakedFrame
 from ..identity import complete_as
-from ..render.job import RenderJob
+from ..render.worker.job import RenderJob
 from .claims import claim_path, is_stale, read_claim, release, remove_partials
 from .config import FarmConfig
 from .executor import Done, Executor, FrameWritten, Lost

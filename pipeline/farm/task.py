@@ -12,7 +12,7 @@ from ..errors import DiskFaultError
 from ..frame_output import confined
 from ..identity import complete_as
 from ..bake import BakedFrame
-from ..render.job import FrameResult, RenderJob, render_frames, worker_id
+from ..render.worker.job import FrameResult, RenderJob, render_frames, worker_id
 from .claims import Claimant, claim_path, release, remove_partials, try_claim
 
 

@@ -33,7 +33,7 @@ MAX_BYTES = 64 << 20  # one entry: 1,024 parts of 30 bytes for each of 2,000 fra
 # the code a kept identity depends on: the simulation's (bake/keep.py) and the bake's, the
 # identity's own, and what the look reads beside the scene's records
 _CODE_FOLDERS = ("bake", "identity")
-_CODE_FILES = ("render/roles.py", "scene/files.py", "scene/lights.py")
+_CODE_FILES = ("render/translate/roles.py", "scene/files.py", "scene/lights.py")
 _LIBRARIES = ("numpy", "scipy", "pydantic")  # the look's parts are pydantic's JSON dumps
 _HEX16 = re.compile(r"[0-9a-f]{16}\Z")
 _code_version: str | None = None

@@ -10,7 +10,7 @@ collider, the dynamics, IK, imports (counted by what they expand to), timeline a
 output's naming and metadata are left out. Motion reaches the renderer only as the
 frame's baked motion, whose digest is the key's other half (identity/motion_digest.py); what
 the motion blocks decide for the renderer as a whole (which objects it draws static,
-as movers or as slices: render/roles.py, given by the caller, which sits above this stage)
+as movers or as slices: render/translate/roles.py, given by the caller, which sits above this stage)
 is a part of the look.
 
 Every part has its own digest in a frame's header (`motion:look_parts`), so a rerun says
@@ -50,7 +50,7 @@ def look_parts(loaded: LoadedScene, roles: Any) -> dict[str, str]:
     """{part: digest} of everything of the scene that reaches the renderer other than
     motion: `renderer` (its version), `render` (the settings and how frames are stored),
     `camera`, `m<i>` per material, `o<i>` per object, `l<i>` per light and `roles` (the
-    renderer's sorting of the scene, render/roles.py `sort_scene(loaded)`); every file
+    renderer's sorting of the scene, render/translate/roles.py `sort_scene(loaded)`); every file
     named by its bytes (`content_named`), nothing by its name."""
     scene = content_named(loaded)
     dump = scene.model_dump(mode="json")

@@ -13,7 +13,7 @@ so conversions pass `scalar_first=True` at the boundary (rotation.py).
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, Callable, NamedTuple
 
 import numpy as np
 
@@ -249,26 +249,51 @@ def quat_normalize(q: np.ndarray) -> np.ndarray:
 
 
 # Below this sin(theta) a slerp is a lerp (then normalised): one scheme, two precisions. The
-# host's float64 resolves sin(theta) to 1e-6; the render kernel's float32 (render/poses.py
-# `slerp`, the same formula in drjit) loses sin((1 - f) theta) / sin(theta) to rounding
-# below about 1e-4.
+# host's float64 resolves sin(theta) to 1e-6; the render kernel's float32 (render/poses/kernel.py
+# `slerp`: this `slerp_with`, on drjit's operations) loses sin((1 - f) theta) / sin(theta) to
+# rounding below about 1e-4.
 SLERP_LINEAR_BELOW = {"float64": 1e-6, "float32": 1e-4}
 
 
+class ArrayOps(NamedTuple):
+    """The operations `slerp_with` needs from an array library (numpy here, drjit in the
+    render kernel), and the precision's threshold of `SLERP_LINEAR_BELOW`."""
+
+    dot: Callable[[Any, Any], Any]  # [..., 4] x [..., 4] -> [..., 1] (or a scalar per lane)
+    where: Callable[[Any, Any, Any], Any]
+    abs: Callable[[Any], Any]
+    acos: Callable[[Any], Any]
+    sin: Callable[[Any], Any]
+    minimum: Callable[[Any, Any], Any]
+    normalize: Callable[[Any], Any]
+    linear_below: float
+
+
+def slerp_with(ops: ArrayOps, q0: Any, q1: Any, s: Any) -> Any:
+    """The one slerp: spherical linear interpolation of unit quaternions (w, x, y, z) with
+    the shortest-path flip, s in [0, 1], on the operations of `ops`: (sin((1 - s) theta) q0
+    + sin(s theta) q1) / sin(theta), a lerp where sin(theta) is below the precision's
+    threshold, normalised."""
+    dot = ops.dot(q0, q1)
+    q1 = ops.where(dot < 0, -q1, q1)
+    dot = ops.abs(dot)
+    theta = ops.acos(ops.minimum(dot, 1.0))
+    sin_theta = ops.sin(theta)
+    small = sin_theta < ops.linear_below
+    safe = ops.where(small, 1.0, sin_theta)
+    a = ops.where(small, 1.0 - s, ops.sin((1.0 - s) * theta) / safe)
+    b = ops.where(small, s, ops.sin(s * theta) / safe)
+    return ops.normalize(a * q0 + b * q1)
+
+
+NUMPY = ArrayOps(lambda a, b: np.sum(a * b, axis=-1, keepdims=True), np.where, np.abs, np.arccos, np.sin, np.minimum,
+                 lambda q: quat_normalize(q), SLERP_LINEAR_BELOW["float64"])
+
+
 def slerp(q0: np.ndarray, q1: np.ndarray, s: np.ndarray | float) -> np.ndarray:
-    """Spherical linear interpolation [..., 4] with the shortest-path flip; s in [0, 1]."""
-    dot = np.sum(q0 * q1, axis=-1, keepdims=True)
-    q1 = np.where(dot < 0, -q1, q1)
-    dot = np.abs(dot)
-    s = np.asarray(s)[..., None]
-    theta = np.arccos(np.clip(dot, -1.0, 1.0))
-    sin_theta = np.sin(theta)
-    small = sin_theta < SLERP_LINEAR_BELOW["float64"]
-    safe = np.where(small, 1.0, sin_theta)
-    # (sin((1-s) theta) q0 + sin(s theta) q1) / sin(theta); lerp where theta ~ 0
-    a = np.where(small, 1.0 - s, np.sin((1.0 - s) * theta) / safe)
-    b = np.where(small, s, np.sin(s * theta) / safe)
-    return quat_normalize(a * q0 + b * q1)
+    """Spherical linear interpolation [..., 4] with the shortest-path flip; s in [0, 1]
+    (`slerp_with` on numpy, float64)."""
+    return slerp_with(NUMPY, np.asarray(q0, dtype=float), np.asarray(q1, dtype=float), np.asarray(s, dtype=float)[..., None])
 
 
 def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:

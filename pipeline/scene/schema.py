@@ -375,7 +375,7 @@ class RenderSettings(Model):
     motion_blur: Literal["stochastic", "subframes", "off"] = "stochastic"
     subframes: Annotated[int, Field(ge=1, le=256)] = 8  # K for motion_blur: subframes
     shutter_samples: Annotated[int, Field(ge=2, le=256)] = 9  # baked samples across the shutter
-    time_slices: Annotated[int, Field(ge=1, le=64)] = 4  # copies of deforming meshes across the shutter (particles are exact: render/world.py)
+    time_slices: Annotated[int, Field(ge=1, le=64)] = 4  # copies of deforming meshes across the shutter (particles are exact: render/kernel/world.py)
     seed: Annotated[int, Field(ge=0, lt=2**31)] = 0
     seed_policy: Literal["per-frame", "fixed"] = "per-frame"
     variant: Literal["auto", "llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb"] = "auto"

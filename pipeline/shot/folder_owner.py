@@ -21,7 +21,7 @@ from pathlib import Path
 from ..errors import InputFileError, ShotFolderTakenError, UsageError
 from ..write_policy import write_atomic
 from ..limits import read_bounded, read_json_record
-from ..render.job import scene_reference
+from ..render.worker.job import scene_reference
 
 RECORD = ".motion-shot.json"
 RECORD_BYTES = 64 * 1024  # the record is one short path; more is not ours

@@ -33,7 +33,7 @@ from ..limits import check_env_sizes
 from ..presets import Preset, load_preset, overrides_from, spread
 from ..identity import MAX_PARTS, CurrentKeys, FrameIdentity, file_digests, recorded_keys, scene_file_hash, settings_digest
 from ..identity.kept import KeptKeys, keep_keys, kept_keys
-from ..render.job import RenderJob, frame_path
+from ..render.worker.job import RenderJob, frame_path
 from ..scene.loader import LoadedScene, load_scene
 from .deliver import DeliverPlan, check_deliver, deliver_and_record, deliver_plan
 from .estimate import denoised_pixels, estimate, run_inline, samples_of
@@ -88,7 +88,7 @@ def load_shot(req: RenderRequest) -> tuple[Preset | None, dict[str, Any], Loaded
 def check_denoiser(req: RenderRequest, loaded: LoadedScene) -> None:
     """A missing or broken OIDN: one line, before any frame (not for --check)."""
     if loaded.scene.render.denoise != "off" and not req.check:
-        from ..render.denoise import check_available
+        from ..render.output.denoise import check_available
 
         check_available()
 
@@ -137,7 +137,7 @@ def make_job(req: RenderRequest, loaded: LoadedScene, overrides: dict[str, Any],
     if kept.look_parts is not None:
         parts = kept.look_parts
     else:
-        from ..render.roles import sort_scene
+        from ..render.translate.roles import sort_scene
 
         parts = look_parts(loaded, sort_scene(loaded))
     job = RenderJob(
@@ -365,9 +365,9 @@ def finish(req: RenderRequest, loaded: LoadedScene, job: RenderJob, out_dir: Pat
     """After every frame: the temporal pass (render.temporal != off) and the deliverables
     (--deliver, else the scene's output.deliver), each recorded in the report."""
     if loaded.scene.render.temporal != "off":
-        from ..render.temporal import temporal_pass
+        from ..render.output.temporal import temporal_pass
 
-        report["temporal"] = temporal_pass(loaded, job, out_dir, frames, workers=workers, log=say)
+        report["temporal"] = temporal_pass(loaded, job, lambda f: frame_path(job, loaded, f), frames, workers=workers, log=say)
         if report_path is not None:
             write_report(report, report_path)
     say_outputs(wanted, frames, paths, say)

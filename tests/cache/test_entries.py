@@ -30,7 +30,7 @@ def test_a_damaged_cache_entry_is_made_again_not_a_hit(tmp_path: Path, monkeypat
     import numpy as np
 
     from motion.pipeline.meshes import load_mesh
-    from motion.pipeline.render.assets import mesh_file
+    from motion.pipeline.render.translate.assets import mesh_file
     from motion.pipeline.scene.imports import converted as cache
     from motion.pipeline.variant import activate
 

@@ -323,7 +323,7 @@ def test_a_fifo_in_place_of_a_pass_or_a_converted_asset_is_made_again(tmp_path: 
     """A FIFO where a kept pass or a converted mesh would be: never opened (no hang), not
     a hit, and replaced by the entry made again."""
     from motion.pipeline.scene.files import file_digest
-    from motion.pipeline.render import assets
+    from motion.pipeline.render.translate import assets
     from motion.pipeline.scene import checked
     from motion.pipeline.variant import activate
 

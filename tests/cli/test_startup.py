@@ -157,7 +157,7 @@ def test_a_smoke_render_imports_no_scipy(tmp_path) -> None:  # type: ignore[no-u
     process about 0.15 s, most of a smoke job's start-up)."""
     mods = _imported_after(["-q", "render", str(REPO / "scenes" / "bouncing-balls.yaml"), "--preset", "ci-smoke", "-o", str(tmp_path), "--no-progress"])
     assert "scipy" not in mods
-    assert "motion.pipeline.render.job" in mods  # it did render in this process
+    assert "motion.pipeline.render.worker.job" in mods  # it did render in this process
 
 
 def test_record_defaults_made_without_validation_equal_the_validated_ones() -> None:
@@ -288,7 +288,7 @@ def test_a_rerun_that_renders_nothing_imports_no_numpy_openexr_or_bake(tmp_path:
     env = {"MOTION_CACHE_DIR": str(tmp_path / "cache")}
     argv = ["-q", "render", str(REPO / "scenes" / f"{scene}.yaml"), "--preset", "ci-smoke", "-o", str(tmp_path / "out"), "--no-progress"]
     first = _imported_after(argv, env)
-    assert "motion.pipeline.render.job" in first and "numpy" in first  # it rendered
+    assert "motion.pipeline.render.worker.job" in first and "numpy" in first  # it rendered
     assert "OpenEXR" in _imported_after(argv, env)  # the first rerun decodes each frame once (then known whole)
     again = _imported_after(argv, env)
     # pydantic's plugin loader (and importlib.metadata under it) come only with a validator

@@ -17,7 +17,7 @@ from motion.pipeline.farm.config import FarmConfig
 from motion.pipeline.farm.executor import Done, Event, FrameWritten, Lost
 from motion.pipeline.farm.scheduler import Scheduler
 from motion.pipeline.farm.task import ChunkResult, TaskContext
-from motion.pipeline.render.job import FrameResult, RenderJob
+from motion.pipeline.render.worker.job import FrameResult, RenderJob
 
 JOB = RenderJob(scene_path="x.yaml", overrides={}, output_dir="out", scene_hash="s", settings_hash="h")
 

@@ -116,9 +116,9 @@ def test_a_shipped_job_renders_the_same_pixels_without_the_scene_folder(tmp_path
     from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.farm.transfer.shipment import BytesByHash, ShippedScene
     from motion.pipeline.frame_output import read_frame
-    from motion.pipeline.render import job as job_mod
+    from motion.pipeline.render.worker import job as job_mod
     from motion.pipeline.identity import scene_hashes
-    from motion.pipeline.render.job import RenderJob, render_frames
+    from motion.pipeline.render.worker.job import RenderJob, render_frames
 
     monkeypatch.setenv("MOTION_CACHE_DIR", str(tmp_path / "worker-cache"))
     path = _scene(tmp_path / "shot", "sub/tex.png")
@@ -150,7 +150,7 @@ def test_frames_come_home_atomically_and_one_lost_on_the_way_fails(tmp_path: Pat
     from motion.pipeline.farm.claims import Claimant, claim_path, try_claim
     from motion.pipeline.farm.task import ChunkResult, TaskContext
     from motion.pipeline.farm.transfer.home import publish_home
-    from motion.pipeline.render.job import FrameResult, RenderJob
+    from motion.pipeline.render.worker.job import FrameResult, RenderJob
 
     out = tmp_path / "out"
     out.mkdir()
@@ -178,7 +178,7 @@ def test_an_imported_scene_ships_its_converted_meshes(tmp_path: Path) -> None:
     from motion.pipeline.farm.transfer.localize import localize
     from motion.pipeline.farm.transfer.manifest import IMPORTED
     from motion.pipeline.farm.transfer.shipment import BytesByHash, ship_job
-    from motion.pipeline.render.job import RenderJob
+    from motion.pipeline.render.worker.job import RenderJob
 
     root = Path(__file__).resolve().parents[2]
     shot = tmp_path / "shot"

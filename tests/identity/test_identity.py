@@ -102,7 +102,7 @@ def test_the_denoiser_probes_answer_is_kept_for_the_next_process(tmp_path: Path)
     holds)."""
     pytest.importorskip("mitsuba_oidn")
     env = {**os.environ, "MOTION_CACHE_DIR": str(tmp_path / "cache")}
-    code = "import json; from motion.pipeline.render.denoise import probe; print(json.dumps(probe()))"
+    code = "import json; from motion.pipeline.render.output.denoise import probe; print(json.dumps(probe()))"
     first = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
     assert first.returncode == 0 and "error" not in json.loads(first.stdout), first.stdout + first.stderr
     entry = next((tmp_path / "cache" / "probes").glob("oidn-*.json"))

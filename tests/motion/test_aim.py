@@ -121,7 +121,7 @@ def test_an_aimed_camera_with_a_keyed_rotation_is_refused(tmp_path: Path):
 def test_a_light_aimed_at_a_moving_object_is_posed_per_frame_by_the_renderer(tmp_path: Path):
     """The spot light has no motion of its own, but its aim moves: the renderer poses it
     per path (a moving light), not once in the static set."""
-    from motion.pipeline.render.roles import sort_scene
+    from motion.pipeline.render.translate.roles import sort_scene
 
     roles = sort_scene(_load(tmp_path))
     assert [light.name for _, light in roles.moving_lights] == ["key"]

@@ -28,7 +28,7 @@ def test_the_checker_sees_a_loop_and_an_upward_import() -> None:
     """The check is live: a loop and an upward import in a made-up graph are reported."""
     check = _checker()
     assert check.cycles({"a": {"b"}, "b": {"a"}, "c": set()}) == [["a", "b"]]
-    assert check.stage("motion.pipeline.scene.loader") < check.stage("motion.pipeline.render.build")
+    assert check.stage("motion.pipeline.scene.loader") < check.stage("motion.pipeline.render.translate.build")
     assert check.stage("motion.cli.main") == len(check.STAGES) - 1
 
 

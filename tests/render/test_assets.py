@@ -1,4 +1,4 @@
-"""Deforming geometry (render/slices.py) against Mitsuba's own `path` on the same asset
+"""Deforming geometry (render/translate/deforming.py) against Mitsuba's own `path` on the same asset
 written by hand: texture coordinates from the file, smooth normals, emission, emissive
 particles. The method of the light tests (tests/render/test_correctness.py): the
 reference never goes through our builders, and |ours - ref| is judged against the noise
@@ -150,7 +150,7 @@ def test_emissive_particles_agree_with_mitsuba_path(tmp_path: Path) -> None:
     import mitsuba as mi
 
     from motion.pipeline.bake import evaluate_frames
-    from motion.pipeline.render.stacked import stack_frame
+    from motion.pipeline.render.poses.stacked import stack_frame
 
     objects = (
         "  - {name: sparks, shape: particles, radius: 0.12, material: black, emission: {radiance: [6.0, 4.0, 2.0]}, "
@@ -410,7 +410,7 @@ def test_slice_normals_follow_the_deformation(tmp_path: Path) -> None:
     (its neighbour moved onto it) keeps a unit normal turned like its neighbours'."""
     activate()
     from motion.pipeline.meshes import load_mesh, load_render_mesh
-    from motion.pipeline.render.slices import neighbours, rest_normals, slice_normals
+    from motion.pipeline.render.translate.deforming import neighbours, rest_normals, slice_normals
 
     _write_ball(tmp_path)
     verts, _ = load_mesh(tmp_path / "ball.obj")
@@ -515,7 +515,7 @@ def test_a_static_mesh_gets_the_engines_normals_from_the_asset_cache(tmp_path: P
     import mitsuba as mi
 
     from motion.pipeline.meshes import load_render_mesh, vertex_normals
-    from motion.pipeline.render.assets import mesh_file
+    from motion.pipeline.render.translate.assets import mesh_file
 
     _write_ball(tmp_path, 24, 12, normals=normals)
     ply = mesh_file(tmp_path / "ball.obj")
@@ -543,7 +543,7 @@ def test_deforming_slice_normals_do_not_depend_on_the_thread_count(tmp_path: Pat
     import mitsuba as mi
 
     from motion.pipeline.bake import evaluate_frames
-    from motion.pipeline.render.stacked import stack_frame
+    from motion.pipeline.render.poses.stacked import stack_frame
 
     _write_ball(tmp_path, 256, 128, normals=False)
     text = light_scene_yaml("  - {type: constant, radiance: 0.3}", _ball_yaml("gold", face_normals=False), resolution=(8, 6), spp=1, last=0)

@@ -1,5 +1,5 @@
 """A frame of more pixels than the lane budget ($MOTION_MAX_LANES) renders in bands of rows
-(render/film.py: `bands`), each with the filter's reach of rows above and below, so no pass
+(render/kernel/film.py: `bands`), each with the filter's reach of rows above and below, so no pass
 holds more lanes than the budget; a frame that fits is one band, as it always was."""
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ BALL = "  - {name: ball, shape: sphere, radius: 1.0, material: white}"
 
 @pytest.mark.parametrize("rows,width,apron,budget", [(24, 32, 1, 32 * 6), (24, 32, 2, 32 * 24), (100, 7, 1, 7 * 9), (5, 10, 3, 10)])
 def test_bands_deliver_every_row_once_and_render_each_ones_reach(rows: int, width: int, apron: int, budget: int) -> None:
-    from motion.pipeline.render.film import bands
+    from motion.pipeline.render.kernel.film import bands
 
     got = bands(rows, width, apron, budget)
     delivered = [r for first, last, _, _ in got for r in range(first, last)]

@@ -1,4 +1,4 @@
-"""The broadphase and the atlas (render/broadphase.py, render/atlas.py): every proxy holds
+"""The broadphase and the atlas (render/kernel/broadphase.py, render/kernel/atlas.py): every proxy holds
 its mover or particle at every time of the shutter, bounding spheres are as tight as the
 shapes allow and never cull a ray that can hit, coincident proxies are made apart (the
 walk steps past each entry it visits), and the atlas's cells never overlap."""
@@ -21,7 +21,7 @@ def _shape(shape: dict) -> object:
 
 def _spheres(shapes: list) -> np.ndarray:
     """The atlas's rest-frame bounding sphere of each one-shape template."""
-    from motion.pipeline.render.atlas import Atlas
+    from motion.pipeline.render.kernel.atlas import Atlas
 
     import mitsuba as mi
 
@@ -47,7 +47,7 @@ def test_a_grazing_ray_is_kept_and_a_near_miss_is_culled() -> None:
     import drjit as dr
     import mitsuba as mi
 
-    from motion.pipeline.render.poses import may_hit
+    from motion.pipeline.render.poses.kernel import may_hit
 
     mover = mi.load_dict({"type": "scene", "s": {"type": "sphere", "radius": 0.5}})
     c = _spheres([_shape({"type": "sphere", "radius": 0.5})])[0]
@@ -65,8 +65,8 @@ def test_the_swept_sphere_holds_the_mover_at_every_time_of_the_shutter() -> None
     the ray's time: the sphere must hold the posed bounding sphere at every u, also for a
     rest centre off the origin that swings through large rotations between samples."""
     from motion.pipeline.motion.pose import quat_exp, quat_rotate
-    from motion.pipeline.render.broadphase import swept_spheres
-    from motion.pipeline.render.shutter_poses import resample
+    from motion.pipeline.render.kernel.broadphase import swept_spheres
+    from motion.pipeline.render.poses.shutter import resample
 
     rng = np.random.default_rng(7)
     n = 5
@@ -85,7 +85,7 @@ def test_the_swept_sphere_holds_the_mover_at_every_time_of_the_shutter() -> None
 
 
 def test_a_still_mover_sweeps_its_own_sphere() -> None:
-    from motion.pipeline.render.broadphase import swept_spheres
+    from motion.pipeline.render.kernel.broadphase import swept_spheres
 
     n = 9
     t = np.tile([1.0, 2.0, 3.0], (1, n, 1))
@@ -99,7 +99,7 @@ def test_a_particles_proxy_holds_it_at_every_time_of_the_shutter() -> None:
     """A particle's ellipsoid holds its sphere along the whole baked path (a bent one
     too), and is not much larger than the capsule the path sweeps."""
     from motion.pipeline.motion.pose import quat_rotate
-    from motion.pipeline.render.broadphase import particle_proxies
+    from motion.pipeline.render.kernel.broadphase import particle_proxies
 
     n = 9
     s = np.linspace(0.0, 1.0, n)
@@ -123,7 +123,7 @@ def test_a_particles_proxy_holds_it_at_every_time_of_the_shutter() -> None:
 def test_coincident_proxies_are_made_apart() -> None:
     """The parts of one rigid body share one swept sphere: `separate` grows each by a rank
     so their entries differ by more than the walk's step; distinct proxies stay as they are."""
-    from motion.pipeline.render.broadphase import separate, sphere_proxies
+    from motion.pipeline.render.kernel.broadphase import separate, sphere_proxies
 
     spheres = np.array([[1.0, 2.0, 3.0, 0.5]] * 3 + [[5.0, 0.0, 0.0, 0.5]])
     out = separate(sphere_proxies(spheres), scale=100.0)
@@ -139,7 +139,7 @@ def test_the_frames_time_in_the_shutters_middle_keeps_a_particles_proxy_along_it
     chord covered half the path and the sample at the shutter's opening lay half a path
     off it: the proxy became a sphere as wide as the path (cannonball-splash's spray,
     2.3x across, and its splash frames 2.3x slower). The frame's time is held, not an end."""
-    from motion.pipeline.render.broadphase import particle_proxies
+    from motion.pipeline.render.kernel.broadphase import particle_proxies
 
     path = np.linspace([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], 9)[None]  # [1, N, 3]: 1 m along x
     alive = np.ones((1, 9), bool)
@@ -158,7 +158,7 @@ def test_distinct_proxies_stay_tight_whatever_the_walks_scale() -> None:
     walk reaches: with cannonball-splash's 20 km sea (a walk scale of 35 km) they were
     grouped by that scale into one run and grown by up to 9 m each, and one frame of the
     spray took minutes. Only centres within float steps of each other are made apart."""
-    from motion.pipeline.render.broadphase import separate, sphere_proxies
+    from motion.pipeline.render.kernel.broadphase import separate, sphere_proxies
 
     rng = np.random.default_rng(5)
     centres = np.array([2.0, 0.05, -12.0]) + rng.uniform(-1.0, 1.0, size=(2000, 3))
@@ -171,7 +171,7 @@ def test_distinct_proxies_stay_tight_whatever_the_walks_scale() -> None:
 
 
 def test_the_atlas_cells_never_overlap() -> None:
-    from motion.pipeline.render.atlas import lay_out
+    from motion.pipeline.render.kernel.atlas import lay_out
 
     rng = np.random.default_rng(3)
     lo = rng.normal(size=(50, 3)) * 10

@@ -65,8 +65,8 @@ def test_agrees_with_mitsuba_path(tmp_path: Path, moving: bool) -> None:
     activate()
     import mitsuba as mi
 
-    from motion.pipeline.render.frame_renderer import FrameRenderer
-    from motion.pipeline.render.stacked import stack_frame
+    from motion.pipeline.render.worker.frame_renderer import FrameRenderer
+    from motion.pipeline.render.poses.stacked import stack_frame
     from motion.pipeline.bake import evaluate_frames
 
     loaded = load(tmp_path, _scene(tmp_path, moving))
@@ -257,7 +257,7 @@ LIGHT_CASES: dict[str, tuple[str, str, Any]] = {
             {},
         ),
     ),
-    # several lights at once: the static ones chosen by contribution (render/lights.py),
+    # several lights at once: the static ones chosen by contribution (render/kernel/lights.py),
     # the constant sky reached by BSDF sampling only, moving lights and lamps beside them
     "sun-sky-lamp": (
         "  - {type: constant, radiance: 0.3}\n  - {type: directional, direction: [-0.4, -1.0, -0.3], irradiance: 2.5}",
@@ -460,14 +460,14 @@ def test_small_emissive_mover_converges_like_a_static_light(tmp_path: Path) -> N
     assert errors["mover"] < 1.25 * errors["static"], errors
 
 
-# --- light selection (render/lights.py) and exact sample counts (film.stratified_passes) ---
+# --- light selection (render/kernel/lights.py) and exact sample counts (film.stratified_passes) ---
 
 
 def test_sun_and_constant_sky_spend_no_light_sample_on_the_sky(tmp_path: Path) -> None:
     """Sun + constant sky: the sky is reached by BSDF sampling only and every light sample
     goes to the sun, so at equal spp our error against a converged `path` reference is well
     far below `path`'s own (which splits its light samples 50/50 and samples the sky over
-    the whole sphere, as we did before render/lights.py)."""
+    the whole sphere, as we did before render/kernel/lights.py)."""
     activate()
     import mitsuba as mi
 
@@ -495,7 +495,7 @@ def test_sample_count_asked_is_the_count_traced() -> None:
     import drjit as dr
     import mitsuba as mi
 
-    from motion.pipeline.render import film
+    from motion.pipeline.render.kernel import film
 
     scene = mi.load_dict(
         {
@@ -518,13 +518,13 @@ def test_sample_count_asked_is_the_count_traced() -> None:
 
 def test_lights_chosen_by_contribution_beat_a_uniform_choice(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A point light near one end of the floor and a dim sun: choosing by estimated
-    contribution (render/lights.py) gives a clearly lower error at equal spp than the same
+    contribution (render/kernel/lights.py) gives a clearly lower error at equal spp than the same
     integrator choosing uniformly (DEFENSIVE = 1: every emitter equally likely, as `path`)."""
     activate()
     import mitsuba as mi
 
     from _render_support import render
-    from motion.pipeline.render import lights as light_choice
+    from motion.pipeline.render.kernel import lights as light_choice
 
     lights = "  - {type: directional, direction: [0.5, -1.0, 0.2], irradiance: 0.3}\n  - {type: point, position: [-1.5, 0.6, 0.5], intensity: 8}"
     emitters = {

@@ -23,7 +23,7 @@ def _frame() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def test_the_device_follows_the_variant() -> None:
-    from motion.pipeline.render.denoise import pick_device
+    from motion.pipeline.render.output.denoise import pick_device
 
     assert pick_device("cuda_ad_rgb", ["CUDA", "CPU"]) == ("CUDA", None)
     assert pick_device("llvm_ad_rgb", ["CUDA", "CPU"]) == ("CPU", None)  # a CPU render keeps its bits
@@ -33,7 +33,7 @@ def test_the_device_follows_the_variant() -> None:
 
 
 def test_a_cuda_frame_is_denoised_on_what_works_here(caplog: pytest.LogCaptureFixture) -> None:
-    from motion.pipeline.render.denoise import Denoiser, describe
+    from motion.pipeline.render.output.denoise import Denoiser, describe
 
     color, albedo, normal = _frame()
     cpu = Denoiser("llvm_ad_rgb")
@@ -65,7 +65,7 @@ class _Unshared:
 
 
 def test_images_staged_through_device_buffers_denoise_to_the_same_bits() -> None:
-    from motion.pipeline.render.denoise import Denoiser
+    from motion.pipeline.render.output.denoise import Denoiser
 
     color, albedo, normal = _frame()
     shared = Denoiser("llvm_ad_rgb")(color, albedo, normal)
@@ -83,7 +83,7 @@ class _Failing(_Unshared):
 
 
 def test_a_gpu_denoiser_that_fails_falls_back_to_the_cpu(caplog: pytest.LogCaptureFixture) -> None:
-    from motion.pipeline.render.denoise import Denoiser
+    from motion.pipeline.render.output.denoise import Denoiser
 
     color, albedo, normal = _frame()
     broken = Denoiser("llvm_ad_rgb")

@@ -64,7 +64,7 @@ def test_a_renderer_alive_at_exit_leaves_quietly(tmp_path: Path) -> None:
             "from pathlib import Path\n"
             "from _render_support import load, render\n"
             f"KEPT = render(load(Path({str(tmp_path)!r}), Path({str(tmp_path / 'scene.yaml')!r}).read_text(), 'again.yaml'), [0])\n"
-            "import atexit, motion.pipeline.render.integrator as I, motion.pipeline.render.poses as P\n"
+            "import atexit, motion.pipeline.render.kernel.integrator as I, motion.pipeline.render.poses.kernel as P\n"
             "atexit.register(lambda: (setattr(I, 'mi', None), setattr(P, 'mi', None)))\n")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=Path(__file__).resolve().parents[2])
     assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr[-2000:]

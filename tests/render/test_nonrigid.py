@@ -91,7 +91,7 @@ def test_a_flock_is_one_mover_per_agent_sharing_one_template(tmp_path: Path) -> 
     # every agent's fitted track puts the agent mesh on the agent's baked vertices
     from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.motion.pose import quat_rotate
-    from motion.pipeline.render.stacked import stack_frame
+    from motion.pipeline.render.poses.stacked import stack_frame
 
     fi = stack_frame(evaluate_frames(load(tmp_path, FLOCK, "again.yaml"), [4])[0])
     cache.deforming.fit(fi)

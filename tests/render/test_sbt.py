@@ -72,9 +72,9 @@ def test_every_scene_traced_in_one_kernel_shares_one_sbt_owner_covering_its_shap
     import mitsuba as mi
 
     from motion.pipeline.bake import evaluate_frames
-    from motion.pipeline.render import sbt
-    from motion.pipeline.render.frame_renderer import FrameRenderer
-    from motion.pipeline.render.stacked import stack_frame
+    from motion.pipeline.render.kernel import sbt
+    from motion.pipeline.render.worker.frame_renderer import FrameRenderer
+    from motion.pipeline.render.poses.stacked import stack_frame
 
     monkeypatch.setattr(sbt, "shares_sbt", lambda: True)  # the CUDA construction, on any variant
     loaded = _ci_smoke(name)
@@ -108,7 +108,7 @@ def test_the_owners_construction_leaves_cpu_frames_unchanged(monkeypatch: pytest
 
     if activate() == "scalar_rgb":
         pytest.skip("the motion_path integrator needs an LLVM or CUDA variant")
-    from motion.pipeline.render import sbt
+    from motion.pipeline.render.kernel import sbt
 
     loaded = _ci_smoke("walker.yaml")
     plain, _, _ = render(loaded, [0])
@@ -122,7 +122,7 @@ def test_scenes_traced_together_without_one_owner_are_refused(monkeypatch: pytes
     from _render_support import activate
 
     activate()
-    from motion.pipeline.render.sbt import SbtOwner, SbtOwnerError, check_shared
+    from motion.pipeline.render.kernel.sbt import SbtOwner, SbtOwnerError, check_shared
     from motion.pipeline.variant import load_dict
 
     ball = {"type": "scene", "ball": {"type": "sphere"}}
@@ -151,12 +151,12 @@ def test_a_render_whose_scenes_do_not_share_the_owner_stops_before_tracing() -> 
         pytest.skip("the motion_path integrator needs an LLVM or CUDA variant")
     import mitsuba as mi
 
-    from motion.pipeline.render.integrator import register
-    from motion.pipeline.render.sbt import SbtOwner, SbtOwnerError
+    from motion.pipeline.render.kernel.integrator import register
+    from motion.pipeline.render.kernel.sbt import SbtOwner, SbtOwnerError
     from motion.pipeline.variant import load_dict
 
     register()
-    from motion.pipeline.render.broadphase import Broadphase, sphere_proxies
+    from motion.pipeline.render.kernel.broadphase import Broadphase, sphere_proxies
 
     owner = SbtOwner({"Mesh", "Sphere", "Ellipsoids"})
     scene = owner.scene({"type": "scene", "integrator": {"type": "motion_path"}, "floor": {"type": "rectangle"},
@@ -194,7 +194,7 @@ def test_a_frame_with_a_disabled_trace_fails_and_the_job_exits_3(tmp_path: Path,
         pytest.skip("the warning comes from drjit's JIT (LLVM or CUDA variants)")
     from motion.cli.main import main
     from motion.pipeline.frame_output import read_frame
-    from motion.pipeline.render.scene_cache import SceneCache
+    from motion.pipeline.render.worker.scene_cache import SceneCache
 
     warn = _jit_log()
     set_frame = SceneCache.set_frame
@@ -223,7 +223,7 @@ def test_a_frame_without_engine_warnings_is_untouched() -> None:
     activate()
     import drjit as dr
 
-    from motion.pipeline.render.engine_log import EngineWarningError, watching
+    from motion.pipeline.render.worker.engine_log import EngineWarningError, watching
 
     warn = _jit_log()
     with watching() as quiet:

@@ -1,4 +1,4 @@
-"""The broadphase's parts of the shutter (render/broadphase.py `parts`, `in_regions`): a
+"""The broadphase's parts of the shutter (render/kernel/broadphase.py `parts`, `in_regions`): a
 lane at shutter fraction u walks the proxies of its own part, so that part must hold every
 sample the lane interpolates between, and no two parts' regions may meet."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from motion.pipeline.render.broadphase import FAR, PARTS, in_regions, parts, particle_proxies, sphere_proxies
+from motion.pipeline.render.kernel.broadphase import FAR, PARTS, in_regions, parts, particle_proxies, sphere_proxies
 
 
 @pytest.mark.parametrize("n", [2, 3, 4, 5, 9, 10, 17, 33, 64, 65])
@@ -49,7 +49,7 @@ def test_parts_are_used_where_they_are_smaller() -> None:
     """A fast particle's proxy per part is an eighth of its streak: worth it. A still one's
     is the same in every part, and eight of them cost each trace deeper BVH levels (4 slow
     movers at the preview preset: 5% of the frame): one part then."""
-    from motion.pipeline.render.broadphase import worth_parts
+    from motion.pipeline.render.kernel.broadphase import worth_parts
 
     fast = np.linspace([0.0, 0.0, 0.0], [2.0, 0.0, 0.0], 9)[None].repeat(50, axis=0)  # 2 m in a shutter, r = 2 cm
     still = np.zeros((50, 9, 3))

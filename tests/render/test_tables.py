@@ -1,5 +1,5 @@
-"""The render stage's tables: the AOV table (render/aovs.py) against the scene format and
-the film's channel layout, and the per-frame data blocks (render/poses.py) refusing a
+"""The render stage's tables: the AOV table (render/kernel/aovs.py) against the scene format and
+the film's channel layout, and the per-frame data blocks (render/poses/kernel.py) refusing a
 frame of the wrong shape with a named error."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from motion.pipeline.errors import FrameDataError, RendererError
-from motion.pipeline.render import aovs
+from motion.pipeline.render.kernel import aovs
 from motion.pipeline.scene.schema import OutputSettings
 
 
@@ -46,7 +46,7 @@ def test_a_frame_of_the_wrong_shape_is_a_frame_data_error() -> None:
     activate()
     import mitsuba as mi
 
-    from motion.pipeline.render.integrator import register
+    from motion.pipeline.render.kernel.integrator import register
 
     register()
     integrator = mi.load_dict({"type": "motion_path"})
@@ -67,7 +67,7 @@ def test_fewer_than_one_sample_per_pixel_is_a_sample_count_error() -> None:
     import mitsuba as mi
 
     from motion.pipeline.errors import SampleCountError
-    from motion.pipeline.render.integrator import register
+    from motion.pipeline.render.kernel.integrator import register
 
     register()
     scene = mi.load_dict({"type": "scene", "integrator": {"type": "motion_path"}, "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 4, "height": 4}}})

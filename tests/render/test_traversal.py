@@ -1,4 +1,4 @@
-"""One traversal for everything that moves (render/world.py): the kernel's ray-tracing
+"""One traversal for everything that moves (render/kernel/world.py): the kernel's ray-tracing
 calls do not depend on how many rigid movers or particles a scene has, nor on how many
 samples across the shutter were baked; particles are spheres on their baked path, so a
 fast particle leaves the streak a rigid sphere with the same motion leaves."""
@@ -34,7 +34,7 @@ def _movers_scene(count: int, samples: int) -> str:
 
 
 def _traces(tmp_path: Path, text: str) -> list[str]:
-    from motion.pipeline.render import world
+    from motion.pipeline.render.kernel import world
 
     loaded = load(tmp_path, text)
     before = len(world.TRACES)
@@ -147,7 +147,7 @@ rs.activate()
 import drjit as dr
 dr.set_thread_count(1)
 from motion.pipeline.bake import evaluate_frames
-from motion.pipeline.render.frame_renderer import FrameRenderer
+from motion.pipeline.render.worker.frame_renderer import FrameRenderer
 from motion.pipeline.scene import load_scene
 loaded = load_scene(Path(sys.argv[2]))
 frames = evaluate_frames(loaded, list(range(8)))
@@ -205,11 +205,11 @@ render: {resolution: [48, 36], spp: 16, max_depth: 3}
 def test_movers_of_the_same_shapes_share_one_atlas_cell_and_each_renders_as_its_own(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Movers whose rest-frame shapes are the same (a ball of one radius and material,
     however each moves) share one cell of the atlas and one copy of the shapes
-    (render/atlas.py: 0.15 s of a 1,000-ball first frame was building 1,000 copies): each
+    (render/kernel/atlas.py: 0.15 s of a 1,000-ball first frame was building 1,000 copies): each
     still renders at its own pose, as with a cell each. A mover whose scale changes leaves
     its shared cell for one of its own (the atlas is built again), and one of another
     material never shares."""
-    from motion.pipeline.render import atlas as atlas_mod
+    from motion.pipeline.render.kernel import atlas as atlas_mod
 
     loaded = load(tmp_path, _SHARED)
     shared, stats, renderer = render(loaded, [0, 12, 24])

@@ -26,7 +26,7 @@ def load(tmp_path: Path, text: str, name: str = "scene.yaml") -> Any:
 def render(loaded: Any, frames: list[int], mode: str | None = None, renderer: Any = None) -> tuple[list[np.ndarray], list[Any], Any]:
     """Render `frames` with one (first-frame cached) renderer; returns images, stats, renderer."""
     activate()
-    from motion.pipeline.render.frame_renderer import FrameRenderer
+    from motion.pipeline.render.worker.frame_renderer import FrameRenderer
     from motion.pipeline.bake import evaluate_frames
 
     if renderer is None:
@@ -51,7 +51,7 @@ def render_layers(loaded: Any, frame: int) -> tuple[np.ndarray, dict[str, np.nda
     import gc
 
     from motion.pipeline.bake import evaluate_frames
-    from motion.pipeline.render.frame_renderer import FrameRenderer
+    from motion.pipeline.render.worker.frame_renderer import FrameRenderer
 
     gc.collect()
     (fi,) = evaluate_frames(loaded, [frame])

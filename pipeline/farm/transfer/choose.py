@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from ...write_policy import write_atomic
-from ...render.job import RenderJob
+from ...render.worker.job import RenderJob
 from ...scene.files import readable_digests
 from ...scene.loader import LoadedScene
 from .shipment import ship_job

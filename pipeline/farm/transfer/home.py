@@ -14,7 +14,7 @@ from ...bake import BakedFrame
 from ...errors import DiskFaultError
 from ...write_policy import confined, writing
 from ...identity import complete_as
-from ...render.job import FrameResult, RenderJob
+from ...render.worker.job import FrameResult, RenderJob
 from ..claims import release
 from ..task import ChunkResult, TaskContext, claim_frame
 
@@ -24,7 +24,7 @@ def claim_home(job: RenderJob, inputs: Sequence[BakedFrame], ctx: TaskContext) -
     the output folder (`task.claim_frame`), which the workers cannot see. Returns the frames
     to render remotely (claimed by this run) and a result holding the others (held by
     another render, already complete, refused); a disk fault stops there."""
-    from ...render.job import worker_id
+    from ...render.worker.job import worker_id
     from ..claims import Claimant
 
     me = Claimant.here(ctx.run_id)

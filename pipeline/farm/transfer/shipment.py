@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from ...errors import AssetError
-from ...render.job import RenderJob
+from ...render.worker.job import RenderJob
 from ...scene.files import bytes_digest
 from ...scene.loader import LoadedScene
 from .localize import localize

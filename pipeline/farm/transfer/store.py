@@ -74,7 +74,7 @@ def missing_assets(assets: Sequence[ShippedAsset], warm: str | None = None) -> l
     sent to it). `warm`: the job's key (`RenderJob.key`, when its workers may reuse their
     renderer); a worker whose renderer holds that job's scene built needs none of its files
     (it never reads them again), wherever it got them (a shared-disk job of the scene)."""
-    from ...render.job import warm_key
+    from ...render.worker.job import warm_key
 
     if warm is not None and warm_key() == warm:
         return []

@@ -30,7 +30,7 @@ from motion.pipeline.variant import activate
 loaded = load_scene(sys.argv[1], {"render": {"resolution": [16, 12], "spp": 1}})
 activate("auto")
 import mitsuba as mi
-from motion.pipeline.render.frame_renderer import FrameRenderer
+from motion.pipeline.render.worker.frame_renderer import FrameRenderer
 
 gc.disable()
 if sys.argv[2] == "junk":
@@ -81,7 +81,7 @@ def test_cache_warm_renders_the_jobs_frames_and_twice_adds_nothing(tmp_path: Pat
     compiled, files = warm()
     assert compiled > 0 and any(f.endswith(".bin") for f in files)
     again, files_again = warm()
-    # Known, not fixed: the broadphase's per-frame buffer write (render/broadphase.py) is
+    # Known, not fixed: the broadphase's per-frame buffer write (render/kernel/broadphase.py) is
     # one tiny kernel in two variants, as drjit's recycled variable indices order its two
     # buffers, and a process meets one of them only (per process, not per write: 16 writes
     # in one process met one). So a second warm may add that one file, outside the frames'

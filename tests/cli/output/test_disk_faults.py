@@ -243,7 +243,7 @@ def test_the_writers_inside_a_render_report_a_full_disk_in_one_line(small_disk: 
     nothing and leave nothing."""
     from motion.pipeline.errors import DiskFaultError
     from motion.pipeline.write_policy import staging, write_best_effort
-    from motion.pipeline.render.temporal import process_frame
+    from motion.pipeline.render.output.temporal import process_frame
 
     src = tmp_path / "src"
     done = run_motion("render", SCENE, "-o", str(src), "--frames", "0-2", "--resolution", "16x12", "--spp", "1", "--no-progress", "--denoise", "--temporal", "reproject")

@@ -22,7 +22,7 @@ from motion.pipeline import variant
 variant.activate("auto", quiet=True)
 from motion.pipeline.scene import load_scene
 from motion.pipeline.bake import evaluate_frames
-from motion.pipeline.render.frame_renderer import FrameRenderer
+from motion.pipeline.render.worker.frame_renderer import FrameRenderer
 import numpy as np
 loaded = load_scene(sys.argv[1], {"render": {"resolution": [48, 32], "spp": 4, "max_depth": 3, "shutter_samples": 5}})
 renderer = FrameRenderer(loaded)
@@ -97,7 +97,7 @@ def test_seed_policy(tmp_path: Path, policy: str) -> None:
     """Through the worker's task path (render_frames), as the farm renders."""
     from motion.pipeline.bake import evaluate_frames
     from motion.pipeline.identity import scene_hashes
-    from motion.pipeline.render.job import RenderJob, render_frames
+    from motion.pipeline.render.worker.job import RenderJob, render_frames
 
     loaded = load(tmp_path, STILL % policy)
     job = RenderJob(str(loaded.path), {}, str(tmp_path / "out"), *scene_hashes(loaded))
@@ -149,7 +149,7 @@ def test_a_worker_refuses_a_scene_edited_after_the_job_started(tmp_path) -> None
     from farm_util import SCENE
     from motion.pipeline.bake import bake
     from motion.pipeline.identity import scene_hashes
-    from motion.pipeline.render.job import RenderJob, render_frames
+    from motion.pipeline.render.worker.job import RenderJob, render_frames
     from motion.pipeline.scene import load_scene
 
     scene = tmp_path / "farm-tiny.yaml"
@@ -172,7 +172,7 @@ def test_the_task_path_is_where_the_frame_is_written(tmp_path: Path) -> None:
     from motion.pipeline.farm.claims import new_run_id
     from motion.pipeline.farm.task import TaskContext, run_chunk
     from motion.pipeline.identity import scene_hashes
-    from motion.pipeline.render.job import RenderJob, frame_path
+    from motion.pipeline.render.worker.job import RenderJob, frame_path
 
     loaded = load(tmp_path, STILL % "fixed")
     out = tmp_path / "out"

@@ -18,7 +18,7 @@ import pytest
 from _render_support import column_x, load, render_layers
 from _support import run_motion
 from motion.pipeline.frame_output import read_frame
-from motion.pipeline.render.temporal import RADIUS
+from motion.pipeline.render.output.temporal import RADIUS
 
 pytestmark = pytest.mark.render
 
@@ -50,7 +50,7 @@ def _white_map(folder: Path) -> None:
 
 
 def test_denoised_flat_plane_converges_to_the_closed_form(tmp_path: Path) -> None:
-    from motion.pipeline.render.denoise import denoise_frame
+    from motion.pipeline.render.output.denoise import denoise_frame
 
     _white_map(tmp_path)
     errors = {}

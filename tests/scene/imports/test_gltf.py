@@ -587,7 +587,7 @@ def test_metallic_roughness_texture_splits_into_grey_textures(tmp_path):
     assert mat.roughness.raw and mat.metallic.raw
     assert np.asarray(Image.open(mat.roughness.file)).max() == 200
     assert np.asarray(Image.open(mat.metallic.file)).max() == 50
-    from motion.pipeline.render.build import material_dict
+    from motion.pipeline.render.translate.build import material_dict
     from motion.pipeline.variant import activate
 
     activate("auto", quiet=True)

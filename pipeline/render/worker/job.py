@@ -19,12 +19,12 @@ from fractions import Fraction
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Protocol, Sequence
 
-from ..bake.records import BakedFrame
-from ..field_model import parity_of
-from ..frame_output import write_frame
-from ..identity import FrameIdentity, Order, frame_identity, header_attributes, render_settings, scene_hashes
-from ..scene.loader import LoadedScene, load_scene
-from ..timeline import frame_timecode
+from ...bake.records import BakedFrame
+from ...field_model import parity_of
+from ...frame_output import write_frame
+from ...identity import FrameIdentity, Order, frame_identity, header_attributes, render_settings, scene_hashes
+from ...scene.loader import LoadedScene, load_scene
+from ...timeline import frame_timecode
 
 if TYPE_CHECKING:  # the renderer (drjit, Mitsuba) is imported where a frame is rendered, not where a job is planned
     import numpy as np
@@ -141,7 +141,7 @@ def worker_id() -> str:
 
 def _renderer(job: RenderJob) -> tuple[FrameRenderer, LoadedScene, str]:
     """The worker's cached renderer for this job (built on first use, reused after)."""
-    from .. import variant as variant_mod
+    from ... import variant as variant_mod
     from .frame_renderer import FrameRenderer
 
     # the key's settings hash reads every file the scene names by its bytes (`content_named`):
@@ -163,7 +163,7 @@ def _renderer(job: RenderJob) -> tuple[FrameRenderer, LoadedScene, str]:
         loaded = load_scene(job.scene_path, job.overrides, assets=False)  # the main process checked them
         scene_hash, settings_hash = scene_hashes(loaded)
     if (scene_hash, settings_hash) != (job.scene_hash, job.settings_hash):
-        from ..errors import SceneChangedError
+        from ...errors import SceneChangedError
 
         raise SceneChangedError(f"{job.scene_path} changed after this render started (scene hash {scene_hash}, settings hash {settings_hash}; "
                                 f"the job was planned with {job.scene_hash}, {job.settings_hash}): this worker renders nothing from it; run motion render again")
@@ -218,9 +218,9 @@ def _draw(renderer: FrameRenderer, job: RenderJob, baked: BakedFrame) -> _Drawn:
 
 def _denoise(drawn: _Drawn, scene: Any) -> _Drawn:
     """Step 2, denoise: right after the render, on the frame's own buffers (docs/denoise.md);
-    with a temporal pass to come the frame says it is pending (render/temporal.py)."""
+    with a temporal pass to come the frame says it is pending (render/output/temporal.py)."""
     if scene.render.denoise != "off":
-        from .denoise import denoise_frame
+        from ..output.denoise import denoise_frame
 
         rgba, aovs, meta = denoise_frame(drawn.rgba, drawn.aovs)
         drawn = _Drawn(rgba, aovs, drawn.stats, drawn.parity, meta)
@@ -281,7 +281,7 @@ def _write(out: Path, baked: BakedFrame, scene: Any, drawn: _Drawn, meta: dict[s
 def _render_one(job: RenderJob, baked: BakedFrame, out: Path | None = None) -> FrameResult:
     """One frame through the worker's named steps: render, denoise, header, write (to
     `out`, the task's path for it, else `frame_path`)."""
-    from ..variant import device_of
+    from ...variant import device_of
 
     t_setup = time.perf_counter()
     try:
@@ -309,7 +309,7 @@ def _render_one(job: RenderJob, baked: BakedFrame, out: Path | None = None) -> F
             device=device_of(variant),
         )
     except Exception as exc:  # reported per frame; the farm decides on retries
-        from ..errors import DiskFaultError
+        from ...errors import DiskFaultError
 
         if isinstance(exc, DiskFaultError):  # the renderer is fine; the disk is not
             return FrameResult(frame=baked.frame, path="", ok=False, worker=worker_id(), error=str(exc), disk_fault=True)

@@ -1,9 +1,9 @@
 """The scene's Mitsuba records at one instant of a frame: its objects' shapes, its lights
 and its sensor at the frame's time (u None) or at a shutter fraction u.
 
-The first-frame cache builds its static set and its sensor from these (render/scene_cache.py),
+The first-frame cache builds its static set and its sensor from these (render/worker/scene_cache.py),
 and the scalar fallback builds whole scenes from them, one per instant
-(render/scalar_fallback.py).
+(render/translate/scalar_fallback.py).
 """
 
 from __future__ import annotations
@@ -12,14 +12,14 @@ from typing import TYPE_CHECKING, Any, Iterable
 
 import numpy as np
 
-from ..scene.lights import light_key
-from ..scene.loader import LoadedScene
-from .broadphase import sphere_proxies
+from ...scene.lights import light_key
+from ...scene.loader import LoadedScene
+from ..kernel.broadphase import sphere_proxies
 from .build import dressed, light_dict, mitsuba_id, object_shapes, sensor_dict, trs_matrix
-from .shutter_poses import particles_at, pose_at
+from ..poses.shutter import particles_at, pose_at
 
 if TYPE_CHECKING:
-    from .stacked import StackedFrame
+    from ..poses.stacked import StackedFrame
 
 
 def add_shapes(d: dict[str, Any], loaded: LoadedScene, objects: Iterable[Any], fi: StackedFrame, materials: dict[str, Any], u: float | None = None) -> None:
@@ -40,7 +40,7 @@ def add_shapes(d: dict[str, Any], loaded: LoadedScene, objects: Iterable[Any], f
 def add_particles(d: dict[str, Any], loaded: LoadedScene, fi: StackedFrame, materials: dict[str, Any], u: float | None = None) -> None:
     """Each visible particle system's live particles at the frame's time (u None) or at
     shutter fraction u, as spheres of its radius in one Mitsuba `ellipsoids` shape (the
-    spheres the traversal draws, render/world.py), added to the scene dictionary d."""
+    spheres the traversal draws, render/kernel/world.py), added to the scene dictionary d."""
     import mitsuba as mi
 
     for obj in loaded.scene.objects:

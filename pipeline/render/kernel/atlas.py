@@ -1,6 +1,6 @@
 """The rest-frame atlas: every moving thing's geometry in ONE Mitsuba scene, each apart.
 
-A rigid mover is intersected in its rest frame at the ray's own time (render/world.py).
+A rigid mover is intersected in its rest frame at the ray's own time (render/kernel/world.py).
 Instead of one small scene per mover (one trace site each in the kernel), every mover's
 rest-frame shapes, and one holder sphere per particle system, live in a single scene: the
 atlas. Each *template* (a mover, or a particle system's holder) sits in its own cell of a
@@ -209,7 +209,7 @@ def shape_sphere(shape: Any, centre: np.ndarray) -> float:
 class Atlas:
     """The atlas scene of one job: templates (lists of built rest-frame shapes, one list per
     mover or particle holder) laid out apart in one scene. `make_scene` builds a scene
-    dictionary (the job's SBT owner's `scene`, render/sbt.py)."""
+    dictionary (the job's SBT owner's `scene`, render/kernel/sbt.py)."""
 
     def __init__(self, mi: Any, make_scene: Callable[[dict[str, Any]], Any]) -> None:
         self._mi = mi
@@ -288,7 +288,7 @@ class Atlas:
         return True
 
     def reshape(self, template: int, positions: np.ndarray, normals: np.ndarray | None) -> bool:
-        """Write new vertices (a deforming mesh's residual, render/slices.py) into template
+        """Write new vertices (a deforming mesh's residual, render/translate/deforming.py) into template
         `template`'s one mesh, recentred in its cell, with its box and bounding sphere;
         written through the scene's parameters (the kernels are replayed), built by
         `commit`. False where they do not fit the cell (the caller builds the atlas again)."""

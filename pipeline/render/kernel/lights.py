@@ -179,7 +179,7 @@ NONE = 0xFFFFFFFF  # no emitter (a template slot without one)
 class MovingEmitters:
     """The emitters on everything that moves, in one sampler: emissive rigid movers,
     emissive particle systems and emissive deforming meshes (a flock's agents each) all
-    wear their emitters on their templates in the atlas (render/atlas.py), so one code
+    wear their emitters on their templates in the atlas (render/kernel/atlas.py), so one code
     path samples any of them, whatever their number (docs/rendering.md, "Light sampling").
 
     An *entry* is an emissive shape of a mover, or an emissive particle system: (its first

@@ -3,7 +3,7 @@ fraction, and the N samples the integrator receives for a motion-blur mode.
 
 A baked track holds 1 + N rows: row 0 at the frame's time, rows 1..N spanning the shutter
 (`StackedFrame`). The integrator interpolates between the N rows per path at the path's
-own time (render/poses.py); here the same interpolation (translation lerp, rotation slerp)
+own time (render/poses/kernel.py); here the same interpolation (translation lerp, rotation slerp)
 serves the modes that see one instant: `off` (all at the frame's time) and one sub-frame
 (all at its shutter fraction).
 """
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..motion.pose import slerp
+from ...motion.pose import slerp
 
 
 def resample(t: np.ndarray, q: np.ndarray, u: float) -> tuple[np.ndarray, np.ndarray]:

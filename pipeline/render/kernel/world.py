@@ -7,16 +7,16 @@ particles or deforming (one broadphase and one atlas, walked in ONE symbolic loo
 particles and deforming meshes cost the kernel the same trace sites whatever their number
 (docs/rendering.md, "One traversal for everything that moves"):
 
-1. the broadphase (render/broadphase.py): one ellipsoid per mover or particle holding it
+1. the broadphase (render/kernel/broadphase.py): one ellipsoid per mover or particle holding it
    across the shutter, in the engine's own BVH; the walk visits the ellipsoids a ray
    enters, in order, from `reach` behind its origin up to the nearest hit found so far;
 2. for each one entered, the exact test at the lane's own time: the proxy's pose at u
    (a mover's slerped pose, a particle's lerped centre; a deforming mesh's template by
    `Movers.template_of`), its posed bounding sphere, then
    the ray in the template's rest frame, moved to its cell of the atlas
-   (render/atlas.py), clipped to the cell's box, and traced there.
+   (render/kernel/atlas.py), clipped to the cell's box, and traced there.
 
-All scenes are traced in one kernel: on CUDA they must share one SBT owner (render/sbt.py),
+All scenes are traced in one kernel: on CUDA they must share one SBT owner (render/kernel/sbt.py),
 which `check_shared` verifies before each render, on every variant.
 """
 
@@ -28,7 +28,7 @@ import drjit as dr
 import mitsuba as mi
 
 from .lights import MovingEmitters
-from .poses import Movers, may_hit
+from ..poses.kernel import Movers, may_hit
 from .sbt import SbtOwner, check_shared
 
 NONE = 0xFFFFFFFF  # `hit` of a ray that met nothing that moves
@@ -60,15 +60,15 @@ def segment_in_box(o: Any, d: Any, lo: Any, hi: Any, maxt: Any) -> tuple[Any, An
 
 class World:
     """The geometry of one job besides the static scene: the broadphase and atlas of
-    everything that moves, and the sampler of the emitters on it (render/lights.py)."""
+    everything that moves, and the sampler of the emitters on it (render/kernel/lights.py)."""
 
     def __init__(self) -> None:
-        self.broadphase: mi.Scene | None = None  # render/broadphase.py
-        self.atlas: mi.Scene | None = None  # render/atlas.py
+        self.broadphase: mi.Scene | None = None  # render/kernel/broadphase.py
+        self.atlas: mi.Scene | None = None  # render/kernel/atlas.py
         self.rigid = 0  # rigid movers, deforming meshes' movers included (proxies 0 .. rigid - 1)
         self.particles = 0  # particle capacity (proxies rigid .. rigid + particles - 1)
         self.emitters: MovingEmitters | None = None  # the emitters on things that move (lights.py)
-        self.owner: SbtOwner | None = None  # the SBT owner of every scene traced (render/sbt.py)
+        self.owner: SbtOwner | None = None  # the SBT owner of every scene traced (render/kernel/sbt.py)
         self._checked: tuple[int, ...] | None = None  # the set of scenes `check_shared` last passed
 
     @property
@@ -81,13 +81,13 @@ class World:
         return [scene, *([self.broadphase, self.atlas] if self.moving else [])]  # type: ignore[list-item]
 
     def set_owner(self, owner: SbtOwner | None) -> None:
-        """The SBT owner every traced scene was built against (render/sbt.py)."""
+        """The SBT owner every traced scene was built against (render/kernel/sbt.py)."""
         self.owner = owner
         self._checked = None
 
     def check_shared(self, scene: mi.Scene) -> None:
         """Raise `sbt.SbtOwnerError` unless the scenes traced with the static `scene`
-        share one SBT owner that covers their shape types (render/sbt.py); checked again
+        share one SBT owner that covers their shape types (render/kernel/sbt.py); checked again
         only when the set of scenes changed."""
         traced = self.traced(scene)
         key = (id(self.owner), *map(id, traced))
@@ -140,7 +140,7 @@ class World:
         # that box meets no proxy: no walk (a conservative gate)
         active = active & (dr.maximum(t_in, reach) <= dr.minimum(t_out, reach + maxt_of(state)))
         # the lane walks its own part of the shutter's proxies, in that part's region
-        # (render/broadphase.py `in_regions`), only inside the box, so that it never
+        # (render/kernel/broadphase.py `in_regions`), only inside the box, so that it never
         # reaches another region
         count = movers.data.scalar("regions", mi.UInt32(0), True)
         spacing = movers.data.scalar("regions", mi.UInt32(1), True)
@@ -171,7 +171,7 @@ class World:
         return tuple(out[2:])
 
     def reach(self, movers: Movers) -> Any:
-        """How far behind a ray its broadphase walk starts (render/broadphase.py `reach`)."""
+        """How far behind a ray its broadphase walk starts (render/kernel/broadphase.py `reach`)."""
         return movers.data.scalar("reach", mi.UInt32(0), True)
 
     def _nearest_moving(self, movers: Movers, ray: Any, active: Any, nearest: Any) -> tuple[Any, Any, Any, Any]:

@@ -13,10 +13,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from ..cache import STORES
-from ..scene.files import file_digest, snapshot
-from ..limits import MAX_IMAGE_BYTES, MAX_MESH_BYTES
-from ..meshes import cache_entry_whole, load_render_mesh, vertex_normals
+from ...cache import STORES
+from ...scene.files import file_digest, snapshot
+from ...limits import MAX_IMAGE_BYTES, MAX_MESH_BYTES
+from ...meshes import cache_entry_whole, load_render_mesh, vertex_normals
 
 STORE = STORES["assets"]
 CONVERSION_VERSION = STORE.tag

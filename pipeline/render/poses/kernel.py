@@ -20,8 +20,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..errors import FrameDataError
-from ..motion.pose import SLERP_LINEAR_BELOW
+from ...errors import FrameDataError
+from ...motion.pose import SLERP_LINEAR_BELOW, ArrayOps, slerp_with
 
 # The blocks of the per-frame data array, in order (see `FrameData.set`):
 #   mover_t [M, N, 3], mover_q [M, N, 4]   movers' world_from_object across the shutter
@@ -31,7 +31,7 @@ from ..motion.pose import SLERP_LINEAR_BELOW
 #   camera_q [N, 4]                        camera rotation across the shutter
 #   light_t [L, N, 3], light_q [L, N, 4]   moving lights' world_from_light across the shutter
 #   light_rgb [L, 3]                       moving lights' colours at the frame time
-#   template_offset [T, 3]                 each template's offset in the atlas (render/atlas.py)
+#   template_offset [T, 3]                 each template's offset in the atlas (render/kernel/atlas.py)
 #   template_box [T, 2, 3]                 each template's padded box in the atlas
 #   template_sphere [T, 4]                 each template's rest-frame bounding sphere
 #   particle_p [C, N, 3]                   particles' centres across the shutter
@@ -39,7 +39,7 @@ from ..motion.pose import SLERP_LINEAR_BELOW
 #   particle_template [C]                  the template (its system's holder) of each particle
 #   reach [1]                              how far behind a ray the broadphase walk starts
 #   proxy_box [2, 3]                       the box holding every live proxy (world space)
-#   regions [2]                            the shutter's parts B and their regions' spacing (render/broadphase.py)
+#   regions [2]                            the shutter's parts B and their regions' spacing (render/kernel/broadphase.py)
 FRAME_BLOCKS = (
     "mover_t", "mover_q", "mover_template", "camera_t", "camera_rel", "sensor_origin", "camera_q", "light_t", "light_q", "light_rgb",
     "template_offset", "template_box", "template_sphere", "particle_p", "particle_alive", "particle_template", "reach",
@@ -60,18 +60,14 @@ def qconj(q: Any) -> Any:
     return mi.Vector4f(q.x, -q.y, -q.z, -q.w)
 
 
+# motion.pose's one slerp, on drjit's operations at float32's threshold
+DRJIT = ArrayOps(dr.dot, dr.select, dr.abs, dr.acos, dr.sin, dr.minimum, dr.normalize, SLERP_LINEAR_BELOW["float32"])
+
+
 def slerp(q0: Any, q1: Any, f: Any) -> Any:
-    """Shortest-arc spherical interpolation of unit quaternions (w, x, y, z): motion.pose's
-    `slerp` in drjit, with the float32 threshold of `SLERP_LINEAR_BELOW`."""
-    d = dr.dot(q0, q1)
-    q1 = dr.select(d < 0, -q1, q1)
-    d = dr.abs(d)
-    theta = dr.acos(dr.minimum(d, 1.0))
-    s = dr.sin(theta)
-    small = s < SLERP_LINEAR_BELOW["float32"]
-    w0 = dr.select(small, 1 - f, dr.sin((1 - f) * theta) / s)
-    w1 = dr.select(small, f, dr.sin(f * theta) / s)
-    return dr.normalize(w0 * q0 + w1 * q1)
+    """Shortest-arc spherical interpolation of unit quaternions (w, x, y, z) as
+    mi.Vector4f: motion.pose's `slerp_with`, the one slerp, on drjit (float32)."""
+    return slerp_with(DRJIT, q0, q1, f)
 
 
 class KernelPose(NamedTuple):
@@ -206,7 +202,7 @@ class Movers:
     proxy k < `rigid` is rigid mover k (its pose lerped and slerped between the baked
     samples around u); proxy k >= `rigid` is particle k - rigid (its centre lerped between
     the samples around u, no rotation). Each proxy draws a template of the atlas
-    (render/atlas.py): a mover its own, a particle its system's holder sphere. Poses are
+    (render/kernel/atlas.py): a mover its own, a particle its system's holder sphere. Poses are
     computed where a ray needs them, per lane, by index: one code path for any count."""
 
     def __init__(self, data: FrameData, rigid: int, particles: int, u: Any, active: Any) -> None:
@@ -247,7 +243,7 @@ class Movers:
 
     def template_of(self, k: Any, active: Any) -> Any:
         """The template rigid mover k draws at the path's time: its own (S = 1), or for a
-        deforming mesh one of its S residual templates (render/slices.py), the two around
+        deforming mesh one of its S residual templates (render/translate/deforming.py), the two around
         u chosen with probabilities by their distance to it, by a hash of u (the same for
         every query of one path: its scene at its time is one scene)."""
         first = mi.UInt32(self.data.scalar("mover_template", k * 2, active))

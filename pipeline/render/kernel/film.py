@@ -23,8 +23,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..errors import SampleCountError
-from ..limits import env_size
+from ...errors import SampleCountError
+from ...limits import env_size
 
 # At most $MOTION_MAX_LANES (default 2^23, limits.ENV_SIZES) sample lanes are in flight
 # per pass: per-sample colour, film position and filter weights are kept for the film,

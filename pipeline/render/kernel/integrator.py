@@ -39,7 +39,7 @@ from . import aovs as aov_table
 from . import film
 from .lights import LightChoice, MovingEmitters, Posed
 from .broadphase import EMPTY_BOX
-from .poses import FrameData, KernelPose, Movers
+from ..poses.kernel import FrameData, KernelPose, Movers
 from .world import NONE, World
 
 
@@ -75,7 +75,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         the integrator from C++, where Python's collector cannot see the edge, so that
         cycle would keep every scene and its JIT variables of a finished job alive; and
         every later kernel in the process traces the leaked plugins' calls (12 small
-        renders made the next one 2.8x slower). render/scene_cache.py calls it when the
+        renders made the next one 2.8x slower). render/worker/scene_cache.py calls it when the
         job's scene cache is freed. Plain references only: no drjit value is made here
         (the per-frame array holds no scene, and a finaliser may run late)."""
         self.world = World()
@@ -87,13 +87,13 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         self.frame_data.n_samples = max(2, int(n_samples))
 
     def set_moving(self, broadphase: Any, atlas: Any, rigid: int, particles: int, emitters: MovingEmitters | None = None) -> None:
-        """Everything that moves (render/world.py): the broadphase and atlas scenes, how
+        """Everything that moves (render/kernel/world.py): the broadphase and atlas scenes, how
         many rigid movers (deforming meshes' movers included) and particles they hold, and
         the sampler of the emitters on them (lights.py)."""
         self.world.set_moving(broadphase, atlas, rigid, particles, emitters)
 
     def set_sbt_owner(self, owner: Any) -> None:
-        """The SBT owner every traced scene of the job was built against (render/sbt.py)."""
+        """The SBT owner every traced scene of the job was built against (render/kernel/sbt.py)."""
         self.world.set_owner(owner)
 
     def set_lights(self, lights: Sequence[Any]) -> None:
@@ -134,7 +134,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         the particles (`mover_template` [M, 2] (first template, count; default: mover k
         draws template k), `template_offset` [T, 3], `template_box` [T, 2, 3],
         `template_sphere` [T, 4], `particle_p` [C, N, 3], `particle_alive` [C, N],
-        `particle_template` [C], `reach` [1], `proxy_box` [2, 3], `regions` [2]; render/scene_cache.py). A shape other than
+        `particle_template` [C], `reach` [1], `proxy_box` [2, 3], `regions` [2]; render/worker/scene_cache.py). A shape other than
         these is a `FrameDataError`."""
         m, n, nl = self.world.rigid, self.frame_data.n_samples, len(self.lights)
         c = self.world.particles
@@ -407,7 +407,7 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
         Returns [H, W, 4 + AOV channels] (RGBA, alpha = the pixel's coverage)."""
         if isinstance(sensor, int):
             sensor = scene.sensors()[sensor]
-        self.world.check_shared(scene)  # one SBT for the whole kernel, or no render (render/sbt.py)
+        self.world.check_shared(scene)  # one SBT for the whole kernel, or no render (render/kernel/sbt.py)
         # the path loop's state holds read-only locals (@dr.syntax passes every local the
         # body reads): with OptimizeLoops drjit would drop them and trace the body again,
         # every frame; LLVM folds them as well

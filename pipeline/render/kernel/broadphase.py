@@ -3,7 +3,7 @@ across the whole shutter, in ONE Mitsuba scene whose BVH (the engine's own) is r
 per frame from one buffer.
 
 Mitsuba's `ellipsoids` shape reports a ray's *entry* into an ellipsoid only (a ray that
-starts inside one does not see it). The kernel (render/world.py) walks a ray's entries in
+starts inside one does not see it). The kernel (render/kernel/world.py) walks a ray's entries in
 order, each a candidate for the exact test at the ray's own time, starting the walk a
 distance `reach` behind the ray's origin: every proxy is smaller across than `reach`, so
 each one that the ray's segment meets is entered after that start, and none is missed
@@ -16,7 +16,7 @@ lane walks the region of its own time's part. A fast thing's proxy is then a fra
 its streak, and a ray walks fewer of them, with the same trace sites.
 
 Proxies, computed here on the host from the baked samples across the shutter:
-- a rigid mover: its swept sphere (render/poses.py `swept_spheres`);
+- a rigid mover: its swept sphere (render/poses/kernel.py `swept_spheres`);
 - a particle: the capsule its sphere sweeps along its path (the chord from the first to
   the last sample, thickened by the farthest sample from that chord), held by a sphere
   when the path is short, else by an ellipsoid along the chord (semi-axes sqrt(2) (h + r)
@@ -30,7 +30,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..motion.pose import quat_rotate
+from ...motion.pose import quat_rotate
 
 FLOATS = 10  # one ellipsoid in Mitsuba's data buffer: centre (3), semi-axes (3), quaternion (x, y, z, w)
 FAR = 1e9  # where empty proxies sit: no ray reaches them within a scene's reach

@@ -43,7 +43,7 @@ PLUGIN_TYPES: dict[str, str] = {
 }
 
 def _ellipsoid_stand_in() -> dict[str, Any]:
-    """One tiny ellipsoid (the broadphase's shape type: render/broadphase.py)."""
+    """One tiny ellipsoid (the broadphase's shape type: render/kernel/broadphase.py)."""
     import mitsuba as mi
     import numpy as np
 
@@ -123,7 +123,7 @@ class SbtOwner:
     pass the root to each scene (default: on CUDA variants, `shares_sbt`)."""
 
     def __init__(self, types: Iterable[str], share: bool | None = None) -> None:
-        from ..variant import load_dict
+        from ...variant import load_dict
 
         self.types = sorted(set(types) or {"Mesh"})
         unknown = [t for t in self.types if t not in STAND_INS]
@@ -137,7 +137,7 @@ class SbtOwner:
     def scene(self, d: Mapping[str, Any]) -> Any:
         """`d` (a scene dictionary) built against this owner: with `share` it traces with
         the owner's pipeline and SBT (CUDA); without, it is built as it is (LLVM)."""
-        from ..variant import load_dict
+        from ...variant import load_dict
 
         missing = dict_types(d) - set(self.types)
         if missing:  # on CUDA the build itself would fail: "shape type not mapped"

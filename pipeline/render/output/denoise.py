@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
-from ..errors import RendererError
+from ...errors import RendererError
 
 if TYPE_CHECKING:  # numpy is imported where a frame is denoised, not where the denoiser is checked
     import numpy as np
@@ -82,7 +82,7 @@ def _probe_entry() -> Path | None:
     libraries it loads (name, size, modification time: a reinstall or another build is
     another key), and this machine (its name and architecture: a cache root shared by other
     machines is not believed for this one). None when the binding is not installed."""
-    from ..cache import STORES, package_stamps
+    from ...cache import STORES, package_stamps
 
     listed = [stamp for name in (MODULE, "drjit", "mitsuba") for stamp in package_stamps(name)]
     if listed[0] == f"{MODULE}:absent" or any(s.endswith(":unreadable") for s in listed):
@@ -115,7 +115,7 @@ def probe() -> dict[str, Any]:
     Dr.Jit's libraries): {version, oidn, device}, or {error}. An answer that the binding
     works is kept in the cache layer (`_probe_entry`) and read by the next process instead
     of probing again; a failure is never kept (a fixed install is seen at once)."""
-    from ..cache import STORES
+    from ...cache import STORES
 
     entry = _probe_entry()
     data = STORES["probes"].read(entry, 4096) if entry is not None else None
@@ -302,7 +302,7 @@ def denoise_frame(rgba: np.ndarray, aovs: Mapping[str, np.ndarray], color: np.nd
     Returns (denoised RGBA with the noisy alpha, layers + `noisy`, header attributes)."""
     import numpy as np
 
-    from .aovs import layer  # (here: the main process checks the denoiser without the AOV table)
+    from ..kernel.aovs import layer  # (here: the main process checks the denoiser without the AOV table)
 
     d = denoiser()
     albedo, normal = aovs.get(layer("albedo")), aovs.get(layer("normal"))

@@ -3,13 +3,13 @@ on the cold frame, and the little that changes per warm frame.
 
 Cold (`SceneCache.build`): the static set and its BVH (through the shared disk cache of
 converted assets), the atlas of the rigid movers' rest-frame shapes and the particle
-systems' holder spheres and the deforming meshes' templates (render/atlas.py), the
+systems' holder spheres and the deforming meshes' templates (render/kernel/atlas.py), the
 moving lights' unit emitters, and the integrator's job state. Warm (`update`, then
 `set_frame`): the sensor's pose and field of view (a parameter update that rebuilds no
 BVH), animated environment lights' parameters, the atlas again where a mover's scale
 changed, the per-frame poses of movers, particles, camera and moving lights (one opaque
 array read by the integrator: no recompilation), the broadphase's proxies (one buffer, one
-BVH build: render/broadphase.py), and the deforming meshes' templates (render/slices.py).
+BVH build: render/kernel/broadphase.py), and the deforming meshes' templates (render/translate/deforming.py).
 """
 
 from __future__ import annotations
@@ -20,23 +20,23 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..motion.pose import quat_mul
-from ..scene.lights import light_key
-from ..scene.loader import LoadedScene
-from ..variant import load_dict
-from .atlas import Atlas, analytic
-from .broadphase import EMPTY_BOX, Broadphase, far_proxies, in_regions, parts, worth_parts, particle_proxies, reach, separate, sphere_proxies, swept_spheres
-from .build import dressed, material_dict, mitsuba_id, object_shapes, unit_light_dict
-from .denoise import integrator_aovs
-from .instant import add_lights, add_shapes, light_record, rest_frame, sensor_record
-from .roles import Roles
-from .sbt import SbtOwner, dict_types
-from .shutter_poses import across_shutter, particles_across_shutter
-from .lights import MovingEmitters, moving_emitter_tables
-from .slices import DeformingMeshes
+from ...motion.pose import quat_mul
+from ...scene.lights import light_key
+from ...scene.loader import LoadedScene
+from ...variant import load_dict
+from ..kernel.atlas import Atlas, analytic
+from ..kernel.broadphase import EMPTY_BOX, Broadphase, far_proxies, in_regions, parts, worth_parts, particle_proxies, reach, separate, sphere_proxies, swept_spheres
+from ..translate.build import dressed, material_dict, mitsuba_id, object_shapes, unit_light_dict
+from ..output.denoise import integrator_aovs
+from ..translate.instant import add_lights, add_shapes, light_record, rest_frame, sensor_record
+from ..translate.roles import Roles
+from ..kernel.sbt import SbtOwner, dict_types
+from ..poses.shutter import across_shutter, particles_across_shutter
+from ..kernel.lights import MovingEmitters, moving_emitter_tables
+from ..translate.deforming import DeformingMeshes
 
 if TYPE_CHECKING:
-    from .stacked import StackedFrame
+    from ..poses.stacked import StackedFrame
 
 
 class SceneCache:
@@ -59,7 +59,7 @@ class SceneCache:
         self._reach = 1e-3  # how far behind a ray the broadphase walk starts (broadphase.reach)
         self._proxy_box = EMPTY_BOX  # the box holding every live proxy (broadphase.union_box)
         self._regions = np.array([1.0, 0.0])  # the shutter's parts and their regions' spacing (broadphase.in_regions)
-        self.deforming: DeformingMeshes | None = None  # deforming meshes: movers of the atlas (render/slices.py)
+        self.deforming: DeformingMeshes | None = None  # deforming meshes: movers of the atlas (render/translate/deforming.py)
         self.owner: SbtOwner | None = None  # the SBT owner of every scene the kernel traces
 
     @property
@@ -89,14 +89,14 @@ class SceneCache:
         d["integrator"] = {"type": "motion_path", "max_depth": self.max_depth, "rr_depth": settings.rr_depth, "aovs": ",".join(aovs)}
         # the sampler's count is set per pass by the film (film.stratified_passes); built with
         # one it takes as it is, so Mitsuba does not warn of a rounding that never happens
-        from .film import stratified_passes  # (film imports drjit: not at module level, which the farm's main process imports)
+        from ..kernel.film import stratified_passes  # (film imports drjit: not at module level, which the farm's main process imports)
 
         d["sensor"] = sensor_record(loaded, stratified_passes(self.spp, self.spp)[0], fi, shutter=(0.0, 1.0), sampler="multijitter")
         static = [o for o in scene.objects if o.name in set(self.roles.static_names)]
         add_shapes(d, loaded, static, fi, materials)
         add_lights(d, loaded, fi, skip=frozenset(i for i, _ in self.roles.moving_lights))
         # every scene the kernel traces is built against one SBT owner covering their
-        # shape types (render/sbt.py: on CUDA the others' traces would be disabled)
+        # shape types (render/kernel/sbt.py: on CUDA the others' traces would be disabled)
         self._materials = materials
         self._mover_stretch = {name: rest_frame(fi, name) for name in self.roles.mover_names}
         mover_dicts = [self._mover_dicts(name, self._mover_stretch[name]) for name in self.roles.mover_names]

@@ -1,4 +1,4 @@
-"""Deforming meshes (blend shapes, skinning, flocks) in the one traversal (world.py).
+"""Deforming meshes (blend shapes, skinning, flocks) in the one traversal (render/kernel/world.py).
 
 A deforming mesh is a mover of the broadphase like any rigid one, posed at each lane's own
 time by its *fitted rigid track*, and drawing one of S residual templates in the atlas
@@ -9,7 +9,7 @@ is what the motion leaves. A mesh that moves rigidly (its object, or a bone that
 whole) has W_i = X at every sample: its blur is its rigid twin's, continuous and exact.
 What the fit cannot carry (a bend, a wave) is the residual: S = `render.time_slices`
 templates at the samples of `slice_samples`, and a lane at u draws the two around u with
-probabilities by their distance (a dither, render/poses.py `Movers.template_of`): a
+probabilities by their distance (a dither, render/poses/kernel.py `Movers.template_of`): a
 crossfade, never a gap. Per instant drawn only these templates' vertices are written into
 the atlas (one BVH build); the trace sites stay the same whatever their number.
 
@@ -27,7 +27,7 @@ local frame (the welded mean face normal and the edge to one neighbour) from res
 sample (`slice_normals`: exact when nothing deforms and for any rigid turn; hard edges
 stay hard), then turned into the template's frame; `face_normals: true` stays faceted.
 An emissive deforming mesh wears its area emitter on every template: the sampler of the
-emitters on things that move samples it in its atlas cell (render/lights.py).
+emitters on things that move samples it in its atlas cell (render/kernel/lights.py).
 """
 
 from __future__ import annotations
@@ -37,14 +37,14 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
-from ..meshes import RenderMesh, load_render_mesh, plain_render_mesh, vertex_normals
-from ..motion.pose import matrix_to_quat, quat_mul, quat_rotate
-from ..scene.loader import LoadedScene
-from ..scene.schema import Mesh
-from ..variant import load_dict
+from ...meshes import RenderMesh, load_render_mesh, plain_render_mesh, vertex_normals
+from ...motion.pose import matrix_to_quat, quat_mul, quat_rotate
+from ...scene.loader import LoadedScene
+from ...scene.schema import Mesh
+from ...variant import load_dict
 
 if TYPE_CHECKING:
-    from .stacked import StackedFrame
+    from ..poses.stacked import StackedFrame
 
 class RestNormals(NamedTuple):
     """A deforming mesh's file normals at rest under one scale, as `slice_normals` carries
@@ -145,7 +145,7 @@ def render_mesh(loaded: LoadedScene, obj: Any, count: int, faces: np.ndarray) ->
     `faces`, and whether it is drawn smooth: a mesh file's own corners (uvs, normals;
     smooth unless `face_normals`), a tessellated sphere or capsule smooth, any other
     primitive or a flock's agents faceted, without uvs."""
-    from ..scene.motion_schema import Flock
+    from ...scene.motion_schema import Flock
 
     if isinstance(obj, Mesh) and not isinstance(obj.deform, Flock):
         mesh = load_render_mesh(loaded.asset(obj.file))
@@ -252,8 +252,8 @@ class DeformingMeshes:
     frame, `draw` per instant drawn (a frame, or each sub-frame)."""
 
     def __init__(self, mi: Any, loaded: LoadedScene, names: list[str], fi: StackedFrame, materials: dict[str, Any]) -> None:
-        from ..motion.deform import bind_mesh
-        from ..motion.instances import agent_mesh
+        from ...motion.deform import bind_mesh
+        from ...motion.instances import agent_mesh
         from .build import emitter_dict, object_material
 
         self._mi = mi
@@ -362,7 +362,7 @@ class DeformingMeshes:
     def tracks(self, mode: str, u_fixed: float | None, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Every mover's fitted track for the frame data ([movers, N, 3], [movers, N, 4]:
         the baked samples, or one instant: `shutter_poses.across_shutter`)."""
-        from .shutter_poses import across_shutter
+        from ..poses.shutter import across_shutter
 
         t = np.concatenate([g.track[0] for g in self.meshes]) if self.meshes else np.zeros((0, n + 1, 3))
         q = np.concatenate([g.track[1] for g in self.meshes]) if self.meshes else np.zeros((0, n + 1, 4))

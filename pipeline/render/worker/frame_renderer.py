@@ -2,13 +2,13 @@
 every frame it is given, keeping what it can.
 
 Under an LLVM or CUDA variant a frame goes through the first-frame cache
-(render/scene_cache.py: the scene built once on the cold frame, a warm frame changes only
+(render/worker/scene_cache.py: the scene built once on the cold frame, a warm frame changes only
 what moved) and the motion_path integrator; under a scalar variant through the scalar
-fallback (render/scalar_fallback.py: Mitsuba's `path`, one whole scene per instant).
+fallback (render/translate/scalar_fallback.py: Mitsuba's `path`, one whole scene per instant).
 On LLVM and CUDA an engine warning that means wrong pixels fails the frame
-(render/engine_log.py). Either way the frame's seed depends only on the scene seed and
+(render/worker/engine_log.py). Either way the frame's seed depends only on the scene seed and
 the frame (`frame_seed`), `motion_blur: subframes` is the mean of instants (`accumulate_subframes`),
-the AOV channels are split into layers by the AOV table (render/aovs.py), and each frame
+the AOV channels are split into layers by the AOV table (render/kernel/aovs.py), and each frame
 reports its stats: cold or warm, setup vs render seconds, kernels, cache hits.
 """
 
@@ -23,15 +23,15 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from ..bake import BakedFrame
-from ..field_model import Parity, row_offset
-from ..scene.loader import LoadedScene
-from .aovs import split_layers
+from ...bake import BakedFrame
+from ...field_model import Parity, row_offset
+from ...scene.loader import LoadedScene
+from ..kernel.aovs import split_layers
 from .engine_log import watching
-from .roles import sort_scene
-from .scalar_fallback import ScalarFallback
+from ..translate.roles import sort_scene
+from ..translate.scalar_fallback import ScalarFallback
 from .scene_cache import SceneCache
-from .stacked import StackedFrame, stack_frame
+from ..poses.stacked import StackedFrame, stack_frame
 
 
 @dataclass
@@ -104,7 +104,7 @@ class FrameRenderer:
         import drjit as dr
         import mitsuba as mi
 
-        from .integrator import register
+        from ..kernel.integrator import register
 
         register()
         self.loaded = loaded
@@ -187,7 +187,7 @@ class FrameRenderer:
 
     def _render(self, frame: BakedFrame, mode: str | None = None, rows: tuple[int, int] = (0, 1)) -> tuple[np.ndarray, dict[str, np.ndarray], FrameStats]:
         stacked = stack_frame(frame)
-        from . import assets
+        from ..translate import assets
 
         dr = self._dr
         mode = mode or self.settings.motion_blur
@@ -203,7 +203,7 @@ class FrameRenderer:
         cold = self.cache.scene is None
         updated: tuple[str, ...] = ()
         # an engine warning that means wrong pixels (a disabled trace on CUDA) fails the
-        # frame (render/engine_log.py)
+        # frame (render/worker/engine_log.py)
         with watching() as engine, _collector_held(cold):
             if cold:
                 self.cache.build(stacked, mode)

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..bake import BakedFrame
+from ...bake import BakedFrame
 
 
 @dataclass(frozen=True)

@@ -1,10 +1,10 @@
 """What each object and light of a scene is to the renderer, fixed for a job.
 
 An object is static (in the static set, built once, its BVH never rebuilt), a rigid mover
-(in the atlas, posed per path: render/world.py), a particle system (each particle a
+(in the atlas, posed per path: render/kernel/world.py), a particle system (each particle a
 sphere on its baked path, in the same traversal as the rigid movers) or a deforming mesh
 (a mover of the same traversal on its fitted rigid track, drawing residual templates:
-render/slices.py). A light is static, moving (a
+render/translate/deforming.py). A light is static, moving (a
 record that is `posed_per_path`: point, spot, directional; posed per path by the
 integrator) or animated in another way (an environment light: updated per frame).
 """
@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from ..scene.loader import LoadedScene
+from ...scene.loader import LoadedScene
 
 
 def moving_objects(loaded: LoadedScene) -> set[str]:
@@ -57,8 +57,8 @@ class Roles:
     mover_names: list[str]
     moving_lights: list[tuple[int, Any]]  # posed per path by the integrator
     animated_lights: list[tuple[int, Any]]  # other lights that change: updated per frame
-    particle_names: tuple[str, ...] = ()  # particle systems: in the traversal (render/world.py)
-    deforming_names: tuple[str, ...] = ()  # deforming meshes: in the traversal (render/slices.py `DeformingMeshes`)
+    particle_names: tuple[str, ...] = ()  # particle systems: in the traversal (render/kernel/world.py)
+    deforming_names: tuple[str, ...] = ()  # deforming meshes: in the traversal (render/translate/deforming.py `DeformingMeshes`)
 
 
 def sort_scene(loaded: LoadedScene) -> Roles:

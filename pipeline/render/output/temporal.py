@@ -32,8 +32,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..timeline import format_frames
-from .aovs import BY_NAME, layer
+from ...timeline import format_frames
+from ..kernel.aovs import BY_NAME, layer
 from .denoise import NOISY_LAYER, denoise_frame
 
 # the layers the pass reads (the AOV table's names for them)
@@ -145,7 +145,7 @@ def _layers(channels: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 def _meta(header: dict[str, Any], key: str) -> Any:
-    from ..frame_output import META_PREFIX
+    from ...frame_output import META_PREFIX
 
     return header.get(META_PREFIX + key)
 
@@ -153,7 +153,7 @@ def _meta(header: dict[str, Any], key: str) -> Any:
 def process_frame(path: str, neighbours: list[tuple[int, str]]) -> dict[str, Any]:
     """Blend, denoise and rewrite one frame (RGBA only; every layer and attribute kept).
     `neighbours`: (frame offset, path) of its complete timeline neighbours."""
-    from ..frame_output import META_PREFIX, write_exr
+    from ...frame_output import META_PREFIX, write_exr
 
     header, channels = _read(Path(path))
     cur = _layers(channels)
@@ -185,8 +185,8 @@ def _neighbour_state(path: Path, look: str) -> str | None:
     """`motion_hash` of a complete frame of this look (its key's half that is not motion:
     identity/look.py; a frame kept from a run of an edit that did not change it counts),
     None if absent or other."""
-    from ..errors import FrameIOError
-    from ..frame_output import META_PREFIX, read_header
+    from ...errors import FrameIOError
+    from ...frame_output import META_PREFIX, read_header
 
     try:
         header = read_header(path)
@@ -197,22 +197,22 @@ def _neighbour_state(path: Path, look: str) -> str | None:
     return f"{header.get(META_PREFIX + 'frame')}:{header.get(META_PREFIX + 'motion_hash')}"
 
 
-def temporal_pass(loaded: Any, job: Any, out_dir: Path, frames: Sequence[int], workers: int = 1, log: Callable[[str], None] = print) -> dict[str, Any]:
-    """Run the temporal mode over `frames` in `out_dir` (see the module docstring): frames
+def temporal_pass(loaded: Any, job: Any, frame_path: Callable[[int], Path], frames: Sequence[int], workers: int = 1, log: Callable[[str], None] = print) -> dict[str, Any]:
+    """Run the temporal mode over `frames`, each where `frame_path` says the job wrote it
+    (the worker's `job.frame_path`; see the module docstring): frames
     whose neighbours are all complete get the blend; the others stay `pending`. A frame
     already done with the same neighbours is left alone. Returns a summary."""
-    from ..frame_output import META_PREFIX, read_header
-    from .job import frame_path
+    from ...frame_output import META_PREFIX, read_header
 
     first, last = loaded.scene.timeline.first, loaded.scene.timeline.last
     todo: list[tuple[str, list[tuple[int, str]]]] = []
     pending: list[int] = []
     for f in frames:
-        path = frame_path(job, loaded, f)
+        path = frame_path(f)
         me = _neighbour_state(path, job.look)
         if me is None:
             continue  # not rendered (failed, interrupted): nothing to do
-        near = [(d, frame_path(job, loaded, f + d)) for d in range(-RADIUS, RADIUS + 1) if d and first <= f + d <= last]
+        near = [(d, frame_path(f + d)) for d in range(-RADIUS, RADIUS + 1) if d and first <= f + d <= last]
         states = [_neighbour_state(p, job.look) for _, p in near]
         if any(s is None for s in states):
             pending.append(f)

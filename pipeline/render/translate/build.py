@@ -11,10 +11,10 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from ..geometry import scale_matrix, shape_geometry
-from ..motion.pose import quat_normalize, quat_to_matrix
-from ..scene.loader import LoadedScene
-from ..scene.schema import (
+from ...geometry import scale_matrix, shape_geometry
+from ...motion.pose import quat_normalize, quat_to_matrix
+from ...scene.loader import LoadedScene
+from ...scene.schema import (
     Camera,
     Conductor,
     Dielectric,
@@ -23,7 +23,7 @@ from ..scene.schema import (
     Principled,
     ThinDielectric,
 )
-from ..scene.types import Texture
+from ...scene.types import Texture
 
 Dict = dict[str, Any]
 

@@ -6,7 +6,7 @@ Under a scalar variant the worker builds the scene at one instant instead (every
 and light placed at the frame's time, or at one shutter fraction) and renders it with
 `path`; motion blur is then the sub-frame comparison mode (the mean of instants, see
 `frame_renderer.accumulate_subframes`). Particles are drawn as Mitsuba `ellipsoids` at
-the instant; deforming meshes are the renderer's own geometry (render/slices.py) and are
+the instant; deforming meshes are the renderer's own geometry (render/translate/deforming.py) and are
 not drawn here. Nothing is kept
 between frames: this is the correctness fallback, not the fast path.
 """
@@ -15,13 +15,13 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from ..scene.loader import LoadedScene
-from ..variant import load_dict
+from ...scene.loader import LoadedScene
+from ...variant import load_dict
 from .build import material_dict
 from .instant import add_lights, add_particles, add_shapes, sensor_record
 
 if TYPE_CHECKING:
-    from .stacked import StackedFrame
+    from ..poses.stacked import StackedFrame
 
 
 class ScalarFallback:
