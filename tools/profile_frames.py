@@ -5,7 +5,7 @@
 One first-frame-cached FrameRenderer renders the frames in order, as a worker does. Per frame:
 the setup (a cold build or a warm update) and render seconds, drjit's JIT kernels of the
 render (how many, compiled or cache hits, their codegen, backend-compile and execution
-milliseconds) and the scene's mover and slice counts. With --prof, a cProfile of the whole
+milliseconds) and the traversal's movers (deforming meshes' included) and particle slots. With --prof, a cProfile of the whole
 run is written there and its top functions by cumulative time are printed: the tool that
 found why an example was 40x slower on CUDA than on LLVM (docs/rendering.md).
 """
@@ -73,10 +73,11 @@ def main() -> int:
         wall = time.perf_counter() - t1
         summary = kernel_summary(renderer._last_history)
         cache = renderer.cache
-        movers = len(getattr(cache, "movers", []) or [])
+        world = cache.integrator.world if cache.scene is not None else None
+        movers = f"{world.rigid} movers, {world.particles} particle slots" if world is not None else "no motion_path scene"
         print(f"frame {fi.frame}: wall {wall:.2f} s, setup {stats.setup_s:.2f} s, render {stats.render_s:.2f} s, cold {stats.cold}, "
               f"kernels {summary['kernels']} ({summary['compiled']} compiled): codegen {summary['codegen_ms']} ms, "
-              f"backend {summary['backend_ms']} ms, exec {summary['exec_ms']} ms, {summary['ops']} ops; movers {movers}")
+              f"backend {summary['backend_ms']} ms, exec {summary['exec_ms']} ms, {summary['ops']} ops; {movers}")
     if profiler:
         profiler.disable()
         profiler.dump_stats(str(args.prof))

@@ -16,12 +16,13 @@ from ...motion.pose import slerp
 
 
 def resample(t: np.ndarray, q: np.ndarray, u: float) -> tuple[np.ndarray, np.ndarray]:
-    """Pose at shutter fraction u from N samples spanning the shutter (lerp + slerp)."""
-    n = len(t)
+    """Pose at shutter fraction u from N samples spanning the shutter (lerp + slerp):
+    t [..., N, 3], q [..., N, 4] (one track, or a stack of them) -> [..., 3], [..., 4]."""
+    n = t.shape[-2]
     x = min(max(u, 0.0), 1.0) * (n - 1)
     i = min(int(np.floor(x)), n - 2)
     f = x - i
-    return (1 - f) * t[i] + f * t[i + 1], slerp(q[i], q[i + 1], f)
+    return (1 - f) * t[..., i, :] + f * t[..., i + 1, :], slerp(q[..., i, :], q[..., i + 1, :], f)
 
 
 def pose_at(t: np.ndarray, q: np.ndarray, u: float | None) -> tuple[np.ndarray, np.ndarray]:
@@ -30,16 +31,17 @@ def pose_at(t: np.ndarray, q: np.ndarray, u: float | None) -> tuple[np.ndarray, 
 
 
 def across_shutter(t: np.ndarray, q: np.ndarray, n: int, mode: str, u_fixed: float | None) -> tuple[np.ndarray, np.ndarray]:
-    """The N samples [N, 3], [N, 4] of a stacked track that the integrator gets: the
-    baked ones (stochastic blur), or N copies of one instant: the frame's time for
-    `off`, shutter fraction `u_fixed` for one sub-frame."""
+    """The N samples [..., N, 3], [..., N, 4] of a stacked track (t [..., 1+N, 3], q
+    [..., 1+N, 4]: one, or every mover's at once) that the integrator gets: the baked ones
+    (stochastic blur), or N copies of one instant: the frame's time for `off`, shutter
+    fraction `u_fixed` for one sub-frame."""
     if mode == "off":
-        tt, qq = t[0], q[0]
+        tt, qq = t[..., 0, :], q[..., 0, :]
     elif u_fixed is not None:
-        tt, qq = resample(t[1:], q[1:], u_fixed)
+        tt, qq = resample(t[..., 1:, :], q[..., 1:, :], u_fixed)
     else:
-        return t[1:], q[1:]
-    return np.repeat(np.asarray(tt)[None], n, axis=0), np.repeat(np.asarray(qq)[None], n, axis=0)
+        return t[..., 1:, :], q[..., 1:, :]
+    return (np.repeat(np.asarray(tt)[..., None, :], n, axis=-2), np.repeat(np.asarray(qq)[..., None, :], n, axis=-2))
 
 
 def particles_at(positions: np.ndarray, alive: np.ndarray, u: float | None) -> tuple[np.ndarray, np.ndarray]:

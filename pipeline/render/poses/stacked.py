@@ -5,7 +5,7 @@ first-frame cache, the scalar fallback and the slices read."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -31,6 +31,30 @@ class StackedFrame:
     ortho_width: np.ndarray | None = None  # [1+N], orthographic cameras
     particles: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)  # (positions [1+N, n, 3], alive [1+N, n])
     stretches: dict[str, np.ndarray] = field(default_factory=dict)  # objects whose stretch is not diagonal: S [1+N, 3, 3]
+    _stacks: dict[tuple[str, ...], tuple[np.ndarray, ...]] = field(default_factory=dict, repr=False, compare=False)
+
+    def tracks(self, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The tracks of the objects `names` in one stack each: translation [M, 1+N, 3],
+        rotation [M, 1+N, 4] and scale [M, 1+N, 3] (one gather per frame and set of names:
+        the first-frame cache reads every mover's poses from it, never mover by mover)."""
+        key = tuple(names)
+        if key not in self._stacks:
+            rows = self.samples + 1
+            self._stacks[key] = tuple(
+                np.array([self.objects[n][c] for n in key], dtype=float).reshape(len(key), rows, width) for c, width in ((0, 3), (1, 4), (2, 3)))
+        t, q, s = self._stacks[key]
+        return t, q, s
+
+    def stretch_at_frame(self, names: Sequence[str]) -> np.ndarray:
+        """Each object's stretch at the frame's time [M, 3, 3]: diag(scale), or the full
+        symmetric S under a non-uniform parent scale (`instant.rest_frame`, stacked)."""
+        out = self.tracks(names)[2][:, 0, :, None] * np.eye(3)
+        if self.stretches:  # (few objects: a loop over them, not over every mover)
+            row = {n: k for k, n in enumerate(names)}
+            for name, stretch in self.stretches.items():
+                if name in row:
+                    out[row[name]] = stretch[0]
+        return out
 
 
 def stack_frame(frame: BakedFrame) -> StackedFrame:

@@ -361,17 +361,12 @@ class DeformingMeshes:
 
     def tracks(self, mode: str, u_fixed: float | None, n: int) -> tuple[np.ndarray, np.ndarray]:
         """Every mover's fitted track for the frame data ([movers, N, 3], [movers, N, 4]:
-        the baked samples, or one instant: `shutter_poses.across_shutter`)."""
+        the baked samples, or one instant: `poses.shutter.across_shutter`)."""
         from ..poses.shutter import across_shutter
 
         t = np.concatenate([g.track[0] for g in self.meshes]) if self.meshes else np.zeros((0, n + 1, 3))
         q = np.concatenate([g.track[1] for g in self.meshes]) if self.meshes else np.zeros((0, n + 1, 4))
-        if mode != "off" and u_fixed is None:  # the baked samples as they are
-            return t[:, 1:], q[:, 1:]
-        if mode == "off":
-            return np.repeat(t[:, :1], n, axis=1), np.repeat(q[:, :1], n, axis=1)
-        poses = [across_shutter(a, b, n, mode, u_fixed) for a, b in zip(t, q)]  # one sub-frame (a comparison mode)
-        return np.array([p[0] for p in poses]).reshape(-1, n, 3), np.array([p[1] for p in poses]).reshape(-1, n, 4)
+        return across_shutter(t, q, n, mode, u_fixed)
 
     def whole_tracks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Every mover's track over all 1 + N rows ([movers, 1+N, 3], [movers, 1+N, 4]) and

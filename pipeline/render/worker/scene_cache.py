@@ -28,7 +28,7 @@ from ..kernel.atlas import Atlas, analytic
 from ..kernel.broadphase import EMPTY_BOX, Broadphase, far_proxies, in_regions, parts, worth_parts, particle_proxies, reach, separate, sphere_proxies, swept_spheres
 from ..translate.build import dressed, material_dict, mitsuba_id, object_shapes, unit_light_dict
 from ..output.denoise import integrator_aovs
-from ..translate.instant import add_lights, add_shapes, light_record, rest_frame, sensor_record
+from ..translate.instant import add_lights, add_shapes, light_record, sensor_record
 from ..translate.roles import Roles
 from ..kernel.sbt import SbtOwner, dict_types
 from ..poses.shutter import across_shutter, particles_across_shutter
@@ -50,7 +50,7 @@ class SceneCache:
         self.max_depth = max_depth
         self.scene: Any = None  # None until the cold frame is built
         self._params: Any = None
-        self._mover_stretch: dict[str, np.ndarray] = {}  # name -> [4, 4] the stretch baked into its atlas shapes
+        self._mover_stretch = np.zeros((0, 3, 3))  # [M, 3, 3] each mover's stretch baked into its atlas shapes
         self._materials: dict[str, Any] = {}
         self.atlas: Atlas | None = None
         self.broadphase: Broadphase | None = None
@@ -98,8 +98,8 @@ class SceneCache:
         # every scene the kernel traces is built against one SBT owner covering their
         # shape types (render/kernel/sbt.py: on CUDA the others' traces would be disabled)
         self._materials = materials
-        self._mover_stretch = {name: rest_frame(fi, name) for name in self.roles.mover_names}
-        mover_dicts = [self._mover_dicts(name, self._mover_stretch[name]) for name in self.roles.mover_names]
+        self._mover_stretch = fi.stretch_at_frame(self.roles.mover_names)
+        mover_dicts = self._all_mover_dicts()
         types = set().union(dict_types(d), *(dict_types({str(k): v for k, v in enumerate(md)}) for md in mover_dicts))
         if self.roles.deforming_names:
             types.add("Mesh")
@@ -136,10 +136,16 @@ class SceneCache:
         # first warm frame replays the cold frame's kernels instead of compiling new ones
         self.update(fi, mode)
 
-    def _mover_dicts(self, name: str, stretch: np.ndarray) -> list[dict[str, Any]]:
-        """A mover's shape dictionaries in its rest frame, its stretch [4, 4] baked in."""
-        obj = self.loaded.objects_by_name[name]
+    def _mover_dicts(self, k: int) -> list[dict[str, Any]]:
+        """Mover k's shape dictionaries in its rest frame, its stretch baked in."""
+        obj = self.loaded.objects_by_name[self.roles.mover_names[k]]
+        stretch = np.eye(4)
+        stretch[:3, :3] = self._mover_stretch[k]
         return object_shapes(obj, self.loaded, stretch, self._materials)
+
+    def _all_mover_dicts(self) -> list[list[dict[str, Any]]]:
+        """Every mover's shape dictionaries (`_mover_dicts`), in order."""
+        return [self._mover_dicts(k) for k in range(len(self.roles.mover_names))]
 
     def _holder_dicts(self, name: str) -> list[dict[str, Any]]:
         """A particle system's holder: one sphere of the particles' radius at the origin,
@@ -218,9 +224,9 @@ class SceneCache:
         """A mover's stretch (its scale, or the full symmetric stretch under a non-uniform
         parent scale: `instant.rest_frame`) is baked into its atlas shapes, per frame (not per
         sample): where any mover's stretch changed, the atlas is laid out and built again."""
-        stretches = {name: rest_frame(fi, name) for name in self.roles.mover_names}
-        changed = [name for name in self.roles.mover_names if not np.allclose(stretches[name], self._mover_stretch[name])]
-        if not changed:
+        stretches = fi.stretch_at_frame(self.roles.mover_names)  # one stack, compared at once
+        changed = np.flatnonzero(~np.isclose(stretches, self._mover_stretch, rtol=1e-5, atol=1e-8).all(axis=(1, 2))) if len(stretches) else []
+        if not len(changed):
             return []
         self._mover_stretch = stretches
         names = self.roles.mover_names
@@ -228,13 +234,12 @@ class SceneCache:
         # in place where each changed mover still fits its cell (the kernels replay), else
         # the atlas is laid out and built again
         fits = atlas is not None and atlas.scene is not None and all(
-            atlas.replace(names.index(name), [load_dict(sd) for sd in self._mover_dicts(name, stretches[name])]) for name in changed
+            atlas.replace(int(k), [load_dict(sd) for sd in self._mover_dicts(int(k))]) for k in changed
         )
-        mover_dicts = [self._mover_dicts(name, stretches[name]) for name in names]
         if not fits:
-            self._build_atlas(mover_dicts)
+            self._build_atlas(self._all_mover_dicts())
             self._moving_changed = True
-        return [f"mover:{mitsuba_id(name)} (atlas)" for name in changed]
+        return [f"mover:{mitsuba_id(names[int(k)])} (atlas)" for k in changed]
 
     def set_frame(self, fi: StackedFrame, mode: str, u_fixed: float | None = None) -> None:
         """The integrator's per-frame poses (movers, particles, camera, moving lights), the
@@ -242,14 +247,8 @@ class SceneCache:
         samples across the shutter, all at the frame's time (`off`), or all at shutter
         fraction `u_fixed` (one sub-frame)."""
         n = fi.samples
-        names = self.roles.mover_names
-        if mode == "off" or u_fixed is not None:
-            poses = [across_shutter(fi.objects[name][0], fi.objects[name][1], n, mode, u_fixed) for name in names]
-            mt = np.array([p[0] for p in poses]).reshape(len(names), n, 3)
-            mq = np.array([p[1] for p in poses]).reshape(len(names), n, 4)
-        else:  # the baked samples as they are: one stack, no per-mover work
-            mt = np.array([fi.objects[name][0][1:] for name in names], dtype=float).reshape(len(names), n, 3)
-            mq = np.array([fi.objects[name][1][1:] for name in names], dtype=float).reshape(len(names), n, 4)
+        t, q, _ = fi.tracks(self.roles.mover_names)  # every mover at once: no per-mover work
+        mt, mq = across_shutter(t, q, n, mode, u_fixed)
         if self.deforming is not None:
             self._draw_deforming(fi, mode, u_fixed)
             dt, dq = self.deforming.tracks(mode, u_fixed, n)
@@ -283,7 +282,7 @@ class SceneCache:
         if all([atlas.reshape(first + k, p, nrm) for k, p, nrm in changing]):
             atlas.commit()
             return
-        self._build_atlas([self._mover_dicts(name, self._mover_stretch[name]) for name in self.roles.mover_names])
+        self._build_atlas(self._all_mover_dicts())
         self._set_moving()
 
     def _deforming_first(self) -> int:
@@ -312,8 +311,7 @@ class SceneCache:
         names = self.roles.mover_names
         m = len(names)
         rows = fi.samples + 1
-        mt = np.array([fi.objects[name][0] for name in names], dtype=float).reshape(m, rows, 3)
-        mq = np.array([fi.objects[name][1] for name in names], dtype=float).reshape(m, rows, 4)
+        mt, mq, _ = fi.tracks(names)
         spheres = atlas.layout.sphere[:m]
         if self.deforming is not None:  # movers too, on their fitted tracks, each held with every template it may draw
             self.deforming.fit(fi)
