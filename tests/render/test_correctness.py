@@ -164,6 +164,9 @@ def _fill_slide(d: Any, path: str) -> Any:
 
 
 # id -> (lights YAML, extra objects YAML, reference at f = frame / 2 in [0, 1]: (emitters, shapes))
+_MANY = [[-2 + 0.25 * k, 3.0, ((k % 3) - 1) * 0.8] for k in range(17)]  # 17 lamps: past lights.EACH_MAX
+
+
 LIGHT_CASES: dict[str, tuple[str, str, Any]] = {
     "directional-down": (
         "  - {type: directional, direction: [0, -1, 0], irradiance: 2.5}",
@@ -312,6 +315,13 @@ LIGHT_CASES: dict[str, tuple[str, str, Any]] = {
         "  - {type: point, parent: rig, position: [0, 3, 0], intensity: 10}",
         "  - {name: rig, shape: empty, " + _KEYED % ("translate", "[-1, 0, 0]", "[1, 0, 0]") + "}\n",
         lambda f: ({"bulb": {"type": "point", "position": [-1 + 2 * f, 3, 0], "intensity": 10.0}}, {}),
+    ),
+    # more moving lights than lights.EACH_MAX: candidates of the one light choice, posed at
+    # each path's time, one shadow ray among them all
+    "many-points-on-moving-parent": (
+        "\n".join(f"  - {{type: point, parent: rig, position: {_MANY[k]}, intensity: 0.6}}" for k in range(len(_MANY))),
+        "  - {name: rig, shape: empty, " + _KEYED % ("translate", "[-1, 0, 0]", "[1, 0, 0]") + "}\n",
+        lambda f: ({f"bulb{k}": {"type": "point", "position": [p[0] - 1 + 2 * f, p[1], p[2]], "intensity": 0.6} for k, p in enumerate(_MANY)}, {}),
     ),
 }
 

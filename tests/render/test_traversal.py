@@ -76,20 +76,27 @@ def test_the_trace_sites_do_not_grow_with_emissive_movers(tmp_path: Path) -> Non
     assert all(c == [*SITES, "occluded", "intersect", "occluded"] for c in counts.values()), {k: len(v) for k, v in counts.items()}
 
 
-def test_the_trace_sites_do_not_grow_with_moving_lights(tmp_path: Path) -> None:
-    """Moving lights are candidates of the one light choice with the static scene's
-    emitters (lights.py `LightChoice`): one shadow ray for 1 or 6 of them, as for the
-    static point light. Before, each moving light had a shadow ray of its own."""
+def test_the_trace_sites_do_not_grow_with_many_moving_lights(tmp_path: Path) -> None:
+    """Up to `lights.EACH_MAX` moving lights are each sampled at every vertex (their own
+    shadow ray: exact but for visibility, the better time to equal error for a few lamps);
+    past that they are candidates of the one light choice with the static scene's emitters,
+    one shadow ray for all, so a shot of many moving lights keeps the kernel's size: the
+    same sites for EACH_MAX + 1 and 40 of them, as for one static light."""
+    from motion.pipeline.render.kernel.lights import EACH_MAX
+
+    def lights(n: int) -> str:
+        return ", ".join(
+            f"{{type: point, position: [{k * 0.1 - 2:.1f}, 4, 0], intensity: 1, motion: {{type: procedural, generators: [{{type: ballistic, v0: [1, 0, 0], a: [0, 0, 0]}}]}}}}"
+            for k in range(n))
+
     counts = {}
-    for n in (1, 6):
+    for n in (1, EACH_MAX + 1, 40):
         folder = tmp_path / str(n)
         folder.mkdir()
-        flying = ", ".join(
-            f"{{type: point, position: [{k * 0.5 - 1:.1f}, 4, 0], intensity: 5, motion: {{type: procedural, generators: [{{type: ballistic, v0: [1, 0, 0], a: [0, 0, 0]}}]}}}}"
-            for k in range(n))
-        text = _movers_scene(4, 9).replace("{type: point, position: [0, 5, 0], intensity: 10}]", f"{flying}]")
-        counts[n] = _traces(folder, text)
-    assert all(c == SITES for c in counts.values()), {k: len(v) for k, v in counts.items()}
+        counts[n] = _traces(folder, _movers_scene(4, 9).replace("{type: point, position: [0, 5, 0], intensity: 10}]", f"{lights(n)}]"))
+    assert counts[EACH_MAX + 1] == counts[40] == SITES, {k: len(v) for k, v in counts.items()}
+    # one moving light: its own shadow ray (the static scene, the walk, the atlas), and no choice
+    assert counts[1] == ["intersect", "intersect", "intersect", "occluded", "intersect", "occluded"]
 
 
 @pytest.mark.slow

@@ -170,6 +170,23 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
 
     # --- lights at the path's time ---------------------------------------------------------
 
+    def _each_light_term(self, scene: mi.Scene, si: Any, bsdf: Any, ctx: Any, choice: LightChoice, posed: Posed, movers: Movers, active: Any) -> Any:
+        """Direct light at si from each of a few moving lights (`LightChoice.each`): one
+        deterministic sample of each delta light (point, spot, directional) in its rest frame
+        at the path's time, back in world space, its shadow ray tested against every scene at
+        the same time; no MIS (BSDF sampling never reaches a delta light)."""
+        L = mi.Spectrum(0.0)
+        for index, at_infinity, emitter in choice.each:
+            pose, colour = posed.poses[index], posed.colours[index]
+            ds, weight = emitter.sample_direction(pose.interaction_to_rest(si), mi.Point2f(0.5), active)
+            d = pose.vector_to_world(ds.d)
+            shadow = si.spawn_ray(d) if at_infinity else si.spawn_ray_to(pose.point_to_world(ds.p))
+            ok = active & (ds.pdf != 0.0)
+            ok &= ~self.world.occluded(scene, shadow, movers, ok)
+            value = bsdf.eval(ctx, si, si.to_local(d), ok)
+            L += dr.select(ok, value * weight * colour, 0.0)
+        return L
+
     def _moving_emitter_term(self, scene: mi.Scene, sampler: mi.Sampler, si: Any, bsdf: Any, ctx: Any, movers: Movers, active: Any) -> Any:
         """Direct light at si from the emitters on things that move (movers, particles,
         deforming meshes): one sample of one of them, whatever their number, in its atlas
@@ -363,12 +380,14 @@ class MotionPathIntegrator(mi.SamplingIntegrator):
             active_next = active & si.is_valid() & (depth + 1 < self.max_depth)
             bsdf = si.bsdf(ray)
 
-            # emitter sampling (static and moving lights, one chosen by contribution:
-            # lights.py), shadow test across all scenes at time u
+            # emitter sampling (the static lights, and the moving ones past a few, one chosen
+            # by contribution: lights.py), shadow test across all scenes at time u
             if has_choice:
                 L += self._light_term(scene, sampler, si, bsdf, bsdf_ctx, choice, posed, movers, beta, active_next)
-            # the emitters on things that move, one of them at this path's time u
+            # a few moving lights, each; the emitters on things that move, one of them; at
+            # this path's time u
             lit = active_next & mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+            L += beta * self._each_light_term(scene, si, bsdf, bsdf_ctx, choice, posed, movers, lit)
             L += beta * self._moving_emitter_term(scene, sampler, si, bsdf, bsdf_ctx, movers, lit)
 
             # BSDF sampling: the next segment of the path
