@@ -4,7 +4,7 @@ face along its velocity, at any times (the motion stage's side of a flock).
 The dynamics stage (pipeline/dynamics/flock.py) simulates the agents and records their
 positions and velocities (a `FlockTrack`: `at(times) -> (x, v)`); evaluation turns the
 track into object-space vertices here, like any other deforming mesh, and the renderer
-draws them as time slices. The budget check runs before the simulation (dynamics calls
+draws each agent as an instance of the agent mesh on a rigid track fitted to them. The budget check runs before the simulation (dynamics calls
 `check_instance_budget`), so a flock too big to draw is refused before any work.
 """
 

@@ -260,7 +260,8 @@ class _Object(Model):
     @property
     def is_nonrigid(self) -> bool:
         """Its vertices move relative to each other (a particle system or any `deform`): it
-        renders as time slices, not as a rigid mover."""
+        renders as a particle system or a deforming mesh (render/translate/deforming.py),
+        not as a rigid mover."""
         return self.spawned or self.deform is not None
 
     @property
@@ -375,7 +376,7 @@ class RenderSettings(Model):
     motion_blur: Literal["stochastic", "subframes", "off"] = "stochastic"
     subframes: Annotated[int, Field(ge=1, le=256)] = 8  # K for motion_blur: subframes
     shutter_samples: Annotated[int, Field(ge=2, le=256)] = 9  # baked samples across the shutter
-    time_slices: Annotated[int, Field(ge=1, le=64)] = 4  # copies of deforming meshes across the shutter (particles are exact: render/kernel/world.py)
+    time_slices: Annotated[int, Field(ge=1, le=64)] = 4  # a deforming mesh's residual templates across the shutter: what its fitted rigid track leaves, crossfaded (render/translate/deforming.py)
     seed: Annotated[int, Field(ge=0, lt=2**31)] = 0
     seed_policy: Literal["per-frame", "fixed"] = "per-frame"
     variant: Literal["auto", "llvm_ad_rgb", "scalar_rgb", "cuda_ad_rgb"] = "auto"

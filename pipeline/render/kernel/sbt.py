@@ -1,7 +1,7 @@
 """One shader-binding-table owner for the scenes one kernel traces (docs/rendering.md).
 
-The motion_path kernel traces the static scene, every rigid mover's rest-frame scene and
-every time-slice scene in one megakernel. On LLVM (Embree) each query takes its scene as
+The motion_path kernel traces the static scene, the broadphase and the atlas of
+everything that moves in one megakernel. On LLVM (Embree) each query takes its scene as
 an argument, so any number of scenes works. On CUDA (OptiX) the first trace compiled into
 a kernel fixes the kernel's pipeline and shader binding table (SBT); drjit disables every
 later trace against another SBT ("more than one OptiX shader binding table ... Disabling
