@@ -22,7 +22,7 @@ which `check_shared` verifies before each render, on every variant.
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any
 
 import drjit as dr
 import mitsuba as mi
