@@ -103,3 +103,31 @@ def test_a_flock_is_one_mover_per_agent_sharing_one_template(tmp_path: Path) -> 
     red = lambda img: (img[..., 0] > img[..., 1] + 0.3).sum()  # noqa: E731
     assert red(first) > 20 and red(later) > 20
     assert stats[1].kernels_compiled == 0
+
+
+def test_a_deforming_mesh_that_outgrows_its_atlas_cell_renders_as_a_cold_frame(tmp_path: Path) -> None:
+    """A blend shape growing 8x between frames 0 and 4: its templates outgrow the atlas
+    cell laid out on the cold frame (three times the size then), so the warm frame lays the
+    atlas out again (`SceneCache._draw_deforming`) and draws what a fresh renderer draws
+    on frame 4 as its cold frame."""
+    verts = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [0.0, 0.3, 0.0], [0.0, 0.0, 0.3]])
+    (tmp_path / "tet.obj").write_text("".join(f"v {x} {y} {z}\n" for x, y, z in verts) + "f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n")
+    keys = f"[{{time: 0, vertices: {verts.tolist()}}}, {{time: 4, vertices: {(verts * 8).tolist()}}}]"
+    text = f"""
+timeline: {{fps: 24, first: 0, last: 4}}
+camera: {{position: [1.2, 1.2, 6], look_at: [1.2, 1.2, 0], fov: 50}}
+lights: [{{type: constant, radiance: 1.0}}]
+materials: [{{name: red, type: diffuse, color: [0.9, 0.2, 0.1]}}]
+objects:
+  - {{name: tet, shape: mesh, file: tet.obj, material: red, deform: {{type: blend-shapes, keys: {keys}}}}}
+render: {{resolution: [48, 32], spp: 8, max_depth: 2}}
+"""
+    loaded = load(tmp_path, text)
+    (first,), _, renderer = render(loaded, [0])
+    cell = renderer.cache.atlas.layout.cell
+    (warm,), stats, _ = render(loaded, [4], renderer=renderer)
+    assert not stats[0].cold and renderer.cache.atlas.layout.cell > 3 * cell  # laid out again
+    (cold,), _, _ = render(load(tmp_path, text, "again.yaml"), [4])
+    red = lambda img: (img[..., 0] > img[..., 1] + 0.3).sum()  # noqa: E731
+    assert red(warm) > 4 * red(first) > 0
+    np.testing.assert_allclose(warm, cold, atol=1e-5)
