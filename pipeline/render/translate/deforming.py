@@ -228,12 +228,16 @@ def deformed_mesh(mi: Any, key: str, bsdf: Any, mesh: RenderMesh, positions: np.
         props["emitter"] = load_dict(emitter)
     shape = mi.Mesh(key, len(positions), len(mesh.faces), props, normals is not None, mesh.uvs is not None)
     p = mi.traverse(shape)
-    p["vertex_positions"] = mi.Float(np.asarray(positions, np.float32).ravel())
-    p["faces"] = mi.UInt32(np.asarray(mesh.faces, np.uint32).ravel())
+
+    def buffer(key: str, values: np.ndarray, dtype: type) -> None:  # the buffer's own type: mi.Float, or a scalar variant's storage
+        p[key] = type(p[key])(np.ascontiguousarray(values, dtype).ravel())
+
+    buffer("vertex_positions", positions, np.float32)
+    buffer("faces", mesh.faces, np.uint32)
     if normals is not None:
-        p["vertex_normals"] = mi.Float(np.asarray(normals, np.float32).ravel())
+        buffer("vertex_normals", normals, np.float32)
     if mesh.uvs is not None:
-        p["vertex_texcoords"] = mi.Float(np.asarray(mesh.uvs, np.float32).ravel())
+        buffer("vertex_texcoords", mesh.uvs, np.float32)
     p.update()
     return shape
 

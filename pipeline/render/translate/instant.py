@@ -26,7 +26,7 @@ def add_shapes(d: dict[str, Any], loaded: LoadedScene, objects: Iterable[Any], f
     """The visible `objects`' shapes at the frame time (u None) or at shutter fraction u,
     added to the scene dictionary d."""
     for obj in objects:
-        if not obj.visible:
+        if not obj.visible or obj.is_nonrigid:  # particles and deforming meshes: `add_particles`, `add_deforming`
             continue
         t, q, s = fi.objects[obj.name]
         ot, oq = pose_at(t, q, u)
@@ -54,6 +54,36 @@ def add_particles(d: dict[str, Any], loaded: LoadedScene, fi: StackedFrame, mate
         spheres = np.concatenate([live, np.full((len(live), 1), float(obj.radius))], axis=1)
         data = mi.TensorXf(np.ascontiguousarray(sphere_proxies(spheres), dtype=np.float32))  # the broadphase's record layout
         d[f"{mitsuba_id(obj.name)}__particles"] = dressed({"type": "ellipsoids", "extent": 1.0, "data": data}, obj, loaded, materials)
+
+
+def add_deforming(d: dict[str, Any], loaded: LoadedScene, fi: StackedFrame, materials: dict[str, Any], u: float | None = None) -> None:
+    """Each visible deforming mesh at the frame's time (u None) or at shutter fraction u,
+    as one built Mitsuba mesh in world space, added to the scene dictionary d: what the
+    one traversal draws at that instant (render/translate/deforming.py: the fitted rigid
+    track at u, the residual template of the baked row nearest u; a flock's agents each
+    on its own track), for the scalar fallback's whole scenes."""
+    import mitsuba as mi
+
+    from ...motion.pose import quat_rotate
+    from ..poses.shutter import across_shutter
+    from .deforming import DeformingMeshes, deformed_mesh
+
+    names = [o.name for o in loaded.scene.objects if o.visible and o.is_nonrigid and not o.is_particles]
+    if not names:
+        return
+    meshes = DeformingMeshes(mi, loaded, names, fi, materials)
+    mode = "off" if u is None else "stochastic"
+    meshes.draw(fi, mode, u)
+    for g in meshes.meshes:
+        t, q = across_shutter(g.track[0], g.track[1], fi.samples, mode, u)  # [pieces, N, ...]: every sample the instant
+        positions, normals = g.drawn[0]
+        world = quat_rotate(q[:, :1], positions[None]) + t[:, :1]  # [pieces, R, 3]
+        turned = None if normals is None else quat_rotate(q[:, :1], normals[None])
+        pieces = len(world)
+        mesh = g.mesh._replace(faces=(g.mesh.faces[None] + (np.arange(pieces) * len(positions))[:, None, None]).reshape(-1, 3),
+                               uvs=None if g.mesh.uvs is None else np.tile(g.mesh.uvs, (pieces, 1)))
+        d[f"{mitsuba_id(g.name)}__deforming"] = deformed_mesh(mi, f"{mitsuba_id(g.name)}__deforming", g.bsdf, mesh, world.reshape(-1, 3),
+                                                             None if turned is None else turned.reshape(-1, 3), g.emitter)
 
 
 def light_record(loaded: LoadedScene, index: int, light: Any, fi: StackedFrame, u: float | None = None) -> dict[str, Any]:

@@ -6,8 +6,8 @@ Under a scalar variant the worker builds the scene at one instant instead (every
 and light placed at the frame's time, or at one shutter fraction) and renders it with
 `path`; motion blur is then the sub-frame comparison mode (the mean of instants, see
 `frame_renderer.accumulate_subframes`). Particles are drawn as Mitsuba `ellipsoids` at
-the instant; deforming meshes are the renderer's own geometry (render/translate/deforming.py) and are
-not drawn here. Nothing is kept
+the instant, deforming meshes as one world-space mesh each, what the one traversal draws
+at that instant (`instant.add_deforming`). Nothing is kept
 between frames: this is the correctness fallback, not the fast path.
 """
 
@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 from ...scene.loader import LoadedScene
 from ...variant import load_dict
 from .build import material_dict
-from .instant import add_lights, add_particles, add_shapes, sensor_record
+from .instant import add_deforming, add_lights, add_particles, add_shapes, sensor_record
 
 if TYPE_CHECKING:
     from ..poses.stacked import StackedFrame
@@ -35,7 +35,8 @@ class ScalarFallback:
 
     def scene_dict(self, stacked: StackedFrame, u: float | None) -> dict[str, Any]:
         """The Mitsuba dictionary of the whole scene at the frame's time (u None) or at
-        shutter fraction u: rigid objects, particles and lights, Mitsuba's `path` integrator."""
+        shutter fraction u: rigid objects, particles, deforming meshes and lights, Mitsuba's
+        `path` integrator."""
         loaded = self.loaded
         scene = loaded.scene
         materials = {m.name: material_dict(m, loaded) for m in scene.materials}
@@ -43,6 +44,7 @@ class ScalarFallback:
         d["sensor"] = sensor_record(loaded, self.spp, stacked, u)
         add_shapes(d, loaded, scene.objects, stacked, materials, u)
         add_particles(d, loaded, stacked, materials, u)
+        add_deforming(d, loaded, stacked, materials, u)
         add_lights(d, loaded, stacked, u)
         return d
 

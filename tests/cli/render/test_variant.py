@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from motion.pipeline.frame_output import read_frame
-from _scenes import FOUNTAIN, orange_pixels
+from _scenes import ARM_BONES, FOUNTAIN, orange_pixels
 from _support import SCENES, run_motion
 
 
@@ -62,3 +62,49 @@ def test_scalar_fallback_draws_particles(tmp_path: Path) -> None:
     frame = read_frame(out / "fountain.0010.exr")
     assert frame.meta["variant"] == "scalar_rgb"
     assert orange_pixels(frame.rgba) > 20  # orange sparks on the grey sky
+
+
+DEFORMING = """
+timeline: {fps: 24, first: 0, last: 24}
+camera: {type: orthographic, position: [0, 1, -6], look_at: [0, 1, 0], ortho_width: 4}
+lights: [{type: constant, radiance: 1.0}]
+materials: [{name: arm, type: diffuse, color: [0.9, 0.2, 0.2]}, {name: dart, type: diffuse, color: [0.2, 0.2, 0.9]}]
+objects:
+  - name: arm
+    shape: cube
+    size: [0.3, 2.0, 0.3]
+    material: arm
+    transform: {translate: [0, 1, 0]}
+    deform:
+      type: skinning
+      auto: true
+""" + ARM_BONES + """\
+  - name: darts
+    shape: cube
+    size: [0.2, 0.15, 0.4]
+    material: dart
+    deform: {type: flock, count: 12, seed: 3, spawn_center: [-1, 1, 0], spawn_size: [0.6, 0.6, 0.6], speed: 1, goal: [1, 1, 0],
+             bounds: {min: [-2, 0, -1], max: [2, 2.5, 1]}}
+render: {resolution: [48, 48], spp: 64, max_depth: 2, motion_blur: off}
+"""
+
+
+def test_scalar_fallback_draws_deforming_meshes(tmp_path: Path) -> None:
+    """Under `scalar_rgb` a skinned arm (bent 90 degrees at frame 24) and a flock's agents
+    are drawn as the vectorised renderer draws them (`instant.add_deforming`): before, the
+    arm was its undeformed bind mesh and a flock failed the frame with a TypeError."""
+    scene = tmp_path / "deforming.yaml"
+    scene.write_text(DEFORMING)
+    images = {}
+    for variant in ("scalar_rgb", "auto"):
+        out = tmp_path / variant
+        proc = run_motion("render", str(scene), "--frames", "24", "--variant", variant, "--no-denoise", "-o", str(out), "--deliver", "none",
+                          env={"MOTION_CACHE_DIR": str(tmp_path / "cache"), "CUDA_VISIBLE_DEVICES": ""})
+        assert proc.returncode == 0, proc.stderr
+        images[variant] = read_frame(out / "deforming.0024.exr").rgba[..., :3]
+    red = {v: img[..., 0] > img[..., 1] + 0.3 for v, img in images.items()}
+    blue = {v: img[..., 2] > img[..., 1] + 0.3 for v, img in images.items()}
+    assert red["auto"].sum() > 50 and blue["auto"].sum() > 10
+    # the same pixels covered, to a pixel's edge here and there
+    assert (red["scalar_rgb"] != red["auto"]).sum() <= 0.05 * red["auto"].sum()
+    assert (blue["scalar_rgb"] != blue["auto"]).sum() <= 0.15 * blue["auto"].sum() + 2
