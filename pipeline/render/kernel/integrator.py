@@ -4,8 +4,8 @@ roulette) in which every camera sample carries its own time inside the shutter.
 Mitsuba 3 has no animated shapes, so motion is ours (docs/rendering.md):
 
 * The static set lives in one `mi.Scene` whose BVH is built once per worker and never
-  touched again. Rigid movers and particles are reached through one broadphase walk and
-  one atlas of rest-frame shapes, whatever their number; the scene queries over all of
+  touched again. Rigid movers, particles and deforming meshes are reached through one
+  broadphase walk and one atlas of rest-frame shapes, whatever their number; the scene queries over all of
   them at a path's time are `world.World`'s.
 * The sensor's shutter is fixed to [0, 1]: `ray.time` is the sample's shutter fraction u,
   drawn by the sampler (stratified across a pixel's samples).
