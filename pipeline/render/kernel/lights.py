@@ -1,5 +1,9 @@
-"""Light selection of the `motion_path` integrator: which emitter of the static scene a path
-vertex samples, and with what probability (docs/rendering.md, "Light selection").
+"""Light sampling of the `motion_path` integrator, in one home: which light a path vertex
+samples, and with what probability (docs/rendering.md, "Light selection"). Three kinds:
+the static scene's emitters and, past `EACH_MAX` of them, the moving lights, in one choice
+by contribution (`LightChoice`, the moving ones posed at the path's time: `Posed`); up to
+`EACH_MAX` moving lights each sampled at every vertex (`LightChoice.each`); and the
+emitters on everything that moves, one sampler over the atlas (`MovingEmitters`).
 
 Mitsuba's `path` picks one of the scene's emitters uniformly, with the first coordinate of
 the light sample reused, and samples a constant sky over the whole sphere: with a sun and a
