@@ -38,6 +38,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import cpu_model  # noqa: E402
+from _cycles import blender, cycles_scene, diffuse  # noqa: E402
 from bench_render import shot, terrain_ply  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -176,27 +177,10 @@ def cycles_worker(spec_file: Path) -> None:
     spec = json.loads(spec_file.read_text())
     out_dir = spec_file.parent
 
-    def blender(v: Any) -> tuple[float, float, float]:  # our Y-up -> Blender's Z-up
-        return (float(v[0]), float(-v[2]), float(v[1]))
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
     fps = spec["fps"]
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.render.threads_mode = "FIXED"
-    scene.render.threads = spec["threads"]
-    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 320, 180, 100
-    scene.render.fps = fps
-    scene.render.use_motion_blur = True
-    scene.render.motion_blur_shutter = 0.5  # 180 degrees, centred on the frame
-    scene.render.use_persistent_data = True  # warm: the scene and BVH are kept between renders
-    scene.cycles.max_bounces = 3  # our max_depth 4: the camera segment + 3 bounces
-    scene.cycles.sample_clamp_direct = 0.0
-    scene.cycles.sample_clamp_indirect = 0.0
-    scene.view_settings.view_transform = "Standard"
-    scene.render.image_settings.file_format = "OPEN_EXR"
-    scene.render.image_settings.color_depth = "32"
+    # 180 degrees, centred on the frame; max bounces 3 for our max_depth 4 (the camera
+    # segment + 3 bounces; bench_movers.py gives 2, which gives the same picture here)
+    scene = cycles_scene(spec["threads"], (320, 180), fps, 0.5, 3)
     world = bpy.data.worlds.new("sky")
     world.use_nodes = True
     world.node_tree.nodes["Background"].inputs[0].default_value = (0.4, 0.4, 0.4, 1.0)
@@ -208,16 +192,6 @@ def cycles_worker(spec_file: Path) -> None:
     sun_obj.rotation_mode = "QUATERNION"
     sun_obj.rotation_quaternion = mathutils.Vector(blender([-0.4, -1.0, -0.3])).normalized().to_track_quat("-Z", "Y")
     scene.collection.objects.link(sun_obj)
-
-    def diffuse(name: str, rgb: tuple[float, float, float]) -> Any:
-        mat = bpy.data.materials.new(name)
-        mat.use_nodes = True
-        nodes = mat.node_tree.nodes
-        nodes.clear()
-        bsdf = nodes.new("ShaderNodeBsdfDiffuse")
-        bsdf.inputs["Color"].default_value = (*rgb, 1.0)
-        mat.node_tree.links.new(bsdf.outputs["BSDF"], nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
-        return mat
 
     # the terrain grid of bench_render.terrain_ply
     n = 224

@@ -42,6 +42,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import cpu_model  # noqa: E402
+from _cycles import blender, cycles_scene, diffuse  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -166,49 +167,21 @@ def cycles_worker(spec_file: Path) -> None:
     spec = json.loads(spec_file.read_text())
     fps = spec["fps"]
 
-    def blender(v: Any) -> tuple[float, float, float]:  # our Y-up -> Blender's Z-up
-        return (float(v[0]), float(-v[2]), float(v[1]))
-
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.render.threads_mode = "FIXED"
-    scene.render.threads = spec["threads"]
-    scene.render.resolution_x, scene.render.resolution_y = spec["resolution"]
-    scene.render.resolution_percentage = 100
-    scene.render.fps, scene.render.fps_base = fps, 1.0
+    scene = cycles_scene(spec["threads"], spec["resolution"], fps, spec["camera"]["shutter"], spec["max_bounces"])  # shutter: angle / 360 of a frame
+    # max_bounces: our max_depth counts path segments, camera + direct = 2
     scene.frame_start, scene.frame_end = spec["first"], spec["last"]
-    scene.render.use_motion_blur = True
-    scene.render.motion_blur_shutter = spec["camera"]["shutter"]  # angle / 360 of a frame
     scene.render.motion_blur_position = "CENTER"  # centred on the frame's time
-    scene.render.use_persistent_data = True  # warm: scene, BVH and shaders kept between renders
     scene.cycles.samples = spec["spp"]
     scene.cycles.use_adaptive_sampling = False
     scene.cycles.use_denoising = False
-    scene.cycles.max_bounces = spec["max_bounces"]  # our max_depth counts path segments: camera + direct = 2
     scene.cycles.min_light_bounces = spec["max_bounces"]  # no Russian roulette before it (ours: rr_depth 5 > max_depth)
-    scene.cycles.sample_clamp_direct = 0.0
-    scene.cycles.sample_clamp_indirect = 0.0
-    scene.view_settings.view_transform = "Standard"
-    scene.render.image_settings.file_format = "OPEN_EXR"
-    scene.render.image_settings.color_depth = "32"
     world = bpy.data.worlds.new("sky")
     world.use_nodes = True
     world.node_tree.nodes["Background"].inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
     world.node_tree.nodes["Background"].inputs["Strength"].default_value = float(spec["world"])
     scene.world = world
 
-    materials = {}
-    for name, rgb in spec["materials"].items():
-        mat = bpy.data.materials.new(name)
-        mat.use_nodes = True
-        nodes = mat.node_tree.nodes
-        nodes.clear()
-        bsdf = nodes.new("ShaderNodeBsdfDiffuse")
-        bsdf.inputs["Color"].default_value = (*rgb, 1.0)
-        mat.node_tree.links.new(bsdf.outputs["BSDF"], nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
-        materials[name] = mat
+    materials = {name: diffuse(name, rgb) for name, rgb in spec["materials"].items()}
 
     g = spec["ground"]
     w, h = g["width"] / 2, g["height"] / 2
