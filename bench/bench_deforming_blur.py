@@ -2,7 +2,7 @@
 
     python bench/bench_deforming_blur.py [--slices 1,4,8,17] [--spp 256] [--truth-subframes 64]
 
-The shot: a dark skinned arm (tests/support/_scenes.py ARM_BONES, a cube on two bones)
+The shot: a dark skinned arm (tests/support/_scenes.py SKINNED_ARM, a cube on two bones)
 whose lower bone turns 90 degrees in two frames, over a white back, orthographic, 96x96:
 within frame 1's 180-degree shutter the elbow turns 22.5 degrees and the arm's tip sweeps
 about 9 pixels. A bend is what the fitted rigid track cannot carry, so it is all residual
@@ -27,10 +27,10 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(ROOT / "tests" / "support"))
 from _common import cpu_model  # noqa: E402
-from _scenes import ARM_BONES  # noqa: E402
+from _scenes import SKINNED_ARM  # noqa: E402
 
 # the lower bone's 90 degrees in two frames (1/12 s) instead of one second
-BONES = ARM_BONES.replace("{time: 1, euler: [0, 0, 90]}", "{time: 0.0834, euler: [0, 0, 90]}")
+ARM = SKINNED_ARM.replace("{time: 1, euler: [0, 0, 90]}", "{time: 0.0834, euler: [0, 0, 90]}")
 
 
 def shot(slices: int, blur: str, spp: int, subframes: int = 8, seed: int = 0) -> str:
@@ -42,15 +42,7 @@ lights: [{{type: constant, radiance: 1.0}}]
 materials: [{{name: arm, type: diffuse, color: [0.05, 0.05, 0.05]}}, {{name: white, type: diffuse, color: 0.9}}]
 objects:
   - {{name: back, shape: rectangle, width: 20, height: 20, material: white, transform: {{translate: [0, 0, 5], rotate: {{euler: [0, 180, 0]}}}}}}
-  - name: arm
-    shape: cube
-    size: [0.3, 2.0, 0.3]
-    material: arm
-    transform: {{translate: [0, 1, 0]}}
-    deform:
-      type: skinning
-      auto: true
-{BONES}render: {{resolution: [96, 96], spp: {spp}, max_depth: 2, motion_blur: {blur}, subframes: {subframes}, time_slices: {slices}, shutter_samples: 17, seed: {seed}}}
+{ARM}render: {{resolution: [96, 96], spp: {spp}, max_depth: 2, motion_blur: {blur}, subframes: {subframes}, time_slices: {slices}, shutter_samples: 17, seed: {seed}}}
 """
 
 

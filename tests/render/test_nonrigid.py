@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from _render_support import load, render
-from _scenes import ARM_BONES, FOUNTAIN, orange_pixels
+from _scenes import FOUNTAIN, SKINNED_ARM, orange_pixels
 
 pytestmark = pytest.mark.render
 
@@ -26,15 +26,7 @@ camera: {type: orthographic, position: [0, 1, -6], look_at: [0, 1, 0], ortho_wid
 lights: [{type: constant, radiance: 1.0}]
 materials: [{name: arm, type: diffuse, color: [0.9, 0.2, 0.2]}]
 objects:
-  - name: arm
-    shape: cube
-    size: [0.3, 2.0, 0.3]
-    material: arm
-    transform: {translate: [0, 1, 0]}
-    deform:
-      type: skinning
-      auto: true
-""" + ARM_BONES + """\
+""" + SKINNED_ARM + """\
 render: {resolution: [64, 64], spp: 4, max_depth: 2, shutter_samples: 3, motion_blur: off}
 """
 

@@ -56,3 +56,16 @@ ARM_BONES = """\
             time_unit: seconds
             channels: {rotate: {keys: [{time: 0, euler: [0, 0, 0]}, {time: 1, euler: [0, 0, 90]}]}}
 """
+
+# An object entry of `objects:` wearing ARM_BONES: a 0.3 x 2 x 0.3 cube standing from y=0
+# to 2 (the bones in its object space), material `arm`, auto weights.
+SKINNED_ARM = """\
+  - name: arm
+    shape: cube
+    size: [0.3, 2.0, 0.3]
+    material: arm
+    transform: {translate: [0, 1, 0]}
+    deform:
+      type: skinning
+      auto: true
+""" + ARM_BONES

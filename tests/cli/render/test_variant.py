@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from motion.pipeline.frame_output import read_frame
-from _scenes import ARM_BONES, FOUNTAIN, orange_pixels
+from _scenes import FOUNTAIN, SKINNED_ARM, orange_pixels
 from _support import SCENES, run_motion
 
 
@@ -70,15 +70,7 @@ camera: {type: orthographic, position: [0, 1, -6], look_at: [0, 1, 0], ortho_wid
 lights: [{type: constant, radiance: 1.0}]
 materials: [{name: arm, type: diffuse, color: [0.9, 0.2, 0.2]}, {name: dart, type: diffuse, color: [0.2, 0.2, 0.9]}]
 objects:
-  - name: arm
-    shape: cube
-    size: [0.3, 2.0, 0.3]
-    material: arm
-    transform: {translate: [0, 1, 0]}
-    deform:
-      type: skinning
-      auto: true
-""" + ARM_BONES + """\
+""" + SKINNED_ARM + """\
   - name: darts
     shape: cube
     size: [0.2, 0.15, 0.4]
