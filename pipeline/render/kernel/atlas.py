@@ -134,6 +134,15 @@ def bounds(shapes: Sequence[Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return lo, hi, np.array([*centre, reach * (1 + 1e-4) + 1e-5])
 
 
+def points_sphere(points: np.ndarray) -> np.ndarray:
+    """A sphere (centre, radius) [4] holding `points` [P, 3]: their box's centre and the
+    farthest point from it, padded as `bounds` pads (zeros for no points)."""
+    if len(points) == 0:
+        return np.zeros(4)
+    centre = (points.min(axis=0) + points.max(axis=0)) / 2
+    return np.array([*centre, float(np.sqrt(((points - centre) ** 2).sum(axis=1).max())) * (1 + 1e-4) + 1e-5])
+
+
 # The box of each analytic shape in its own frame, before its to_world (Mitsuba's unit
 # shapes: the cube [-1, 1]^3, the rectangle and the disk in z = 0, the cylinder from z = 0
 # to 1 of radius 1); a sphere is bounded by its centre and radius instead.
@@ -304,11 +313,9 @@ class Atlas:
         self._params[f"{prefix}.vertex_positions"] = self._mi.Float(np.asarray(positions + offset, np.float32).ravel())
         if normals is not None and f"{prefix}.vertex_normals" in self._params:
             self._params[f"{prefix}.vertex_normals"] = self._mi.Float(np.asarray(normals, np.float32).ravel())
-        centre = (lo + hi) / 2
-        radius = float(np.sqrt(((positions - centre) ** 2).sum(axis=1).max()))
         layout.offset[template] = offset
         layout.box[template] = (lo + offset - pad, hi + offset + pad)
-        layout.sphere[template] = (*centre, radius * (1 + 1e-4) + 1e-5)
+        layout.sphere[template] = points_sphere(positions)
         return True
 
     def commit(self) -> None:

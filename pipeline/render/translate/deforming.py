@@ -42,6 +42,7 @@ from ...motion.pose import matrix_to_quat, quat_mul, quat_rotate
 from ...scene.loader import LoadedScene
 from ...scene.schema import Mesh
 from ...variant import load_dict
+from ..kernel.atlas import points_sphere
 
 if TYPE_CHECKING:
     from ..poses.stacked import StackedFrame
@@ -242,14 +243,6 @@ def deformed_mesh(mi: Any, key: str, bsdf: Any, mesh: RenderMesh, positions: np.
     return shape
 
 
-def _sphere(points: np.ndarray) -> np.ndarray:
-    """A sphere (centre, radius) holding `points` [P, 3]: their box's centre, the farthest."""
-    if len(points) == 0:
-        return np.zeros(4)
-    centre = (points.min(axis=0) + points.max(axis=0)) / 2
-    return np.array([*centre, float(np.sqrt(((points - centre) ** 2).sum(axis=1).max())) * (1 + 1e-4) + 1e-5])
-
-
 class DeformingMeshes:
     """The deforming meshes of one job drawn in the atlas (see above): their movers, each
     on a fitted track, and their templates (S per mesh, one per flock). `fit` once per
@@ -314,7 +307,7 @@ class DeformingMeshes:
                 tt = t[:, None] + quat_rotate(q[:, None], shift)
                 qq = quat_mul(np.broadcast_to(q[:, None], (rows, g.pieces, 4)), matrix_to_quat(r))
                 g.track = (np.swapaxes(tt, 0, 1), np.swapaxes(qq, 0, 1))
-                g.sphere = _sphere(g.rest)
+                g.sphere = points_sphere(g.rest)
                 continue
             r, shift = rigid_fit(scaled[0], scaled[1:])
             r = np.concatenate([np.eye(3)[None], r])
@@ -323,7 +316,7 @@ class DeformingMeshes:
             g.residual = np.einsum("rvi,rij->rvj", scaled - shift[:, None], r)  # R^T (Y - T), row by row
             g.residual[0] = scaled[0]
             g.track = ((t + quat_rotate(q, shift))[None], quat_mul(q, matrix_to_quat(r))[None])
-            g.sphere = _sphere(g.residual.reshape(-1, 3))
+            g.sphere = points_sphere(g.residual.reshape(-1, 3))
             g.scaled, g.scale, g.stretched = scaled, s, stretch is not None
         self._fitted = fi
 

@@ -372,7 +372,7 @@ class SceneCache:
         if atlas is None or broad is None:
             return
         m = len(self.roles.mover_names)
-        firsts = list(range(m)) + ([int(f) for f in self.deforming.mover_templates(self._deforming_first())[:, 0]] if self.deforming is not None else [])
+        firsts = [int(f) for f in self._mover_templates()[:, 0]]
         systems, at = [], len(firsts)
         for k, room in enumerate(self._capacity):  # each system: (first proxy, room, holder template)
             systems.append((at, room, m + k))
@@ -381,6 +381,15 @@ class SceneCache:
         emitters = MovingEmitters(atlas.scene, entries, table, room) if entries else None
         self.integrator.set_moving(broad.scene, atlas.scene, len(firsts), int(sum(self._capacity)), emitters)
         self._moving_changed = False
+
+    def _mover_templates(self) -> np.ndarray:
+        """Each rigid proxy's (first template, count) [M, 2]: a mover its own template, a
+        deforming mesh's movers theirs (the frame data's `mover_template`)."""
+        m = len(self.roles.mover_names)
+        templates = np.stack([np.arange(m, dtype=float), np.ones(m)], axis=1)
+        if self.deforming is not None:
+            templates = np.concatenate([templates, self.deforming.mover_templates(self._deforming_first())])
+        return templates
 
     def _particles_frame(self, fi: StackedFrame, mode: str, u_fixed: float | None) -> dict[str, np.ndarray]:
         """The particles across the shutter for motion-blur `mode` (the frame data's
@@ -406,14 +415,8 @@ class SceneCache:
         atlas = self.atlas
         if atlas is None or atlas.scene is None:
             return {}
-        m = len(self.roles.mover_names)
-        first = np.arange(m, dtype=float)
-        count = np.ones(m)
-        templates = np.stack([first, count], axis=1)
-        if self.deforming is not None:
-            templates = np.concatenate([templates, self.deforming.mover_templates(self._deforming_first())])
         return {
-            "mover_template": templates,
+            "mover_template": self._mover_templates(),
             "template_offset": atlas.layout.offset,
             "template_box": atlas.layout.box,
             "template_sphere": atlas.layout.sphere,
